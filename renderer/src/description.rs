@@ -1,0 +1,158 @@
+//! The scene description: plain data produced by the XML importer (or by code), consumed by
+//! [`crate::scene::Scene::build`]. Geometry is already in world space.
+
+use crate::bsdf::Bsdf;
+use crate::spectrum::Rgb;
+use glam::{Mat4, Vec2, Vec3};
+
+/// A triangle mesh in world space.
+#[derive(Debug, Clone, Default)]
+pub struct TriangleMesh {
+    /// Vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Per-vertex shading normals (unit length), if any; absent = flat (face) normals.
+    pub normals: Option<Vec<Vec3>>,
+    /// Per-vertex texture coordinates, if any.
+    pub uvs: Option<Vec<Vec2>>,
+    /// Triangles as vertex indices, counter-clockwise seen from the front (normal) side.
+    pub indices: Vec<[u32; 3]>,
+}
+
+/// The geometry of one shape.
+#[derive(Debug, Clone)]
+pub enum Geometry {
+    /// Triangles (`obj`, `ply`, `rectangle`, `cube` are all imported as meshes).
+    Mesh(TriangleMesh),
+    /// Analytic sphere (`sphere`); `flip_normals` makes its normal point inwards.
+    Sphere {
+        /// Centre in world space.
+        center: Vec3,
+        /// Radius in world units.
+        radius: f32,
+        /// Normals point inwards.
+        flip_normals: bool,
+    },
+    /// Analytic disk (`disk`): the unit disk in the local z = 0 plane, normal +z, mapped by `to_world`.
+    Disk {
+        /// Object-to-world transform.
+        to_world: Mat4,
+        /// Normal points along −z instead.
+        flip_normals: bool,
+    },
+}
+
+/// One shape with its material and, for area lights, its emission.
+#[derive(Debug, Clone)]
+pub struct ShapeDesc {
+    /// The `id` attribute, or a generated name (for error messages and statistics).
+    pub name: String,
+    /// World-space geometry.
+    pub geometry: Geometry,
+    /// Index into [`SceneDescription::bsdfs`].
+    pub bsdf: usize,
+    /// Radiance of a nested `area` emitter (emits from the front side only, as Mitsuba).
+    pub emission: Option<Rgb>,
+}
+
+/// A light source that is not attached to a shape.
+#[derive(Debug, Clone)]
+pub enum EmitterDesc {
+    /// `point`: radiant `intensity` (W/sr) at `position`.
+    Point {
+        /// World position.
+        position: Vec3,
+        /// Radiant intensity.
+        intensity: Rgb,
+    },
+    /// `spot`: like Mitsuba's, pointing along the local +z of `to_world`.
+    Spot {
+        /// Object-to-world transform (position and orientation).
+        to_world: Mat4,
+        /// Radiant intensity at the beam's centre.
+        intensity: Rgb,
+        /// `cutoff_angle` in degrees (default 20).
+        cutoff_angle: f32,
+        /// `beam_width` in degrees (default 3/4 of the cutoff angle).
+        beam_width: f32,
+    },
+    /// `directional`: `irradiance` arriving along `direction` (the direction light travels).
+    Directional {
+        /// Unit direction of propagation.
+        direction: Vec3,
+        /// Irradiance on a surface facing the light.
+        irradiance: Rgb,
+    },
+    /// `constant`: uniform environment radiance.
+    Constant {
+        /// Radiance from every direction.
+        radiance: Rgb,
+    },
+}
+
+/// Which axis `fov` measures (Mitsuba's `fov_axis`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FovAxis {
+    /// Horizontal.
+    X,
+    /// Vertical.
+    Y,
+    /// Diagonal.
+    Diagonal,
+    /// The smaller of the two image axes.
+    Smaller,
+    /// The larger of the two image axes.
+    Larger,
+}
+
+/// The camera (`perspective` or `thinlens` sensor) and its film.
+#[derive(Debug, Clone)]
+pub struct CameraDesc {
+    /// Camera-to-world; the camera looks along local +z with +y up (Mitsuba's convention).
+    pub to_world: Mat4,
+    /// Field of view in degrees.
+    pub fov: f32,
+    /// Which axis `fov` measures.
+    pub fov_axis: FovAxis,
+    /// `near_clip` (default 0.01).
+    pub near_clip: f32,
+    /// `far_clip` (default 10000).
+    pub far_clip: f32,
+    /// `aperture_radius` (0 for a pinhole, the `perspective` sensor).
+    pub aperture_radius: f32,
+    /// `focus_distance` (thin lens only).
+    pub focus_distance: f32,
+    /// Film width in pixels.
+    pub width: u32,
+    /// Film height in pixels.
+    pub height: u32,
+}
+
+/// Integrator settings found in the file (the command line may override them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IntegratorDesc {
+    /// Plugin name, e.g. `path`, `sppm`.
+    pub kind: String,
+    /// `max_depth` (−1 = unbounded; Mitsuba's default).
+    pub max_depth: i32,
+    /// `rr_depth` (Mitsuba's default 5).
+    pub rr_depth: u32,
+}
+
+/// A whole scene as data.
+#[derive(Debug, Clone)]
+pub struct SceneDescription {
+    /// The sensor.
+    pub camera: CameraDesc,
+    /// The sampler's `sample_count`, if given.
+    pub sample_count: Option<u32>,
+    /// The integrator, if given.
+    pub integrator: Option<IntegratorDesc>,
+    /// All materials; shapes refer to them by index.
+    pub bsdfs: Vec<Bsdf>,
+    /// All shapes.
+    pub shapes: Vec<ShapeDesc>,
+    /// Emitters not attached to shapes.
+    pub emitters: Vec<EmitterDesc>,
+    /// Non-fatal messages from the importer (e.g. a Gaussian rfilter mapped to box).
+    pub warnings: Vec<String>,
+}

@@ -1,0 +1,8 @@
+//! Physically based renderer: Mitsuba 3 XML scenes, BVH, materials, lights, cameras, a path
+//! tracer and the multi-level SPPM integrator that writes sample bundles.
+//! It knows nothing of neural networks.
+
+pub mod bsdf;
+pub mod description;
+pub mod spectrum;
+pub mod texture;

@@ -1,0 +1,111 @@
+//! Textures: values varying over a surface's (u, v) coordinates.
+
+use crate::spectrum::Rgb;
+use glam::{Mat3, Vec2};
+use std::sync::Arc;
+
+/// A linear-RGB image sampled by [`Texture::Bitmap`] (row 0 is the top row, as in files).
+#[derive(Debug, Clone)]
+pub struct Bitmap {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Row-major linear-RGB texels (sRGB-encoded files are linearised on load unless `raw`).
+    pub texels: Vec<Rgb>,
+}
+
+/// How a bitmap is filtered (Mitsuba's `filter_type`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BitmapFilter {
+    /// Nearest texel.
+    Nearest,
+    /// Bilinear interpolation of the four nearest texels.
+    Bilinear,
+}
+
+/// A spatially varying colour, Mitsuba's texture plugins plus constants.
+#[derive(Debug, Clone)]
+pub enum Texture {
+    /// The same colour everywhere (`<rgb>`, `<spectrum>` or `<float>` values).
+    Constant(Rgb),
+    /// Mitsuba's `checkerboard`: `color0` where ⌊u'⌋+⌊v'⌋ is even… with (u', v') = to_uv·(u, v, 1), 2×2 cells per unit.
+    Checkerboard {
+        /// Colour of the first cell type.
+        color0: Rgb,
+        /// Colour of the second cell type.
+        color1: Rgb,
+        /// Affine uv transform (Mitsuba's `to_uv`).
+        to_uv: Mat3,
+    },
+    /// Mitsuba's `bitmap`: an image looked up by uv (v = 0 at the image's bottom row, as Mitsuba).
+    Bitmap {
+        /// The decoded image.
+        image: Arc<Bitmap>,
+        /// Filtering mode.
+        filter: BitmapFilter,
+        /// Affine uv transform (Mitsuba's `to_uv`).
+        to_uv: Mat3,
+    },
+}
+
+impl Texture {
+    /// Whether the texture is the same everywhere.
+    pub fn is_constant(&self) -> bool {
+        matches!(self, Texture::Constant(_))
+    }
+
+    /// The colour at texture coordinates `uv`.
+    pub fn eval(&self, uv: Vec2) -> Rgb {
+        match self {
+            Texture::Constant(c) => *c,
+            Texture::Checkerboard { color0, color1, to_uv } => {
+                let p = *to_uv * uv.extend(1.0);
+                // Mitsuba: cells of size 0.5 in the transformed uv square.
+                let x = p.x - p.x.floor();
+                let y = p.y - p.y.floor();
+                if (x > 0.5) == (y > 0.5) {
+                    *color0
+                } else {
+                    *color1
+                }
+            }
+            Texture::Bitmap { image, filter, to_uv } => {
+                let p = *to_uv * uv.extend(1.0);
+                let (w, h) = (image.width as i64, image.height as i64);
+                let fetch = |x: i64, y: i64| {
+                    let x = x.rem_euclid(w);
+                    // Flip v: texel row 0 is the top of the image, v = 0 the bottom.
+                    let y = (h - 1 - y.rem_euclid(h)).clamp(0, h - 1);
+                    image.texels[(y * w + x) as usize]
+                };
+                let u = p.x * w as f32;
+                let v = p.y * h as f32;
+                match filter {
+                    BitmapFilter::Nearest => fetch(u.floor() as i64, v.floor() as i64),
+                    BitmapFilter::Bilinear => {
+                        let (u, v) = (u - 0.5, v - 0.5);
+                        let (x0, y0) = (u.floor(), v.floor());
+                        let (fx, fy) = (u - x0, v - y0);
+                        let (x0, y0) = (x0 as i64, y0 as i64);
+                        let a = fetch(x0, y0) * (1.0 - fx) + fetch(x0 + 1, y0) * fx;
+                        let b = fetch(x0, y0 + 1) * (1.0 - fx) + fetch(x0 + 1, y0 + 1) * fx;
+                        a * (1.0 - fy) + b * fy
+                    }
+                }
+            }
+        }
+    }
+
+    /// The mean colour (used for albedo estimates and light power).
+    pub fn mean(&self) -> Rgb {
+        match self {
+            Texture::Constant(c) => *c,
+            Texture::Checkerboard { color0, color1, .. } => 0.5 * (*color0 + *color1),
+            Texture::Bitmap { image, .. } => {
+                let n = image.texels.len().max(1) as f32;
+                image.texels.iter().copied().sum::<Rgb>() / n
+            }
+        }
+    }
+}
