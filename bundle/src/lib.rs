@@ -1,1 +1,685 @@
 //! The sample-bundle format (SPEC §3.5): the contract between the renderer and the network side.
+//!
+//! A bundle is one single-part, multi-layer float32 OpenEXR file holding the five multi-level
+//! SPPM estimates (`y`, `z1`..`z4`), their variances of the mean, the G-buffer (albedo, normal,
+//! depth) and optionally the per-level kernel radii. Layers follow the OpenEXR "layer.channel"
+//! naming convention, so OpenImageIO, Python `OpenEXR`, `exrheader` etc. read them directly.
+//! Metadata ([`BundleMeta`]) lives in the EXR header as a JSON string attribute
+//! ([`META_ATTRIBUTE`]); there is no sidecar file. The exact layout is documented in
+//! `docs/formats.md`.
+//!
+//! References (long renders) are plain RGB EXRs with channels `R`, `G`, `B`
+//! ([`write_rgb_exr_image`], [`read_rgb_exr_image`]).
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use exr::prelude::{
+    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image as ExrImage,
+    LayerAttributes, ReadChannels, ReadLayers, SmallVec, Text, WritableImage,
+};
+use serde::{Deserialize, Serialize};
+
+/// Names of the five estimate levels, sharpest first: `y` is the sharpest (independent)
+/// estimate, `z1`..`z4` the progressively smoother (correlated) ones.
+pub const LEVEL_NAMES: [&str; 5] = ["y", "z1", "z2", "z3", "z4"];
+
+/// Header attribute holding the JSON-serialised [`BundleMeta`].
+pub const META_ATTRIBUTE: &str = "bundleMeta";
+
+/// Header attribute holding the format identifier [`FORMAT_VERSION`].
+pub const FORMAT_ATTRIBUTE: &str = "bundleFormat";
+
+/// Format identifier written to [`FORMAT_ATTRIBUTE`]; bumped on incompatible changes.
+pub const FORMAT_VERSION: &str = "sppm-ml-bundle/1";
+
+/// Channel names of an RGB layer.
+const RGB: [&str; 3] = ["R", "G", "B"];
+/// Channel names of the normal layer.
+const XYZ: [&str; 3] = ["X", "Y", "Z"];
+
+/// Errors of reading and writing bundles and reference images; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum BundleError {
+    /// The file could not be created, renamed or opened.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file concerned.
+        path: PathBuf,
+        /// The underlying I/O error.
+        source: std::io::Error,
+    },
+    /// The EXR library rejected the file (truncated, corrupt, not an EXR).
+    #[error("{path}: invalid or truncated EXR: {source}")]
+    Exr {
+        /// The file concerned.
+        path: PathBuf,
+        /// The underlying EXR error.
+        source: exr::error::Error,
+    },
+    /// A required channel is absent from the file.
+    #[error("{path}: missing channel `{channel}`")]
+    MissingChannel {
+        /// The file concerned.
+        path: PathBuf,
+        /// The full channel name, e.g. `z3.G`.
+        channel: String,
+    },
+    /// A channel or image has the wrong size or shape.
+    #[error("{path}: bad channel `{channel}`: {reason}")]
+    BadChannel {
+        /// The file concerned.
+        path: PathBuf,
+        /// The channel or layer name.
+        channel: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The metadata attribute is missing or malformed.
+    #[error("{path}: bad metadata attribute `{attribute}`: {reason}")]
+    Metadata {
+        /// The file concerned.
+        path: PathBuf,
+        /// The attribute name.
+        attribute: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
+/// A dense float image: row-major, channels interleaved (`data[(y*width + x)*channels + c]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Channels per pixel.
+    pub channels: usize,
+    /// `width * height * channels` samples.
+    pub data: Vec<f32>,
+}
+
+impl Image {
+    /// A zero-filled image.
+    pub fn new(width: usize, height: usize, channels: usize) -> Self {
+        Self {
+            width,
+            height,
+            channels,
+            data: vec![0.0; width * height * channels],
+        }
+    }
+
+    /// The sample at pixel (x, y), channel c.
+    pub fn get(&self, x: usize, y: usize, c: usize) -> f32 {
+        self.data[(y * self.width + x) * self.channels + c]
+    }
+
+    /// Sets the sample at pixel (x, y), channel c.
+    pub fn set(&mut self, x: usize, y: usize, c: usize, value: f32) {
+        self.data[(y * self.width + x) * self.channels + c] = value;
+    }
+
+    /// The channels of pixel (x, y).
+    pub fn pixel(&self, x: usize, y: usize) -> &[f32] {
+        let start = (y * self.width + x) * self.channels;
+        &self.data[start..start + self.channels]
+    }
+
+    /// Copies channel `c` out as a row-major plane.
+    fn plane(&self, c: usize) -> Vec<f32> {
+        self.data
+            .iter()
+            .skip(c)
+            .step_by(self.channels)
+            .copied()
+            .collect()
+    }
+
+    /// First non-finite sample as (x, y, channel index).
+    fn find_non_finite(&self) -> Option<(usize, usize, usize)> {
+        let i = self.data.iter().position(|v| !v.is_finite())?;
+        let pixel = i / self.channels;
+        Some((pixel % self.width, pixel / self.width, i % self.channels))
+    }
+
+    /// Checks the shape against the expected one.
+    fn check_shape(
+        &self,
+        path: &Path,
+        layer: &str,
+        width: usize,
+        height: usize,
+        channels: usize,
+    ) -> Result<(), BundleError> {
+        let bad = |reason: String| BundleError::BadChannel {
+            path: path.to_owned(),
+            channel: layer.to_owned(),
+            reason,
+        };
+        if self.width != width || self.height != height || self.channels != channels {
+            return Err(bad(format!(
+                "expected {width}x{height}x{channels}, got {}x{}x{}",
+                self.width, self.height, self.channels
+            )));
+        }
+        if self.data.len() != width * height * channels {
+            return Err(bad(format!(
+                "data holds {} samples, expected {}",
+                self.data.len(),
+                width * height * channels
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Metadata of a bundle, stored as JSON in the EXR header attribute [`META_ATTRIBUTE`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BundleMeta {
+    /// Scene identifier (file stem or procedural scene id).
+    pub scene: String,
+    /// Render seed.
+    pub seed: u64,
+    /// SPPM passes accumulated.
+    pub passes: u32,
+    /// Photons emitted per pass.
+    pub photons_per_pass: u64,
+    /// Wall-clock render time in seconds up to this bundle.
+    pub seconds: f64,
+    /// Integrator name (`sppm-ml` or `sppm`).
+    pub integrator: String,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+}
+
+/// One rendered sample: five estimates, their variances and the G-buffer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bundle {
+    /// Metadata written to the EXR header.
+    pub meta: BundleMeta,
+    /// Five RGB images in [`LEVEL_NAMES`] order.
+    pub levels: Vec<Image>,
+    /// Variance of the mean, averaged over RGB: 5 channels in [`LEVEL_NAMES`] order.
+    pub variance: Image,
+    /// Albedo at path A's visible point, RGB.
+    pub albedo: Image,
+    /// World-space shading normal at path A's visible point, XYZ.
+    pub normal: Image,
+    /// Camera distance along path A to its visible point, 1 channel.
+    pub depth: Image,
+    /// Current kernel radius per level, 5 channels in [`LEVEL_NAMES`] order.
+    pub radius: Option<Image>,
+}
+
+impl Bundle {
+    /// All layers as (layer name, channel names, image), in file-documentation order.
+    fn layers(&self) -> Vec<(&'static str, Vec<&'static str>, &Image)> {
+        let mut out: Vec<(&'static str, Vec<&'static str>, &Image)> = Vec::new();
+        for (name, img) in LEVEL_NAMES.iter().zip(&self.levels) {
+            out.push((name, RGB.to_vec(), img));
+        }
+        out.push(("variance", LEVEL_NAMES.to_vec(), &self.variance));
+        out.push(("albedo", RGB.to_vec(), &self.albedo));
+        out.push(("normal", XYZ.to_vec(), &self.normal));
+        out.push(("depth", vec!["Z"], &self.depth));
+        if let Some(radius) = &self.radius {
+            out.push(("radius", LEVEL_NAMES.to_vec(), radius));
+        }
+        out
+    }
+
+    /// The first non-finite sample as (layer, channel, x, y), or `None` if all are finite.
+    pub fn find_non_finite(&self) -> Option<(&'static str, &'static str, usize, usize)> {
+        self.layers()
+            .into_iter()
+            .find_map(|(layer, channels, img)| {
+                img.find_non_finite()
+                    .map(|(x, y, c)| (layer, channels[c], x, y))
+            })
+    }
+
+    /// Checks level count and that every layer matches the metadata's resolution.
+    fn validate(&self, path: &Path) -> Result<(), BundleError> {
+        if self.levels.len() != LEVEL_NAMES.len() {
+            return Err(BundleError::BadChannel {
+                path: path.to_owned(),
+                channel: "levels".into(),
+                reason: format!("expected 5 levels, got {}", self.levels.len()),
+            });
+        }
+        let (w, h) = (self.meta.width as usize, self.meta.height as usize);
+        for (layer, channels, img) in self.layers() {
+            img.check_shape(path, layer, w, h, channels.len())?;
+        }
+        Ok(())
+    }
+}
+
+/// Writes `exr` to a temporary file next to `path`, then renames it over `path`, so readers
+/// never see a half-written file.
+fn write_atomic(
+    path: &Path,
+    exr: ExrImage<exr::image::Layer<AnyChannels<FlatSamples>>>,
+) -> Result<(), BundleError> {
+    let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+    let file_name = file_name.unwrap_or_else(|| "bundle.exr".into());
+    let tmp = path.with_file_name(format!(".{file_name}.tmp{}", std::process::id()));
+    if let Err(source) = exr.write().to_file(&tmp) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(match source {
+            exr::error::Error::Io(source) => BundleError::Io {
+                path: path.to_owned(),
+                source,
+            },
+            source => BundleError::Exr {
+                path: path.to_owned(),
+                source,
+            },
+        });
+    }
+    std::fs::rename(&tmp, path).map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        BundleError::Io {
+            path: path.to_owned(),
+            source,
+        }
+    })
+}
+
+/// Builds a single-part EXR image from (full channel name, plane) pairs.
+fn build_exr(
+    width: usize,
+    height: usize,
+    channels: Vec<(String, Vec<f32>)>,
+    attributes: HashMap<Text, AttributeValue>,
+) -> ExrImage<exr::image::Layer<AnyChannels<FlatSamples>>> {
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
+        .into_iter()
+        .map(|(name, plane)| AnyChannel::new(name.as_str(), FlatSamples::F32(plane)))
+        .collect();
+    let layer_attributes = LayerAttributes {
+        other: attributes,
+        ..LayerAttributes::default()
+    };
+    let layer = exr::image::Layer::new(
+        (width, height),
+        layer_attributes,
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list),
+    );
+    ExrImage::from_layer(layer)
+}
+
+/// Writes a bundle as one multi-layer float32 EXR, atomically (temp file + rename).
+pub fn write_bundle(path: &Path, b: &Bundle) -> Result<(), BundleError> {
+    b.validate(path)?;
+    let mut channels = Vec::new();
+    for (layer, names, img) in b.layers() {
+        for (c, name) in names.iter().enumerate() {
+            channels.push((format!("{layer}.{name}"), img.plane(c)));
+        }
+    }
+    let json = serde_json::to_string(&b.meta).map_err(|e| BundleError::Metadata {
+        path: path.to_owned(),
+        attribute: META_ATTRIBUTE.into(),
+        reason: e.to_string(),
+    })?;
+    let mut attributes = HashMap::new();
+    // OpenEXR string attributes are byte strings; UTF-8 passes through unchanged.
+    attributes.insert(
+        Text::from(META_ATTRIBUTE),
+        AttributeValue::Text(Text::from_slice_unchecked(json.as_bytes())),
+    );
+    attributes.insert(
+        Text::from(FORMAT_ATTRIBUTE),
+        AttributeValue::Text(Text::from(FORMAT_VERSION)),
+    );
+    let exr = build_exr(
+        b.meta.width as usize,
+        b.meta.height as usize,
+        channels,
+        attributes,
+    );
+    write_atomic(path, exr)
+}
+
+/// A decoded EXR: resolution, channel planes by full name, header attributes.
+struct Decoded {
+    width: usize,
+    height: usize,
+    planes: HashMap<String, Vec<f32>>,
+    attributes: HashMap<Text, AttributeValue>,
+}
+
+impl Decoded {
+    /// Reads the first layer of an EXR with all channels and attributes.
+    fn read(path: &Path) -> Result<Self, BundleError> {
+        let file = std::fs::File::open(path).map_err(|source| BundleError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let image = exr::prelude::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .pedantic()
+            .from_unbuffered(file)
+            .map_err(|source| BundleError::Exr {
+                path: path.to_owned(),
+                source,
+            })?;
+        let layer = image.layer_data;
+        let mut planes = HashMap::new();
+        for channel in layer.channel_data.list {
+            let name = String::from_utf8_lossy(channel.name.as_slice()).into_owned();
+            planes.insert(name, channel.sample_data.values_as_f32().collect());
+        }
+        let mut attributes = image.attributes.other;
+        attributes.extend(layer.attributes.other);
+        Ok(Self {
+            width: layer.size.0,
+            height: layer.size.1,
+            planes,
+            attributes,
+        })
+    }
+
+    /// Assembles an interleaved image from the channels `layer.name` (or bare `name` if `layer`
+    /// is empty).
+    fn image(&self, path: &Path, layer: &str, names: &[&str]) -> Result<Image, BundleError> {
+        let mut img = Image::new(self.width, self.height, names.len());
+        for (c, name) in names.iter().enumerate() {
+            let full = if layer.is_empty() {
+                (*name).to_owned()
+            } else {
+                format!("{layer}.{name}")
+            };
+            let plane = self
+                .planes
+                .get(&full)
+                .ok_or_else(|| BundleError::MissingChannel {
+                    path: path.to_owned(),
+                    channel: full.clone(),
+                })?;
+            if plane.len() != self.width * self.height {
+                return Err(BundleError::BadChannel {
+                    path: path.to_owned(),
+                    channel: full,
+                    reason: format!(
+                        "{} samples for a {}x{} image",
+                        plane.len(),
+                        self.width,
+                        self.height
+                    ),
+                });
+            }
+            for (i, v) in plane.iter().enumerate() {
+                img.data[i * names.len() + c] = *v;
+            }
+        }
+        Ok(img)
+    }
+
+    /// The UTF-8 text of a string attribute.
+    fn text_attribute(&self, path: &Path, name: &str) -> Result<String, BundleError> {
+        let bad = |reason: &str| BundleError::Metadata {
+            path: path.to_owned(),
+            attribute: name.to_owned(),
+            reason: reason.to_owned(),
+        };
+        match self.attributes.get(&Text::from(name)) {
+            Some(AttributeValue::Text(text)) => {
+                String::from_utf8(text.as_slice().to_vec()).map_err(|_| bad("not valid UTF-8"))
+            }
+            Some(_) => Err(bad("not a string attribute")),
+            None => Err(bad("missing")),
+        }
+    }
+}
+
+/// Reads a bundle written by [`write_bundle`]; errors name the file and the missing or bad
+/// channel or attribute.
+pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
+    let decoded = Decoded::read(path)?;
+    let json = decoded.text_attribute(path, META_ATTRIBUTE)?;
+    let meta: BundleMeta = serde_json::from_str(&json).map_err(|e| BundleError::Metadata {
+        path: path.to_owned(),
+        attribute: META_ATTRIBUTE.into(),
+        reason: e.to_string(),
+    })?;
+    if meta.width as usize != decoded.width || meta.height as usize != decoded.height {
+        return Err(BundleError::Metadata {
+            path: path.to_owned(),
+            attribute: META_ATTRIBUTE.into(),
+            reason: format!(
+                "metadata says {}x{}, image is {}x{}",
+                meta.width, meta.height, decoded.width, decoded.height
+            ),
+        });
+    }
+    let levels = LEVEL_NAMES
+        .iter()
+        .map(|level| decoded.image(path, level, &RGB))
+        .collect::<Result<Vec<_>, _>>()?;
+    let radius = if decoded.planes.keys().any(|k| k.starts_with("radius.")) {
+        Some(decoded.image(path, "radius", &LEVEL_NAMES)?)
+    } else {
+        None
+    };
+    Ok(Bundle {
+        meta,
+        levels,
+        variance: decoded.image(path, "variance", &LEVEL_NAMES)?,
+        albedo: decoded.image(path, "albedo", &RGB)?,
+        normal: decoded.image(path, "normal", &XYZ)?,
+        depth: decoded.image(path, "depth", &["Z"])?,
+        radius,
+    })
+}
+
+/// Writes a plain RGB float32 EXR (channels `R`, `G`, `B`), atomically (temp file + rename).
+pub fn write_rgb_exr_image(path: &Path, img: &Image) -> Result<(), BundleError> {
+    img.check_shape(path, "RGB", img.width, img.height, 3)?;
+    let channels = RGB
+        .iter()
+        .enumerate()
+        .map(|(c, name)| ((*name).to_owned(), img.plane(c)))
+        .collect();
+    write_atomic(
+        path,
+        build_exr(img.width, img.height, channels, HashMap::new()),
+    )
+}
+
+/// Reads the `R`, `G`, `B` channels of an EXR (other channels, e.g. `A`, are ignored).
+pub fn read_rgb_exr_image(path: &Path) -> Result<Image, BundleError> {
+    Decoded::read(path)?.image(path, "", &RGB)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bundle with distinct, position-dependent values in every channel.
+    fn sample_bundle(width: usize, height: usize, with_radius: bool) -> Bundle {
+        let fill = |channels: usize, salt: f32| {
+            let mut img = Image::new(width, height, channels);
+            for (i, v) in img.data.iter_mut().enumerate() {
+                *v = salt + i as f32 * 0.25 - (i % 7) as f32 * 1e-3;
+            }
+            img
+        };
+        Bundle {
+            meta: BundleMeta {
+                scene: "cornell-box ü".into(),
+                seed: 42,
+                passes: 128,
+                photons_per_pass: 100_000,
+                seconds: 12.5,
+                integrator: "sppm-ml".into(),
+                width: width as u32,
+                height: height as u32,
+            },
+            levels: (0..5).map(|l| fill(3, l as f32 * 100.0)).collect(),
+            variance: fill(5, 1000.0),
+            albedo: fill(3, 2000.0),
+            normal: fill(3, -3000.0),
+            depth: fill(1, 4000.0),
+            radius: with_radius.then(|| fill(5, 5000.0)),
+        }
+    }
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("bundle-test-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn bundle_round_trip_is_exact() {
+        let dir = temp_dir("roundtrip");
+        for with_radius in [false, true] {
+            let b = sample_bundle(7, 5, with_radius);
+            let path = dir.join(format!("b{with_radius}.exr"));
+            write_bundle(&path, &b).unwrap();
+            let back = read_bundle(&path).unwrap();
+            assert_eq!(back, b);
+        }
+        // No temp files are left behind.
+        let leftovers: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
+            .collect();
+        assert!(leftovers.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn channel_names_follow_the_documented_layout() {
+        let dir = temp_dir("names");
+        let path = dir.join("b.exr");
+        write_bundle(&path, &sample_bundle(3, 2, true)).unwrap();
+        let decoded = Decoded::read(&path).unwrap();
+        let mut names: Vec<_> = decoded.planes.keys().cloned().collect();
+        names.sort();
+        let mut expected: Vec<String> = Vec::new();
+        for l in LEVEL_NAMES {
+            for c in RGB {
+                expected.push(format!("{l}.{c}"));
+            }
+            expected.push(format!("variance.{l}"));
+            expected.push(format!("radius.{l}"));
+        }
+        for c in RGB {
+            expected.push(format!("albedo.{c}"));
+        }
+        for c in XYZ {
+            expected.push(format!("normal.{c}"));
+        }
+        expected.push("depth.Z".into());
+        expected.sort();
+        assert_eq!(names, expected);
+        assert_eq!(
+            decoded.text_attribute(&path, FORMAT_ATTRIBUTE).unwrap(),
+            FORMAT_VERSION
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn truncated_file_is_an_error_naming_the_file() {
+        let dir = temp_dir("truncated");
+        let path = dir.join("b.exr");
+        write_bundle(&path, &sample_bundle(16, 16, false)).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let cut = dir.join("cut.exr");
+        for keep in [bytes.len() / 2, bytes.len() - 10, 40] {
+            std::fs::write(&cut, &bytes[..keep]).unwrap();
+            let err = read_bundle(&cut).unwrap_err();
+            assert!(err.to_string().contains("cut.exr"), "{err}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn missing_channel_is_an_error_naming_it() {
+        let dir = temp_dir("missing");
+        let path = dir.join("partial.exr");
+        let b = sample_bundle(4, 3, false);
+        // Write every documented channel except `z3.G`.
+        let mut channels = Vec::new();
+        for (layer, names, img) in b.layers() {
+            for (c, name) in names.iter().enumerate() {
+                let full = format!("{layer}.{name}");
+                if full != "z3.G" {
+                    channels.push((full, img.plane(c)));
+                }
+            }
+        }
+        let mut attributes = HashMap::new();
+        let json = serde_json::to_string(&b.meta).unwrap();
+        attributes.insert(
+            Text::from(META_ATTRIBUTE),
+            AttributeValue::Text(Text::from_slice_unchecked(json.as_bytes())),
+        );
+        write_atomic(&path, build_exr(4, 3, channels, attributes)).unwrap();
+        let err = read_bundle(&path).unwrap_err();
+        let msg = err.to_string();
+        assert!(matches!(err, BundleError::MissingChannel { .. }), "{msg}");
+        assert!(msg.contains("z3.G") && msg.contains("partial.exr"), "{msg}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn missing_metadata_is_an_error() {
+        let dir = temp_dir("nometa");
+        let path = dir.join("ref.exr");
+        write_rgb_exr_image(&path, &Image::new(2, 2, 3)).unwrap();
+        let err = read_bundle(&path).unwrap_err();
+        assert!(err.to_string().contains(META_ATTRIBUTE), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn wrong_shape_is_rejected_on_write() {
+        let dir = temp_dir("shape");
+        let mut b = sample_bundle(4, 3, false);
+        b.albedo = Image::new(3, 3, 3);
+        let err = write_bundle(&dir.join("b.exr"), &b).unwrap_err();
+        assert!(err.to_string().contains("albedo"), "{err}");
+        assert!(!dir.join("b.exr").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn non_finite_detection_names_layer_channel_and_pixel() {
+        let mut b = sample_bundle(6, 4, true);
+        assert_eq!(b.find_non_finite(), None);
+        b.variance.set(5, 2, 3, f32::NAN);
+        assert_eq!(b.find_non_finite(), Some(("variance", "z3", 5, 2)));
+        b.levels[2].set(1, 3, 2, f32::INFINITY);
+        assert_eq!(b.find_non_finite(), Some(("z2", "B", 1, 3)));
+    }
+
+    #[test]
+    fn rgb_reference_round_trip() {
+        let dir = temp_dir("rgb");
+        let path = dir.join("ref.exr");
+        let mut img = Image::new(5, 4, 3);
+        for (i, v) in img.data.iter_mut().enumerate() {
+            *v = (i as f32).sqrt() * 0.1;
+        }
+        write_rgb_exr_image(&path, &img).unwrap();
+        assert_eq!(read_rgb_exr_image(&path).unwrap(), img);
+        let err = read_rgb_exr_image(&dir.join("absent.exr")).unwrap_err();
+        assert!(err.to_string().contains("absent.exr"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
