@@ -2,7 +2,13 @@
 //! tracer and the multi-level SPPM integrator that writes sample bundles.
 //! It knows nothing of neural networks.
 
+pub mod accel;
 pub mod bsdf;
+pub mod camera;
 pub mod description;
+pub mod integrators;
+pub mod math;
+pub mod sampling;
+pub mod shapes;
 pub mod spectrum;
 pub mod texture;

@@ -1,0 +1,3 @@
+//! Light transport algorithms: each integrator turns a scene into images.
+
+pub mod sppm;
