@@ -1,0 +1,149 @@
+//! `bundle_info`: prints a sample bundle's metadata and per-layer statistics, and optionally
+//! writes each estimate level (and the G-buffer) as an sRGB PNG for a quick look.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use bundle::{read_bundle, Bundle, Image, LEVEL_NAMES};
+use clap::Parser;
+
+/// Inspect a multi-level SPPM sample bundle (docs/formats.md).
+#[derive(Parser, Debug)]
+#[command(version, about)]
+struct Args {
+    /// Bundle EXR written by `render --integrator sppm-ml|sppm`.
+    bundle: PathBuf,
+    /// Write `<prefix>_<layer>.png` for y, z1..z4, albedo, normal and depth.
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// Exposure in stops applied to the estimate PNGs.
+    #[arg(long, default_value_t = 0.0)]
+    exposure: f32,
+}
+
+/// Min, max, mean and non-finite count of one channel.
+struct ChannelStats {
+    min: f64,
+    max: f64,
+    mean: f64,
+    non_finite: usize,
+}
+
+/// Statistics of channel `c` of `img`, over finite samples.
+fn channel_stats(img: &Image, c: usize) -> ChannelStats {
+    let (mut min, mut max, mut sum, mut n, mut non_finite) =
+        (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0usize, 0usize);
+    for v in img.data.iter().skip(c).step_by(img.channels) {
+        if v.is_finite() {
+            let v = *v as f64;
+            min = min.min(v);
+            max = max.max(v);
+            sum += v;
+            n += 1;
+        } else {
+            non_finite += 1;
+        }
+    }
+    ChannelStats {
+        min,
+        max,
+        mean: if n > 0 { sum / n as f64 } else { f64::NAN },
+        non_finite,
+    }
+}
+
+/// Prints one table row per channel of a layer.
+fn print_layer(name: &str, channels: &[&str], img: &Image) {
+    for (c, ch) in channels.iter().enumerate() {
+        let s = channel_stats(img, c);
+        println!(
+            "{:<14} {:>13.6e} {:>13.6e} {:>13.6e} {:>9}",
+            format!("{name}.{ch}"),
+            s.min,
+            s.max,
+            s.mean,
+            s.non_finite
+        );
+    }
+}
+
+/// Linear → sRGB-encoded 8-bit value.
+fn srgb8(v: f32) -> u8 {
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let s = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0 + 0.5) as u8
+}
+
+/// Writes the first three channels of `img` (or its single channel as grey), mapped by `map`.
+fn write_png(path: &Path, img: &Image, map: impl Fn(f32) -> f32) -> Result<()> {
+    let mut out = image::RgbImage::new(img.width as u32, img.height as u32);
+    for (x, y, px) in out.enumerate_pixels_mut() {
+        let p = img.pixel(x as usize, y as usize);
+        let rgb = if img.channels >= 3 {
+            [p[0], p[1], p[2]]
+        } else {
+            [p[0]; 3]
+        };
+        *px = image::Rgb(rgb.map(|v| srgb8(map(v))));
+    }
+    out.save(path)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// Writes the PNG previews next to `prefix`.
+fn write_pngs(b: &Bundle, prefix: &Path, exposure: f32) -> Result<()> {
+    let scale = exposure.exp2();
+    let name = |layer: &str| {
+        let mut s = prefix.as_os_str().to_owned();
+        s.push(format!("_{layer}.png"));
+        PathBuf::from(s)
+    };
+    for (level, img) in LEVEL_NAMES.iter().zip(&b.levels) {
+        write_png(&name(level), img, |v| v * scale)?;
+    }
+    write_png(&name("albedo"), &b.albedo, |v| v)?;
+    write_png(&name("normal"), &b.normal, |v| 0.5 * v + 0.5)?;
+    let max_depth = channel_stats(&b.depth, 0).max.max(1e-6) as f32;
+    write_png(&name("depth"), &b.depth, |v| v / max_depth)?;
+    eprintln!(
+        "wrote {}_{{y,z1..z4,albedo,normal,depth}}.png",
+        prefix.display()
+    );
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    let b = read_bundle(&args.bundle)?;
+    println!("file:        {}", args.bundle.display());
+    println!("{}", serde_json::to_string_pretty(&b.meta)?);
+    println!(
+        "{:<14} {:>13} {:>13} {:>13} {:>9}",
+        "channel", "min", "max", "mean", "nonfinite"
+    );
+    for (level, img) in LEVEL_NAMES.iter().zip(&b.levels) {
+        print_layer(level, &["R", "G", "B"], img);
+    }
+    print_layer("variance", &LEVEL_NAMES, &b.variance);
+    print_layer("albedo", &["R", "G", "B"], &b.albedo);
+    print_layer("normal", &["X", "Y", "Z"], &b.normal);
+    print_layer("depth", &["Z"], &b.depth);
+    if let Some(radius) = &b.radius {
+        print_layer("radius", &LEVEL_NAMES, radius);
+    }
+    if let Some((layer, channel, x, y)) = b.find_non_finite() {
+        println!("first non-finite sample: {layer}.{channel} at ({x}, {y})");
+    }
+    if let Some(prefix) = &args.png {
+        write_pngs(&b, prefix, args.exposure)?;
+    }
+    Ok(())
+}
