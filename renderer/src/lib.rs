@@ -6,6 +6,7 @@ pub mod accel;
 pub mod bsdf;
 pub mod camera;
 pub mod description;
+pub mod frame;
 pub mod integrators;
 pub mod math;
 pub mod sampling;

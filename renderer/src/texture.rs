@@ -29,7 +29,8 @@ pub enum BitmapFilter {
 pub enum Texture {
     /// The same colour everywhere (`<rgb>`, `<spectrum>` or `<float>` values).
     Constant(Rgb),
-    /// Mitsuba's `checkerboard`: `color0` where ⌊u'⌋+⌊v'⌋ is even… with (u', v') = to_uv·(u, v, 1), 2×2 cells per unit.
+    /// Mitsuba's `checkerboard`: with (u', v') = to_uv·(u, v, 1), `color0` where the fractional
+    /// parts of u' and v' are both ≤ ½ or both > ½, `color1` elsewhere (2×2 cells per unit square).
     Checkerboard {
         /// Colour of the first cell type.
         color0: Rgb,
@@ -38,7 +39,10 @@ pub enum Texture {
         /// Affine uv transform (Mitsuba's `to_uv`).
         to_uv: Mat3,
     },
-    /// Mitsuba's `bitmap`: an image looked up by uv (v = 0 at the image's bottom row, as Mitsuba).
+    /// Mitsuba's `bitmap`: an image looked up by uv exactly as Mitsuba 3 does: texel row
+    /// ⌊v·height⌋ counted from the **top** row of the file (no flip here), repeat wrapping,
+    /// bilinear filtering between texel centres. Mitsuba's OBJ/PLY loaders store `1 − v`, so the
+    /// importers must do the same for textured meshes to come out upright.
     Bitmap {
         /// The decoded image.
         image: Arc<Bitmap>,
@@ -59,7 +63,11 @@ impl Texture {
     pub fn eval(&self, uv: Vec2) -> Rgb {
         match self {
             Texture::Constant(c) => *c,
-            Texture::Checkerboard { color0, color1, to_uv } => {
+            Texture::Checkerboard {
+                color0,
+                color1,
+                to_uv,
+            } => {
                 let p = *to_uv * uv.extend(1.0);
                 // Mitsuba: cells of size 0.5 in the transformed uv square.
                 let x = p.x - p.x.floor();
@@ -70,13 +78,17 @@ impl Texture {
                     *color1
                 }
             }
-            Texture::Bitmap { image, filter, to_uv } => {
+            Texture::Bitmap {
+                image,
+                filter,
+                to_uv,
+            } => {
                 let p = *to_uv * uv.extend(1.0);
                 let (w, h) = (image.width as i64, image.height as i64);
                 let fetch = |x: i64, y: i64| {
+                    // Repeat wrapping; row 0 is the file's top row, reached at v ∈ [0, 1/h).
                     let x = x.rem_euclid(w);
-                    // Flip v: texel row 0 is the top of the image, v = 0 the bottom.
-                    let y = (h - 1 - y.rem_euclid(h)).clamp(0, h - 1);
+                    let y = y.rem_euclid(h);
                     image.texels[(y * w + x) as usize]
                 };
                 let u = p.x * w as f32;
@@ -94,6 +106,23 @@ impl Texture {
                     }
                 }
             }
+        }
+    }
+
+    /// A cheap estimate of [`Texture::mean`] for per-sample use (lobe-selection weights): exact
+    /// for constants and checkerboards, a fixed stride subsample of ≤ 64 texels for bitmaps.
+    pub fn mean_estimate(&self) -> Rgb {
+        match self {
+            Texture::Bitmap { image, .. } if image.texels.len() > 64 => {
+                let stride = image.texels.len().div_ceil(64);
+                let (sum, count) = image
+                    .texels
+                    .iter()
+                    .step_by(stride)
+                    .fold((Rgb::ZERO, 0u32), |(s, c), t| (s + *t, c + 1));
+                sum / count as f32
+            }
+            _ => self.mean(),
         }
     }
 

@@ -10,9 +10,63 @@
 //! - [`BsdfSample::weight`] is f·|cos θi| / pdf (for a delta lobe: the full throughput of that
 //!   lobe divided by the probability of having chosen it);
 //! - one-sided models (diffuse, conductors, plastics) are black when `wo.z <= 0` or
-//!   `wi.z <= 0`, as in Mitsuba; `twosided` mirrors the frame for the back side.
+//!   `wi.z <= 0`, as in Mitsuba; `twosided` mirrors the frame for the back side;
+//! - for a delta sample, [`BsdfSample::pdf`] is the probability of having chosen that lobe (as
+//!   Mitsuba's `bs.pdf`), not a density: never use it for MIS;
+//! - `sample` returns `None` where Mitsuba returns a zero-weight sample (the path ends).
+//!
+//! Everything follows Mitsuba 3's plugins (`src/bsdfs/*.cpp`) term by term; the rough models
+//! always use visible-normal sampling (Mitsuba's default `sample_visible = true`).
 
+mod conductor;
+mod dielectric;
+mod diffuse;
+pub mod fresnel;
+pub mod microfacet;
+mod plastic;
+mod roughconductor;
+mod roughdielectric;
+mod roughplastic;
+mod thindielectric;
+pub mod warp;
+
+#[cfg(test)]
+mod tests;
+
+use crate::spectrum::Rgb;
 use crate::texture::Texture;
+use glam::{Vec2, Vec3};
+
+/// Roughness below which a rough conductor/dielectric counts as [`Lobe::Glossy`] (the larger of
+/// `alpha_u`, `alpha_v` is compared): SPPM continues eye paths through such surfaces instead of
+/// storing a visible point, because a photon-density estimate on a sharp lobe is very noisy.
+pub const GLOSSY_ALPHA_THRESHOLD: f32 = 0.25;
+
+/// A direction sampled from a BSDF.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BsdfSample {
+    /// Sampled direction (local frame), pointing away from the surface.
+    pub wi: Vec3,
+    /// f·|cos θi| / pdf (delta lobes: throughput / lobe probability).
+    pub weight: Rgb,
+    /// Solid-angle density of `wi` (delta lobes: the lobe's selection probability).
+    pub pdf: f32,
+    /// Whether the sample came from a delta (specular) lobe.
+    pub delta: bool,
+    /// Relative IOR crossed by the sample (1 for reflection), for Russian roulette.
+    pub eta: f32,
+}
+
+/// How an SPPM eye path treats a surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lobe {
+    /// Only specular components: the eye path must continue.
+    Delta,
+    /// Narrow glossy lobes (α < [`GLOSSY_ALPHA_THRESHOLD`]): the eye path continues.
+    Glossy,
+    /// Broad lobes: the eye path stops and a visible point is stored.
+    Diffuse,
+}
 
 /// Which quantity a path carries: radiance from the camera, or importance/flux from lights.
 /// Refraction scales radiance by 1/η² but not flux, so photon tracing passes `Importance`.
@@ -48,9 +102,9 @@ pub struct Roughness {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ConductorIor {
     /// Real part η.
-    pub eta: crate::spectrum::Rgb,
+    pub eta: Rgb,
     /// Imaginary part k (absorption).
-    pub k: crate::spectrum::Rgb,
+    pub k: Rgb,
 }
 
 /// `diffuse`: Lambertian reflection.
@@ -169,4 +223,171 @@ pub enum Bsdf {
         /// Model for the other side.
         back: Box<Bsdf>,
     },
+}
+
+impl Bsdf {
+    /// Sample an incident direction `wi` for the outgoing direction `wo` (local frame).
+    /// `u_lobe` chooses among components, `u` drives the direction warp.
+    pub fn sample(
+        &self,
+        wo: Vec3,
+        uv: Vec2,
+        u_lobe: f32,
+        u: Vec2,
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        let s = match self {
+            Bsdf::Diffuse(b) => b.sample(wo, uv, u),
+            Bsdf::Conductor(b) => b.sample(wo, uv),
+            Bsdf::RoughConductor(b) => b.sample(wo, uv, u),
+            Bsdf::Dielectric(b) => b.sample(wo, uv, u_lobe, mode),
+            Bsdf::ThinDielectric(b) => b.sample(wo, uv, u_lobe),
+            Bsdf::RoughDielectric(b) => b.sample(wo, uv, u_lobe, u, mode),
+            Bsdf::Plastic(b) => b.sample(wo, uv, u_lobe, u),
+            Bsdf::RoughPlastic(b) => b.sample(wo, uv, u_lobe, u),
+            Bsdf::TwoSided { front, back } => {
+                if wo.z > 0.0 {
+                    front.sample(wo, uv, u_lobe, u, mode)
+                } else if wo.z < 0.0 {
+                    back.sample(flip(wo), uv, u_lobe, u, mode)
+                        .map(|s| BsdfSample {
+                            wi: flip(s.wi),
+                            ..s
+                        })
+                } else {
+                    None
+                }
+            }
+        }?;
+        // A zero-throughput sample ends the path, as Mitsuba's zero weight does.
+        (s.weight.max_element() > 0.0 && s.weight.is_finite() && s.pdf > 0.0).then_some(s)
+    }
+
+    /// BSDF value f(wo, wi) without the cosine; zero for delta components.
+    pub fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
+        match self {
+            Bsdf::Diffuse(b) => b.eval(wo, wi, uv),
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Rgb::ZERO,
+            Bsdf::RoughConductor(b) => b.eval(wo, wi, uv),
+            Bsdf::RoughDielectric(b) => b.eval(wo, wi, uv, mode),
+            Bsdf::Plastic(b) => b.eval(wo, wi, uv),
+            Bsdf::RoughPlastic(b) => b.eval(wo, wi, uv),
+            Bsdf::TwoSided { front, back } => {
+                if wo.z > 0.0 {
+                    front.eval(wo, wi, uv, mode)
+                } else if wo.z < 0.0 {
+                    back.eval(flip(wo), flip(wi), uv, mode)
+                } else {
+                    Rgb::ZERO
+                }
+            }
+        }
+    }
+
+    /// Solid-angle density with which [`Bsdf::sample`] produces `wi` through non-delta lobes.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
+        let _ = uv; // Lobe-selection weights use texture means, not the local value (as Mitsuba).
+        match self {
+            Bsdf::Diffuse(b) => b.pdf(wo, wi),
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
+            Bsdf::RoughConductor(b) => b.pdf(wo, wi),
+            Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
+            Bsdf::Plastic(b) => b.pdf(wo, wi),
+            Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
+            Bsdf::TwoSided { front, back } => {
+                if wo.z > 0.0 {
+                    front.pdf(wo, wi, uv)
+                } else if wo.z < 0.0 {
+                    back.pdf(flip(wo), flip(wi), uv)
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// How SPPM treats this surface (for `twosided` with different sides: the less diffuse of
+    /// the two, so an eye path never stops on a mirror; see [`Bsdf::lobe_for`]).
+    pub fn lobe(&self) -> Lobe {
+        match self {
+            Bsdf::Diffuse(_) | Bsdf::Plastic(_) | Bsdf::RoughPlastic(_) => Lobe::Diffuse,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Lobe::Delta,
+            Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
+            Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
+            Bsdf::TwoSided { front, back } => {
+                let (f, b) = (front.lobe(), back.lobe());
+                if lobe_rank(f) <= lobe_rank(b) {
+                    f
+                } else {
+                    b
+                }
+            }
+        }
+    }
+
+    /// [`Bsdf::lobe`] for the side `wo` (local frame) is on: resolves `twosided` exactly.
+    pub fn lobe_for(&self, wo: Vec3) -> Lobe {
+        match self {
+            Bsdf::TwoSided { front, back } => {
+                if wo.z >= 0.0 {
+                    front.lobe_for(wo)
+                } else {
+                    back.lobe_for(flip(wo))
+                }
+            }
+            b => b.lobe(),
+        }
+    }
+
+    /// Whether [`Bsdf::eval`] can be non-zero (next-event estimation is worthwhile).
+    pub fn has_non_delta(&self) -> bool {
+        match self {
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => false,
+            Bsdf::TwoSided { front, back } => front.has_non_delta() || back.has_non_delta(),
+            _ => true,
+        }
+    }
+
+    /// Albedo for the G-buffer: the diffuse reflectance of diffuse and plastic models; for
+    /// conductors the specular tint times the normal-incidence Fresnel reflectance (the
+    /// metal's colour); for dielectrics the transmittance tint; `twosided`: the front side.
+    pub fn albedo(&self, uv: Vec2) -> Rgb {
+        match self {
+            Bsdf::Diffuse(b) => b.reflectance.eval(uv),
+            Bsdf::Plastic(b) => b.diffuse_reflectance.eval(uv),
+            Bsdf::RoughPlastic(b) => b.diffuse_reflectance.eval(uv),
+            Bsdf::Conductor(b) => {
+                b.specular_reflectance.eval(uv) * conductor::conductor_reflectance(&b.ior, 1.0)
+            }
+            Bsdf::RoughConductor(b) => {
+                b.specular_reflectance.eval(uv) * conductor::conductor_reflectance(&b.ior, 1.0)
+            }
+            Bsdf::Dielectric(b) => b.specular_transmittance.eval(uv),
+            Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(uv),
+            Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(uv),
+            Bsdf::TwoSided { front, .. } => front.albedo(uv),
+        }
+    }
+}
+
+/// Mirror a local direction to the other side of the surface (twosided's back face).
+#[inline]
+fn flip(w: Vec3) -> Vec3 {
+    Vec3::new(w.x, w.y, -w.z)
+}
+
+fn rough_lobe(r: &Roughness) -> Lobe {
+    if r.alpha_u.max(r.alpha_v) < GLOSSY_ALPHA_THRESHOLD {
+        Lobe::Glossy
+    } else {
+        Lobe::Diffuse
+    }
+}
+
+fn lobe_rank(l: Lobe) -> u8 {
+    match l {
+        Lobe::Delta => 0,
+        Lobe::Glossy => 1,
+        Lobe::Diffuse => 2,
+    }
 }

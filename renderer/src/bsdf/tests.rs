@@ -1,0 +1,1 @@
+//! Statistical tests of every BSDF (see the module doc of `bsdf`).
