@@ -1,0 +1,47 @@
+//! Directional light (Mitsuba's `directional`): irradiance E arriving from one direction.
+
+use super::{EmissionSample, LightSample, SceneSphere};
+use crate::math::{coordinate_system, Ray};
+use crate::sampling::square_to_uniform_disk_concentric;
+use crate::spectrum::Rgb;
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// A distant light.
+#[derive(Debug, Clone, Copy)]
+pub struct DirectionalLight {
+    /// Unit direction of propagation.
+    pub direction: Vec3,
+    /// Irradiance on a surface facing the light.
+    pub irradiance: Rgb,
+}
+
+impl DirectionalLight {
+    /// Direct illumination at `p` (the shadow ray is unbounded).
+    pub fn sample_li(&self, p: Vec3, sphere: &SceneSphere) -> LightSample {
+        let wi = -self.direction;
+        LightSample {
+            wi,
+            p: p + wi * (2.0 * sphere.radius + (p - sphere.center).length()),
+            dist: f32::INFINITY,
+            weight: self.irradiance,
+            pdf: 1.0,
+            delta: true,
+            infinite: true,
+            light: 0,
+        }
+    }
+
+    /// A photon starting on a disk covering the scene's bounding sphere, facing the light.
+    pub fn sample_emission(&self, u: Vec2, sphere: &SceneSphere) -> EmissionSample {
+        let (s, t) = coordinate_system(self.direction);
+        let d = square_to_uniform_disk_concentric(u) * sphere.radius;
+        let o = sphere.center - self.direction * sphere.radius + s * d.x + t * d.y;
+        EmissionSample { ray: Ray::new(o, self.direction), flux: self.irradiance * (PI * sphere.radius * sphere.radius), light: 0 }
+    }
+
+    /// Power through the scene's bounding disk, E·πR².
+    pub fn power(&self, sphere: &SceneSphere) -> Rgb {
+        self.irradiance * (PI * sphere.radius * sphere.radius)
+    }
+}

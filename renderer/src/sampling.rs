@@ -1,0 +1,276 @@
+//! Random numbers and sample warps: deterministic per-pixel / per-photon PCG32 streams, the
+//! square-to-domain warps used by cameras, lights and BSDFs, MIS heuristics and a discrete
+//! distribution for light selection.
+
+use glam::{Vec2, Vec3};
+pub use rand_pcg::Pcg32;
+use rand_core::RngCore;
+use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+
+/// SplitMix64 finaliser: a bijective 64-bit mix with good avalanche.
+#[inline]
+fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Hash of (seed, pass, index) to 64 bits; distinct inputs give unrelated outputs.
+#[inline]
+pub fn hash3(seed: u64, pass: u64, index: u64) -> u64 {
+    let h = mix64(seed ^ 0x9e37_79b9_7f4a_7c15);
+    let h = mix64(h ^ pass.wrapping_mul(0xd1b5_4a32_d192_ed03));
+    mix64(h ^ index.wrapping_mul(0xaef1_7502_108e_f2d9))
+}
+
+/// The random stream of one work item (a pixel's samples in one pass, one photon…): a PCG32
+/// generator whose state and stream are derived from hash(seed, pass, index). Results depend
+/// only on these three numbers, never on thread scheduling.
+#[inline]
+pub fn rng_for(seed: u64, pass: u64, index: u64) -> Pcg32 {
+    let h = hash3(seed, pass, index);
+    Pcg32::new(h, mix64(h ^ 0x5851_f42d_4c95_7f2d))
+}
+
+/// Uniform floats from a generator.
+pub trait UniformSource {
+    /// A uniform float in [0, 1) (24 random mantissa bits).
+    fn next_f32(&mut self) -> f32;
+    /// Two uniform floats in [0, 1)².
+    #[inline]
+    fn next_2d(&mut self) -> Vec2 {
+        let x = self.next_f32();
+        let y = self.next_f32();
+        Vec2::new(x, y)
+    }
+}
+
+impl UniformSource for Pcg32 {
+    #[inline]
+    fn next_f32(&mut self) -> f32 {
+        (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
+}
+
+/// Power heuristic (β = 2) weight of a strategy with density `a` against one with density `b`.
+#[inline]
+pub fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 == 0.0 {
+        return 0.0;
+    }
+    if !a2.is_finite() {
+        return 1.0;
+    }
+    a2 / (a2 + b2)
+}
+
+/// Concentric (Shirley–Chiu) map of the unit square to the unit disk.
+#[inline]
+pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, FRAC_PI_4 * (o.y / o.x))
+    } else {
+        (o.y, FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
+    };
+    let (s, c) = theta.sin_cos();
+    Vec2::new(r * c, r * s)
+}
+
+/// Cosine-weighted direction on the +z hemisphere.
+#[inline]
+pub fn square_to_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = square_to_uniform_disk_concentric(u);
+    let z = (1.0 - d.length_squared()).max(0.0).sqrt();
+    Vec3::new(d.x, d.y, z)
+}
+
+/// Density of [`square_to_cosine_hemisphere`] (solid angle).
+#[inline]
+pub fn cosine_hemisphere_pdf(v: Vec3) -> f32 {
+    v.z.max(0.0) * std::f32::consts::FRAC_1_PI
+}
+
+/// Uniform direction on the unit sphere.
+#[inline]
+pub fn square_to_uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.y;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let (s, c) = (2.0 * PI * u.x).sin_cos();
+    Vec3::new(r * c, r * s, z)
+}
+
+/// Density of [`square_to_uniform_sphere`].
+pub const UNIFORM_SPHERE_PDF: f32 = 1.0 / (4.0 * PI);
+
+/// Uniform direction in the cone around +z with cos(half-angle) = `cos_max`.
+#[inline]
+pub fn square_to_uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
+    let cos_t = (1.0 - u.y) + u.y * cos_max;
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let (s, c) = (2.0 * PI * u.x).sin_cos();
+    Vec3::new(sin_t * c, sin_t * s, cos_t)
+}
+
+/// Density of [`square_to_uniform_cone`] (inside the cone).
+#[inline]
+pub fn uniform_cone_pdf(cos_max: f32) -> f32 {
+    1.0 / (2.0 * PI * (1.0 - cos_max))
+}
+
+/// Uniform barycentric coordinates (b1, b2) on a triangle (b0 = 1 − b1 − b2).
+#[inline]
+pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {
+    let t = (1.0 - u.x).max(0.0).sqrt();
+    Vec2::new(1.0 - t, u.y * t)
+}
+
+/// A piecewise-constant discrete distribution over `n` items (light selection by power).
+#[derive(Debug, Clone, Default)]
+pub struct Distribution1D {
+    /// Normalised probabilities.
+    pmf: Vec<f32>,
+    /// Cumulative sums, `cdf[n] = 1`.
+    cdf: Vec<f32>,
+    /// Sum of the unnormalised weights.
+    total: f32,
+}
+
+impl Distribution1D {
+    /// Builds the distribution from non-negative weights; all-zero weights become uniform.
+    pub fn new(weights: &[f32]) -> Self {
+        let n = weights.len();
+        let clean: Vec<f64> =
+            weights.iter().map(|&w| if w.is_finite() && w > 0.0 { w as f64 } else { 0.0 }).collect();
+        let mut total: f64 = clean.iter().sum();
+        let uniform = total <= 0.0;
+        if uniform {
+            total = n as f64;
+        }
+        let mut pmf = Vec::with_capacity(n);
+        let mut cdf = Vec::with_capacity(n + 1);
+        let mut acc = 0.0f64;
+        cdf.push(0.0);
+        for w in clean {
+            let p = if uniform { 1.0 / n as f64 } else { w / total };
+            pmf.push(p as f32);
+            acc += p;
+            cdf.push(acc as f32);
+        }
+        if let Some(last) = cdf.last_mut() {
+            *last = 1.0;
+        }
+        Distribution1D { pmf, cdf, total: if uniform { 0.0 } else { total as f32 } }
+    }
+
+    /// Number of items.
+    pub fn len(&self) -> usize {
+        self.pmf.len()
+    }
+
+    /// Whether there are no items.
+    pub fn is_empty(&self) -> bool {
+        self.pmf.is_empty()
+    }
+
+    /// Sum of the weights the distribution was built from.
+    pub fn total(&self) -> f32 {
+        self.total
+    }
+
+    /// Probability of item `i`.
+    #[inline]
+    pub fn pmf(&self, i: usize) -> f32 {
+        self.pmf[i]
+    }
+
+    /// Picks an item with `u` in [0,1); returns (index, probability, `u` rescaled to [0,1) within
+    /// the chosen item so it can be reused).
+    #[inline]
+    pub fn sample(&self, u: f32) -> (usize, f32, f32) {
+        // Last index with cdf[i] <= u among 0..n.
+        let n = self.pmf.len();
+        let mut i = self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
+        while i + 1 < n && self.pmf[i] == 0.0 {
+            i += 1;
+        }
+        let i = i.min(n - 1);
+        let p = self.pmf[i];
+        let du = if p > 0.0 { ((u - self.cdf[i]) / p).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 };
+        (i, p, du)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rng_streams_are_deterministic_and_distinct() {
+        let a: Vec<f32> = (0..4).map(|_| 0.0).scan(rng_for(1, 2, 3), |r, _| Some(r.next_f32())).collect();
+        let b: Vec<f32> = (0..4).map(|_| 0.0).scan(rng_for(1, 2, 3), |r, _| Some(r.next_f32())).collect();
+        let c: Vec<f32> = (0..4).map(|_| 0.0).scan(rng_for(1, 2, 4), |r, _| Some(r.next_f32())).collect();
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+        let mut r = rng_for(7, 0, 0);
+        let mean: f64 = (0..100_000).map(|_| r.next_f32() as f64).sum::<f64>() / 100_000.0;
+        assert!((mean - 0.5).abs() < 0.005, "mean {mean}");
+    }
+
+    #[test]
+    fn mis_weights_sum_to_one() {
+        for (a, b) in [(0.3, 2.0), (5.0, 5.0), (1e-3, 10.0), (0.0, 1.0)] {
+            let s = power_heuristic(a, b) + power_heuristic(b, a);
+            assert!((s - 1.0).abs() < 1e-6, "{a} {b}: {s}");
+        }
+    }
+
+    /// Monte Carlo integral of a density over its domain must be 1 (uniform sphere estimator).
+    #[test]
+    fn warps_match_their_densities() {
+        let mut r = rng_for(3, 0, 0);
+        let n = 200_000;
+        // ∫ pdf_cos dω = 1, estimated with uniform sphere samples.
+        let mut acc = 0.0f64;
+        let cos_max = 0.8f32;
+        let mut cone_acc = 0.0f64;
+        for _ in 0..n {
+            let d = square_to_uniform_sphere(r.next_2d());
+            acc += (cosine_hemisphere_pdf(d) / UNIFORM_SPHERE_PDF) as f64;
+            if d.z >= cos_max {
+                cone_acc += (uniform_cone_pdf(cos_max) / UNIFORM_SPHERE_PDF) as f64;
+            }
+        }
+        assert!((acc / n as f64 - 1.0).abs() < 0.01);
+        assert!((cone_acc / n as f64 - 1.0).abs() < 0.03);
+        // Cosine samples: E[z] = 2/3 under the cosine density.
+        let ez: f64 = (0..n).map(|_| square_to_cosine_hemisphere(r.next_2d()).z as f64).sum::<f64>() / n as f64;
+        assert!((ez - 2.0 / 3.0).abs() < 0.005);
+        // Cone samples stay inside the cone and are unit length.
+        for _ in 0..1000 {
+            let d = square_to_uniform_cone(r.next_2d(), cos_max);
+            assert!(d.z >= cos_max - 1e-6 && (d.length() - 1.0).abs() < 1e-5);
+        }
+        // Triangle: mean barycentrics are 1/3.
+        let m = (0..n).map(|_| square_to_uniform_triangle(r.next_2d())).fold(Vec2::ZERO, |a, b| a + b) / n as f32;
+        assert!((m - Vec2::splat(1.0 / 3.0)).abs().max_element() < 0.005);
+    }
+
+    #[test]
+    fn distribution_samples_proportionally() {
+        let d = Distribution1D::new(&[1.0, 0.0, 3.0]);
+        assert_eq!(d.sample(0.0).0, 0);
+        assert_eq!(d.sample(0.2).0, 0);
+        assert_eq!(d.sample(0.3).0, 2);
+        assert_eq!(d.sample(0.999_999).0, 2);
+        assert!((d.pmf(2) - 0.75).abs() < 1e-6);
+        let (_, _, du) = d.sample(0.625);
+        assert!((du - 0.5).abs() < 1e-5);
+        let u = Distribution1D::new(&[0.0, 0.0]);
+        assert_eq!(u.pmf(1), 0.5);
+    }
+}

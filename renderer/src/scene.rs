@@ -1,0 +1,432 @@
+//! The renderable scene: shapes in a BVH, their materials and emission, the light list with
+//! power-proportional selection, the camera, and the queries integrators make (closest hit,
+//! occlusion, emitted radiance, light sampling for NEE and photon emission).
+
+use crate::accel::{Accel, CwBvhAccel};
+use crate::bsdf::Bsdf;
+use crate::camera::Camera;
+use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription};
+use crate::frame::Frame;
+use crate::lights::{
+    channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, Light, LightSample, PointLight,
+    SceneSphere, SpotLight,
+};
+use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
+use crate::sampling::Distribution1D;
+use crate::shapes::Shape;
+use crate::spectrum::Rgb;
+use anyhow::{bail, Result};
+use glam::{Vec2, Vec3};
+
+/// Everything known about a ray's closest hit.
+#[derive(Debug, Clone, Copy)]
+pub struct SurfaceInteraction {
+    /// Hit position.
+    pub p: Vec3,
+    /// Distance along the ray.
+    pub t: f32,
+    /// Unit geometric normal (winding / analytic orientation; not flipped towards the ray).
+    pub ng: Vec3,
+    /// Shading frame (`frame.n` is the interpolated shading normal).
+    pub frame: Frame,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Unit direction back along the incoming ray (world space), Mitsuba's `-ray.d`.
+    pub wo: Vec3,
+    /// Index of the hit shape.
+    pub shape: u32,
+    /// Primitive (triangle) index within the shape.
+    pub prim: u32,
+    /// Index of the shape's material in [`Scene::bsdfs`].
+    pub material: u32,
+    /// Index of the shape's area light in [`Scene::lights`], if it emits.
+    pub light: Option<u32>,
+}
+
+impl SurfaceInteraction {
+    /// World vector → shading frame.
+    #[inline]
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        self.frame.to_local(v)
+    }
+
+    /// Shading frame → world vector.
+    #[inline]
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.frame.to_world(v)
+    }
+
+    /// A ray leaving the surface in world direction `d` (offset against self-intersection).
+    #[inline]
+    pub fn spawn_ray(&self, d: Vec3) -> Ray {
+        spawn_ray(self.p, self.ng, d)
+    }
+
+    /// A shadow ray from the surface to point `q`, stopping just short of it.
+    #[inline]
+    pub fn spawn_ray_to(&self, q: Vec3) -> Ray {
+        spawn_ray_to(self.p, self.ng, q)
+    }
+}
+
+/// Per-shape lookups.
+#[derive(Debug, Clone)]
+pub struct ShapeInfo {
+    /// The shape's name (for messages).
+    pub name: String,
+    /// Index into [`Scene::bsdfs`].
+    pub material: u32,
+    /// Index into [`Scene::lights`] of the shape's area light.
+    pub light: Option<u32>,
+}
+
+/// A scene ready for rendering.
+pub struct Scene {
+    /// The camera.
+    pub camera: Camera,
+    /// Shapes (geometry).
+    pub shapes: Vec<Shape>,
+    /// Material and emitter of each shape.
+    pub shape_info: Vec<ShapeInfo>,
+    /// Materials.
+    pub bsdfs: Vec<Bsdf>,
+    /// All lights; area lights refer to their shape.
+    pub lights: Vec<Light>,
+    /// Light selection proportional to power.
+    light_selection: Distribution1D,
+    /// Indices of environment (constant) lights.
+    environment_lights: Vec<u32>,
+    /// Sum of the environment lights' radiance.
+    environment_radiance: Rgb,
+    /// Ray-tracing acceleration structure.
+    accel: CwBvhAccel,
+    /// Bounding box (min, max) of all shapes.
+    bounds: (Vec3, Vec3),
+    /// Bounding sphere of all shapes (and the camera), for infinite lights.
+    sphere: SceneSphere,
+    /// Integrator settings from the file.
+    pub integrator: Option<IntegratorDesc>,
+    /// Samples per pixel from the file.
+    pub sample_count: Option<u32>,
+}
+
+fn finite_rgb(c: Rgb) -> bool {
+    c.is_finite() && c.min_element() >= 0.0
+}
+
+impl Scene {
+    /// Builds BVH, lights and lookups from a description; rejects inconsistent data with an
+    /// error naming the offending shape or emitter.
+    pub fn build(desc: &SceneDescription) -> Result<Scene> {
+        let cam = &desc.camera;
+        if cam.width == 0 || cam.height == 0 {
+            bail!("film size {}x{} is empty", cam.width, cam.height);
+        }
+        if !(cam.fov.is_finite() && cam.fov > 0.0 && cam.fov < 180.0) {
+            bail!("camera fov {} is outside (0, 180) degrees", cam.fov);
+        }
+        let mut shapes = Vec::with_capacity(desc.shapes.len());
+        let mut shape_info = Vec::with_capacity(desc.shapes.len());
+        let mut lights = Vec::new();
+        for (i, s) in desc.shapes.iter().enumerate() {
+            if s.bsdf >= desc.bsdfs.len() {
+                bail!("shape '{}' refers to material {} but only {} exist", s.name, s.bsdf, desc.bsdfs.len());
+            }
+            match &s.geometry {
+                Geometry::Mesh(m) => {
+                    let nv = m.positions.len();
+                    if let Some(t) = m.indices.iter().find(|t| t.iter().any(|&v| v as usize >= nv)) {
+                        bail!("mesh '{}' has triangle {:?} indexing past its {} vertices", s.name, t, nv);
+                    }
+                    if m.positions.iter().any(|p| !p.is_finite()) {
+                        bail!("mesh '{}' has non-finite vertex positions", s.name);
+                    }
+                    if m.normals.as_ref().is_some_and(|n| n.len() != nv) || m.uvs.as_ref().is_some_and(|u| u.len() != nv) {
+                        bail!("mesh '{}' has per-vertex normals/uvs not matching its {} vertices", s.name, nv);
+                    }
+                }
+                Geometry::Sphere { center, radius, .. } => {
+                    if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
+                        bail!("sphere '{}' has invalid centre {:?} or radius {}", s.name, center, radius);
+                    }
+                }
+                Geometry::Disk { to_world, .. } => {
+                    if !to_world.is_finite() || to_world.determinant() == 0.0 {
+                        bail!("disk '{}' has a singular or non-finite to_world", s.name);
+                    }
+                }
+            }
+            let shape = Shape::new(&s.geometry);
+            let light = match s.emission {
+                Some(l) if !finite_rgb(l) => bail!("area emitter of shape '{}' has invalid radiance {:?}", s.name, l),
+                Some(l) if l.max_element() > 0.0 && shape.area() > 0.0 => {
+                    lights.push(Light::Area(AreaLight { shape: i as u32, radiance: l }));
+                    Some(lights.len() as u32 - 1)
+                }
+                _ => None,
+            };
+            shape_info.push(ShapeInfo { name: s.name.clone(), material: s.bsdf as u32, light });
+            shapes.push(shape);
+        }
+        let mut environment_lights = Vec::new();
+        let mut environment_radiance = Rgb::ZERO;
+        for (i, e) in desc.emitters.iter().enumerate() {
+            let light = match *e {
+                EmitterDesc::Point { position, intensity } => {
+                    if !finite_rgb(intensity) || !position.is_finite() {
+                        bail!("point emitter #{i} has invalid intensity or position");
+                    }
+                    Light::Point(PointLight { position, intensity })
+                }
+                EmitterDesc::Spot { to_world, intensity, cutoff_angle, beam_width } => {
+                    if !finite_rgb(intensity) || !(cutoff_angle > 0.0 && cutoff_angle <= 180.0) || beam_width < 0.0 {
+                        bail!("spot emitter #{i}: invalid intensity, cutoff_angle {cutoff_angle} or beam_width {beam_width}");
+                    }
+                    Light::Spot(SpotLight::new(to_world, intensity, cutoff_angle, beam_width))
+                }
+                EmitterDesc::Directional { direction, irradiance } => {
+                    if !finite_rgb(irradiance) || !(direction.length_squared() > 0.0) {
+                        bail!("directional emitter #{i} has invalid irradiance or direction");
+                    }
+                    Light::Directional(DirectionalLight { direction: direction.normalize(), irradiance })
+                }
+                EmitterDesc::Constant { radiance } => {
+                    if !finite_rgb(radiance) {
+                        bail!("constant emitter #{i} has invalid radiance {radiance:?}");
+                    }
+                    environment_lights.push(lights.len() as u32);
+                    environment_radiance += radiance;
+                    Light::Constant(ConstantLight { radiance })
+                }
+            };
+            lights.push(light);
+        }
+
+        let accel = CwBvhAccel::build(&shapes);
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for s in &shapes {
+            for p in 0..s.primitive_count() as u32 {
+                let (a, b) = s.primitive_bounds(p);
+                lo = lo.min(a.into());
+                hi = hi.max(b.into());
+            }
+        }
+        if shapes.is_empty() {
+            lo = Vec3::ZERO;
+            hi = Vec3::ZERO;
+        }
+        let camera = Camera::new(cam);
+        // Infinite lights must cover the camera too (a camera outside the geometry sees them).
+        let (slo, shi) = (lo.min(camera.position()), hi.max(camera.position()));
+        let center = 0.5 * (slo + shi);
+        let radius = (0.5 * (shi - slo).length()).max(1e-3) * 1.01;
+        let sphere = SceneSphere { center, radius };
+
+        let powers: Vec<f32> = lights.iter().map(|l| channel_mean(light_power(l, &shapes, &sphere))).collect();
+        Ok(Scene {
+            camera,
+            shapes,
+            shape_info,
+            bsdfs: desc.bsdfs.clone(),
+            light_selection: Distribution1D::new(&powers),
+            lights,
+            environment_lights,
+            environment_radiance,
+            accel,
+            bounds: (lo, hi),
+            sphere,
+            integrator: desc.integrator.clone(),
+            sample_count: desc.sample_count,
+        })
+    }
+
+    /// Bounding box (min, max) of the geometry.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.bounds
+    }
+
+    /// Length of the geometry's bounding-box diagonal.
+    pub fn diagonal(&self) -> f32 {
+        (self.bounds.1 - self.bounds.0).length()
+    }
+
+    /// Bounding sphere used by infinite lights.
+    pub fn bounding_sphere(&self) -> SceneSphere {
+        self.sphere
+    }
+
+    /// Whether the scene has an environment light (rays that escape see radiance).
+    pub fn has_environment(&self) -> bool {
+        !self.environment_lights.is_empty()
+    }
+
+    /// The material at a hit.
+    #[inline]
+    pub fn bsdf(&self, si: &SurfaceInteraction) -> &Bsdf {
+        &self.bsdfs[si.material as usize]
+    }
+
+    /// The closest surface hit by `ray`.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
+        let hit = self.accel.intersect(ray)?;
+        let shape = &self.shapes[hit.shape as usize];
+        let g = shape.hit_geometry(hit.prim, ray, hit.t);
+        let info = &self.shape_info[hit.shape as usize];
+        Some(SurfaceInteraction {
+            p: g.p,
+            t: hit.t,
+            ng: g.ng,
+            frame: Frame::from_normal_tangent(g.ns, g.dpdu),
+            uv: g.uv,
+            wo: -ray.d,
+            shape: hit.shape,
+            prim: hit.prim,
+            material: info.material,
+            light: info.light,
+        })
+    }
+
+    /// Whether anything blocks `ray` within its `[tmin, tmax]`.
+    #[inline]
+    pub fn occluded_ray(&self, ray: &Ray) -> bool {
+        self.accel.occluded(ray)
+    }
+
+    /// Whether the segment from surface point `p` (geometric normal `ng`) to point `q` is blocked.
+    #[inline]
+    pub fn occluded(&self, p: Vec3, ng: Vec3, q: Vec3) -> bool {
+        self.accel.occluded(&spawn_ray_to(p, ng, q))
+    }
+
+    /// Whether the light sample `ls`, taken from surface point `p` (geometric normal `ng`), is
+    /// blocked; infinite lights test an unbounded ray.
+    #[inline]
+    pub fn light_occluded(&self, p: Vec3, ng: Vec3, ls: &LightSample) -> bool {
+        if ls.infinite {
+            self.accel.occluded(&Ray::new(offset_point(p, ng, ls.wi), ls.wi))
+        } else {
+            self.accel.occluded(&spawn_ray_to(p, ng, ls.p))
+        }
+    }
+
+    /// Radiance emitted by the surface at `si` towards world direction `w` (zero unless it is an
+    /// area light seen from its front side, judged by the shading normal as Mitsuba does).
+    #[inline]
+    pub fn emitted(&self, si: &SurfaceInteraction, w: Vec3) -> Rgb {
+        match si.light {
+            Some(l) => match &self.lights[l as usize] {
+                Light::Area(a) => a.eval(si.frame.n, w),
+                _ => Rgb::ZERO,
+            },
+            None => Rgb::ZERO,
+        }
+    }
+
+    /// Radiance arriving along a ray that escapes the scene in direction `d`.
+    #[inline]
+    pub fn environment(&self, _d: Vec3) -> Rgb {
+        self.environment_radiance
+    }
+
+    /// Probability of selecting light `i` for NEE or photon emission.
+    #[inline]
+    pub fn light_pmf(&self, i: u32) -> f32 {
+        self.light_selection.pmf(i as usize)
+    }
+
+    /// Emitted power of light `i`.
+    pub fn light_power(&self, i: u32) -> Rgb {
+        light_power(&self.lights[i as usize], &self.shapes, &self.sphere)
+    }
+
+    /// Samples a light by power and a direction towards it from point `p`. `u_sel` picks the
+    /// light (and, rescaled, the triangle of a mesh light), `u` the point/direction. The returned
+    /// `pdf` and `weight` include the selection probability.
+    #[inline]
+    pub fn sample_li(&self, p: Vec3, u_sel: f32, u: Vec2) -> Option<LightSample> {
+        if self.lights.is_empty() {
+            return None;
+        }
+        let (i, pmf, u_rest) = self.light_selection.sample(u_sel);
+        if pmf == 0.0 {
+            return None;
+        }
+        let mut ls = match &self.lights[i] {
+            Light::Area(a) => a.sample_li(&self.shapes[a.shape as usize], p, u_rest, u)?,
+            Light::Point(l) => l.sample_li(p)?,
+            Light::Spot(l) => l.sample_li(p)?,
+            Light::Directional(l) => l.sample_li(p, &self.sphere),
+            Light::Constant(l) => l.sample_li(p, u, &self.sphere),
+        };
+        ls.light = i as u32;
+        ls.pdf *= pmf;
+        ls.weight /= pmf;
+        Some(ls)
+    }
+
+    /// Solid-angle density (selection included) with which [`Self::sample_li`] from `p_ref`
+    /// would produce the direction that hit the area light at `si`.
+    #[inline]
+    pub fn pdf_li_surface(&self, p_ref: Vec3, si: &SurfaceInteraction) -> f32 {
+        match si.light {
+            Some(l) => match &self.lights[l as usize] {
+                Light::Area(a) => {
+                    let d = si.p - p_ref;
+                    let dist = d.length();
+                    let cos_l = si.frame.n.dot(-d / dist);
+                    a.pdf_li(&self.shapes[a.shape as usize], dist, cos_l) * self.light_pmf(l)
+                }
+                _ => 0.0,
+            },
+            None => 0.0,
+        }
+    }
+
+    /// Solid-angle density (selection included) of sampling escaping direction `d` through the
+    /// environment lights.
+    #[inline]
+    pub fn pdf_li_environment(&self, _d: Vec3) -> f32 {
+        self.environment_lights
+            .iter()
+            .map(|&i| match &self.lights[i as usize] {
+                Light::Constant(c) => c.pdf_li() * self.light_pmf(i),
+                _ => 0.0,
+            })
+            .sum()
+    }
+
+    /// Samples a photon: a light by power, then a ray leaving it. `flux` includes the selection
+    /// probability, so the average of `flux` over photons estimates the total emitted power.
+    pub fn sample_emission(&self, u_sel: f32, u_pos: Vec2, u_dir: Vec2) -> Option<EmissionSample> {
+        if self.lights.is_empty() {
+            return None;
+        }
+        let (i, pmf, u_rest) = self.light_selection.sample(u_sel);
+        if pmf == 0.0 {
+            return None;
+        }
+        let mut e = match &self.lights[i] {
+            Light::Area(a) => a.sample_emission(&self.shapes[a.shape as usize], u_rest, u_pos, u_dir),
+            Light::Point(l) => l.sample_emission(u_dir),
+            Light::Spot(l) => l.sample_emission(u_dir),
+            Light::Directional(l) => l.sample_emission(u_pos, &self.sphere),
+            Light::Constant(l) => l.sample_emission(u_dir, u_pos, &self.sphere),
+        };
+        e.light = i as u32;
+        e.flux /= pmf;
+        (e.flux.max_element() > 0.0).then_some(e)
+    }
+}
+
+/// Emitted power of one light.
+fn light_power(l: &Light, shapes: &[Shape], sphere: &SceneSphere) -> Rgb {
+    match l {
+        Light::Area(a) => a.power(&shapes[a.shape as usize]),
+        Light::Point(p) => p.power(),
+        Light::Spot(s) => s.power(),
+        Light::Directional(d) => d.power(sphere),
+        Light::Constant(c) => c.power(sphere),
+    }
+}

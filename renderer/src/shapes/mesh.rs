@@ -1,0 +1,188 @@
+//! Triangle meshes: Möller–Trumbore intersection, interpolated shading normals and uvs
+//! (barycentric uvs when the mesh has none, as Mitsuba), area sampling.
+
+use super::{AreaSample, HitGeometry};
+use crate::description::TriangleMesh;
+use crate::math::{coordinate_system, Ray};
+use crate::sampling::{square_to_uniform_triangle, Distribution1D};
+use glam::{Vec2, Vec3, Vec3A};
+
+/// A world-space triangle mesh with its triangle-area distribution.
+#[derive(Debug, Clone)]
+pub struct Mesh {
+    /// The mesh data.
+    pub data: TriangleMesh,
+    /// Triangle selection proportional to area.
+    area_distribution: Distribution1D,
+    /// Total area.
+    area: f32,
+}
+
+/// Distance along `ray` to triangle (p0, p1, p2), or +∞ when missed (Möller–Trumbore, both sides).
+#[inline(always)]
+pub fn intersect_triangle(o: Vec3A, d: Vec3A, tmin: f32, tmax: f32, p0: Vec3A, e1: Vec3A, e2: Vec3A) -> f32 {
+    let pvec = d.cross(e2);
+    let det = e1.dot(pvec);
+    if det.abs() < 1e-12 {
+        return f32::INFINITY;
+    }
+    let inv = 1.0 / det;
+    let tvec = o - p0;
+    let u = tvec.dot(pvec) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return f32::INFINITY;
+    }
+    let qvec = tvec.cross(e1);
+    let v = d.dot(qvec) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return f32::INFINITY;
+    }
+    let t = e2.dot(qvec) * inv;
+    if t > tmin && t < tmax {
+        t
+    } else {
+        f32::INFINITY
+    }
+}
+
+/// Barycentric coordinates (b1, b2) of the hit of `ray` with a triangle.
+#[inline]
+fn barycentrics(ray: &Ray, p0: Vec3, p1: Vec3, p2: Vec3) -> Vec2 {
+    let (e1, e2) = (p1 - p0, p2 - p0);
+    let pvec = ray.d.cross(e2);
+    let inv = 1.0 / e1.dot(pvec);
+    let tvec = ray.o - p0;
+    let u = tvec.dot(pvec) * inv;
+    let v = ray.d.dot(tvec.cross(e1)) * inv;
+    Vec2::new(u.clamp(0.0, 1.0), v.clamp(0.0, 1.0 - u.clamp(0.0, 1.0)))
+}
+
+impl Mesh {
+    /// Wraps mesh data and precomputes its area distribution.
+    pub fn new(data: &TriangleMesh) -> Self {
+        let areas: Vec<f32> = (0..data.indices.len())
+            .map(|i| {
+                let [a, b, c] = Self::corners(data, i as u32);
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .collect();
+        let area = areas.iter().map(|&a| a as f64).sum::<f64>() as f32;
+        Mesh { data: data.clone(), area_distribution: Distribution1D::new(&areas), area }
+    }
+
+    #[inline]
+    fn corners(data: &TriangleMesh, tri: u32) -> [Vec3; 3] {
+        let [a, b, c] = data.indices[tri as usize];
+        [data.positions[a as usize], data.positions[b as usize], data.positions[c as usize]]
+    }
+
+    /// Vertex positions of triangle `tri`.
+    #[inline]
+    pub fn triangle(&self, tri: u32) -> [Vec3; 3] {
+        Self::corners(&self.data, tri)
+    }
+
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.data.indices.len()
+    }
+
+    /// Total surface area.
+    pub fn area(&self) -> f32 {
+        self.area
+    }
+
+    /// Bounding box of triangle `tri`.
+    pub fn triangle_bounds(&self, tri: u32) -> (Vec3A, Vec3A) {
+        let [a, b, c] = self.triangle(tri);
+        (Vec3A::from(a.min(b).min(c)), Vec3A::from(a.max(b).max(c)))
+    }
+
+    /// Shading data at the hit of `ray` with triangle `tri` (distance `t`).
+    pub fn hit_geometry(&self, tri: u32, ray: &Ray, t: f32) -> HitGeometry {
+        let [i0, i1, i2] = self.data.indices[tri as usize];
+        let [p0, p1, p2] = self.triangle(tri);
+        let b = barycentrics(ray, p0, p1, p2);
+        let b0 = 1.0 - b.x - b.y;
+        let p = ray.at(t);
+        let (e1, e2) = (p1 - p0, p2 - p0);
+        let ng = e1.cross(e2).normalize_or(Vec3::Z);
+        let ns = match &self.data.normals {
+            Some(n) => (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng),
+            None => ng,
+        };
+        let (uv, dpdu) = match &self.data.uvs {
+            Some(uv) => {
+                let (t0, t1, t2) = (uv[i0 as usize], uv[i1 as usize], uv[i2 as usize]);
+                let (d1, d2) = (t1 - t0, t2 - t0);
+                let det = d1.x * d2.y - d1.y * d2.x;
+                let dpdu = if det != 0.0 { (e1 * d2.y - e2 * d1.y) / det } else { coordinate_system(ng).0 };
+                (t0 * b0 + t1 * b.x + t2 * b.y, dpdu)
+            }
+            None => (b, e1),
+        };
+        HitGeometry { p, ng, ns, dpdu, uv }
+    }
+
+    /// A point uniformly distributed over the mesh's area.
+    pub fn sample_area(&self, u_prim: f32, u: Vec2) -> AreaSample {
+        let (tri, _, _) = self.area_distribution.sample(u_prim);
+        let [i0, i1, i2] = self.data.indices[tri];
+        let [p0, p1, p2] = self.triangle(tri as u32);
+        let b = square_to_uniform_triangle(u);
+        let b0 = 1.0 - b.x - b.y;
+        let p = p0 * b0 + p1 * b.x + p2 * b.y;
+        let ng = (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Z);
+        // Mitsuba reports the interpolated vertex normal when the mesh has normals.
+        let n = match &self.data.normals {
+            Some(n) => (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng),
+            None => ng,
+        };
+        let uv = match &self.data.uvs {
+            Some(uv) => uv[i0 as usize] * b0 + uv[i1 as usize] * b.x + uv[i2 as usize] * b.y,
+            None => b,
+        };
+        AreaSample { p, n, uv, pdf: 1.0 / self.area }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ray_triangle_hit_and_miss() {
+        let (p0, p1, p2) = (Vec3A::ZERO, Vec3A::X, Vec3A::Y);
+        let (e1, e2) = (p1 - p0, p2 - p0);
+        let o = Vec3A::new(0.25, 0.25, 2.0);
+        let t = intersect_triangle(o, -Vec3A::Z, 0.0, f32::INFINITY, p0, e1, e2);
+        assert!((t - 2.0).abs() < 1e-6);
+        // From behind works too (two-sided intersection).
+        let t = intersect_triangle(Vec3A::new(0.25, 0.25, -1.0), Vec3A::Z, 0.0, f32::INFINITY, p0, e1, e2);
+        assert!((t - 1.0).abs() < 1e-6);
+        // Outside the hypotenuse.
+        let t = intersect_triangle(Vec3A::new(0.6, 0.6, 2.0), -Vec3A::Z, 0.0, f32::INFINITY, p0, e1, e2);
+        assert!(t.is_infinite());
+        // Beyond tmax.
+        let t = intersect_triangle(o, -Vec3A::Z, 0.0, 1.5, p0, e1, e2);
+        assert!(t.is_infinite());
+    }
+
+    #[test]
+    fn hit_geometry_interpolates_normals_and_uvs() {
+        let data = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            normals: Some(vec![Vec3::Z, Vec3::Z, Vec3::new(0.0, 1.0, 1.0).normalize()]),
+            uvs: Some(vec![Vec2::ZERO, Vec2::X, Vec2::Y]),
+            indices: vec![[0, 1, 2]],
+        };
+        let m = Mesh::new(&data);
+        assert!((m.area() - 0.5).abs() < 1e-6);
+        let ray = Ray::new(Vec3::new(0.2, 0.3, 1.0), -Vec3::Z);
+        let g = m.hit_geometry(0, &ray, 1.0);
+        assert!((g.uv - Vec2::new(0.2, 0.3)).length() < 1e-5);
+        assert!((g.ng - Vec3::Z).length() < 1e-6);
+        assert!(g.ns.y > 0.0 && (g.ns.length() - 1.0).abs() < 1e-5);
+        assert!((g.dpdu - Vec3::X).length() < 1e-5);
+    }
+}

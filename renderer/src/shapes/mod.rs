@@ -1,0 +1,115 @@
+//! Renderable shapes: triangle meshes, analytic spheres and disks. Each shape can be intersected
+//! primitive by primitive (for the BVH), describe the local surface at a hit, and be sampled
+//! uniformly by area (for area lights and photon emission).
+
+pub mod disk;
+pub mod mesh;
+pub mod sphere;
+
+pub use disk::Disk;
+pub use mesh::Mesh;
+pub use sphere::Sphere;
+
+use crate::description::Geometry;
+use crate::math::Ray;
+use glam::{Vec2, Vec3, Vec3A};
+
+/// Local geometry at a ray hit, before materials and lights are attached.
+#[derive(Debug, Clone, Copy)]
+pub struct HitGeometry {
+    /// Hit position.
+    pub p: Vec3,
+    /// Unit geometric normal (from the triangle winding / analytic surface, after `flip_normals`).
+    pub ng: Vec3,
+    /// Unit shading normal (interpolated vertex normal, or `ng`).
+    pub ns: Vec3,
+    /// Surface tangent ∂p/∂u (not normalised; may be zero when undefined).
+    pub dpdu: Vec3,
+    /// Texture coordinates.
+    pub uv: Vec2,
+}
+
+/// A point sampled on a surface.
+#[derive(Debug, Clone, Copy)]
+pub struct AreaSample {
+    /// Position.
+    pub p: Vec3,
+    /// Unit normal there (interpolated vertex normal for meshes that have them, as Mitsuba): the
+    /// side that emits for area lights.
+    pub n: Vec3,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Density with respect to surface area.
+    pub pdf: f32,
+}
+
+/// One shape of the scene.
+#[derive(Debug, Clone)]
+pub enum Shape {
+    /// Triangle mesh.
+    Mesh(Mesh),
+    /// Analytic sphere.
+    Sphere(Sphere),
+    /// Analytic disk.
+    Disk(Disk),
+}
+
+impl Shape {
+    /// Builds the shape from its description.
+    pub fn new(geometry: &Geometry) -> Self {
+        match geometry {
+            Geometry::Mesh(m) => Shape::Mesh(Mesh::new(m)),
+            Geometry::Sphere { center, radius, flip_normals } => {
+                Shape::Sphere(Sphere::new(*center, *radius, *flip_normals))
+            }
+            Geometry::Disk { to_world, flip_normals } => Shape::Disk(Disk::new(*to_world, *flip_normals)),
+        }
+    }
+
+    /// Number of BVH primitives (triangles for meshes, 1 otherwise).
+    pub fn primitive_count(&self) -> usize {
+        match self {
+            Shape::Mesh(m) => m.triangle_count(),
+            _ => 1,
+        }
+    }
+
+    /// Bounding box (min, max) of primitive `prim`.
+    pub fn primitive_bounds(&self, prim: u32) -> (Vec3A, Vec3A) {
+        match self {
+            Shape::Mesh(m) => m.triangle_bounds(prim),
+            Shape::Sphere(s) => s.bounds(),
+            Shape::Disk(d) => d.bounds(),
+        }
+    }
+
+    /// Surface area.
+    pub fn area(&self) -> f32 {
+        match self {
+            Shape::Mesh(m) => m.area(),
+            Shape::Sphere(s) => s.area(),
+            Shape::Disk(d) => d.area(),
+        }
+    }
+
+    /// Local geometry at the hit of `ray` with primitive `prim` at distance `t`.
+    #[inline]
+    pub fn hit_geometry(&self, prim: u32, ray: &Ray, t: f32) -> HitGeometry {
+        match self {
+            Shape::Mesh(m) => m.hit_geometry(prim, ray, t),
+            Shape::Sphere(s) => s.hit_geometry(ray, t),
+            Shape::Disk(d) => d.hit_geometry(ray, t),
+        }
+    }
+
+    /// A point distributed uniformly over the surface area, from `u` ∈ [0,1)² (plus a third
+    /// number `u_prim` ∈ [0,1) used by meshes to pick a triangle).
+    #[inline]
+    pub fn sample_area(&self, u_prim: f32, u: Vec2) -> AreaSample {
+        match self {
+            Shape::Mesh(m) => m.sample_area(u_prim, u),
+            Shape::Sphere(s) => s.sample_area(u),
+            Shape::Disk(d) => d.sample_area(u),
+        }
+    }
+}
