@@ -7,6 +7,7 @@ pub mod bsdf;
 pub mod camera;
 pub mod description;
 pub mod frame;
+pub mod image_io;
 pub mod integrators;
 pub mod lights;
 pub mod math;

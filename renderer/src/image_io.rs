@@ -1,0 +1,387 @@
+//! Reading and writing plain RGB images: PNG (sRGB-encoded) and OpenEXR (linear float).
+//!
+//! Everything here works in linear sRGB: PNGs are decoded through the sRGB transfer curve
+//! (unless read "raw", as Mitsuba's `bitmap` with `raw=true`), EXRs are taken as they are.
+//! Writers are atomic: the image goes to a temporary file next to the target, which is then
+//! renamed over it, so a reader never sees a half-written file.
+
+use crate::spectrum::Rgb;
+use std::path::{Path, PathBuf};
+
+/// An image file could not be read or written; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageIoError {
+    /// The file could not be opened, created or renamed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The OpenEXR decoder or encoder failed (corrupt file, no R/G/B channels, …).
+    #[error("{path}: OpenEXR: {source}")]
+    Exr {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: exr::error::Error,
+    },
+    /// The PNG decoder or encoder failed.
+    #[error("{path}: PNG: {source}")]
+    Png {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: image::ImageError,
+    },
+    /// The file name has an extension other than `.png` or `.exr`.
+    #[error("{path}: unsupported image format (expected .png or .exr)")]
+    UnsupportedFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The pixel buffer handed to a writer does not match width × height.
+    #[error("{path}: {len} pixels given for a {width}x{height} image")]
+    SizeMismatch {
+        /// The file.
+        path: PathBuf,
+        /// Image width.
+        width: u32,
+        /// Image height.
+        height: u32,
+        /// Number of pixels given.
+        len: usize,
+    },
+}
+
+/// A decoded image: width, height and row-major linear-RGB pixels (row 0 is the top row).
+pub type RgbImage = (u32, u32, Vec<Rgb>);
+
+/// The file formats this module knows, chosen by file extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Format {
+    Png,
+    Exr,
+}
+
+fn format_of(path: &Path) -> Result<Format, ImageIoError> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "png" => Ok(Format::Png),
+        "exr" => Ok(Format::Exr),
+        _ => Err(ImageIoError::UnsupportedFormat {
+            path: path.to_owned(),
+        }),
+    }
+}
+
+/// The sRGB electro-optical transfer function: encoded value in [0, 1] → linear.
+pub fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// The inverse sRGB transfer function: linear → encoded value (inputs clamped to [0, 1]).
+pub fn linear_to_srgb(v: f32) -> f32 {
+    let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+    if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Reads a PNG (sRGB → linear) or EXR (linear) image as linear RGB. Alpha is ignored;
+/// grey-scale PNGs are expanded to three equal channels.
+pub fn read_rgb_image(path: &Path) -> Result<RgbImage, ImageIoError> {
+    read_rgb_image_encoded(path, false)
+}
+
+/// Like [`read_rgb_image`], but with `raw = true` PNG values are taken as they are (no sRGB
+/// decoding), as Mitsuba's `bitmap` does with `raw="true"` (e.g. for roughness or normal maps).
+/// EXRs are always linear.
+pub fn read_rgb_image_encoded(path: &Path, raw: bool) -> Result<RgbImage, ImageIoError> {
+    match format_of(path)? {
+        Format::Png => read_png(path, raw),
+        Format::Exr => read_exr(path),
+    }
+}
+
+fn read_png(path: &Path, raw: bool) -> Result<RgbImage, ImageIoError> {
+    let png_err = |source| ImageIoError::Png {
+        path: path.to_owned(),
+        source,
+    };
+    let reader = image::ImageReader::open(path).map_err(|source| ImageIoError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let reader = reader
+        .with_guessed_format()
+        .map_err(|source| ImageIoError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+    let decoded = reader.decode().map_err(png_err)?;
+    let rgb = decoded.to_rgb32f();
+    let (width, height) = rgb.dimensions();
+    let decode = |v: f32| if raw { v } else { srgb_to_linear(v) };
+    let pixels = rgb
+        .pixels()
+        .map(|p| Rgb::new(decode(p.0[0]), decode(p.0[1]), decode(p.0[2])))
+        .collect();
+    Ok((width, height, pixels))
+}
+
+fn read_exr(path: &Path) -> Result<RgbImage, ImageIoError> {
+    // Open the file ourselves so that "not found" is an I/O error naming the file.
+    std::fs::metadata(path).map_err(|source| ImageIoError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |resolution, _| {
+            (
+                resolution.width(),
+                vec![Rgb::ZERO; resolution.width() * resolution.height()],
+            )
+        },
+        |(width, pixels): &mut (usize, Vec<Rgb>), position, (r, g, b, _a): (f32, f32, f32, f32)| {
+            pixels[position.y() * *width + position.x()] = Rgb::new(r, g, b);
+        },
+    )
+    .map_err(|source| match source {
+        exr::error::Error::Io(source) => ImageIoError::Io {
+            path: path.to_owned(),
+            source,
+        },
+        source => ImageIoError::Exr {
+            path: path.to_owned(),
+            source,
+        },
+    })?;
+    let size = image.layer_data.size;
+    let (_, pixels) = image.layer_data.channel_data.pixels;
+    Ok((size.width() as u32, size.height() as u32, pixels))
+}
+
+fn check_size(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result<(), ImageIoError> {
+    if pixels.len() as u64 != width as u64 * height as u64 || width == 0 || height == 0 {
+        return Err(ImageIoError::SizeMismatch {
+            path: path.to_owned(),
+            width,
+            height,
+            len: pixels.len(),
+        });
+    }
+    Ok(())
+}
+
+/// A temporary path next to `path` (same directory, so the rename is atomic).
+fn temp_path_for(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "image".into());
+    // Keep the real extension last: the PNG encoder picks the format from it.
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let unique = format!("{}.{:?}", std::process::id(), std::thread::current().id())
+        .replace(|c: char| !c.is_ascii_alphanumeric(), "");
+    path.with_file_name(format!(".{name}.tmp{unique}.{ext}"))
+}
+
+/// Writes via `write_temp` into a temporary file, then renames it over `path`.
+fn write_atomically(
+    path: &Path,
+    write_temp: impl FnOnce(&Path) -> Result<(), ImageIoError>,
+) -> Result<(), ImageIoError> {
+    let tmp = temp_path_for(path);
+    if let Err(e) = write_temp(&tmp) {
+        let _ = std::fs::remove_file(&tmp);
+        // Name the real target, not the temporary file, in the error.
+        return Err(match e {
+            ImageIoError::Io { source, .. } => ImageIoError::Io {
+                path: path.to_owned(),
+                source,
+            },
+            ImageIoError::Exr { source, .. } => ImageIoError::Exr {
+                path: path.to_owned(),
+                source,
+            },
+            ImageIoError::Png { source, .. } => ImageIoError::Png {
+                path: path.to_owned(),
+                source,
+            },
+            other => other,
+        });
+    }
+    std::fs::rename(&tmp, path).map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        ImageIoError::Io {
+            path: path.to_owned(),
+            source,
+        }
+    })
+}
+
+/// Writes a float32 RGB OpenEXR (channels `R`, `G`, `B`), atomically.
+pub fn write_rgb_exr(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[Rgb],
+) -> Result<(), ImageIoError> {
+    check_size(path, width, height, pixels)?;
+    write_atomically(path, |tmp| {
+        let w = width as usize;
+        exr::prelude::write_rgb_file(tmp, w, height as usize, |x, y| {
+            let p = pixels[y * w + x];
+            (p.x, p.y, p.z)
+        })
+        .map_err(|source| match source {
+            exr::error::Error::Io(source) => ImageIoError::Io {
+                path: tmp.to_owned(),
+                source,
+            },
+            source => ImageIoError::Exr {
+                path: tmp.to_owned(),
+                source,
+            },
+        })
+    })
+}
+
+/// Writes an 8-bit sRGB PNG: linear values clamped to [0, 1] and gamma-encoded, atomically.
+pub fn write_png_srgb(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[Rgb],
+) -> Result<(), ImageIoError> {
+    check_size(path, width, height, pixels)?;
+    let encode = |v: f32| (linear_to_srgb(v) * 255.0 + 0.5) as u8;
+    let bytes: Vec<u8> = pixels
+        .iter()
+        .flat_map(|p| [encode(p.x), encode(p.y), encode(p.z)])
+        .collect();
+    write_atomically(path, |tmp| {
+        image::save_buffer_with_format(
+            tmp,
+            &bytes,
+            width,
+            height,
+            image::ExtendedColorType::Rgb8,
+            image::ImageFormat::Png,
+        )
+        .map_err(|source| ImageIoError::Png {
+            path: tmp.to_owned(),
+            source,
+        })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("renderer-image-io-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    fn gradient(w: u32, h: u32) -> Vec<Rgb> {
+        (0..w * h)
+            .map(|i| {
+                Rgb::new(
+                    i as f32 * 0.37,
+                    (i % 3) as f32 * 0.25,
+                    1.0 / (i as f32 + 1.0),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn exr_round_trip_is_exact() {
+        let dir = temp_dir("exr");
+        let path = dir.join("a.exr");
+        let pixels = gradient(5, 3);
+        write_rgb_exr(&path, 5, 3, &pixels).unwrap();
+        let (w, h, back) = read_rgb_image(&path).unwrap();
+        assert_eq!((w, h), (5, 3));
+        assert_eq!(back, pixels);
+        // No temporary file is left behind.
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn png_round_trip_within_quantisation() {
+        let dir = temp_dir("png");
+        let path = dir.join("a.png");
+        let pixels: Vec<Rgb> = (0..12)
+            .map(|i| Rgb::splat(i as f32 / 11.0) * Rgb::new(1.0, 0.5, 0.25))
+            .collect();
+        write_png_srgb(&path, 4, 3, &pixels).unwrap();
+        let (w, h, back) = read_rgb_image(&path).unwrap();
+        assert_eq!((w, h), (4, 3));
+        for (a, b) in pixels.iter().zip(&back) {
+            // One 8-bit step in sRGB is at most ~1.3 % of full scale in linear.
+            assert!((*a - *b).abs().max_element() < 0.007, "{a} vs {b}");
+        }
+        // Raw reading returns the encoded values.
+        let (_, _, raw) = read_rgb_image_encoded(&path, true).unwrap();
+        assert!((raw[11].x - 1.0).abs() < 1e-6);
+        assert!((raw[11].y - linear_to_srgb(0.5)).abs() < 0.003);
+    }
+
+    #[test]
+    fn srgb_curve_round_trips() {
+        for i in 0..=100 {
+            let v = i as f32 / 100.0;
+            assert!((srgb_to_linear(linear_to_srgb(v)) - v).abs() < 1e-5);
+        }
+        assert!((srgb_to_linear(0.5) - 0.214_041).abs() < 1e-5);
+    }
+
+    #[test]
+    fn errors_name_the_file() {
+        let dir = temp_dir("errors");
+        let missing = dir.join("missing.exr");
+        let e = read_rgb_image(&missing).unwrap_err().to_string();
+        assert!(e.contains("missing.exr"), "{e}");
+        let missing = dir.join("missing.png");
+        let e = read_rgb_image(&missing).unwrap_err().to_string();
+        assert!(e.contains("missing.png"), "{e}");
+        let garbage = dir.join("garbage.exr");
+        std::fs::write(&garbage, b"not an exr").unwrap();
+        let e = read_rgb_image(&garbage).unwrap_err().to_string();
+        assert!(e.contains("garbage.exr"), "{e}");
+        let garbage = dir.join("garbage.png");
+        std::fs::write(&garbage, b"not a png").unwrap();
+        let e = read_rgb_image(&garbage).unwrap_err().to_string();
+        assert!(e.contains("garbage.png"), "{e}");
+        let e = read_rgb_image(&dir.join("x.jpg")).unwrap_err().to_string();
+        assert!(e.contains("x.jpg"), "{e}");
+        let e = write_rgb_exr(&dir.join("short.exr"), 2, 2, &[Rgb::ZERO; 3])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("short.exr"), "{e}");
+        let e = write_png_srgb(&dir.join("nodir/x.png"), 1, 1, &[Rgb::ZERO])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nodir/x.png"), "{e}");
+    }
+}
