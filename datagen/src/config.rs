@@ -1,0 +1,424 @@
+//! The dataset configuration (`configs/datagen/*.toml`): resolution, render settings, split
+//! fractions and, per scene family, the scene count and every parameter range. Parsing denies
+//! unknown fields so typos are errors naming the field.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A whole dataset configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Preset name (recorded in the manifest).
+    pub name: String,
+    /// Master seed: scenes, splits and render seeds all derive from it.
+    pub seed: u64,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// How references and input bundles are rendered.
+    pub render: RenderConfig,
+    /// Train/validation/test fractions (by scene).
+    pub split: SplitConfig,
+    /// Scene families, counts and parameter ranges.
+    pub families: Families,
+}
+
+/// Render settings of the dataset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderConfig {
+    /// Photons per SPPM pass of the input bundles.
+    pub photons_per_pass: u64,
+    /// Pass counts at which one continuing input run writes a bundle (ascending).
+    pub passes: Vec<u32>,
+    /// Independent input runs (render seeds) per scene.
+    pub seeds: u32,
+    /// Passes of the reference run.
+    pub reference_passes: u32,
+    /// Photons per pass of the reference run.
+    pub reference_photons_per_pass: u64,
+    /// Maximum path depth for eye and photon paths.
+    pub max_depth: u32,
+}
+
+/// Fractions of scenes per split; they must sum to 1.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SplitConfig {
+    /// Training fraction.
+    pub train: f32,
+    /// Validation fraction.
+    pub val: f32,
+    /// Test fraction.
+    pub test: f32,
+}
+
+/// The five families; an absent table means no scenes of that family.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Families {
+    /// Rooms lit mostly indirectly.
+    pub room: Option<RoomConfig>,
+    /// Refractive caustics from glass objects.
+    pub glass: Option<GlassConfig>,
+    /// Water height fields over textured floors.
+    pub water: Option<WaterConfig>,
+    /// Reflective caustics from metal rings and curved mirrors.
+    pub metal: Option<MetalConfig>,
+    /// Depth-of-field shelves.
+    pub shelf: Option<ShelfConfig>,
+}
+
+/// A compact light used by several families.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SmallLight {
+    /// A small rectangular area light facing the scene centre.
+    Area,
+    /// A spot light aimed at the scene centre.
+    Spot,
+    /// A point light.
+    Point,
+}
+
+/// How a room is lit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RoomLight {
+    /// Area lights just below the ceiling facing up (cove lighting).
+    Cove,
+    /// An area light behind a free-standing panel, facing a wall.
+    Panel,
+}
+
+/// Objects of the glass family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GlassShape {
+    /// Analytic sphere.
+    Sphere,
+    /// Randomly displaced sphere (PLY).
+    Blob,
+    /// Wine glass as a lathe mesh with wall thickness (PLY).
+    WineGlass,
+}
+
+/// Lights of the water family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WaterLight {
+    /// Directional sun.
+    Sun,
+    /// Spot light from above.
+    Spot,
+}
+
+/// Objects of the metal family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MetalObject {
+    /// A closed annular ring (its concave inside focuses a cardioid caustic).
+    Ring,
+    /// A standing cylindrical mirror section.
+    Mirror,
+}
+
+/// Parameter ranges of the room family; `[lo, hi]` pairs are sampled uniformly.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoomConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Room width (x).
+    pub size_x: [f32; 2],
+    /// Room depth (z).
+    pub size_z: [f32; 2],
+    /// Ceiling height.
+    pub height: [f32; 2],
+    /// Per-channel wall albedo.
+    pub wall_albedo: [f32; 2],
+    /// Per-channel floor albedo (under a glossy coat).
+    pub floor_albedo: [f32; 2],
+    /// GGX alpha of the floor coat (below 0.01: smooth `plastic`).
+    pub floor_alpha: [f32; 2],
+    /// Lighting variants, chosen uniformly.
+    pub lights: Vec<RoomLight>,
+    /// Radiance of the hidden area lights.
+    pub light_radiance: [f32; 2],
+    /// Number of furniture objects.
+    pub objects: [u32; 2],
+    /// Object size.
+    pub object_size: [f32; 2],
+    /// Probability that an object is metallic.
+    pub metal_probability: f32,
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
+/// Parameter ranges of the glass family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GlassConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Number of glass objects.
+    pub objects: [u32; 2],
+    /// Object kinds, chosen uniformly per object.
+    pub shapes: Vec<GlassShape>,
+    /// Object size (sphere/blob radius, glass height / 2).
+    pub object_size: [f32; 2],
+    /// Index of refraction.
+    pub ior: [f32; 2],
+    /// Light kinds, chosen uniformly.
+    pub lights: Vec<SmallLight>,
+    /// Half-size of area lights.
+    pub light_size: [f32; 2],
+    /// Emitted power (W) of the light.
+    pub light_power: [f32; 2],
+    /// Light elevation above the floor plane, degrees.
+    pub light_elevation: [f32; 2],
+    /// Light distance from the scene centre.
+    pub light_distance: [f32; 2],
+    /// Per-channel floor albedo.
+    pub floor_albedo: [f32; 2],
+    /// Probability of a checkerboard floor.
+    pub checker_probability: f32,
+    /// Constant environment radiance (0 = none).
+    pub env_radiance: [f32; 2],
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
+/// Parameter ranges of the water family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WaterConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Pool half-size (x and z).
+    pub pool_size: [f32; 2],
+    /// Water surface height above the floor.
+    pub water_height: [f32; 2],
+    /// Number of waves.
+    pub waves: [u32; 2],
+    /// Wave amplitude.
+    pub wave_amplitude: [f32; 2],
+    /// Wavelength.
+    pub wavelength: [f32; 2],
+    /// Height-field grid resolution (quads per side).
+    pub grid: u32,
+    /// Checker squares across the pool.
+    pub checks: [f32; 2],
+    /// Per-channel albedo of the light checks.
+    pub check_light: [f32; 2],
+    /// Per-channel albedo of the dark checks.
+    pub check_dark: [f32; 2],
+    /// Index of refraction of the water.
+    pub ior: [f32; 2],
+    /// Light kinds, chosen uniformly.
+    pub lights: Vec<WaterLight>,
+    /// Sun elevation, degrees.
+    pub sun_elevation: [f32; 2],
+    /// Sun irradiance.
+    pub sun_irradiance: [f32; 2],
+    /// Spot light emitted power (W).
+    pub spot_power: [f32; 2],
+    /// Spot cutoff angle, degrees.
+    pub spot_cutoff: [f32; 2],
+    /// Camera elevation, degrees.
+    pub camera_elevation: [f32; 2],
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
+/// Parameter ranges of the metal family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MetalConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Number of metal objects.
+    pub objects: [u32; 2],
+    /// Object kinds, chosen uniformly per object.
+    pub kinds: Vec<MetalObject>,
+    /// Ring / mirror radius of curvature.
+    pub radius: [f32; 2],
+    /// Ring / mirror height.
+    pub object_height: [f32; 2],
+    /// Wall thickness.
+    pub thickness: [f32; 2],
+    /// Angular extent of mirror sections, degrees.
+    pub mirror_angle: [f32; 2],
+    /// Named conductors (Mitsuba `material`), chosen uniformly.
+    pub materials: Vec<String>,
+    /// GGX alpha (below 0.01: smooth `conductor`).
+    pub alpha: [f32; 2],
+    /// Light kinds, chosen uniformly.
+    pub lights: Vec<SmallLight>,
+    /// Half-size of area lights.
+    pub light_size: [f32; 2],
+    /// Emitted power (W) of the light.
+    pub light_power: [f32; 2],
+    /// Light elevation, degrees (low light gives long caustics).
+    pub light_elevation: [f32; 2],
+    /// Light distance from the scene centre.
+    pub light_distance: [f32; 2],
+    /// Per-channel floor albedo.
+    pub floor_albedo: [f32; 2],
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
+/// Parameter ranges of the depth-of-field shelf family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShelfConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Number of shelf boards.
+    pub shelves: [u32; 2],
+    /// Objects per board.
+    pub objects_per_shelf: [u32; 2],
+    /// Object size.
+    pub object_size: [f32; 2],
+    /// Probability that an object is glossy (rough plastic).
+    pub glossy_probability: f32,
+    /// Probability that an object is metallic (rough conductor).
+    pub metal_probability: f32,
+    /// GGX alpha of glossy and metal objects.
+    pub alpha: [f32; 2],
+    /// Thin-lens aperture radius.
+    pub aperture_radius: [f32; 2],
+    /// Camera distance from the shelf front.
+    pub camera_distance: [f32; 2],
+    /// Radiance of the area light.
+    pub light_radiance: [f32; 2],
+    /// Constant environment radiance (0 = none).
+    pub env_radiance: [f32; 2],
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
+/// Configuration errors; each names the file and the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// Config path.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// TOML syntax or schema error (the message names line, column and field).
+    #[error("{path}: {message}")]
+    Parse {
+        /// Config path.
+        path: String,
+        /// Parser message.
+        message: String,
+    },
+    /// A value is out of its valid domain.
+    #[error("{path}: invalid value: {message}")]
+    Invalid {
+        /// Config path.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl Config {
+    /// Reads, parses and validates a configuration file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let p = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: p.clone(),
+            source,
+        })?;
+        Self::parse(&text, &p)
+    }
+
+    /// Parses and validates configuration text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let config: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: origin.to_owned(),
+            message: e.to_string(),
+        })?;
+        config.validate().map_err(|message| ConfigError::Invalid {
+            path: origin.to_owned(),
+            message,
+        })?;
+        Ok(config)
+    }
+
+    /// Checks domains that the type system does not.
+    fn validate(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 {
+            return Err("width and height must be positive".into());
+        }
+        let r = &self.render;
+        if r.passes.is_empty() || r.passes.contains(&0) {
+            return Err("render.passes must be a non-empty list of positive pass counts".into());
+        }
+        if r.passes.windows(2).any(|w| w[0] >= w[1]) {
+            return Err("render.passes must be strictly ascending".into());
+        }
+        if r.seeds == 0 || r.reference_passes == 0 {
+            return Err("render.seeds and render.reference_passes must be positive".into());
+        }
+        if r.photons_per_pass == 0 || r.reference_photons_per_pass == 0 {
+            return Err("photons per pass must be positive".into());
+        }
+        let s = &self.split;
+        if [s.train, s.val, s.test]
+            .iter()
+            .any(|f| !(0.0..=1.0).contains(f))
+            || (s.train + s.val + s.test - 1.0).abs() > 1e-4
+        {
+            return Err("split fractions must lie in [0, 1] and sum to 1".into());
+        }
+        let f = &self.families;
+        let empty = |name: &str, len: usize| {
+            if len == 0 {
+                Err(format!("families.{name}: choice lists must not be empty"))
+            } else {
+                Ok(())
+            }
+        };
+        if let Some(c) = &f.room {
+            empty("room.lights", c.lights.len())?;
+        }
+        if let Some(c) = &f.glass {
+            empty("glass.shapes", c.shapes.len())?;
+            empty("glass.lights", c.lights.len())?;
+        }
+        if let Some(c) = &f.water {
+            empty("water.lights", c.lights.len())?;
+            if c.grid < 2 {
+                return Err("families.water.grid must be at least 2".into());
+            }
+        }
+        if let Some(c) = &f.metal {
+            empty("metal.kinds", c.kinds.len())?;
+            empty("metal.materials", c.materials.len())?;
+            empty("metal.lights", c.lights.len())?;
+        }
+        if self.scene_count() == 0 {
+            return Err("no scenes: give at least one family a positive count".into());
+        }
+        Ok(())
+    }
+
+    /// Total number of scenes over all families.
+    pub fn scene_count(&self) -> u32 {
+        let f = &self.families;
+        f.room.as_ref().map_or(0, |c| c.count)
+            + f.glass.as_ref().map_or(0, |c| c.count)
+            + f.water.as_ref().map_or(0, |c| c.count)
+            + f.metal.as_ref().map_or(0, |c| c.count)
+            + f.shelf.as_ref().map_or(0, |c| c.count)
+    }
+}

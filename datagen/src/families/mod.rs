@@ -1,0 +1,48 @@
+//! The procedural scene families and the deterministic mapping from (config, scene index) to a
+//! generated scene. Scenes are numbered over the families in [`Family::ALL`] order.
+
+mod glass;
+mod lights;
+mod metal;
+mod room;
+mod shelf;
+mod water;
+
+use crate::config::Config;
+use crate::rng::{hash_seq, hash_str, Rng};
+use crate::scene::{Family, GeneratedScene};
+
+/// Every scene of the config as (scene id, family), in index order.
+pub fn scene_list(config: &Config) -> Vec<(String, Family)> {
+    let f = &config.families;
+    let counts = [
+        f.room.as_ref().map_or(0, |c| c.count),
+        f.glass.as_ref().map_or(0, |c| c.count),
+        f.water.as_ref().map_or(0, |c| c.count),
+        f.metal.as_ref().map_or(0, |c| c.count),
+        f.shelf.as_ref().map_or(0, |c| c.count),
+    ];
+    let mut out = Vec::new();
+    for (family, count) in Family::ALL.into_iter().zip(counts) {
+        for _ in 0..count {
+            let id = format!("{:03}-{}", out.len(), family.name());
+            out.push((id, family));
+        }
+    }
+    out
+}
+
+/// Generates scene number `index` (see [`scene_list`]); deterministic in (config, index).
+pub fn generate(config: &Config, index: usize) -> GeneratedScene {
+    let (id, family) = scene_list(config)[index].clone();
+    let mut rng = Rng::new(hash_seq(&[config.seed, hash_str("scene"), index as u64]));
+    let f = &config.families;
+    // The family tables exist for every listed family (scene_list only lists those).
+    match family {
+        Family::Room => room::generate(config, f.room.as_ref().unwrap(), &mut rng, id),
+        Family::Glass => glass::generate(config, f.glass.as_ref().unwrap(), &mut rng, id),
+        Family::Water => water::generate(config, f.water.as_ref().unwrap(), &mut rng, id),
+        Family::Metal => metal::generate(config, f.metal.as_ref().unwrap(), &mut rng, id),
+        Family::Shelf => shelf::generate(config, f.shelf.as_ref().unwrap(), &mut rng, id),
+    }
+}

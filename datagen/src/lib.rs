@@ -1,0 +1,13 @@
+//! Dataset generation for multi-level SPPM post-reconstruction: procedural randomized scene
+//! families written as Mitsuba 3 XML + PLY, kill-safe sharded rendering of references and input
+//! bundles, the dataset manifest, dataset checks and contact sheets. See `docs/datagen.md`.
+
+pub mod config;
+pub mod families;
+pub mod fsutil;
+pub mod mesh;
+pub mod plan;
+pub mod ply;
+pub mod rng;
+pub mod scene;
+pub mod xml;

@@ -1,0 +1,280 @@
+//! The dataset plan: every scene with its split, every render job (one reference run per
+//! scene, one input run per (scene, seed) writing a bundle at each configured pass count),
+//! the relative paths of all outputs, render seeds, and the assignment of jobs to shards.
+
+use crate::config::Config;
+use crate::families::scene_list;
+use crate::rng::{hash_seq, hash_str, Rng};
+use crate::scene::Family;
+use serde::{Deserialize, Serialize};
+
+/// Which part of the dataset a scene belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Split {
+    /// Training scenes.
+    Train,
+    /// Validation scenes (model selection).
+    Val,
+    /// Held-out test scenes.
+    Test,
+}
+
+/// One planned scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScenePlan {
+    /// Index in generation order.
+    pub index: usize,
+    /// Scene id, e.g. `007-glass`.
+    pub id: String,
+    /// Family.
+    pub family: Family,
+    /// Split.
+    pub split: Split,
+}
+
+impl ScenePlan {
+    /// Directory of the scene's XML and PLY files, relative to the dataset root.
+    pub fn scene_dir(&self) -> String {
+        format!("scenes/{}", self.id)
+    }
+
+    /// The scene's XML, relative to the dataset root.
+    pub fn scene_xml(&self) -> String {
+        format!("scenes/{}/scene.xml", self.id)
+    }
+
+    /// The reference EXR, relative to the dataset root.
+    pub fn reference(&self) -> String {
+        format!("references/{}.exr", self.id)
+    }
+}
+
+/// One unit of rendering work; a shard runs whole jobs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Job {
+    /// The long reference run of a scene.
+    Reference {
+        /// Scene index.
+        scene: usize,
+    },
+    /// One input run of a scene, writing one bundle per configured pass count.
+    Inputs {
+        /// Scene index.
+        scene: usize,
+        /// Seed number 0..seeds.
+        seed_index: u32,
+    },
+}
+
+impl Job {
+    /// The job's scene index.
+    pub fn scene(&self) -> usize {
+        match *self {
+            Job::Reference { scene } | Job::Inputs { scene, .. } => scene,
+        }
+    }
+}
+
+/// The whole plan of a configuration.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// Scenes in index order.
+    pub scenes: Vec<ScenePlan>,
+    /// Jobs in canonical order: per scene, its reference then its input seeds.
+    pub jobs: Vec<Job>,
+    /// Master seed.
+    seed: u64,
+}
+
+impl Plan {
+    /// Plans a configuration (deterministic).
+    pub fn new(config: &Config) -> Self {
+        let list = scene_list(config);
+        let splits = assign_splits(config, &list);
+        let scenes: Vec<ScenePlan> = list
+            .into_iter()
+            .enumerate()
+            .map(|(index, (id, family))| ScenePlan {
+                index,
+                id,
+                family,
+                split: splits[index],
+            })
+            .collect();
+        let mut jobs = Vec::new();
+        for s in 0..scenes.len() {
+            jobs.push(Job::Reference { scene: s });
+            for seed_index in 0..config.render.seeds {
+                jobs.push(Job::Inputs {
+                    scene: s,
+                    seed_index,
+                });
+            }
+        }
+        Self {
+            scenes,
+            jobs,
+            seed: config.seed,
+        }
+    }
+
+    /// Render seed of a job (32 bits so JSON readers in any language keep it exact).
+    pub fn render_seed(&self, job: &Job) -> u64 {
+        let key = match *job {
+            Job::Reference { scene } => hash_seq(&[self.seed, hash_str("reference"), scene as u64]),
+            Job::Inputs { scene, seed_index } => hash_seq(&[
+                self.seed,
+                hash_str("inputs"),
+                scene as u64,
+                u64::from(seed_index),
+            ]),
+        };
+        key & 0xffff_ffff
+    }
+
+    /// Bundle path (relative) of an input run at a pass count.
+    pub fn bundle_path(&self, scene: usize, seed_index: u32, passes: u32) -> String {
+        format!(
+            "bundles/{}/s{seed_index:02}_p{passes:05}.exr",
+            self.scenes[scene].id
+        )
+    }
+
+    /// Path (relative) of a job's completion record.
+    pub fn record_path(&self, job: &Job) -> String {
+        let id = &self.scenes[job.scene()].id;
+        match *job {
+            Job::Reference { .. } => format!("records/{id}/reference.json"),
+            Job::Inputs { seed_index, .. } => format!("records/{id}/s{seed_index:02}.json"),
+        }
+    }
+
+    /// Path (relative) of a job's timing note (wall-clock; not part of the canonical data).
+    pub fn timing_path(&self, job: &Job) -> String {
+        self.record_path(job).replacen("records/", "timings/", 1)
+    }
+
+    /// Indices of the jobs shard `index` of `count` runs: every `count`-th job.
+    pub fn shard_jobs(&self, shard: Shard) -> Vec<usize> {
+        (0..self.jobs.len())
+            .filter(|j| j % shard.count as usize == shard.index as usize)
+            .collect()
+    }
+}
+
+/// A shard: this process runs jobs `index`, `index + count`, ...
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    /// 0-based shard index.
+    pub index: u32,
+    /// Number of shards (≥ 1).
+    pub count: u32,
+}
+
+impl Shard {
+    /// The whole dataset in one process.
+    pub const ALL: Shard = Shard { index: 0, count: 1 };
+
+    /// Parses `I/N` (0 ≤ I < N).
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let (i, n) = s
+            .split_once('/')
+            .ok_or_else(|| format!("shard `{s}`: expected I/N, e.g. 0/4"))?;
+        let index: u32 = i
+            .trim()
+            .parse()
+            .map_err(|_| format!("shard `{s}`: bad index"))?;
+        let count: u32 = n
+            .trim()
+            .parse()
+            .map_err(|_| format!("shard `{s}`: bad count"))?;
+        Self::new(index, count).map_err(|e| format!("shard `{s}`: {e}"))
+    }
+
+    /// Validates index < count.
+    pub fn new(index: u32, count: u32) -> Result<Self, String> {
+        if count == 0 || index >= count {
+            return Err(format!(
+                "index {index} must be below count {count} (count ≥ 1)"
+            ));
+        }
+        Ok(Self { index, count })
+    }
+
+    /// The shard from scheduler environment variables, if set: Slurm array jobs
+    /// (`SLURM_ARRAY_TASK_ID` − `SLURM_ARRAY_TASK_MIN` of `SLURM_ARRAY_TASK_COUNT`) or
+    /// Kubernetes Indexed Jobs (`JOB_COMPLETION_INDEX` of `DATAGEN_SHARD_COUNT`).
+    pub fn from_env(get: impl Fn(&str) -> Option<String>) -> Result<Option<Self>, String> {
+        let num =
+            |name: &str| -> Result<Option<u32>, String> {
+                match get(name) {
+                    None => Ok(None),
+                    Some(v) => v.trim().parse().map(Some).map_err(|_| {
+                        format!("environment variable {name}=`{v}` is not an integer")
+                    }),
+                }
+            };
+        if let Some(id) = num("SLURM_ARRAY_TASK_ID")? {
+            let count = num("SLURM_ARRAY_TASK_COUNT")?
+                .ok_or("SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not")?;
+            let min = num("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+            let index = id
+                .checked_sub(min)
+                .ok_or("SLURM_ARRAY_TASK_ID is below SLURM_ARRAY_TASK_MIN")?;
+            return Self::new(index, count).map(Some);
+        }
+        if let Some(index) = num("JOB_COMPLETION_INDEX")? {
+            let count = num("DATAGEN_SHARD_COUNT")?.ok_or(
+                "JOB_COMPLETION_INDEX is set but DATAGEN_SHARD_COUNT (the Job's completions) is not",
+            )?;
+            return Self::new(index, count).map(Some);
+        }
+        Ok(None)
+    }
+}
+
+/// Assigns splits by scene: within each family the scenes are shuffled (seeded), then test and
+/// validation scenes are taken round-robin over the families so every split sees every family
+/// as far as counts allow. Counts are the rounded fractions (at least one scene for a positive
+/// fraction when there are at least three scenes).
+fn assign_splits(config: &Config, list: &[(String, Family)]) -> Vec<Split> {
+    let n = list.len();
+    let count_for = |f: f32| {
+        let k = (f * n as f32).round() as usize;
+        if f > 0.0 && k == 0 && n >= 3 {
+            1
+        } else {
+            k
+        }
+    };
+    let n_test = count_for(config.split.test);
+    let n_val = count_for(config.split.val).min(n - n_test.min(n));
+    let mut rng = Rng::new(hash_seq(&[config.seed, hash_str("split")]));
+    let mut per_family: Vec<Vec<usize>> = Family::ALL
+        .iter()
+        .map(|f| (0..n).filter(|&i| list[i].1 == *f).collect())
+        .collect();
+    for v in &mut per_family {
+        rng.shuffle(v);
+    }
+    // Round-robin order: first of each family, second of each family, ...
+    let mut order = Vec::new();
+    let longest = per_family.iter().map(Vec::len).max().unwrap_or(0);
+    for k in 0..longest {
+        for v in &per_family {
+            if let Some(&i) = v.get(k) {
+                order.push(i);
+            }
+        }
+    }
+    let mut splits = vec![Split::Train; n];
+    for (rank, &i) in order.iter().enumerate() {
+        if rank < n_test {
+            splits[i] = Split::Test;
+        } else if rank < n_test + n_val {
+            splits[i] = Split::Val;
+        }
+    }
+    splits
+}
