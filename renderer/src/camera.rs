@@ -64,6 +64,15 @@ pub fn horizontal_fov(fov: f32, axis: FovAxis, aspect: f32) -> f32 {
     x.to_degrees() as f32
 }
 
+/// Mitsuba's `lookat` transform: camera-to-world with local +z towards `target`, local +x =
+/// up × dir (the image's left) and local +y the re-orthogonalised up vector.
+pub fn look_at(origin: Vec3, target: Vec3, up: Vec3) -> Mat4 {
+    let dir = (target - origin).normalize();
+    let left = up.normalize().cross(dir).normalize();
+    let new_up = dir.cross(left);
+    Mat4::from_cols(left.extend(0.0), new_up.extend(0.0), dir.extend(0.0), origin.extend(1.0))
+}
+
 impl Camera {
     /// Builds the camera from its description.
     pub fn new(desc: &CameraDesc) -> Self {

@@ -6,6 +6,7 @@ pub mod accel;
 pub mod bsdf;
 pub mod camera;
 pub mod description;
+pub mod film;
 pub mod frame;
 pub mod image_io;
 pub mod integrators;

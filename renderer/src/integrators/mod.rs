@@ -1,3 +1,4 @@
 //! Light transport algorithms: each integrator turns a scene into images.
 
+pub mod path;
 pub mod sppm;
