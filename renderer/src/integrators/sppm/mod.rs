@@ -1,6 +1,469 @@
 //! Stochastic progressive photon mapping with five nested kernel bandwidths (SPEC §3.4), and
-//! its single-level baseline.
+//! its single-level baseline; the result of a run is a series of [`bundle::Bundle`]s.
+//!
+//! One pass *i* (1-based):
+//! 1. photon pass: `photons_per_pass` photons are traced and deposited ([`photon_trace`]),
+//!    then sorted into a hash grid ([`photon_map::PhotonGrid`]);
+//! 2. per pixel (in parallel, each pixel with its own random streams): eye subpaths A and B are
+//!    traced to their visible points ([`visible_point`]); a pixel without radii yet gets
+//!    r₅ = distance to the k-th nearest photon (capped) at its first visible point; A gathers
+//!    level 1 (`y`) at r₁, B gathers levels 2..5 (`z1`..`z4`) with one query at r₅
+//!    ([`gather`]); the per-pass estimates enter Welford accumulators ([`accumulate`]);
+//!    then all radii shrink by r² ← r²·(i+α)/(i+1) ([`radius`]).
+//!
+//! Determinism: pixel `p` uses the streams `rng_for(seed, pass, 2p)` (A) and
+//! `rng_for(seed, pass, 2p+1)` (B), photon `j` a stream of (seed, pass, j) in a separate domain;
+//! photon deposits are concatenated in photon order and the grid is built by a stable counting
+//! sort; every reduction is per pixel in a fixed order. Output is bit-identical for any thread
+//! count.
 
 pub mod accumulate;
+pub mod gather;
 pub mod photon_map;
+pub mod photon_trace;
 pub mod radius;
+pub mod visible_point;
+
+use std::time::Instant;
+
+use anyhow::{bail, Result};
+use bundle::{Bundle, BundleMeta, Image};
+use glam::UVec2;
+use rayon::prelude::*;
+
+use crate::film::with_threads;
+use crate::sampling::{rng_for, UniformSource};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+
+use accumulate::{GBufferSum, Welford};
+use photon_map::PhotonGrid;
+use radius::{nested_radii, shrink_factor, LEVELS};
+use visible_point::{trace_eye_path, EyePath};
+
+/// Default cap on the initial radius as a fraction of the scene's bounding-box diagonal
+/// (1/50): keeps the kernel local in dark, photon-starved regions.
+pub const DEFAULT_MAX_RADIUS_FRACTION: f32 = 0.02;
+
+/// Default k of the k-nearest-photon initial radius (the paper's k = 20).
+pub const DEFAULT_KNN: usize = 20;
+
+/// Default α of the radius shrink rule.
+pub const DEFAULT_ALPHA: f32 = 2.0 / 3.0;
+
+/// Default bound on eye-path delta/glossy bounces and on photon bounces.
+pub const DEFAULT_MAX_DEPTH: u32 = 16;
+
+/// Which estimator to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SppmMode {
+    /// Standard SPPM: one eye subpath, one level whose radius is initialised like level 2
+    /// (r₅/√2³ with r₅ the k-NN distance). Its estimate fills all five bundle levels.
+    Single,
+    /// Multi-level SPPM: subpaths A (level 1) and B (levels 2..5), five nested radii.
+    MultiLevel,
+}
+
+impl SppmMode {
+    /// The integrator name written into bundle metadata and accepted by `render`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SppmMode::Single => "sppm",
+            SppmMode::MultiLevel => "sppm-ml",
+        }
+    }
+}
+
+/// Settings of an SPPM run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SppmSettings {
+    /// Photons emitted per pass (N_photon).
+    pub photons_per_pass: u64,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Cap on the initial radius r₅ in world units; `None`: the scene's bounding diagonal
+    /// times [`DEFAULT_MAX_RADIUS_FRACTION`].
+    pub max_radius: Option<f32>,
+    /// k of the k-nearest-photon initial radius.
+    pub knn: usize,
+    /// α of the shrink rule r² ← r²·(i+α)/(i+1).
+    pub alpha: f32,
+    /// Multi-level or single-level.
+    pub mode: SppmMode,
+    /// Bound on delta/glossy eye bounces and on photon bounces.
+    pub max_depth: u32,
+    /// Worker threads (0: all cores). The output does not depend on it.
+    pub threads: usize,
+    /// Scene identifier written into bundle metadata.
+    pub scene_name: String,
+}
+
+impl Default for SppmSettings {
+    fn default() -> Self {
+        SppmSettings {
+            photons_per_pass: 100_000,
+            seed: 0,
+            max_radius: None,
+            knn: DEFAULT_KNN,
+            alpha: DEFAULT_ALPHA,
+            mode: SppmMode::MultiLevel,
+            max_depth: DEFAULT_MAX_DEPTH,
+            threads: 0,
+            scene_name: String::new(),
+        }
+    }
+}
+
+/// When to emit bundles and when to stop.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct StopCondition {
+    /// Pass counts at which a bundle is produced (any order; duplicates ignored). The run stops
+    /// after the largest one.
+    pub checkpoints: Vec<u32>,
+    /// Wall-clock budget in seconds: the run stops after the first pass that ends past it and
+    /// produces a final bundle (unless that pass count was a checkpoint already).
+    pub seconds: Option<f64>,
+}
+
+/// Progress report after each pass.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PassProgress {
+    /// Passes done.
+    pub pass: u32,
+    /// The last checkpoint, if the run is pass-bounded.
+    pub target_passes: Option<u32>,
+    /// Seconds since the start.
+    pub elapsed: f64,
+    /// Photons emitted so far.
+    pub photons_emitted: u64,
+    /// Photons stored in this pass.
+    pub photons_stored: u64,
+    /// Visible points found in this pass (both subpaths).
+    pub visible_points: u64,
+}
+
+/// Totals of a finished run, for reports and benchmarks.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RenderSummary {
+    /// Passes rendered.
+    pub passes: u32,
+    /// Wall-clock seconds of the whole run (bundle assembly and callbacks included).
+    pub seconds: f64,
+    /// Seconds spent tracing photons and building the grid.
+    pub photon_seconds: f64,
+    /// Seconds spent on eye subpaths, gathering and accumulation.
+    pub gather_seconds: f64,
+    /// Photons emitted.
+    pub photons_emitted: u64,
+    /// Photons stored.
+    pub photons_stored: u64,
+    /// Visible points found.
+    pub visible_points: u64,
+}
+
+/// The per-pixel state carried across passes.
+#[derive(Debug, Clone, Copy, Default)]
+struct PixelState {
+    /// Current r₅² of the pixel (multi-level) or the single level's r² (single); 0 until the
+    /// pixel's first visible point.
+    r2: f32,
+    /// Pass in which the radius was initialised.
+    init_pass: u32,
+    /// Welford accumulators per level ([`SppmMode::Single`] uses index 0 only).
+    levels: [Welford; LEVELS],
+    /// G-buffer sums from path A.
+    gbuffer: GBufferSum,
+}
+
+impl PixelState {
+    /// The current radii of the levels this pixel estimates (ascending).
+    fn radii(&self, mode: SppmMode) -> [f32; LEVELS] {
+        let r = self.r2.sqrt();
+        match mode {
+            SppmMode::MultiLevel => nested_radii(r),
+            SppmMode::Single => [r; LEVELS],
+        }
+    }
+}
+
+/// Everything a pass needs that does not change within it.
+struct PassContext<'a> {
+    scene: &'a Scene,
+    settings: &'a SppmSettings,
+    grid: &'a PhotonGrid,
+    max_radius: f32,
+    pass: u32,
+}
+
+/// Initial radius at `p`: the k-NN distance, or the cap when fewer than k photons are within
+/// it; for the single level scaled like level 2.
+fn initial_r2(ctx: &PassContext, p: glam::Vec3) -> f32 {
+    let r5 = ctx
+        .grid
+        .kth_nearest_distance(p, ctx.settings.knn, ctx.max_radius)
+        .unwrap_or(ctx.max_radius);
+    let r = match ctx.settings.mode {
+        SppmMode::MultiLevel => r5,
+        SppmMode::Single => nested_radii(r5)[1],
+    };
+    r * r
+}
+
+/// Renders one pass of pixel `index` and updates its state. Returns the visible-point count.
+fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 {
+    let scene = ctx.scene;
+    let width = scene.camera.resolution().x as usize;
+    let pixel = UVec2::new((index % width) as u32, (index / width) as u32);
+    let trace = |sub: u64| -> EyePath {
+        let mut rng = rng_for(ctx.settings.seed, ctx.pass as u64, 2 * index as u64 + sub);
+        let u_film = rng.next_2d();
+        let u_lens = rng.next_2d();
+        let ray = scene.camera.generate_ray(pixel, u_film, u_lens);
+        trace_eye_path(scene, ray, &mut rng, ctx.settings.max_depth)
+    };
+    let a = trace(0);
+    let b = match ctx.settings.mode {
+        SppmMode::MultiLevel => Some(trace(1)),
+        SppmMode::Single => None,
+    };
+    if state.r2 == 0.0 {
+        let first = a.vp.or(b.and_then(|b| b.vp));
+        if let Some(vp) = first {
+            state.r2 = initial_r2(ctx, vp.p);
+            state.init_pass = ctx.pass;
+        }
+    }
+    let radii = state.radii(ctx.settings.mode);
+    let n = ctx.settings.photons_per_pass;
+    let mut estimates = [Rgb::ZERO; LEVELS];
+    let mut found = 0;
+    match ctx.settings.mode {
+        SppmMode::MultiLevel => {
+            estimates[0] = a.direct;
+            if let Some(vp) = &a.vp {
+                gather::gather(scene, ctx.grid, vp, &radii[..1], n, &mut estimates[..1]);
+                found += 1;
+            }
+            let b = b.unwrap_or_default();
+            for e in &mut estimates[1..] {
+                *e = b.direct;
+            }
+            if let Some(vp) = &b.vp {
+                gather::gather(scene, ctx.grid, vp, &radii[1..], n, &mut estimates[1..]);
+                found += 1;
+            }
+            for (w, e) in state.levels.iter_mut().zip(&estimates) {
+                w.push(sanitize(*e));
+            }
+        }
+        SppmMode::Single => {
+            estimates[0] = a.direct;
+            if let Some(vp) = &a.vp {
+                gather::gather(scene, ctx.grid, vp, &radii[..1], n, &mut estimates[..1]);
+                found += 1;
+            }
+            state.levels[0].push(sanitize(estimates[0]));
+        }
+    }
+    state.gbuffer.push(&a.gbuffer);
+    if state.r2 > 0.0 {
+        state.r2 *= shrink_factor(ctx.pass, ctx.settings.alpha);
+    }
+    found
+}
+
+/// Replaces a non-finite per-pass estimate (a numerical accident) by zero, so one bad sample
+/// cannot poison a pixel's mean for the rest of the run.
+#[inline]
+fn sanitize(e: Rgb) -> Rgb {
+    if e.is_finite() {
+        e
+    } else {
+        Rgb::ZERO
+    }
+}
+
+/// Assembles the bundle of the current state.
+fn make_bundle(
+    scene: &Scene,
+    settings: &SppmSettings,
+    states: &[PixelState],
+    passes: u32,
+    seconds: f64,
+) -> Bundle {
+    let res = scene.camera.resolution();
+    let (w, h) = (res.x as usize, res.y as usize);
+    let mut levels: Vec<Image> = (0..LEVELS).map(|_| Image::new(w, h, 3)).collect();
+    let mut variance = Image::new(w, h, LEVELS);
+    let mut albedo = Image::new(w, h, 3);
+    let mut normal = Image::new(w, h, 3);
+    let mut depth = Image::new(w, h, 1);
+    let mut radius = Image::new(w, h, LEVELS);
+    for (i, s) in states.iter().enumerate() {
+        for l in 0..LEVELS {
+            // The single level fills every level layer (docs/formats.md).
+            let acc = match settings.mode {
+                SppmMode::MultiLevel => &s.levels[l],
+                SppmMode::Single => &s.levels[0],
+            };
+            levels[l].data[3 * i..3 * i + 3].copy_from_slice(&acc.mean_rgb().to_array());
+            variance.data[LEVELS * i + l] = acc.variance_of_mean();
+        }
+        let g = s.gbuffer.average(passes);
+        albedo.data[3 * i..3 * i + 3].copy_from_slice(&g.albedo.to_array());
+        normal.data[3 * i..3 * i + 3].copy_from_slice(&g.normal.to_array());
+        depth.data[i] = g.depth;
+        // Radii used in the last pass (before its shrink).
+        let r = if s.r2 > 0.0 {
+            let last_shrink = shrink_factor(passes, settings.alpha);
+            let mut unshrunk = *s;
+            unshrunk.r2 /= last_shrink;
+            unshrunk.radii(settings.mode)
+        } else {
+            [0.0; LEVELS]
+        };
+        radius.data[LEVELS * i..LEVELS * i + LEVELS].copy_from_slice(&r);
+    }
+    Bundle {
+        meta: BundleMeta {
+            scene: settings.scene_name.clone(),
+            seed: settings.seed,
+            passes,
+            photons_per_pass: settings.photons_per_pass,
+            seconds,
+            integrator: settings.mode.name().into(),
+            width: res.x,
+            height: res.y,
+        },
+        levels,
+        variance,
+        albedo,
+        normal,
+        depth,
+        radius: Some(radius),
+    }
+}
+
+/// Cell size of this pass's photon grid from the radii the pixels will query: the mean
+/// initialised radius, but at least a quarter of the largest (bounds the cells a query visits);
+/// the cap before any pixel has a radius.
+fn grid_cell_size(states: &[PixelState], mode: SppmMode, max_radius: f32) -> f32 {
+    let (mut sum, mut count, mut max) = (0.0f64, 0u64, 0.0f32);
+    for s in states.iter().filter(|s| s.r2 > 0.0) {
+        let r = s.radii(mode)[LEVELS - 1];
+        sum += r as f64;
+        count += 1;
+        max = max.max(r);
+    }
+    if count == 0 {
+        return max_radius;
+    }
+    ((sum / count as f64) as f32).max(0.25 * max)
+}
+
+/// Runs SPPM on `scene` and calls `on_checkpoint` with a bundle at every checkpoint of `stop`
+/// (and at the time limit). `progress` is called after every pass. Everything runs in a
+/// dedicated rayon pool of `settings.threads` workers.
+pub fn render_sppm(
+    scene: &Scene,
+    settings: &SppmSettings,
+    stop: &StopCondition,
+    mut on_checkpoint: impl FnMut(Bundle) -> Result<()> + Send,
+    mut progress: impl FnMut(&PassProgress) + Send,
+) -> Result<RenderSummary> {
+    if settings.photons_per_pass == 0 {
+        bail!("photons per pass must be positive");
+    }
+    if settings.knn == 0 {
+        bail!("k of the k-nearest-photon radius must be positive");
+    }
+    if !(settings.alpha > 0.0 && settings.alpha < 1.0) {
+        bail!("alpha must lie in (0, 1), got {}", settings.alpha);
+    }
+    let mut checkpoints = stop.checkpoints.clone();
+    checkpoints.sort_unstable();
+    checkpoints.dedup();
+    checkpoints.retain(|&c| c > 0);
+    if checkpoints.is_empty() && stop.seconds.is_none() {
+        bail!("no stop condition: give pass checkpoints and/or a time limit");
+    }
+    if let Some(s) = stop.seconds {
+        if !(s > 0.0) {
+            bail!("time limit must be positive, got {s}");
+        }
+    }
+    let max_radius = match settings.max_radius {
+        Some(r) if r.is_finite() && r > 0.0 => r,
+        Some(r) => bail!("max radius must be positive, got {r}"),
+        None => (scene.diagonal() * DEFAULT_MAX_RADIUS_FRACTION).max(1e-6),
+    };
+    let res = scene.camera.resolution();
+    let pixel_count = res.x as usize * res.y as usize;
+    let target = checkpoints.last().copied();
+
+    with_threads(settings.threads, move || -> Result<RenderSummary> {
+        let start = Instant::now();
+        let mut states = vec![PixelState::default(); pixel_count];
+        let mut summary = RenderSummary::default();
+        let mut next_checkpoint = 0;
+        let mut pass = 0u32;
+        loop {
+            pass += 1;
+            let t0 = Instant::now();
+            let photons = photon_trace::trace_photons(
+                scene,
+                settings.seed,
+                pass as u64,
+                settings.photons_per_pass,
+                settings.max_depth,
+            );
+            let stored = photons.len() as u64;
+            let cell = grid_cell_size(&states, settings.mode, max_radius);
+            let grid = PhotonGrid::build(photons, cell);
+            let t1 = Instant::now();
+            let ctx = PassContext {
+                scene,
+                settings,
+                grid: &grid,
+                max_radius,
+                pass,
+            };
+            let visible_points: u64 = states
+                .par_iter_mut()
+                .enumerate()
+                .with_min_len(64)
+                .map(|(i, s)| render_pixel(&ctx, i, s))
+                .sum();
+            drop(grid);
+            let t2 = Instant::now();
+            summary.passes = pass;
+            summary.photon_seconds += (t1 - t0).as_secs_f64();
+            summary.gather_seconds += (t2 - t1).as_secs_f64();
+            summary.photons_emitted += settings.photons_per_pass;
+            summary.photons_stored += stored;
+            summary.visible_points += visible_points;
+            let elapsed = start.elapsed().as_secs_f64();
+            progress(&PassProgress {
+                pass,
+                target_passes: target,
+                elapsed,
+                photons_emitted: summary.photons_emitted,
+                photons_stored: stored,
+                visible_points,
+            });
+            let timed_out = stop.seconds.is_some_and(|s| elapsed >= s);
+            let at_checkpoint = checkpoints.get(next_checkpoint) == Some(&pass);
+            if at_checkpoint {
+                next_checkpoint += 1;
+            }
+            if at_checkpoint || timed_out {
+                on_checkpoint(make_bundle(scene, settings, &states, pass, elapsed))?;
+            }
+            if timed_out || (target.is_some() && next_checkpoint == checkpoints.len()) {
+                break;
+            }
+        }
+        summary.seconds = start.elapsed().as_secs_f64();
+        Ok(summary)
+    })?
+}

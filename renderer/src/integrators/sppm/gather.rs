@@ -1,0 +1,75 @@
+//! Photon gathering at a visible point (SPEC §3.4 step 4): one range query at the largest
+//! radius of the levels the point feeds, each photon added to every level whose radius covers
+//! it, with photons from the other side of the surface or from differently oriented surfaces
+//! rejected.
+
+use crate::bsdf::{Bsdf, TransportMode};
+use crate::scene::Scene;
+use crate::spectrum::Rgb;
+use std::f32::consts::PI;
+
+use super::photon_map::PhotonGrid;
+use super::visible_point::VisiblePoint;
+
+/// Minimum cosine between a photon's surface normal and the visible point's geometric normal.
+/// Photons on surfaces meeting the visible point's at more than 60° (corners, the other face
+/// of a thin wall) are rejected: they belong to a different surface (Mitsuba's SPPM accepts
+/// them and leaks light around corners and through thin walls).
+pub const NORMAL_AGREEMENT_COS: f32 = 0.5;
+
+/// Whether a BSDF transmits light through the surface with a non-delta lobe: then photons on
+/// the other side of the surface contribute legitimately.
+fn transmits(bsdf: &Bsdf) -> bool {
+    match bsdf {
+        Bsdf::RoughDielectric(_) => true,
+        Bsdf::TwoSided { front, back } => transmits(front) || transmits(back),
+        _ => false,
+    }
+}
+
+/// Adds the photon-density estimates of the visible point for the nested `radii` (ascending)
+/// to `out[ℓ]`: β·Σ f(wo, wp)·Φp / (n_photons·π·r_ℓ²). One query at the largest radius.
+pub fn gather(
+    scene: &Scene,
+    grid: &PhotonGrid,
+    vp: &VisiblePoint,
+    radii: &[f32],
+    n_photons: u64,
+    out: &mut [Rgb],
+) {
+    debug_assert_eq!(radii.len(), out.len());
+    let Some(&r_max) = radii.last() else {
+        return;
+    };
+    let bsdf = &scene.bsdfs[vp.material as usize];
+    let allow_other_side = transmits(bsdf);
+    let viewer_side = vp.wo_world.dot(vp.ng) > 0.0;
+    let r2: [f32; 8] = std::array::from_fn(|l| radii.get(l).map_or(0.0, |r| r * r));
+    let mut sums = [Rgb::ZERO; 8];
+    grid.for_each_within(vp.p, r_max, |photon, d2| {
+        if photon.normal.dot(vp.ng) < NORMAL_AGREEMENT_COS {
+            return;
+        }
+        if !allow_other_side && (photon.wi.dot(vp.ng) > 0.0) != viewer_side {
+            return;
+        }
+        let wi = vp.frame.to_local(photon.wi);
+        let f = bsdf.eval(vp.wo, wi, vp.uv, TransportMode::Radiance);
+        if f == Rgb::ZERO {
+            return;
+        }
+        let contribution = f * photon.flux;
+        // Radii ascend: the covering levels are a suffix of the list.
+        for (sum, r2) in sums.iter_mut().zip(&r2).take(radii.len()).rev() {
+            if d2 > *r2 {
+                break;
+            }
+            *sum += contribution;
+        }
+    });
+    for ((o, sum), r2) in out.iter_mut().zip(&sums).zip(&r2) {
+        if *r2 > 0.0 {
+            *o += vp.beta * *sum / (n_photons as f32 * PI * r2);
+        }
+    }
+}

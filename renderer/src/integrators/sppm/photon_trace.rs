@@ -1,0 +1,102 @@
+//! The photon pass (SPEC §3.4 step 2): photons leave the lights by power, scatter with Russian
+//! roulette, and are deposited at every diffuse/rough hit after at least one bounce (light
+//! arriving directly from a light is next-event estimation's job).
+//!
+//! Photons are only stored where a visible point can exist (surfaces whose lobe class is
+//! [`Lobe::Diffuse`]); deposits on glossy surfaces could never be gathered.
+
+use crate::bsdf::{Lobe, TransportMode};
+use crate::sampling::{rng_for, UniformSource};
+use crate::scene::Scene;
+use rayon::prelude::*;
+
+use super::photon_map::Photon;
+
+/// Photons traced per parallel work item; the deposits of a chunk stay in photon order and
+/// chunks are concatenated in order, so the photon list does not depend on the thread count.
+const CHUNK: u64 = 4096;
+
+/// Bounce from which Russian roulette may end a photon path.
+const RR_START: u32 = 3;
+
+/// Domain-separation constant mixed into the seed of photon streams (pixels use the plain seed).
+const PHOTON_STREAM: u64 = 0x7068_6f74_6f6e_7321;
+
+/// Traces photon `index` of pass `pass`, appending its deposits to `out`.
+pub fn trace_photon(
+    scene: &Scene,
+    seed: u64,
+    pass: u64,
+    index: u64,
+    max_depth: u32,
+    out: &mut Vec<Photon>,
+) {
+    let mut rng = rng_for(seed ^ PHOTON_STREAM, pass, index);
+    let u_sel = rng.next_f32();
+    let u_pos = rng.next_2d();
+    let u_dir = rng.next_2d();
+    let Some(emission) = scene.sample_emission(u_sel, u_pos, u_dir) else {
+        return;
+    };
+    let mut ray = emission.ray;
+    let mut flux = emission.flux;
+    for bounce in 0..max_depth {
+        let Some(si) = scene.intersect(&ray) else {
+            break;
+        };
+        let bsdf = scene.bsdf(&si);
+        let wo = si.to_local(si.wo);
+        if bounce > 0 && bsdf.lobe_for(wo) == Lobe::Diffuse {
+            out.push(Photon {
+                position: si.p,
+                wi: si.wo,
+                normal: si.ng,
+                flux,
+            });
+        }
+        let u_lobe = rng.next_f32();
+        let u = rng.next_2d();
+        let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Importance) else {
+            break;
+        };
+        let new_flux = flux * bs.weight;
+        if bounce + 1 >= RR_START {
+            // Survive with the probability of the throughput change, so surviving photons keep
+            // roughly constant flux.
+            let q = (new_flux.max_element() / flux.max_element()).min(0.95);
+            if !(q > 0.0) || rng.next_f32() >= q {
+                break;
+            }
+            flux = new_flux / q;
+        } else {
+            flux = new_flux;
+        }
+        if !(flux.max_element() > 0.0) || !flux.is_finite() {
+            break;
+        }
+        ray = si.spawn_ray(si.to_world(bs.wi));
+    }
+}
+
+/// Traces `count` photons of pass `pass` in parallel (current rayon pool) and returns all
+/// deposits in photon-index order.
+pub fn trace_photons(
+    scene: &Scene,
+    seed: u64,
+    pass: u64,
+    count: u64,
+    max_depth: u32,
+) -> Vec<Photon> {
+    let chunks = count.div_ceil(CHUNK);
+    let per_chunk: Vec<Vec<Photon>> = (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let mut out = Vec::new();
+            for index in c * CHUNK..((c + 1) * CHUNK).min(count) {
+                trace_photon(scene, seed, pass, index, max_depth, &mut out);
+            }
+            out
+        })
+        .collect();
+    per_chunk.concat()
+}

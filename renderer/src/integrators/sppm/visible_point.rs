@@ -1,0 +1,212 @@
+//! SPPM eye subpaths: from the camera through delta and glossy bounces to the first diffuse or
+//! rough surface, where a visible point is stored (SPEC §3.4 step 1).
+//!
+//! Along the way the path collects everything that is not a photon-density estimate: emission
+//! seen directly or through delta bounces, direct light at glossy vertices (NEE + MIS with the
+//! continuing BSDF sample), and direct light at the visible point itself (NEE + MIS, completed by
+//! one BSDF-sampled ray that only looks for emitters; the photons hold the indirect part).
+
+use crate::bsdf::{Bsdf, Lobe, TransportMode};
+use crate::frame::Frame;
+use crate::math::Ray;
+use crate::sampling::{power_heuristic, Pcg32, UniformSource};
+use crate::scene::{Scene, SurfaceInteraction};
+use crate::spectrum::Rgb;
+use glam::{Vec2, Vec3};
+
+use super::accumulate::GBufferSample;
+
+/// Where an eye subpath stopped on a diffuse or rough surface.
+#[derive(Debug, Clone, Copy)]
+pub struct VisiblePoint {
+    /// Position.
+    pub p: Vec3,
+    /// Geometric normal (as stored by the scene, not flipped towards the viewer).
+    pub ng: Vec3,
+    /// Shading frame.
+    pub frame: Frame,
+    /// Direction towards the viewer, world space.
+    pub wo_world: Vec3,
+    /// Direction towards the viewer, shading frame.
+    pub wo: Vec3,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Index of the material in [`Scene::bsdfs`].
+    pub material: u32,
+    /// Path throughput β from the camera to this point.
+    pub beta: Rgb,
+}
+
+/// The result of one eye subpath.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct EyePath {
+    /// Radiance gathered without photons (emission, NEE), already multiplied by throughput.
+    pub direct: Rgb,
+    /// The visible point, if the path reached a diffuse or rough surface.
+    pub vp: Option<VisiblePoint>,
+    /// G-buffer features at the visible point (zeros without one).
+    pub gbuffer: GBufferSample,
+}
+
+/// Emission-search state after a scattering event: how the last direction was sampled, for
+/// MIS against light sampling.
+#[derive(Clone, Copy)]
+struct LastScatter {
+    /// Position of the scattering vertex.
+    p: Vec3,
+    /// Solid-angle density of the sampled direction (unused when `delta`).
+    pdf: f32,
+    /// The direction came from a delta lobe or from the camera: emission counts fully.
+    delta: bool,
+}
+
+/// MIS weight of emission found by BSDF sampling (`pdf_light`: light sampling's density of the
+/// same direction).
+#[inline]
+fn bsdf_mis(last: &LastScatter, pdf_light: impl FnOnce() -> f32) -> f32 {
+    if last.delta {
+        1.0
+    } else {
+        power_heuristic(last.pdf, pdf_light())
+    }
+}
+
+/// Radiance from emitters found along `ray` (emitting surface or environment), MIS-weighted.
+#[inline]
+fn emission_along(
+    scene: &Scene,
+    ray: &Ray,
+    hit: Option<&SurfaceInteraction>,
+    last: &LastScatter,
+) -> Rgb {
+    match hit {
+        Some(si) => {
+            if si.light.is_none() {
+                return Rgb::ZERO;
+            }
+            let le = scene.emitted(si, si.wo);
+            if le == Rgb::ZERO {
+                return le;
+            }
+            le * bsdf_mis(last, || scene.pdf_li_surface(last.p, si))
+        }
+        None => {
+            if !scene.has_environment() {
+                return Rgb::ZERO;
+            }
+            scene.environment(ray.d) * bsdf_mis(last, || scene.pdf_li_environment(ray.d))
+        }
+    }
+}
+
+/// Next-event estimation at `si`: one light sample, MIS-weighted against BSDF sampling.
+#[inline]
+fn direct_light(
+    scene: &Scene,
+    si: &SurfaceInteraction,
+    bsdf: &Bsdf,
+    wo: Vec3,
+    rng: &mut Pcg32,
+) -> Rgb {
+    let u_sel = rng.next_f32();
+    let u = rng.next_2d();
+    let Some(ls) = scene.sample_li(si.p, u_sel, u) else {
+        return Rgb::ZERO;
+    };
+    let wi = si.to_local(ls.wi);
+    let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance);
+    if f.max_element() <= 0.0 || scene.light_occluded(si.p, si.ng, &ls) {
+        return Rgb::ZERO;
+    }
+    let w = if ls.delta {
+        1.0
+    } else {
+        power_heuristic(ls.pdf, bsdf.pdf(wo, wi, si.uv))
+    };
+    f * (wi.z.abs() * w) * ls.weight
+}
+
+/// Traces one eye subpath starting with `ray`; `max_depth` bounds the number of delta/glossy
+/// bounces before the path gives up without a visible point.
+pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u32) -> EyePath {
+    let camera_pos = scene.camera.position();
+    let mut out = EyePath::default();
+    let mut beta = Rgb::ONE;
+    let mut path_length = 0.0f32;
+    let mut last = LastScatter {
+        p: ray.o,
+        pdf: 1.0,
+        delta: true,
+    };
+    for depth in 0..=max_depth {
+        let hit = scene.intersect(&ray);
+        out.direct += beta * emission_along(scene, &ray, hit.as_ref(), &last);
+        let Some(si) = hit else {
+            break;
+        };
+        path_length += if depth == 0 {
+            si.p.distance(camera_pos)
+        } else {
+            si.t
+        };
+        let bsdf = scene.bsdf(&si);
+        let wo = si.to_local(si.wo);
+        let lobe = bsdf.lobe_for(wo);
+        if lobe == Lobe::Diffuse {
+            out.direct += beta * direct_light(scene, &si, bsdf, wo, rng);
+            // The BSDF-sampling half of the MIS pair: it only looks for emitters.
+            let u_lobe = rng.next_f32();
+            let u = rng.next_2d();
+            if let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance) {
+                let probe = si.spawn_ray(si.to_world(bs.wi));
+                let probe_hit = scene.intersect(&probe);
+                let probe_last = LastScatter {
+                    p: si.p,
+                    pdf: bs.pdf,
+                    delta: bs.delta,
+                };
+                out.direct += beta
+                    * bs.weight
+                    * emission_along(scene, &probe, probe_hit.as_ref(), &probe_last);
+            }
+            out.vp = Some(VisiblePoint {
+                p: si.p,
+                ng: si.ng,
+                frame: si.frame,
+                wo_world: si.wo,
+                wo,
+                uv: si.uv,
+                material: si.material,
+                beta,
+            });
+            out.gbuffer = GBufferSample {
+                albedo: bsdf.albedo(si.uv),
+                normal: si.frame.n,
+                depth: path_length,
+            };
+            break;
+        }
+        if depth == max_depth {
+            break;
+        }
+        if lobe == Lobe::Glossy {
+            out.direct += beta * direct_light(scene, &si, bsdf, wo, rng);
+        }
+        let u_lobe = rng.next_f32();
+        let u = rng.next_2d();
+        let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance) else {
+            break;
+        };
+        beta *= bs.weight;
+        if !(beta.max_element() > 0.0) || !beta.is_finite() {
+            break;
+        }
+        last = LastScatter {
+            p: si.p,
+            pdf: bs.pdf,
+            delta: bs.delta,
+        };
+        ray = si.spawn_ray(si.to_world(bs.wi));
+    }
+    out
+}
