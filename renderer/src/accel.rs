@@ -71,7 +71,11 @@ impl CwBvhAccel {
                     Shape::Mesh(m) => {
                         let [a, b, c] = m.triangle(prim);
                         let p0 = Vec3A::from(a);
-                        PrimGeom::Triangle { p0, e1: Vec3A::from(b) - p0, e2: Vec3A::from(c) - p0 }
+                        PrimGeom::Triangle {
+                            p0,
+                            e1: Vec3A::from(b) - p0,
+                            e2: Vec3A::from(c) - p0,
+                        }
                     }
                     Shape::Sphere(s) => PrimGeom::Sphere(*s),
                     Shape::Disk(d) => {
@@ -82,13 +86,35 @@ impl CwBvhAccel {
             }
         }
         if bounds.is_empty() {
-            return CwBvhAccel { bvh: CwBvh::default(), geoms, ids, disks };
+            return CwBvhAccel {
+                bvh: CwBvh::default(),
+                geoms,
+                ids,
+                disks,
+            };
         }
-        let bvh = build_cwbvh(&bounds, BvhBuildParams::medium_build(), &mut Duration::default());
+        let bvh = build_cwbvh(
+            &bounds,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
         // Reorder primitives into leaf order so traversal indexes them directly.
-        let geoms = bvh.primitive_indices.iter().map(|&i| geoms[i as usize]).collect();
-        let ids = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
-        CwBvhAccel { bvh, geoms, ids, disks }
+        let geoms = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| geoms[i as usize])
+            .collect();
+        let ids = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| ids[i as usize])
+            .collect();
+        CwBvhAccel {
+            bvh,
+            geoms,
+            ids,
+            disks,
+        }
     }
 
     /// Number of primitives.
@@ -99,11 +125,19 @@ impl CwBvhAccel {
     #[inline(always)]
     fn intersect_prim(&self, ray: &BvhRay, i: usize) -> f32 {
         match &self.geoms[i] {
-            PrimGeom::Triangle { p0, e1, e2 } => {
-                crate::shapes::mesh::intersect_triangle(ray.origin, ray.direction, ray.tmin, ray.tmax, *p0, *e1, *e2)
-            }
+            PrimGeom::Triangle { p0, e1, e2 } => crate::shapes::mesh::intersect_triangle(
+                ray.origin,
+                ray.direction,
+                ray.tmin,
+                ray.tmax,
+                *p0,
+                *e1,
+                *e2,
+            ),
             PrimGeom::Sphere(s) => s.intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
-            PrimGeom::Disk(d) => self.disks[*d as usize].intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
+            PrimGeom::Disk(d) => {
+                self.disks[*d as usize].intersect(ray.origin, ray.direction, ray.tmin, ray.tmax)
+            }
         }
     }
 }
@@ -120,9 +154,16 @@ impl Accel for CwBvhAccel {
         }
         let r = to_bvh_ray(ray);
         let mut hit = RayHit::none();
-        if self.bvh.ray_traverse(r, &mut hit, |r, i| self.intersect_prim(r, i)) {
+        if self
+            .bvh
+            .ray_traverse(r, &mut hit, |r, i| self.intersect_prim(r, i))
+        {
             let (shape, prim) = self.ids[hit.primitive_id as usize];
-            Some(PrimitiveHit { shape, prim, t: hit.t })
+            Some(PrimitiveHit {
+                shape,
+                prim,
+                t: hit.t,
+            })
         } else {
             None
         }
@@ -132,7 +173,9 @@ impl Accel for CwBvhAccel {
         if self.geoms.is_empty() {
             return false;
         }
-        !self.bvh.ray_traverse_miss(to_bvh_ray(ray), |r, i| self.intersect_prim(r, i))
+        !self
+            .bvh
+            .ray_traverse_miss(to_bvh_ray(ray), |r, i| self.intersect_prim(r, i))
     }
 }
 
@@ -147,18 +190,30 @@ mod tests {
     fn closest_hit_over_mixed_shapes() {
         // A quad at z = 3 and a sphere at z = 6 (radius 1), both on the +z axis.
         let quad = TriangleMesh {
-            positions: vec![Vec3::new(-1.0, -1.0, 3.0), Vec3::new(1.0, -1.0, 3.0), Vec3::new(1.0, 1.0, 3.0), Vec3::new(-1.0, 1.0, 3.0)],
+            positions: vec![
+                Vec3::new(-1.0, -1.0, 3.0),
+                Vec3::new(1.0, -1.0, 3.0),
+                Vec3::new(1.0, 1.0, 3.0),
+                Vec3::new(-1.0, 1.0, 3.0),
+            ],
             normals: None,
             uvs: None,
             indices: vec![[0, 1, 2], [0, 2, 3]],
         };
-        let shapes = vec![Shape::Sphere(Sphere::new(Vec3::new(0.0, 0.0, 6.0), 1.0, false)), Shape::Mesh(Mesh::new(&quad))];
+        let shapes = vec![
+            Shape::Sphere(Sphere::new(Vec3::new(0.0, 0.0, 6.0), 1.0, false)),
+            Shape::Mesh(Mesh::new(&quad)),
+        ];
         let accel = CwBvhAccel::build(&shapes);
-        let h = accel.intersect(&Ray::new(Vec3::new(0.2, 0.1, 0.0), Vec3::Z)).unwrap();
+        let h = accel
+            .intersect(&Ray::new(Vec3::new(0.2, 0.1, 0.0), Vec3::Z))
+            .unwrap();
         assert_eq!(h.shape, 1);
         assert!((h.t - 3.0).abs() < 1e-5);
         // Starting past the quad: the sphere.
-        let h = accel.intersect(&Ray::new(Vec3::new(0.0, 0.0, 4.0), Vec3::Z)).unwrap();
+        let h = accel
+            .intersect(&Ray::new(Vec3::new(0.0, 0.0, 4.0), Vec3::Z))
+            .unwrap();
         assert_eq!((h.shape, h.prim), (0, 0));
         assert!((h.t - 1.0).abs() < 1e-5);
         // Sideways: nothing.

@@ -70,7 +70,12 @@ pub fn look_at(origin: Vec3, target: Vec3, up: Vec3) -> Mat4 {
     let dir = (target - origin).normalize();
     let left = up.normalize().cross(dir).normalize();
     let new_up = dir.cross(left);
-    Mat4::from_cols(left.extend(0.0), new_up.extend(0.0), dir.extend(0.0), origin.extend(1.0))
+    Mat4::from_cols(
+        left.extend(0.0),
+        new_up.extend(0.0),
+        dir.extend(0.0),
+        origin.extend(1.0),
+    )
 }
 
 impl Camera {
@@ -114,7 +119,11 @@ impl Camera {
     pub fn generate_ray(&self, pixel: UVec2, u_film: Vec2, u_lens: Vec2) -> Ray {
         let s = (pixel.as_vec2() + u_film) / self.resolution.as_vec2();
         // Film x grows to the right, camera-space +x points left: hence 1 − 2s.
-        let plane = Vec3::new((1.0 - 2.0 * s.x) * self.tan_half_x, (1.0 - 2.0 * s.y) * self.tan_half_y, 1.0);
+        let plane = Vec3::new(
+            (1.0 - 2.0 * s.x) * self.tan_half_x,
+            (1.0 - 2.0 * s.y) * self.tan_half_y,
+            1.0,
+        );
         let (o_local, d_local) = if self.aperture_radius > 0.0 {
             let lens = square_to_uniform_disk_concentric(u_lens) * self.aperture_radius;
             let lens = Vec3::new(lens.x, lens.y, 0.0);
@@ -128,7 +137,12 @@ impl Camera {
         let far_t = self.far_clip * inv_z;
         let o = self.to_world.transform_point3(o_local);
         let d = self.to_world.transform_vector3(d_local).normalize();
-        Ray { o: o + d * near_t, d, tmin: 0.0, tmax: far_t - near_t }
+        Ray {
+            o: o + d * near_t,
+            d,
+            tmin: 0.0,
+            tmax: far_t - near_t,
+        }
     }
 }
 

@@ -21,7 +21,11 @@ pub struct Film {
 impl Film {
     /// A black image.
     pub fn new(width: u32, height: u32) -> Self {
-        Film { width, height, pixels: vec![Rgb::ZERO; width as usize * height as usize] }
+        Film {
+            width,
+            height,
+            pixels: vec![Rgb::ZERO; width as usize * height as usize],
+        }
     }
 
     /// The value of pixel (x, y).
@@ -43,24 +47,35 @@ impl Film {
 
 /// Runs `f(pool)` inside a rayon pool with `threads` workers (0 = rayon's default: all cores).
 pub fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> anyhow::Result<R> {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
     Ok(pool.install(f))
 }
 
 /// Fills a film in parallel over rows: `pixel(x, y)` returns the pixel's final value (it must
 /// derive its randomness from (x, y) alone). `progress` advances by `work_per_pixel` per pixel.
-pub fn render_pixels<F>(width: u32, height: u32, progress: Option<&ProgressBar>, work_per_pixel: u64, pixel: F) -> Film
+pub fn render_pixels<F>(
+    width: u32,
+    height: u32,
+    progress: Option<&ProgressBar>,
+    work_per_pixel: u64,
+    pixel: F,
+) -> Film
 where
     F: Fn(u32, u32) -> Rgb + Sync,
 {
     let mut film = Film::new(width, height);
-    film.pixels.par_chunks_mut(width as usize).enumerate().for_each(|(y, row)| {
-        for (x, out) in row.iter_mut().enumerate() {
-            *out = pixel(x as u32, y as u32);
-        }
-        if let Some(p) = progress {
-            p.inc(work_per_pixel * width as u64);
-        }
-    });
+    film.pixels
+        .par_chunks_mut(width as usize)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
+                *out = pixel(x as u32, y as u32);
+            }
+            if let Some(p) = progress {
+                p.inc(work_per_pixel * width as u64);
+            }
+        });
     film
 }

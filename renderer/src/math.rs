@@ -24,7 +24,12 @@ impl Ray {
     /// A ray with an unbounded far end.
     #[inline]
     pub fn new(o: Vec3, d: Vec3) -> Self {
-        Ray { o, d, tmin: 0.0, tmax: f32::INFINITY }
+        Ray {
+            o,
+            d,
+            tmin: 0.0,
+            tmax: f32::INFINITY,
+        }
     }
 
     /// The point at distance `t`.
@@ -56,7 +61,12 @@ pub fn spawn_ray_to(p: Vec3, n: Vec3, target: Vec3) -> Ray {
     let o = offset_point(p, n, target - p);
     let d = target - o;
     let dist = d.length();
-    Ray { o, d: d / dist, tmin: 0.0, tmax: dist * (1.0 - SHADOW_EPSILON) }
+    Ray {
+        o,
+        d: d / dist,
+        tmin: 0.0,
+        tmax: dist * (1.0 - SHADOW_EPSILON),
+    }
 }
 
 /// Two unit vectors completing the unit vector `n` to a right-handed orthonormal basis
@@ -92,7 +102,10 @@ pub fn direction_to_spherical_uv(d: Vec3) -> Vec2 {
     if phi < 0.0 {
         phi += 2.0 * std::f32::consts::PI;
     }
-    Vec2::new(phi * 0.5 * std::f32::consts::FRAC_1_PI, theta * std::f32::consts::FRAC_1_PI)
+    Vec2::new(
+        phi * 0.5 * std::f32::consts::FRAC_1_PI,
+        theta * std::f32::consts::FRAC_1_PI,
+    )
 }
 
 #[cfg(test)]
@@ -101,7 +114,12 @@ mod tests {
 
     #[test]
     fn coordinate_system_is_orthonormal() {
-        for n in [Vec3::Z, -Vec3::Z, Vec3::X, Vec3::new(0.3, -0.5, 0.8).normalize()] {
+        for n in [
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::X,
+            Vec3::new(0.3, -0.5, 0.8).normalize(),
+        ] {
             let (s, t) = coordinate_system(n);
             assert!((s.length() - 1.0).abs() < 1e-5);
             assert!((t.length() - 1.0).abs() < 1e-5);

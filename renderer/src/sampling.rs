@@ -3,8 +3,8 @@
 //! distribution for light selection.
 
 use glam::{Vec2, Vec3};
-pub use rand_pcg::Pcg32;
 use rand_core::RngCore;
+pub use rand_pcg::Pcg32;
 use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
 /// SplitMix64 finaliser: a bijective 64-bit mix with good avalanche.
@@ -144,8 +144,16 @@ impl Distribution1D {
     /// Builds the distribution from non-negative weights; all-zero weights become uniform.
     pub fn new(weights: &[f32]) -> Self {
         let n = weights.len();
-        let clean: Vec<f64> =
-            weights.iter().map(|&w| if w.is_finite() && w > 0.0 { w as f64 } else { 0.0 }).collect();
+        let clean: Vec<f64> = weights
+            .iter()
+            .map(|&w| {
+                if w.is_finite() && w > 0.0 {
+                    w as f64
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let mut total: f64 = clean.iter().sum();
         let uniform = total <= 0.0;
         if uniform {
@@ -164,7 +172,11 @@ impl Distribution1D {
         if let Some(last) = cdf.last_mut() {
             *last = 1.0;
         }
-        Distribution1D { pmf, cdf, total: if uniform { 0.0 } else { total as f32 } }
+        Distribution1D {
+            pmf,
+            cdf,
+            total: if uniform { 0.0 } else { total as f32 },
+        }
     }
 
     /// Number of items.
@@ -200,7 +212,11 @@ impl Distribution1D {
         }
         let i = i.min(n - 1);
         let p = self.pmf[i];
-        let du = if p > 0.0 { ((u - self.cdf[i]) / p).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 };
+        let du = if p > 0.0 {
+            ((u - self.cdf[i]) / p).clamp(0.0, 1.0 - f32::EPSILON)
+        } else {
+            0.0
+        };
         (i, p, du)
     }
 }
@@ -211,9 +227,18 @@ mod tests {
 
     #[test]
     fn rng_streams_are_deterministic_and_distinct() {
-        let a: Vec<f32> = (0..4).map(|_| 0.0).scan(rng_for(1, 2, 3), |r, _| Some(r.next_f32())).collect();
-        let b: Vec<f32> = (0..4).map(|_| 0.0).scan(rng_for(1, 2, 3), |r, _| Some(r.next_f32())).collect();
-        let c: Vec<f32> = (0..4).map(|_| 0.0).scan(rng_for(1, 2, 4), |r, _| Some(r.next_f32())).collect();
+        let a: Vec<f32> = (0..4)
+            .map(|_| 0.0)
+            .scan(rng_for(1, 2, 3), |r, _| Some(r.next_f32()))
+            .collect();
+        let b: Vec<f32> = (0..4)
+            .map(|_| 0.0)
+            .scan(rng_for(1, 2, 3), |r, _| Some(r.next_f32()))
+            .collect();
+        let c: Vec<f32> = (0..4)
+            .map(|_| 0.0)
+            .scan(rng_for(1, 2, 4), |r, _| Some(r.next_f32()))
+            .collect();
         assert_eq!(a, b);
         assert_ne!(a, c);
         let mut r = rng_for(7, 0, 0);
@@ -248,7 +273,10 @@ mod tests {
         assert!((acc / n as f64 - 1.0).abs() < 0.01);
         assert!((cone_acc / n as f64 - 1.0).abs() < 0.03);
         // Cosine samples: E[z] = 2/3 under the cosine density.
-        let ez: f64 = (0..n).map(|_| square_to_cosine_hemisphere(r.next_2d()).z as f64).sum::<f64>() / n as f64;
+        let ez: f64 = (0..n)
+            .map(|_| square_to_cosine_hemisphere(r.next_2d()).z as f64)
+            .sum::<f64>()
+            / n as f64;
         assert!((ez - 2.0 / 3.0).abs() < 0.005);
         // Cone samples stay inside the cone and are unit length.
         for _ in 0..1000 {
@@ -256,7 +284,10 @@ mod tests {
             assert!(d.z >= cos_max - 1e-6 && (d.length() - 1.0).abs() < 1e-5);
         }
         // Triangle: mean barycentrics are 1/3.
-        let m = (0..n).map(|_| square_to_uniform_triangle(r.next_2d())).fold(Vec2::ZERO, |a, b| a + b) / n as f32;
+        let m = (0..n)
+            .map(|_| square_to_uniform_triangle(r.next_2d()))
+            .fold(Vec2::ZERO, |a, b| a + b)
+            / n as f32;
         assert!((m - Vec2::splat(1.0 / 3.0)).abs().max_element() < 0.005);
     }
 

@@ -8,8 +8,8 @@ use crate::camera::Camera;
 use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription};
 use crate::frame::Frame;
 use crate::lights::{
-    channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, Light, LightSample, PointLight,
-    SceneSphere, SpotLight,
+    channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, Light, LightSample,
+    PointLight, SceneSphere, SpotLight,
 };
 use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
 use crate::sampling::Distribution1D;
@@ -130,24 +130,49 @@ impl Scene {
         let mut lights = Vec::new();
         for (i, s) in desc.shapes.iter().enumerate() {
             if s.bsdf >= desc.bsdfs.len() {
-                bail!("shape '{}' refers to material {} but only {} exist", s.name, s.bsdf, desc.bsdfs.len());
+                bail!(
+                    "shape '{}' refers to material {} but only {} exist",
+                    s.name,
+                    s.bsdf,
+                    desc.bsdfs.len()
+                );
             }
             match &s.geometry {
                 Geometry::Mesh(m) => {
                     let nv = m.positions.len();
-                    if let Some(t) = m.indices.iter().find(|t| t.iter().any(|&v| v as usize >= nv)) {
-                        bail!("mesh '{}' has triangle {:?} indexing past its {} vertices", s.name, t, nv);
+                    if let Some(t) = m
+                        .indices
+                        .iter()
+                        .find(|t| t.iter().any(|&v| v as usize >= nv))
+                    {
+                        bail!(
+                            "mesh '{}' has triangle {:?} indexing past its {} vertices",
+                            s.name,
+                            t,
+                            nv
+                        );
                     }
                     if m.positions.iter().any(|p| !p.is_finite()) {
                         bail!("mesh '{}' has non-finite vertex positions", s.name);
                     }
-                    if m.normals.as_ref().is_some_and(|n| n.len() != nv) || m.uvs.as_ref().is_some_and(|u| u.len() != nv) {
-                        bail!("mesh '{}' has per-vertex normals/uvs not matching its {} vertices", s.name, nv);
+                    if m.normals.as_ref().is_some_and(|n| n.len() != nv)
+                        || m.uvs.as_ref().is_some_and(|u| u.len() != nv)
+                    {
+                        bail!(
+                            "mesh '{}' has per-vertex normals/uvs not matching its {} vertices",
+                            s.name,
+                            nv
+                        );
                     }
                 }
                 Geometry::Sphere { center, radius, .. } => {
                     if !(center.is_finite() && radius.is_finite() && *radius > 0.0) {
-                        bail!("sphere '{}' has invalid centre {:?} or radius {}", s.name, center, radius);
+                        bail!(
+                            "sphere '{}' has invalid centre {:?} or radius {}",
+                            s.name,
+                            center,
+                            radius
+                        );
                     }
                 }
                 Geometry::Disk { to_world, .. } => {
@@ -158,37 +183,78 @@ impl Scene {
             }
             let shape = Shape::new(&s.geometry);
             let light = match s.emission {
-                Some(l) if !finite_rgb(l) => bail!("area emitter of shape '{}' has invalid radiance {:?}", s.name, l),
+                Some(l) if !finite_rgb(l) => bail!(
+                    "area emitter of shape '{}' has invalid radiance {:?}",
+                    s.name,
+                    l
+                ),
                 Some(l) if l.max_element() > 0.0 && shape.area() > 0.0 => {
-                    lights.push(Light::Area(AreaLight { shape: i as u32, radiance: l }));
+                    lights.push(Light::Area(AreaLight {
+                        shape: i as u32,
+                        radiance: l,
+                    }));
                     Some(lights.len() as u32 - 1)
                 }
                 _ => None,
             };
-            shape_info.push(ShapeInfo { name: s.name.clone(), material: s.bsdf as u32, light });
+            shape_info.push(ShapeInfo {
+                name: s.name.clone(),
+                material: s.bsdf as u32,
+                light,
+            });
             shapes.push(shape);
         }
         let mut environment_lights = Vec::new();
         let mut environment_radiance = Rgb::ZERO;
         for (i, e) in desc.emitters.iter().enumerate() {
             let light = match *e {
-                EmitterDesc::Point { position, intensity } => {
+                EmitterDesc::Point {
+                    position,
+                    intensity,
+                } => {
                     if !finite_rgb(intensity) || !position.is_finite() {
                         bail!("point emitter #{i} has invalid intensity or position");
                     }
-                    Light::Point(PointLight { position, intensity })
+                    Light::Point(PointLight {
+                        position,
+                        intensity,
+                    })
                 }
-                EmitterDesc::Spot { to_world, intensity, cutoff_angle, beam_width } => {
-                    if !finite_rgb(intensity) || !(cutoff_angle > 0.0 && cutoff_angle <= 180.0) || beam_width < 0.0 {
+                EmitterDesc::Spot {
+                    to_world,
+                    intensity,
+                    cutoff_angle,
+                    beam_width,
+                } => {
+                    let cutoff_ok = cutoff_angle > 0.0 && cutoff_angle <= 180.0;
+                    if !finite_rgb(intensity)
+                        || !cutoff_ok
+                        || beam_width.is_nan()
+                        || beam_width < 0.0
+                    {
                         bail!("spot emitter #{i}: invalid intensity, cutoff_angle {cutoff_angle} or beam_width {beam_width}");
                     }
-                    Light::Spot(SpotLight::new(to_world, intensity, cutoff_angle, beam_width))
+                    Light::Spot(SpotLight::new(
+                        to_world,
+                        intensity,
+                        cutoff_angle,
+                        beam_width,
+                    ))
                 }
-                EmitterDesc::Directional { direction, irradiance } => {
-                    if !finite_rgb(irradiance) || !(direction.length_squared() > 0.0) {
+                EmitterDesc::Directional {
+                    direction,
+                    irradiance,
+                } => {
+                    if !finite_rgb(irradiance)
+                        || !direction.is_finite()
+                        || direction.length_squared() == 0.0
+                    {
                         bail!("directional emitter #{i} has invalid irradiance or direction");
                     }
-                    Light::Directional(DirectionalLight { direction: direction.normalize(), irradiance })
+                    Light::Directional(DirectionalLight {
+                        direction: direction.normalize(),
+                        irradiance,
+                    })
                 }
                 EmitterDesc::Constant { radiance } => {
                     if !finite_rgb(radiance) {
@@ -223,7 +289,10 @@ impl Scene {
         let radius = (0.5 * (shi - slo).length()).max(1e-3) * 1.01;
         let sphere = SceneSphere { center, radius };
 
-        let powers: Vec<f32> = lights.iter().map(|l| channel_mean(light_power(l, &shapes, &sphere))).collect();
+        let powers: Vec<f32> = lights
+            .iter()
+            .map(|l| channel_mean(light_power(l, &shapes, &sphere)))
+            .collect();
         Ok(Scene {
             camera,
             shapes,
@@ -305,7 +374,8 @@ impl Scene {
     #[inline]
     pub fn light_occluded(&self, p: Vec3, ng: Vec3, ls: &LightSample) -> bool {
         if ls.infinite {
-            self.accel.occluded(&Ray::new(offset_point(p, ng, ls.wi), ls.wi))
+            self.accel
+                .occluded(&Ray::new(offset_point(p, ng, ls.wi), ls.wi))
         } else {
             self.accel.occluded(&spawn_ray_to(p, ng, ls.p))
         }
@@ -408,7 +478,9 @@ impl Scene {
             return None;
         }
         let mut e = match &self.lights[i] {
-            Light::Area(a) => a.sample_emission(&self.shapes[a.shape as usize], u_rest, u_pos, u_dir),
+            Light::Area(a) => {
+                a.sample_emission(&self.shapes[a.shape as usize], u_rest, u_pos, u_dir)
+            }
             Light::Point(l) => l.sample_emission(u_dir),
             Light::Spot(l) => l.sample_emission(u_dir),
             Light::Directional(l) => l.sample_emission(u_pos, &self.sphere),
@@ -436,7 +508,9 @@ mod tests {
     use super::*;
     use crate::bsdf::Diffuse;
     use crate::description::{CameraDesc, FovAxis, ShapeDesc, TriangleMesh};
-    use crate::sampling::{power_heuristic, rng_for, square_to_uniform_sphere, UniformSource, UNIFORM_SPHERE_PDF};
+    use crate::sampling::{
+        power_heuristic, rng_for, square_to_uniform_sphere, UniformSource, UNIFORM_SPHERE_PDF,
+    };
     use crate::texture::Texture;
     use glam::Mat4;
 
@@ -455,7 +529,9 @@ mod tests {
             },
             sample_count: None,
             integrator: None,
-            bsdfs: vec![Bsdf::Diffuse(Diffuse { reflectance: Texture::Constant(Rgb::splat(0.5)) })],
+            bsdfs: vec![Bsdf::Diffuse(Diffuse {
+                reflectance: Texture::Constant(Rgb::splat(0.5)),
+            })],
             shapes,
             emitters,
             warnings: vec![],
@@ -485,7 +561,11 @@ mod tests {
     fn ball_light(center: Vec3, radius: f32) -> ShapeDesc {
         ShapeDesc {
             name: "ball".into(),
-            geometry: Geometry::Sphere { center, radius, flip_normals: false },
+            geometry: Geometry::Sphere {
+                center,
+                radius,
+                flip_normals: false,
+            },
             bsdf: 0,
             emission: Some(Rgb::ONE),
         }
@@ -506,21 +586,33 @@ mod tests {
 
     #[test]
     fn sampled_light_pdf_matches_the_pdf_of_the_hit_and_mis_sums_to_one() {
-        let scene = Scene::build(&desc(vec![ceiling_light(), ball_light(Vec3::new(3.0, 0.5, 0.0), 0.5)], vec![])).unwrap();
+        let scene = Scene::build(&desc(
+            vec![ceiling_light(), ball_light(Vec3::new(3.0, 0.5, 0.0), 0.5)],
+            vec![],
+        ))
+        .unwrap();
         assert_eq!(scene.lights.len(), 2);
         let p = Vec3::new(0.2, 0.0, 0.1);
         let mut rng = rng_for(5, 0, 0);
         let mut checked = 0;
         for _ in 0..2000 {
-            let Some(ls) = scene.sample_li(p, rng.next_f32(), rng.next_2d()) else { continue };
-            let si = scene.intersect(&Ray::new(p, ls.wi)).expect("the sampled light is visible");
+            let Some(ls) = scene.sample_li(p, rng.next_f32(), rng.next_2d()) else {
+                continue;
+            };
+            let si = scene
+                .intersect(&Ray::new(p, ls.wi))
+                .expect("the sampled light is visible");
             assert_eq!(si.light, Some(ls.light));
             assert!((si.t - ls.dist).abs() < 1e-3 * ls.dist);
             let pdf = scene.pdf_li_surface(p, &si);
             // Near a silhouette the cosine at the light loses relative precision.
             let cos_l = si.frame.n.dot(-ls.wi);
             let tol = if cos_l > 0.05 { 1e-3 } else { 0.05 };
-            assert!((pdf - ls.pdf).abs() <= tol * ls.pdf, "{pdf} vs {} (cos {cos_l})", ls.pdf);
+            assert!(
+                (pdf - ls.pdf).abs() <= tol * ls.pdf,
+                "{pdf} vs {} (cos {cos_l})",
+                ls.pdf
+            );
             // MIS against any BSDF density for the same direction sums to one.
             let bsdf_pdf = 0.37 * ls.wi.y.abs();
             let s = power_heuristic(ls.pdf, bsdf_pdf) + power_heuristic(bsdf_pdf, ls.pdf);
@@ -540,7 +632,8 @@ mod tests {
         // sphere subtends, 2π(1 − √(1 − r²/d²)) (uniform-direction integration of its pdf has
         // infinite variance at the silhouette, so test this way round).
         let (r, d) = (0.5f32, 2.0f32);
-        let scene = Scene::build(&desc(vec![ball_light(Vec3::new(0.0, 0.0, d), r)], vec![])).unwrap();
+        let scene =
+            Scene::build(&desc(vec![ball_light(Vec3::new(0.0, 0.0, d), r)], vec![])).unwrap();
         let mut rng = rng_for(12, 0, 0);
         let n = 400_000;
         let mut acc = 0.0f64;
@@ -551,13 +644,19 @@ mod tests {
         }
         let omega = acc / n as f64;
         let expected = 2.0 * std::f64::consts::PI * (1.0 - (1.0 - (r * r / (d * d)) as f64).sqrt());
-        assert!((omega - expected).abs() < 0.01 * expected, "{omega} vs {expected}");
+        assert!(
+            (omega - expected).abs() < 0.01 * expected,
+            "{omega} vs {expected}"
+        );
     }
 
     #[test]
     fn photon_flux_averages_to_the_emitted_power() {
         let emitters = vec![
-            EmitterDesc::Point { position: Vec3::new(0.0, 0.5, 0.0), intensity: Rgb::splat(2.0) },
+            EmitterDesc::Point {
+                position: Vec3::new(0.0, 0.5, 0.0),
+                intensity: Rgb::splat(2.0),
+            },
             EmitterDesc::Spot {
                 to_world: Mat4::from_translation(Vec3::new(0.0, 0.5, 0.0)),
                 intensity: Rgb::splat(5.0),
@@ -566,13 +665,18 @@ mod tests {
             },
         ];
         let scene = Scene::build(&desc(vec![ceiling_light()], emitters)).unwrap();
-        let total: Rgb = (0..scene.lights.len() as u32).map(|i| scene.light_power(i)).sum();
+        let total: Rgb = (0..scene.lights.len() as u32)
+            .map(|i| scene.light_power(i))
+            .sum();
         let mut rng = rng_for(9, 0, 0);
         let n = 200_000;
         let mut acc = glam::DVec3::ZERO;
         for _ in 0..n {
             // A photon may carry nothing (e.g. exactly on a spot's cutoff): it counts as zero.
-            let Some(e) = scene.sample_emission(rng.next_f32(), rng.next_2d(), rng.next_2d()) else { continue };
+            let Some(e) = scene.sample_emission(rng.next_f32(), rng.next_2d(), rng.next_2d())
+            else {
+                continue;
+            };
             if e.light == 0 {
                 // Area-light photons leave the front (−y) side.
                 assert!(e.ray.d.y < 0.0);
@@ -580,14 +684,22 @@ mod tests {
             acc += e.flux.as_dvec3();
         }
         let mean = (acc / n as f64).as_vec3();
-        assert!(((mean - total) / total).abs().max_element() < 0.01, "{mean:?} vs {total:?}");
+        assert!(
+            ((mean - total) / total).abs().max_element() < 0.01,
+            "{mean:?} vs {total:?}"
+        );
     }
 
     #[test]
     fn point_light_follows_the_inverse_square_law() {
-        let emitters = vec![EmitterDesc::Point { position: Vec3::new(0.0, 2.0, 0.0), intensity: Rgb::splat(8.0) }];
+        let emitters = vec![EmitterDesc::Point {
+            position: Vec3::new(0.0, 2.0, 0.0),
+            intensity: Rgb::splat(8.0),
+        }];
         let scene = Scene::build(&desc(vec![], emitters)).unwrap();
-        let ls = scene.sample_li(Vec3::ZERO, 0.3, glam::Vec2::splat(0.5)).unwrap();
+        let ls = scene
+            .sample_li(Vec3::ZERO, 0.3, glam::Vec2::splat(0.5))
+            .unwrap();
         assert!(ls.delta && (ls.wi - Vec3::Y).length() < 1e-6);
         assert!((ls.weight - Rgb::splat(2.0)).abs().max_element() < 1e-5);
     }

@@ -23,7 +23,10 @@ pub struct PathTracer {
 
 impl Default for PathTracer {
     fn default() -> Self {
-        PathTracer { max_depth: -1, rr_depth: 5 }
+        PathTracer {
+            max_depth: -1,
+            rr_depth: 5,
+        }
     }
 }
 
@@ -33,7 +36,11 @@ impl PathTracer {
         if self.max_depth == 0 {
             return Rgb::ZERO;
         }
-        let max_depth = if self.max_depth < 0 { u32::MAX } else { self.max_depth as u32 };
+        let max_depth = if self.max_depth < 0 {
+            u32::MAX
+        } else {
+            self.max_depth as u32
+        };
         let mut throughput = Rgb::ONE;
         let mut result = Rgb::ZERO;
         let mut eta = 1.0f32;
@@ -45,7 +52,11 @@ impl PathTracer {
         loop {
             let Some(si) = scene.intersect(&ray) else {
                 if scene.has_environment() {
-                    let w = if prev_delta { 1.0 } else { power_heuristic(prev_pdf, scene.pdf_li_environment(ray.d)) };
+                    let w = if prev_delta {
+                        1.0
+                    } else {
+                        power_heuristic(prev_pdf, scene.pdf_li_environment(ray.d))
+                    };
                     result += throughput * scene.environment(ray.d) * w;
                 }
                 break;
@@ -53,7 +64,11 @@ impl PathTracer {
             if si.light.is_some() {
                 let le = scene.emitted(&si, si.wo);
                 if le != Rgb::ZERO {
-                    let w = if prev_delta { 1.0 } else { power_heuristic(prev_pdf, scene.pdf_li_surface(prev_p, &si)) };
+                    let w = if prev_delta {
+                        1.0
+                    } else {
+                        power_heuristic(prev_pdf, scene.pdf_li_surface(prev_p, &si))
+                    };
                     result += throughput * le * w;
                 }
             }
@@ -71,7 +86,11 @@ impl PathTracer {
                     let wi = si.to_local(ls.wi);
                     let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance);
                     if f.max_element() > 0.0 && !scene.light_occluded(si.p, si.ng, &ls) {
-                        let w = if ls.delta { 1.0 } else { power_heuristic(ls.pdf, bsdf.pdf(wo, wi, si.uv)) };
+                        let w = if ls.delta {
+                            1.0
+                        } else {
+                            power_heuristic(ls.pdf, bsdf.pdf(wo, wi, si.uv))
+                        };
                         result += throughput * f * (wi.z.abs() * w) * ls.weight;
                     }
                 }
@@ -100,7 +119,7 @@ impl PathTracer {
                 }
                 throughput /= q;
             }
-            if !(throughput_max > 0.0) {
+            if throughput_max <= 0.0 || throughput_max.is_nan() {
                 break;
             }
         }
@@ -127,9 +146,17 @@ impl PathTracer {
     }
 
     /// Renders the whole image with `spp` samples per pixel in the current rayon pool.
-    pub fn render(&self, scene: &Scene, spp: u32, seed: u64, progress: Option<&ProgressBar>) -> Film {
+    pub fn render(
+        &self,
+        scene: &Scene,
+        spp: u32,
+        seed: u64,
+        progress: Option<&ProgressBar>,
+    ) -> Film {
         let res = scene.camera.resolution();
-        render_pixels(res.x, res.y, progress, spp as u64, |x, y| self.pixel(scene, x, y, spp, seed, 0))
+        render_pixels(res.x, res.y, progress, spp as u64, |x, y| {
+            self.pixel(scene, x, y, spp, seed, 0)
+        })
     }
 }
 
@@ -137,7 +164,9 @@ impl PathTracer {
 mod tests {
     use super::*;
     use crate::bsdf::{Bsdf, Diffuse};
-    use crate::description::{CameraDesc, EmitterDesc, FovAxis, Geometry, SceneDescription, ShapeDesc};
+    use crate::description::{
+        CameraDesc, EmitterDesc, FovAxis, Geometry, SceneDescription, ShapeDesc,
+    };
     use crate::film::with_threads;
     use crate::texture::Texture;
     use glam::Vec3;
@@ -157,7 +186,9 @@ mod tests {
     }
 
     fn diffuse(r: f32) -> Bsdf {
-        Bsdf::Diffuse(Diffuse { reflectance: Texture::Constant(Rgb::splat(r)) })
+        Bsdf::Diffuse(Diffuse {
+            reflectance: Texture::Constant(Rgb::splat(r)),
+        })
     }
 
     /// A diffuse sphere of albedo `rho` seen from outside, in a constant environment of radiance 1.
@@ -169,7 +200,11 @@ mod tests {
             bsdfs: vec![diffuse(rho)],
             shapes: vec![ShapeDesc {
                 name: "ball".into(),
-                geometry: Geometry::Sphere { center: Vec3::ZERO, radius: 1.0, flip_normals: false },
+                geometry: Geometry::Sphere {
+                    center: Vec3::ZERO,
+                    radius: 1.0,
+                    flip_normals: false,
+                },
                 bsdf: 0,
                 emission: None,
             }],
@@ -189,7 +224,11 @@ mod tests {
             bsdfs: vec![diffuse(rho)],
             shapes: vec![ShapeDesc {
                 name: "enclosure".into(),
-                geometry: Geometry::Sphere { center: Vec3::ZERO, radius: 1.0, flip_normals: true },
+                geometry: Geometry::Sphere {
+                    center: Vec3::ZERO,
+                    radius: 1.0,
+                    flip_normals: true,
+                },
                 bsdf: 0,
                 emission: Some(Rgb::ONE),
             }],
@@ -204,21 +243,36 @@ mod tests {
         let scene = sphere_in_environment(1.0);
         let film = PathTracer::default().render(&scene, 256, 1, None);
         for (i, p) in film.pixels.iter().enumerate() {
-            assert!((*p - Rgb::ONE).abs().max_element() < 0.05, "pixel {i}: {p:?}");
+            assert!(
+                (*p - Rgb::ONE).abs().max_element() < 0.05,
+                "pixel {i}: {p:?}"
+            );
         }
-        assert!((film.mean() - Rgb::ONE).abs().max_element() < 0.01, "{:?}", film.mean());
+        assert!(
+            (film.mean() - Rgb::ONE).abs().max_element() < 0.01,
+            "{:?}",
+            film.mean()
+        );
     }
 
     #[test]
     fn max_depth_limits_the_bounces_seen_in_the_environment() {
         let scene = sphere_in_environment(0.5);
         // Depth 1: only the environment seen directly; the sphere is black.
-        let f1 = PathTracer { max_depth: 1, rr_depth: 5 }.render(&scene, 16, 2, None);
+        let f1 = PathTracer {
+            max_depth: 1,
+            rr_depth: 5,
+        }
+        .render(&scene, 16, 2, None);
         let centre = f1.get(4, 4);
         assert_eq!(centre, Rgb::ZERO);
         assert_eq!(f1.get(0, 0), Rgb::ONE);
         // Depth 2 and more: a convex sphere reflects the environment once: 0.5.
-        let f2 = PathTracer { max_depth: 2, rr_depth: 5 }.render(&scene, 256, 3, None);
+        let f2 = PathTracer {
+            max_depth: 2,
+            rr_depth: 5,
+        }
+        .render(&scene, 256, 3, None);
         let c = f2.get(4, 4);
         assert!((c - Rgb::splat(0.5)).abs().max_element() < 0.03, "{c:?}");
     }
@@ -233,7 +287,11 @@ mod tests {
             } else {
                 (0..depth).map(|k| rho.powi(k)).sum::<f32>()
             };
-            let film = PathTracer { max_depth: depth, rr_depth: 5 }.render(&scene, spp, 7, None);
+            let film = PathTracer {
+                max_depth: depth,
+                rr_depth: 5,
+            }
+            .render(&scene, spp, 7, None);
             let m = film.mean();
             assert!(
                 (m - Rgb::splat(expected)).abs().max_element() < 0.01 * expected,
@@ -248,7 +306,11 @@ mod tests {
         let pt = PathTracer::default();
         let a = with_threads(1, || pt.render(&scene, 8, 42, None)).unwrap();
         let b = with_threads(2, || pt.render(&scene, 8, 42, None)).unwrap();
-        assert!(a.pixels.iter().zip(&b.pixels).all(|(p, q)| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits)));
+        assert!(a
+            .pixels
+            .iter()
+            .zip(&b.pixels)
+            .all(|(p, q)| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits)));
         let c = with_threads(2, || pt.render(&scene, 8, 43, None)).unwrap();
         assert_ne!(a, c, "the seed changes the image");
     }

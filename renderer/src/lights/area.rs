@@ -46,7 +46,16 @@ impl AreaLight {
         if !(pdf > 0.0 && pdf.is_finite()) {
             return None;
         }
-        Some(LightSample { wi, p: s.p, dist, weight: self.radiance / pdf, pdf, delta: false, infinite: false, light: 0 })
+        Some(LightSample {
+            wi,
+            p: s.p,
+            dist,
+            weight: self.radiance / pdf,
+            pdf,
+            delta: false,
+            infinite: false,
+            light: 0,
+        })
     }
 
     /// Solid-angle density of [`Self::sample_li`] for a hit at distance `dist` where the light's
@@ -60,12 +69,22 @@ impl AreaLight {
     }
 
     /// A photon from a uniform point, cosine-distributed over the front hemisphere: flux L·π·A.
-    pub fn sample_emission(&self, shape: &Shape, u_prim: f32, u_pos: Vec2, u_dir: Vec2) -> EmissionSample {
+    pub fn sample_emission(
+        &self,
+        shape: &Shape,
+        u_prim: f32,
+        u_pos: Vec2,
+        u_dir: Vec2,
+    ) -> EmissionSample {
         let s = shape.sample_area(u_prim, u_pos);
         let local = square_to_cosine_hemisphere(u_dir);
         let (t, b) = coordinate_system(s.n);
         let d = (t * local.x + b * local.y + s.n * local.z).normalize();
-        EmissionSample { ray: spawn_ray(s.p, s.n, d), flux: self.radiance * (PI / s.pdf), light: 0 }
+        EmissionSample {
+            ray: spawn_ray(s.p, s.n, d),
+            flux: self.radiance * (PI / s.pdf),
+            light: 0,
+        }
     }
 
     /// Power L·π·A.

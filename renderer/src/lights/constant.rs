@@ -2,7 +2,9 @@
 
 use super::{EmissionSample, LightSample, SceneSphere};
 use crate::math::{coordinate_system, Ray};
-use crate::sampling::{square_to_uniform_disk_concentric, square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
+use crate::sampling::{
+    square_to_uniform_disk_concentric, square_to_uniform_sphere, UNIFORM_SPHERE_PDF,
+};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -37,12 +39,21 @@ impl ConstantLight {
 
     /// A photon arriving from a uniform direction, starting on a disk that covers the scene's
     /// bounding sphere: flux L·4π·πR².
-    pub fn sample_emission(&self, u_dir: Vec2, u_pos: Vec2, sphere: &SceneSphere) -> EmissionSample {
+    pub fn sample_emission(
+        &self,
+        u_dir: Vec2,
+        u_pos: Vec2,
+        sphere: &SceneSphere,
+    ) -> EmissionSample {
         let d = -square_to_uniform_sphere(u_dir);
         let (s, t) = coordinate_system(d);
         let q = square_to_uniform_disk_concentric(u_pos) * sphere.radius;
         let o = sphere.center - d * sphere.radius + s * q.x + t * q.y;
-        EmissionSample { ray: Ray::new(o, d), flux: self.power(sphere), light: 0 }
+        EmissionSample {
+            ray: Ray::new(o, d),
+            flux: self.power(sphere),
+            light: 0,
+        }
     }
 
     /// Power entering the bounding sphere, L·4π·πR².

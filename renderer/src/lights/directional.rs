@@ -37,7 +37,11 @@ impl DirectionalLight {
         let (s, t) = coordinate_system(self.direction);
         let d = square_to_uniform_disk_concentric(u) * sphere.radius;
         let o = sphere.center - self.direction * sphere.radius + s * d.x + t * d.y;
-        EmissionSample { ray: Ray::new(o, self.direction), flux: self.irradiance * (PI * sphere.radius * sphere.radius), light: 0 }
+        EmissionSample {
+            ray: Ray::new(o, self.direction),
+            flux: self.irradiance * (PI * sphere.radius * sphere.radius),
+            light: 0,
+        }
     }
 
     /// Power through the scene's bounding disk, E·πR².

@@ -86,7 +86,10 @@ pub enum Light {
 impl Light {
     /// Whether the light is a delta light (cannot be hit by rays).
     pub fn is_delta(&self) -> bool {
-        matches!(self, Light::Point(_) | Light::Spot(_) | Light::Directional(_))
+        matches!(
+            self,
+            Light::Point(_) | Light::Spot(_) | Light::Directional(_)
+        )
     }
 
     /// Whether the light is at infinity.

@@ -39,7 +39,11 @@ impl PointLight {
     /// A photon in a uniformly sampled direction: flux I / (1/4π).
     pub fn sample_emission(&self, u: Vec2) -> EmissionSample {
         let d = square_to_uniform_sphere(u);
-        EmissionSample { ray: Ray::new(self.position, d), flux: self.intensity / UNIFORM_SPHERE_PDF, light: 0 }
+        EmissionSample {
+            ray: Ray::new(self.position, d),
+            flux: self.intensity / UNIFORM_SPHERE_PDF,
+            light: 0,
+        }
     }
 
     /// Power 4πI.

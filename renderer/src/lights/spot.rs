@@ -36,7 +36,11 @@ impl SpotLight {
         let (x, y) = crate::math::coordinate_system(z);
         let cutoff = cutoff_deg.to_radians();
         let beam = beam_width_deg.to_radians().min(cutoff);
-        let inv_transition = if cutoff > beam { 1.0 / (cutoff - beam) } else { f32::INFINITY };
+        let inv_transition = if cutoff > beam {
+            1.0 / (cutoff - beam)
+        } else {
+            f32::INFINITY
+        };
         let mut s = SpotLight {
             position,
             frame: Mat3::from_cols(x, y, z),
@@ -67,7 +71,8 @@ impl SpotLight {
         } else if cos_theta >= self.cos_beam {
             1.0
         } else {
-            ((self.cutoff - cos_theta.clamp(-1.0, 1.0).acos()) * self.inv_transition).clamp(0.0, 1.0)
+            ((self.cutoff - cos_theta.clamp(-1.0, 1.0).acos()) * self.inv_transition)
+                .clamp(0.0, 1.0)
         }
     }
 
@@ -101,7 +106,11 @@ impl SpotLight {
         let local = square_to_uniform_cone(u, self.cos_cutoff);
         let d = self.frame * local;
         let flux = self.intensity * (self.falloff(local.z) / uniform_cone_pdf(self.cos_cutoff));
-        EmissionSample { ray: Ray::new(self.position, d), flux, light: 0 }
+        EmissionSample {
+            ray: Ray::new(self.position, d),
+            flux,
+            light: 0,
+        }
     }
 
     /// Emitted power I·∫falloff dω.

@@ -24,7 +24,11 @@ impl Disk {
     pub fn new(to_world: Mat4, flip_normals: bool) -> Self {
         let a = to_world.transform_vector3(Vec3::X);
         let b = to_world.transform_vector3(Vec3::Y);
-        let n = to_world.inverse().transpose().transform_vector3(Vec3::Z).normalize_or(Vec3::Z);
+        let n = to_world
+            .inverse()
+            .transpose()
+            .transform_vector3(Vec3::Z)
+            .normalize_or(Vec3::Z);
         Disk {
             to_world,
             to_local: to_world.inverse(),
@@ -82,14 +86,25 @@ impl Disk {
         q.z = 0.0;
         let p = self.to_world.transform_point3(q);
         let dpdu = self.to_world.transform_vector3(Vec3::X);
-        HitGeometry { p, ng: self.normal, ns: self.normal, dpdu, uv: Self::local_uv(q) }
+        HitGeometry {
+            p,
+            ng: self.normal,
+            ns: self.normal,
+            dpdu,
+            uv: Self::local_uv(q),
+        }
     }
 
     /// A point uniformly distributed over the disk (an affine map keeps uniformity).
     pub fn sample_area(&self, u: Vec2) -> AreaSample {
         let d = square_to_uniform_disk_concentric(u);
         let q = Vec3::new(d.x, d.y, 0.0);
-        AreaSample { p: self.to_world.transform_point3(q), n: self.normal, uv: Self::local_uv(q), pdf: 1.0 / self.area }
+        AreaSample {
+            p: self.to_world.transform_point3(q),
+            n: self.normal,
+            uv: Self::local_uv(q),
+            pdf: 1.0 / self.area,
+        }
     }
 }
 
@@ -99,11 +114,16 @@ mod tests {
 
     #[test]
     fn ray_disk() {
-        let d = Disk::new(Mat4::from_translation(Vec3::new(0.0, 0.0, 2.0)) * Mat4::from_scale(Vec3::splat(2.0)), false);
+        let d = Disk::new(
+            Mat4::from_translation(Vec3::new(0.0, 0.0, 2.0)) * Mat4::from_scale(Vec3::splat(2.0)),
+            false,
+        );
         assert!((d.area() - 4.0 * PI).abs() < 1e-4);
         let t = d.intersect(Vec3A::new(1.5, 0.0, 0.0), Vec3A::Z, 0.0, f32::INFINITY);
         assert!((t - 2.0).abs() < 1e-5);
-        assert!(d.intersect(Vec3A::new(2.5, 0.0, 0.0), Vec3A::Z, 0.0, f32::INFINITY).is_infinite());
+        assert!(d
+            .intersect(Vec3A::new(2.5, 0.0, 0.0), Vec3A::Z, 0.0, f32::INFINITY)
+            .is_infinite());
         let g = d.hit_geometry(&Ray::new(Vec3::new(1.0, 0.0, 0.0), Vec3::Z), 2.0);
         assert!((g.ng - Vec3::Z).length() < 1e-6 && (g.uv.x - 0.5).abs() < 1e-5);
     }

@@ -20,7 +20,15 @@ pub struct Mesh {
 
 /// Distance along `ray` to triangle (p0, p1, p2), or +∞ when missed (Möller–Trumbore, both sides).
 #[inline(always)]
-pub fn intersect_triangle(o: Vec3A, d: Vec3A, tmin: f32, tmax: f32, p0: Vec3A, e1: Vec3A, e2: Vec3A) -> f32 {
+pub fn intersect_triangle(
+    o: Vec3A,
+    d: Vec3A,
+    tmin: f32,
+    tmax: f32,
+    p0: Vec3A,
+    e1: Vec3A,
+    e2: Vec3A,
+) -> f32 {
     let pvec = d.cross(e2);
     let det = e1.dot(pvec);
     if det.abs() < 1e-12 {
@@ -67,13 +75,21 @@ impl Mesh {
             })
             .collect();
         let area = areas.iter().map(|&a| a as f64).sum::<f64>() as f32;
-        Mesh { data: data.clone(), area_distribution: Distribution1D::new(&areas), area }
+        Mesh {
+            data: data.clone(),
+            area_distribution: Distribution1D::new(&areas),
+            area,
+        }
     }
 
     #[inline]
     fn corners(data: &TriangleMesh, tri: u32) -> [Vec3; 3] {
         let [a, b, c] = data.indices[tri as usize];
-        [data.positions[a as usize], data.positions[b as usize], data.positions[c as usize]]
+        [
+            data.positions[a as usize],
+            data.positions[b as usize],
+            data.positions[c as usize],
+        ]
     }
 
     /// Vertex positions of triangle `tri`.
@@ -108,7 +124,9 @@ impl Mesh {
         let (e1, e2) = (p1 - p0, p2 - p0);
         let ng = e1.cross(e2).normalize_or(Vec3::Z);
         let ns = match &self.data.normals {
-            Some(n) => (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng),
+            Some(n) => {
+                (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng)
+            }
             None => ng,
         };
         let (uv, dpdu) = match &self.data.uvs {
@@ -116,12 +134,22 @@ impl Mesh {
                 let (t0, t1, t2) = (uv[i0 as usize], uv[i1 as usize], uv[i2 as usize]);
                 let (d1, d2) = (t1 - t0, t2 - t0);
                 let det = d1.x * d2.y - d1.y * d2.x;
-                let dpdu = if det != 0.0 { (e1 * d2.y - e2 * d1.y) / det } else { coordinate_system(ng).0 };
+                let dpdu = if det != 0.0 {
+                    (e1 * d2.y - e2 * d1.y) / det
+                } else {
+                    coordinate_system(ng).0
+                };
                 (t0 * b0 + t1 * b.x + t2 * b.y, dpdu)
             }
             None => (b, e1),
         };
-        HitGeometry { p, ng, ns, dpdu, uv }
+        HitGeometry {
+            p,
+            ng,
+            ns,
+            dpdu,
+            uv,
+        }
     }
 
     /// A point uniformly distributed over the mesh's area.
@@ -135,14 +163,21 @@ impl Mesh {
         let ng = (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Z);
         // Mitsuba reports the interpolated vertex normal when the mesh has normals.
         let n = match &self.data.normals {
-            Some(n) => (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng),
+            Some(n) => {
+                (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng)
+            }
             None => ng,
         };
         let uv = match &self.data.uvs {
             Some(uv) => uv[i0 as usize] * b0 + uv[i1 as usize] * b.x + uv[i2 as usize] * b.y,
             None => b,
         };
-        AreaSample { p, n, uv, pdf: 1.0 / self.area }
+        AreaSample {
+            p,
+            n,
+            uv,
+            pdf: 1.0 / self.area,
+        }
     }
 }
 
@@ -158,10 +193,26 @@ mod tests {
         let t = intersect_triangle(o, -Vec3A::Z, 0.0, f32::INFINITY, p0, e1, e2);
         assert!((t - 2.0).abs() < 1e-6);
         // From behind works too (two-sided intersection).
-        let t = intersect_triangle(Vec3A::new(0.25, 0.25, -1.0), Vec3A::Z, 0.0, f32::INFINITY, p0, e1, e2);
+        let t = intersect_triangle(
+            Vec3A::new(0.25, 0.25, -1.0),
+            Vec3A::Z,
+            0.0,
+            f32::INFINITY,
+            p0,
+            e1,
+            e2,
+        );
         assert!((t - 1.0).abs() < 1e-6);
         // Outside the hypotenuse.
-        let t = intersect_triangle(Vec3A::new(0.6, 0.6, 2.0), -Vec3A::Z, 0.0, f32::INFINITY, p0, e1, e2);
+        let t = intersect_triangle(
+            Vec3A::new(0.6, 0.6, 2.0),
+            -Vec3A::Z,
+            0.0,
+            f32::INFINITY,
+            p0,
+            e1,
+            e2,
+        );
         assert!(t.is_infinite());
         // Beyond tmax.
         let t = intersect_triangle(o, -Vec3A::Z, 0.0, 1.5, p0, e1, e2);

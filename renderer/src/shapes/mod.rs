@@ -59,10 +59,15 @@ impl Shape {
     pub fn new(geometry: &Geometry) -> Self {
         match geometry {
             Geometry::Mesh(m) => Shape::Mesh(Mesh::new(m)),
-            Geometry::Sphere { center, radius, flip_normals } => {
-                Shape::Sphere(Sphere::new(*center, *radius, *flip_normals))
-            }
-            Geometry::Disk { to_world, flip_normals } => Shape::Disk(Disk::new(*to_world, *flip_normals)),
+            Geometry::Sphere {
+                center,
+                radius,
+                flip_normals,
+            } => Shape::Sphere(Sphere::new(*center, *radius, *flip_normals)),
+            Geometry::Disk {
+                to_world,
+                flip_normals,
+            } => Shape::Disk(Disk::new(*to_world, *flip_normals)),
         }
     }
 

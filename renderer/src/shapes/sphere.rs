@@ -20,7 +20,11 @@ pub struct Sphere {
 impl Sphere {
     /// A sphere from centre, radius and orientation.
     pub fn new(center: Vec3, radius: f32, flip_normals: bool) -> Self {
-        Sphere { center, radius: radius.abs(), flip_normals }
+        Sphere {
+            center,
+            radius: radius.abs(),
+            flip_normals,
+        }
     }
 
     /// Bounding box.
@@ -49,7 +53,11 @@ impl Sphere {
             return f32::INFINITY;
         }
         let sq = disc.sqrt();
-        let q = if b < 0.0 { -0.5 * (b - sq) } else { -0.5 * (b + sq) };
+        let q = if b < 0.0 {
+            -0.5 * (b - sq)
+        } else {
+            -0.5 * (b + sq)
+        };
         let (mut t0, mut t1) = (q / a, c / q);
         if t0 > t1 {
             std::mem::swap(&mut t0, &mut t1);
@@ -76,8 +84,18 @@ impl Sphere {
         let n = if self.flip_normals { -local } else { local };
         let uv = direction_to_spherical_uv(local);
         let dpdu = Vec3::new(-local.y, local.x, 0.0);
-        let dpdu = if dpdu.length_squared() > 1e-12 { dpdu } else { coordinate_system(n).0 };
-        HitGeometry { p, ng: n, ns: n, dpdu, uv }
+        let dpdu = if dpdu.length_squared() > 1e-12 {
+            dpdu
+        } else {
+            coordinate_system(n).0
+        };
+        HitGeometry {
+            p,
+            ng: n,
+            ns: n,
+            dpdu,
+            uv,
+        }
     }
 
     /// A point uniformly distributed over the sphere.
@@ -104,7 +122,9 @@ mod tests {
         assert!((t - 4.0).abs() < 1e-5);
         let t = s.intersect(Vec3A::new(0.0, 0.0, 5.0), Vec3A::Z, 0.0, f32::INFINITY);
         assert!((t - 1.0).abs() < 1e-5);
-        assert!(s.intersect(Vec3A::ZERO, Vec3A::X, 0.0, f32::INFINITY).is_infinite());
+        assert!(s
+            .intersect(Vec3A::ZERO, Vec3A::X, 0.0, f32::INFINITY)
+            .is_infinite());
         let g = s.hit_geometry(&Ray::new(Vec3::ZERO, Vec3::Z), 4.0);
         assert!((g.ng + Vec3::Z).length() < 1e-5);
     }
