@@ -24,6 +24,9 @@ pub mod photon_trace;
 pub mod radius;
 pub mod visible_point;
 
+#[cfg(test)]
+mod tests;
+
 use std::time::Instant;
 
 use anyhow::{bail, Result};
@@ -300,13 +303,13 @@ fn make_bundle(
     let mut depth = Image::new(w, h, 1);
     let mut radius = Image::new(w, h, LEVELS);
     for (i, s) in states.iter().enumerate() {
-        for l in 0..LEVELS {
+        for (l, level) in levels.iter_mut().enumerate() {
             // The single level fills every level layer (docs/formats.md).
             let acc = match settings.mode {
                 SppmMode::MultiLevel => &s.levels[l],
                 SppmMode::Single => &s.levels[0],
             };
-            levels[l].data[3 * i..3 * i + 3].copy_from_slice(&acc.mean_rgb().to_array());
+            level.data[3 * i..3 * i + 3].copy_from_slice(&acc.mean_rgb().to_array());
             variance.data[LEVELS * i + l] = acc.variance_of_mean();
         }
         let g = s.gbuffer.average(passes);
@@ -388,7 +391,7 @@ pub fn render_sppm(
         bail!("no stop condition: give pass checkpoints and/or a time limit");
     }
     if let Some(s) = stop.seconds {
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             bail!("time limit must be positive, got {s}");
         }
     }

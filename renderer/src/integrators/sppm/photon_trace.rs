@@ -64,14 +64,14 @@ pub fn trace_photon(
             // Survive with the probability of the throughput change, so surviving photons keep
             // roughly constant flux.
             let q = (new_flux.max_element() / flux.max_element()).min(0.95);
-            if !(q > 0.0) || rng.next_f32() >= q {
+            if q.is_nan() || q <= 0.0 || rng.next_f32() >= q {
                 break;
             }
             flux = new_flux / q;
         } else {
             flux = new_flux;
         }
-        if !(flux.max_element() > 0.0) || !flux.is_finite() {
+        if !flux.is_finite() || flux.max_element() <= 0.0 {
             break;
         }
         ray = si.spawn_ray(si.to_world(bs.wi));

@@ -198,7 +198,7 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
             break;
         };
         beta *= bs.weight;
-        if !(beta.max_element() > 0.0) || !beta.is_finite() {
+        if !beta.is_finite() || beta.max_element() <= 0.0 {
             break;
         }
         last = LastScatter {

@@ -1,0 +1,399 @@
+//! Tests of the SPPM integrator on tiny analytic scenes: energy (furnace), level behaviour,
+//! variance calibration, light leaks through thin walls, thread-count determinism.
+
+use super::*;
+use crate::bsdf::{Bsdf, Diffuse};
+use crate::description::{
+    CameraDesc, EmitterDesc, FovAxis, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
+};
+use crate::texture::Texture;
+use glam::Vec3;
+
+fn camera(origin: Vec3, target: Vec3, fov: f32, res: u32) -> CameraDesc {
+    CameraDesc {
+        to_world: crate::camera::look_at(origin, target, Vec3::Y),
+        fov,
+        fov_axis: FovAxis::X,
+        near_clip: 0.01,
+        far_clip: 1000.0,
+        aperture_radius: 0.0,
+        focus_distance: 1.0,
+        width: res,
+        height: res,
+    }
+}
+
+fn diffuse(r: f32) -> Bsdf {
+    Bsdf::Diffuse(Diffuse {
+        reflectance: Texture::Constant(Rgb::splat(r)),
+    })
+}
+
+/// A parallelogram `c ± u ± v` whose front (normal) side is `u × v`.
+fn quad(name: &str, c: Vec3, u: Vec3, v: Vec3, bsdf: usize, emission: Option<Rgb>) -> ShapeDesc {
+    ShapeDesc {
+        name: name.into(),
+        geometry: Geometry::Mesh(TriangleMesh {
+            positions: vec![c - u - v, c + u - v, c + u + v, c - u + v],
+            normals: None,
+            uvs: None,
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+        }),
+        bsdf,
+        emission,
+    }
+}
+
+fn scene(
+    camera: CameraDesc,
+    bsdfs: Vec<Bsdf>,
+    shapes: Vec<ShapeDesc>,
+    emitters: Vec<EmitterDesc>,
+) -> Scene {
+    Scene::build(&SceneDescription {
+        camera,
+        sample_count: None,
+        integrator: None,
+        bsdfs,
+        shapes,
+        emitters,
+        warnings: vec![],
+    })
+    .unwrap()
+}
+
+/// Camera inside a closed sphere of albedo ρ emitting radiance 1 everywhere: the radiance is
+/// 1/(1−ρ) on every surface point. A chord-distance disk query on a sphere covers exactly
+/// area πr² (Archimedes), so the kernel estimate has no geometric bias here.
+fn furnace(rho: f32) -> Scene {
+    scene(
+        camera(Vec3::new(0.1, 0.2, 0.0), Vec3::new(0.0, 0.0, 1.0), 60.0, 6),
+        vec![diffuse(rho)],
+        vec![ShapeDesc {
+            name: "enclosure".into(),
+            geometry: Geometry::Sphere {
+                center: Vec3::ZERO,
+                radius: 1.0,
+                flip_normals: true,
+            },
+            bsdf: 0,
+            emission: Some(Rgb::ONE),
+        }],
+        vec![],
+    )
+}
+
+/// A closed diffuse box [−1,1]³ (inward normals) with a small ceiling light, seen from inside.
+fn lit_box(res: u32) -> Scene {
+    let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
+    let shapes = vec![
+        quad("floor", -y, z, x, 0, None),
+        quad("ceiling", y, x, z, 0, None),
+        quad("back", z, y, x, 1, None),
+        quad("front", -z, x, y, 0, None),
+        quad("left", -x, y, z, 2, None),
+        quad("right", x, z, y, 0, None),
+        quad(
+            "light",
+            y * 0.99,
+            x * 0.25,
+            z * 0.25,
+            0,
+            Some(Rgb::splat(8.0)),
+        ),
+    ];
+    scene(
+        camera(
+            Vec3::new(0.0, 0.0, -0.95),
+            Vec3::new(0.0, 0.0, 1.0),
+            70.0,
+            res,
+        ),
+        vec![diffuse(0.7), diffuse(0.5), diffuse(0.3)],
+        shapes,
+        vec![],
+    )
+}
+
+fn settings(mode: SppmMode, photons: u64, seed: u64) -> SppmSettings {
+    SppmSettings {
+        photons_per_pass: photons,
+        seed,
+        mode,
+        threads: 1,
+        scene_name: "test".into(),
+        ..SppmSettings::default()
+    }
+}
+
+/// Renders and returns the bundle at `passes`.
+fn render(scene: &Scene, s: &SppmSettings, passes: u32) -> Bundle {
+    let mut out = None;
+    let stop = StopCondition {
+        checkpoints: vec![passes],
+        seconds: None,
+    };
+    let summary = render_sppm(
+        scene,
+        s,
+        &stop,
+        |b| {
+            out = Some(b);
+            Ok(())
+        },
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(summary.passes, passes);
+    out.unwrap()
+}
+
+fn mean_rgb(img: &Image) -> f64 {
+    img.data.iter().map(|&v| v as f64).sum::<f64>() / img.data.len() as f64
+}
+
+fn channel_mean(img: &Image, c: usize) -> f64 {
+    let n = img.width * img.height;
+    (0..n)
+        .map(|i| img.data[i * img.channels + c] as f64)
+        .sum::<f64>()
+        / n as f64
+}
+
+#[test]
+fn furnace_every_level_converges_to_the_geometric_series() {
+    let rho = 0.5;
+    let scene = furnace(rho);
+    let expected = 1.0 / (1.0 - rho as f64);
+    for mode in [SppmMode::MultiLevel, SppmMode::Single] {
+        let b = render(&scene, &settings(mode, 20_000, 3), 8);
+        assert_eq!(b.find_non_finite(), None);
+        for (l, img) in b.levels.iter().enumerate() {
+            let m = mean_rgb(img);
+            assert!(
+                (m - expected).abs() < 0.03 * expected,
+                "{mode:?} level {l}: mean {m}, expected {expected}"
+            );
+        }
+        // G-buffer: albedo ρ, unit normals facing the camera side, depth ≈ distance to the wall.
+        assert!((mean_rgb(&b.albedo) - rho as f64).abs() < 1e-5);
+        assert!(b.depth.data.iter().all(|&d| d > 0.7 && d < 1.3));
+    }
+}
+
+#[test]
+fn smoother_levels_have_lower_variance() {
+    let scene = lit_box(12);
+    let b = render(&scene, &settings(SppmMode::MultiLevel, 4_000, 11), 4);
+    let v: Vec<f64> = (0..LEVELS).map(|l| channel_mean(&b.variance, l)).collect();
+    for l in 0..LEVELS - 1 {
+        assert!(
+            v[l] > v[l + 1],
+            "variances not decreasing with bandwidth: {v:?}"
+        );
+    }
+    assert!(v[0] > 2.0 * v[4], "sharpest vs smoothest too close: {v:?}");
+    // The radii layer holds nested radii r_ℓ = r₅/√2^(5−ℓ).
+    let r = b.radius.as_ref().unwrap();
+    let p = r.pixel(6, 6);
+    assert!(p[4] > 0.0);
+    for l in 0..4 {
+        assert!(
+            (p[l + 1] / p[l] - std::f32::consts::SQRT_2).abs() < 1e-4,
+            "{p:?}"
+        );
+    }
+}
+
+#[test]
+fn stored_variance_matches_the_spread_across_seeds() {
+    let scene = lit_box(8);
+    let seeds = 16;
+    let passes = 6;
+    let bundles: Vec<Bundle> = (0..seeds)
+        .map(|s| {
+            render(
+                &scene,
+                &settings(SppmMode::MultiLevel, 2_000, 100 + s),
+                passes,
+            )
+        })
+        .collect();
+    for l in [0, 2, 4] {
+        let (mut stored, mut empirical) = (0.0f64, 0.0f64);
+        let n_px = 8 * 8;
+        for i in 0..n_px {
+            stored += bundles
+                .iter()
+                .map(|b| b.variance.data[i * LEVELS + l] as f64)
+                .sum::<f64>()
+                / seeds as f64;
+            let mut var = 0.0;
+            for c in 0..3 {
+                let xs: Vec<f64> = bundles
+                    .iter()
+                    .map(|b| b.levels[l].data[3 * i + c] as f64)
+                    .collect();
+                let m = xs.iter().sum::<f64>() / seeds as f64;
+                var += xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (seeds - 1) as f64;
+            }
+            empirical += var / 3.0;
+        }
+        let ratio = stored / empirical;
+        assert!(
+            (0.7..=1.3).contains(&ratio),
+            "level {l}: stored {stored:.3e} vs empirical {empirical:.3e} (ratio {ratio:.3})"
+        );
+    }
+}
+
+/// A large wall at z = 0 lit from +z (a light between it and a reflector at z = 2), seen from
+/// −z. Photons on the lit face lie within the kernel of the dark face's visible points; none
+/// may contribute.
+fn thin_wall(slab: bool) -> Scene {
+    let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
+    let mut bsdfs = vec![diffuse(0.8)];
+    let mut shapes = vec![
+        quad("reflector", 2.0 * z, y * 5.0, x * 5.0, 0, None),
+        quad("light", z, x * 0.5, y * 0.5, 0, Some(Rgb::splat(20.0))),
+        quad(
+            "light-back",
+            z * 1.001,
+            y * 0.5,
+            x * 0.5,
+            0,
+            Some(Rgb::splat(20.0)),
+        ),
+    ];
+    if slab {
+        // Two one-sided faces 1 mm apart.
+        shapes.push(quad("lit-face", Vec3::ZERO, x * 5.0, y * 5.0, 0, None));
+        shapes.push(quad("dark-face", -0.001 * z, y * 5.0, x * 5.0, 0, None));
+    } else {
+        // One zero-thickness two-sided sheet.
+        bsdfs.push(Bsdf::TwoSided {
+            front: Box::new(diffuse(0.8)),
+            back: Box::new(diffuse(0.8)),
+        });
+        shapes.push(quad("sheet", Vec3::ZERO, x * 5.0, y * 5.0, 1, None));
+    }
+    scene(
+        camera(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, 40.0, 8),
+        bsdfs,
+        shapes,
+        vec![],
+    )
+}
+
+#[test]
+fn thin_wall_lit_from_one_side_stays_dark_on_the_other() {
+    for slab in [false, true] {
+        let scene = thin_wall(slab);
+        let s = settings(SppmMode::MultiLevel, 20_000, 5);
+        let b = render(&scene, &s, 2);
+        // The kernels are much wider than the wall, so leaks would be caught.
+        let r = b.radius.as_ref().unwrap();
+        assert!(r.pixel(4, 4)[0] > 0.01, "{:?}", r.pixel(4, 4));
+        for (l, img) in b.levels.iter().enumerate() {
+            assert!(
+                img.data.iter().all(|&v| v == 0.0),
+                "slab {slab}: level {l} leaks light"
+            );
+        }
+        // The lit side does receive photons (seen from beside the light).
+        let mut lit = thin_wall(slab);
+        lit.camera = crate::camera::Camera::new(&camera(
+            Vec3::new(2.5, 0.0, 1.9),
+            Vec3::new(2.5, 0.0, 0.0),
+            40.0,
+            8,
+        ));
+        let b = render(&lit, &s, 2);
+        assert!(
+            mean_rgb(&b.levels[4]) > 0.1,
+            "slab {slab}: lit side is dark"
+        );
+    }
+}
+
+#[test]
+fn bundles_are_bit_identical_for_one_and_two_threads() {
+    let scene = lit_box(10);
+    for mode in [SppmMode::MultiLevel, SppmMode::Single] {
+        let mut s = settings(mode, 3_000, 9);
+        let mut one = render(&scene, &s, 3);
+        s.threads = 2;
+        let mut two = render(&scene, &s, 3);
+        one.meta.seconds = 0.0;
+        two.meta.seconds = 0.0;
+        let bits = |b: &Bundle| -> Vec<u32> {
+            let mut v: Vec<u32> = Vec::new();
+            for img in b
+                .levels
+                .iter()
+                .chain([&b.variance, &b.albedo, &b.normal, &b.depth])
+            {
+                v.extend(img.data.iter().map(|x| x.to_bits()));
+            }
+            v.extend(b.radius.as_ref().unwrap().data.iter().map(|x| x.to_bits()));
+            v
+        };
+        assert_eq!(one.meta, two.meta);
+        assert!(
+            bits(&one) == bits(&two),
+            "{mode:?}: thread count changed the bundle"
+        );
+        s.seed = 10;
+        let other = render(&scene, &s, 3);
+        assert_ne!(bits(&one), bits(&other), "the seed changes the bundle");
+    }
+}
+
+#[test]
+fn checkpoints_and_time_limit() {
+    let scene = lit_box(4);
+    let s = settings(SppmMode::MultiLevel, 500, 1);
+    let mut passes = Vec::new();
+    let stop = StopCondition {
+        checkpoints: vec![3, 1, 3, 2],
+        seconds: None,
+    };
+    render_sppm(
+        &scene,
+        &s,
+        &stop,
+        |b| {
+            passes.push(b.meta.passes);
+            Ok(())
+        },
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(passes, vec![1, 2, 3]);
+    // A tiny time budget stops after the first pass with one bundle.
+    let mut got = Vec::new();
+    let stop = StopCondition {
+        checkpoints: vec![],
+        seconds: Some(1e-9),
+    };
+    render_sppm(
+        &scene,
+        &s,
+        &stop,
+        |b| {
+            got.push(b.meta.passes);
+            Ok(())
+        },
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(got, vec![1]);
+    // Invalid settings are errors, not panics.
+    let bad = SppmSettings {
+        photons_per_pass: 0,
+        ..s.clone()
+    };
+    assert!(render_sppm(&scene, &bad, &stop, |_| Ok(()), |_| {}).is_err());
+    let none = StopCondition::default();
+    assert!(render_sppm(&scene, &s, &none, |_| Ok(()), |_| {}).is_err());
+}
