@@ -1,9 +1,10 @@
 //! Area light (Mitsuba's `area`): constant radiance leaving the front side of a shape.
 
 use super::{EmissionSample, LightSample};
+use crate::frame::Frame;
 use crate::math::{coordinate_system, spawn_ray};
-use crate::sampling::square_to_cosine_hemisphere;
-use crate::shapes::Shape;
+use crate::sampling::{square_to_cosine_hemisphere, square_to_uniform_cone, uniform_cone_pdf};
+use crate::shapes::{Shape, Sphere};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -28,8 +29,36 @@ impl AreaLight {
         }
     }
 
-    /// Direct illumination at `p` from a point sampled uniformly by area on `shape`.
+    /// Direct illumination at `p`: for a sphere seen from outside, a direction uniform in the
+    /// cone it subtends (as Mitsuba); otherwise a point sampled uniformly by area on `shape`.
     pub fn sample_li(&self, shape: &Shape, p: Vec3, u_prim: f32, u: Vec2) -> Option<LightSample> {
+        if let Shape::Sphere(sphere) = shape {
+            if let Some(cone) = SphereCone::new(sphere, p) {
+                if sphere.flip_normals {
+                    // Only the inner side emits: invisible from outside.
+                    return None;
+                }
+                let local = square_to_uniform_cone(u, cone.cos_max);
+                let wi = (cone.frame.to_world(local)).normalize();
+                // Distance to the near intersection, from the triangle (p, centre, hit).
+                let cos_t = local.z;
+                let sin2 = (1.0 - cos_t * cos_t).max(0.0);
+                let r2 = sphere.radius * sphere.radius;
+                let dist = cone.dist * cos_t - (r2 - cone.dist * cone.dist * sin2).max(0.0).sqrt();
+                let pdf = uniform_cone_pdf(cone.cos_max);
+                let q = p + wi * dist;
+                return Some(LightSample {
+                    wi,
+                    p: q,
+                    dist,
+                    weight: self.radiance / pdf,
+                    pdf,
+                    delta: false,
+                    infinite: false,
+                    light: 0,
+                });
+            }
+        }
         let s = shape.sample_area(u_prim, u);
         let d = s.p - p;
         let dist2 = d.length_squared();
@@ -43,7 +72,7 @@ impl AreaLight {
             return None;
         }
         let pdf = s.pdf * dist2 / cos_l;
-        if !(pdf > 0.0 && pdf.is_finite()) {
+        if !pdf.is_finite() || pdf <= 0.0 {
             return None;
         }
         Some(LightSample {
@@ -58,14 +87,26 @@ impl AreaLight {
         })
     }
 
-    /// Solid-angle density of [`Self::sample_li`] for a hit at distance `dist` where the light's
-    /// normal makes cosine `cos_l` with the ray.
+    /// Solid-angle density of [`Self::sample_li`] from `p_ref` for the direction that reaches
+    /// the light at `p_light`, where the light's normal is `n_light`.
     #[inline]
-    pub fn pdf_li(&self, shape: &Shape, dist: f32, cos_l: f32) -> f32 {
+    pub fn pdf_li(&self, shape: &Shape, p_ref: Vec3, p_light: Vec3, n_light: Vec3) -> f32 {
+        if let Shape::Sphere(sphere) = shape {
+            if let Some(cone) = SphereCone::new(sphere, p_ref) {
+                return if sphere.flip_normals {
+                    0.0
+                } else {
+                    uniform_cone_pdf(cone.cos_max)
+                };
+            }
+        }
+        let d = p_light - p_ref;
+        let dist2 = d.length_squared();
+        let cos_l = -n_light.dot(d) / dist2.sqrt();
         if cos_l <= 0.0 {
             return 0.0;
         }
-        dist * dist / (cos_l * shape.area())
+        dist2 / (cos_l * shape.area())
     }
 
     /// A photon from a uniform point, cosine-distributed over the front hemisphere: flux L·π·A.
@@ -90,5 +131,34 @@ impl AreaLight {
     /// Power L·π·A.
     pub fn power(&self, shape: &Shape) -> Rgb {
         self.radiance * (PI * shape.area())
+    }
+}
+
+/// The cone of directions a sphere subtends from an outside point.
+struct SphereCone {
+    /// Frame whose +z points from the reference point to the centre.
+    frame: Frame,
+    /// Distance from the reference point to the centre.
+    dist: f32,
+    /// Cosine of the cone's half-angle.
+    cos_max: f32,
+}
+
+impl SphereCone {
+    /// The cone seen from `p`, or `None` when `p` is inside (or on) the sphere.
+    fn new(sphere: &Sphere, p: Vec3) -> Option<Self> {
+        let d = sphere.center - p;
+        let dist = d.length();
+        // A small margin: points on the surface itself sample by area.
+        if dist <= sphere.radius * (1.0 + 1e-4) {
+            return None;
+        }
+        let sin_max = sphere.radius / dist;
+        let cos_max = (1.0 - sin_max * sin_max).max(0.0).sqrt();
+        Some(SphereCone {
+            frame: Frame::from_normal(d / dist),
+            dist,
+            cos_max,
+        })
     }
 }
