@@ -17,3 +17,4 @@ pub mod scene;
 pub mod shapes;
 pub mod spectrum;
 pub mod texture;
+pub mod xml;

@@ -1,0 +1,234 @@
+//! `<bsdf>` plugins → [`Bsdf`] values, with Mitsuba 3's parameter names and defaults.
+
+use super::props::Props;
+use super::{ior, Builder, Element, SceneError};
+use crate::bsdf::{
+    Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, MicrofacetKind, Plastic, RoughConductor,
+    RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
+};
+use crate::spectrum::{Rgb, SpectrumKind};
+use crate::texture::Texture;
+
+/// The BSDF plugins this importer knows.
+const BSDF_PLUGINS: [&str; 9] = [
+    "diffuse",
+    "conductor",
+    "roughconductor",
+    "dielectric",
+    "thindielectric",
+    "roughdielectric",
+    "plastic",
+    "roughplastic",
+    "twosided",
+];
+
+/// Builds the BSDF declared by a `<bsdf>` element.
+pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsdf, SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    if !BSDF_PLUGINS.contains(&kind) {
+        let err = el.error(format!(
+            "unknown plugin \"{kind}\" (supported BSDFs: {})",
+            BSDF_PLUGINS.join(", ")
+        ));
+        b.diag.unknown(err)?;
+        // Lenient: stand in Mitsuba's default material.
+        return Ok(Bsdf::Diffuse(Diffuse {
+            reflectance: Texture::Constant(Rgb::splat(0.5)),
+        }));
+    }
+    let mut p = Props::parse(b, el)?;
+    let refl = SpectrumKind::Reflectance;
+    let bsdf = match kind {
+        "diffuse" => Bsdf::Diffuse(Diffuse {
+            reflectance: p.texture_or(b, "reflectance", refl, 0.5)?,
+        }),
+        "conductor" => Bsdf::Conductor(Conductor {
+            ior: conductor_ior(b, &mut p)?,
+            specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
+        }),
+        "roughconductor" => Bsdf::RoughConductor(RoughConductor {
+            roughness: roughness(b, &mut p, true)?,
+            ior: conductor_ior(b, &mut p)?,
+            specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
+        }),
+        "dielectric" | "thindielectric" | "roughdielectric" => {
+            let roughness = if kind == "roughdielectric" {
+                Some(roughness(b, &mut p, true)?)
+            } else {
+                None
+            };
+            let eta = relative_ior(&mut p, "bk7")?;
+            let specular_reflectance = p.texture_or(b, "specular_reflectance", refl, 1.0)?;
+            let specular_transmittance = p.texture_or(b, "specular_transmittance", refl, 1.0)?;
+            match (kind, roughness) {
+                ("dielectric", _) => Bsdf::Dielectric(Dielectric {
+                    eta,
+                    specular_reflectance,
+                    specular_transmittance,
+                }),
+                ("thindielectric", _) => Bsdf::ThinDielectric(ThinDielectric {
+                    eta,
+                    specular_reflectance,
+                    specular_transmittance,
+                }),
+                (_, Some(roughness)) => Bsdf::RoughDielectric(RoughDielectric {
+                    roughness,
+                    eta,
+                    specular_reflectance,
+                    specular_transmittance,
+                }),
+                _ => unreachable_plugin(el)?,
+            }
+        }
+        "plastic" => Bsdf::Plastic(Plastic {
+            eta: relative_ior(&mut p, "polypropylene")?,
+            diffuse_reflectance: p.texture_or(b, "diffuse_reflectance", refl, 0.5)?,
+            specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
+            nonlinear: p.bool_or("nonlinear", false)?,
+        }),
+        "roughplastic" => Bsdf::RoughPlastic(RoughPlastic {
+            roughness: roughness(b, &mut p, false)?,
+            eta: relative_ior(&mut p, "polypropylene")?,
+            diffuse_reflectance: p.texture_or(b, "diffuse_reflectance", refl, 0.5)?,
+            specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
+            nonlinear: p.bool_or("nonlinear", false)?,
+        }),
+        "twosided" => {
+            let nested = p.objects(&["bsdf", "ref"]);
+            let mut sides = Vec::with_capacity(2);
+            for n in &nested {
+                let side = b.bsdf_value(n)?;
+                if matches!(side, Bsdf::TwoSided { .. }) {
+                    return Err(n.error("a twosided BSDF cannot contain another twosided BSDF"));
+                }
+                sides.push(side);
+            }
+            match sides.len() {
+                1 => {
+                    let front = sides.remove(0);
+                    Bsdf::TwoSided {
+                        back: Box::new(front.clone()),
+                        front: Box::new(front),
+                    }
+                }
+                2 => {
+                    let back = sides.pop().map(Box::new);
+                    let front = sides.pop().map(Box::new);
+                    match (front, back) {
+                        (Some(front), Some(back)) => Bsdf::TwoSided { front, back },
+                        _ => unreachable_plugin(el)?,
+                    }
+                }
+                n => {
+                    return Err(el.error(format!("twosided needs one or two nested BSDFs, got {n}")))
+                }
+            }
+        }
+        _ => unreachable_plugin(el)?,
+    };
+    p.finish(b)?;
+    Ok(bsdf)
+}
+
+/// Internal consistency guard (never reached: the plugin list was checked above).
+fn unreachable_plugin(el: &Element) -> Result<Bsdf, SceneError> {
+    Err(el.error("internal error: unhandled BSDF plugin"))
+}
+
+/// `int_ior` / `ext_ior` (numbers or names) → relative IOR.
+fn relative_ior(p: &mut Props, default_int: &str) -> Result<f32, SceneError> {
+    let int_ior = p.ior("int_ior", default_int)?;
+    let ext_ior = p.ior("ext_ior", "air")?;
+    Ok((int_ior / ext_ior) as f32)
+}
+
+/// `distribution`, `alpha` or `alpha_u`/`alpha_v` (Mitsuba defaults: beckmann, 0.1).
+fn roughness<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+    anisotropic: bool,
+) -> Result<Roughness, SceneError> {
+    let dist_el = p.element_of("distribution");
+    let kind = match p.string("distribution")?.unwrap_or("beckmann") {
+        "beckmann" => MicrofacetKind::Beckmann,
+        "ggx" => MicrofacetKind::Ggx,
+        other => {
+            return Err(dist_el.error(format!(
+                "unknown microfacet distribution \"{other}\" (use \"beckmann\" or \"ggx\")"
+            )))
+        }
+    };
+    let has_uv = p.has("alpha_u") || p.has("alpha_v");
+    let (alpha_u, alpha_v) = if anisotropic && has_uv {
+        if p.has("alpha") {
+            return Err(p
+                .element_of("alpha")
+                .error("give either \"alpha\" or \"alpha_u\"/\"alpha_v\", not both"));
+        }
+        let (Some(u), Some(v)) = (scalar(p, "alpha_u")?, scalar(p, "alpha_v")?) else {
+            return Err(p
+                .owner
+                .error("\"alpha_u\" and \"alpha_v\" must be given together"));
+        };
+        (u, v)
+    } else {
+        let a = scalar(p, "alpha")?.unwrap_or(0.1);
+        (a, a)
+    };
+    for (name, a) in [("alpha", alpha_u), ("alpha_v", alpha_v)] {
+        if !(0.0..=10.0).contains(&a) {
+            return Err(p
+                .owner
+                .error(format!("roughness \"{name}\" = {a} is out of range")));
+        }
+    }
+    let sample_visible_el = p.element_of("sample_visible");
+    if !p.bool_or("sample_visible", true)? {
+        b.diag.warn(sample_visible_el, "sample_visible=false ignored: visible normals are always sampled (same image, less noise)");
+    }
+    Ok(Roughness {
+        kind,
+        alpha_u: alpha_u as f32,
+        alpha_v: alpha_v as f32,
+    })
+}
+
+/// A roughness value: a float (textured roughness is not supported).
+fn scalar(p: &mut Props, name: &str) -> Result<Option<f64>, SceneError> {
+    p.float(name)
+}
+
+/// `material` or `eta`/`k` of a conductor; `None` is Mitsuba's `material="none"` (a perfect
+/// mirror, the default).
+fn conductor_ior<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+) -> Result<Option<ConductorIor>, SceneError> {
+    let material_el = p.element_of("material");
+    let material = p.string("material")?.unwrap_or("none");
+    let given = p.has("eta") || p.has("k");
+    if material != "none" {
+        if given {
+            return Err(material_el.error("give either \"material\" or \"eta\"/\"k\", not both"));
+        }
+        return match ior::conductor_ior(material) {
+            Some(ior) => Ok(Some(ior)),
+            None => Err(material_el.error(format!(
+                "unknown conductor material \"{material}\"; valid presets: none, {}",
+                ior::conductor_names().join(", ")
+            ))),
+        };
+    }
+    if !given {
+        return Ok(None);
+    }
+    // Mitsuba: eta defaults to 0 and k to 1 when only one is given.
+    let eta = p
+        .constant_color(b, "eta", SpectrumKind::Unbounded)?
+        .unwrap_or(Rgb::ZERO);
+    let k = p
+        .constant_color(b, "k", SpectrumKind::Unbounded)?
+        .unwrap_or(Rgb::ONE);
+    Ok(Some(ConductorIor { eta, k }))
+}

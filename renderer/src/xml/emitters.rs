@@ -1,0 +1,131 @@
+//! `<emitter>` plugins: `area` (inside a shape), `point`, `spot`, `directional`, `constant`.
+//! Emission spectra are converted without D65 weighting, as Mitsuba's RGB variants do.
+
+use super::props::Props;
+use super::{Builder, Element, SceneError};
+use crate::description::EmitterDesc;
+use crate::spectrum::{Rgb, SpectrumKind};
+use glam::{Mat4, Vec3};
+
+const EMISSION: SpectrumKind = SpectrumKind::Emission;
+
+/// Builds a top-level (not shape-attached) emitter and adds it to the scene.
+pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    if kind == "area" {
+        return Err(el.error("an area emitter must be nested inside a <shape>"));
+    }
+    if !["point", "spot", "directional", "constant"].contains(&kind) {
+        let err = el.error(format!(
+            "unknown plugin \"{kind}\" (supported emitters: area, point, spot, directional, constant)"
+        ));
+        return b.diag.unknown(err);
+    }
+    let mut p = Props::parse(b, el)?;
+    let emitter = match kind {
+        "point" => {
+            let intensity = color(b, &mut p, "intensity")?;
+            let to_world = p.transform("to_world")?;
+            let position = p.vector("position")?;
+            let position = match (position, to_world) {
+                (Some(_), Some(_)) => {
+                    return Err(el.error("give either \"position\" or \"to_world\", not both"))
+                }
+                (Some(pos), None) => pos,
+                (None, Some(m)) => m.transform_point3(Vec3::ZERO),
+                (None, None) => Vec3::ZERO,
+            };
+            EmitterDesc::Point {
+                position,
+                intensity,
+            }
+        }
+        "spot" => {
+            let intensity = color(b, &mut p, "intensity")?;
+            let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+            let cutoff_angle = p.float_or("cutoff_angle", 20.0)?;
+            let beam_width = p.float_or("beam_width", cutoff_angle * 0.75)?;
+            if !(cutoff_angle > 0.0 && cutoff_angle <= 180.0) {
+                return Err(p.element_of("cutoff_angle").error(format!(
+                    "cutoff_angle must be in (0, 180], got {cutoff_angle}"
+                )));
+            }
+            if !(beam_width > 0.0) {
+                return Err(p
+                    .element_of("beam_width")
+                    .error(format!("beam_width must be positive, got {beam_width}")));
+            }
+            EmitterDesc::Spot {
+                to_world,
+                intensity,
+                cutoff_angle: cutoff_angle as f32,
+                beam_width: beam_width.min(cutoff_angle) as f32,
+            }
+        }
+        "directional" => {
+            let irradiance = color(b, &mut p, "irradiance")?;
+            let to_world = p.transform("to_world")?;
+            let direction = p.vector("direction")?;
+            let direction = match (direction, to_world) {
+                (Some(_), Some(_)) => {
+                    return Err(el.error("give either \"direction\" or \"to_world\", not both"))
+                }
+                (Some(d), None) => d,
+                (None, Some(m)) => m.transform_vector3(Vec3::Z),
+                (None, None) => Vec3::Z,
+            };
+            let Some(direction) = direction.try_normalize() else {
+                return Err(el.error("the light direction is zero"));
+            };
+            EmitterDesc::Directional {
+                direction,
+                irradiance,
+            }
+        }
+        _ => EmitterDesc::Constant {
+            radiance: color(b, &mut p, "radiance")?,
+        },
+    };
+    p.ignore(
+        b,
+        &["sampling_weight"],
+        "lights are sampled proportionally to their power",
+    );
+    p.finish(b)?;
+    b.emitters.push(emitter);
+    Ok(())
+}
+
+/// The radiance of an `area` emitter nested in a shape.
+pub(super) fn area_radiance<'a>(
+    b: &mut Builder<'a>,
+    el: &'a Element,
+) -> Result<Option<Rgb>, SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    if kind != "area" {
+        let err = el.error(format!("unknown plugin \"{kind}\" inside a shape (only \"area\" emitters can be attached to shapes)"));
+        b.diag.unknown(err)?;
+        return Ok(None);
+    }
+    let mut p = Props::parse(b, el)?;
+    let radiance = color(b, &mut p, "radiance")?;
+    p.ignore(
+        b,
+        &["sampling_weight"],
+        "lights are sampled proportionally to their power",
+    );
+    p.finish(b)?;
+    Ok(Some(radiance))
+}
+
+/// An emission colour parameter (default 1, as Mitsuba), constant and non-negative.
+fn color<'a>(b: &mut Builder<'a>, p: &mut Props<'a>, name: &str) -> Result<Rgb, SceneError> {
+    let el = p.element_of(name);
+    let c = p.constant_color(b, name, EMISSION)?.unwrap_or(Rgb::ONE);
+    if c.min_element() < 0.0 {
+        return Err(el.error(format!("\"{name}\" must not be negative")));
+    }
+    Ok(c)
+}

@@ -1,0 +1,586 @@
+//! Mitsuba 3 XML scene importer (SPEC §3.1): reads a scene file into a [`SceneDescription`].
+//!
+//! Loading runs in two stages, like Mitsuba's own parser:
+//! 1. **read** ([`read_file`]): the XML is parsed, `$name` parameters are substituted (values
+//!    from `<default>` elements, overridden by the command line's `-D name=value`), and
+//!    `<include>` elements are replaced by the included file's contents. The result is a tree
+//!    of [`Element`]s, each remembering its file, line and column;
+//! 2. **build** ([`Builder`]): plugins are instantiated in document order; `<ref id>` is
+//!    resolved against every `id` in the tree (forward references work), shapes are loaded and
+//!    transformed to world space, and spectra are converted to linear sRGB.
+//!
+//! Every problem (unknown plugin or parameter, malformed number, wrong value type, missing
+//! file, dangling reference) is a [`SceneError`] naming file, line, column and element; in
+//! `lenient` mode unknown plugins and parameters become warnings instead. Nothing panics.
+
+mod bsdfs;
+mod emitters;
+pub mod error;
+pub mod ior;
+mod props;
+mod sensors;
+mod shapes;
+mod textures;
+pub mod transform;
+
+pub use error::{Location, SceneError};
+
+use crate::bsdf::{Bsdf, Diffuse};
+use crate::description::{CameraDesc, EmitterDesc, IntegratorDesc, SceneDescription, ShapeDesc};
+use crate::spectrum::Rgb;
+use crate::texture::{Bitmap, Texture};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Deepest allowed `<include>` nesting (guards against include cycles).
+const MAX_INCLUDE_DEPTH: usize = 16;
+
+/// One XML element after `$name` substitution and `<include>` expansion.
+#[derive(Debug, Clone)]
+pub(crate) struct Element {
+    /// Tag name, e.g. `bsdf`, `float`.
+    pub tag: String,
+    /// Attributes in file order.
+    pub attrs: Vec<(String, String)>,
+    /// Child elements (comments and text dropped).
+    pub children: Vec<Element>,
+    /// Where the element starts.
+    pub location: Location,
+}
+
+impl Element {
+    /// The value of attribute `name`.
+    pub fn attr(&self, name: &str) -> Option<&str> {
+        self.attrs
+            .iter()
+            .find(|(k, _)| k == name)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// The element as written, reduced to its identifying attributes: `<bsdf type="diffuse" id="white">`.
+    pub fn describe(&self) -> String {
+        let mut s = format!("<{}", self.tag);
+        for key in ["type", "name", "id"] {
+            if let Some(v) = self.attr(key) {
+                s.push_str(&format!(" {key}=\"{v}\""));
+            }
+        }
+        s.push('>');
+        s
+    }
+
+    /// An error about this element.
+    pub fn error(&self, message: impl Into<String>) -> SceneError {
+        SceneError::Element {
+            location: self.location.clone(),
+            element: self.describe(),
+            message: message.into(),
+        }
+    }
+
+    /// The directory relative paths in this element are resolved against (its file's folder).
+    pub fn directory(&self) -> &Path {
+        self.location.file.parent().unwrap_or(Path::new(""))
+    }
+
+    /// Resolves a path attribute value relative to this element's file.
+    pub fn resolve_path(&self, value: &str) -> PathBuf {
+        let p = Path::new(value);
+        if p.is_absolute() {
+            p.to_owned()
+        } else {
+            self.directory().join(p)
+        }
+    }
+
+    /// Checks attributes: every attribute must be in `allowed` (unknown ones are reported
+    /// through `diag`), every one in `required` must be present.
+    pub fn check_attributes(
+        &self,
+        allowed: &[&str],
+        required: &[&str],
+        diag: &mut Diagnostics,
+    ) -> Result<(), SceneError> {
+        for (k, _) in &self.attrs {
+            if !allowed.contains(&k.as_str()) {
+                diag.unknown(self.error(format!("unknown attribute \"{k}\"")))?;
+            }
+        }
+        for r in required {
+            if self.attr(r).is_none() {
+                return Err(self.error(format!("missing attribute \"{r}\"")));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Collects warnings and decides whether unknown plugins/parameters are fatal.
+#[derive(Debug, Default)]
+pub(crate) struct Diagnostics {
+    /// Turn unknown plugins, parameters and attributes into warnings.
+    pub lenient: bool,
+    /// Non-fatal messages, each prefixed with its location.
+    pub warnings: Vec<String>,
+}
+
+impl Diagnostics {
+    /// Reports something unknown: an error, or in lenient mode a warning (`Ok`).
+    pub fn unknown(&mut self, err: SceneError) -> Result<(), SceneError> {
+        if self.lenient {
+            self.warnings.push(format!("{err} (ignored: lenient mode)"));
+            Ok(())
+        } else {
+            Err(err)
+        }
+    }
+
+    /// Records a warning about `el`.
+    pub fn warn(&mut self, el: &Element, message: impl std::fmt::Display) {
+        self.warnings
+            .push(format!("{}: {}: {message}", el.location, el.describe()));
+    }
+}
+
+/// Loads a Mitsuba 3 XML scene.
+///
+/// `defaults` are `name=value` parameters from the command line (`-D`); they override the
+/// file's `<default>` values. With `lenient`, unknown plugins, parameters and attributes are
+/// skipped with a warning in [`SceneDescription::warnings`] instead of failing.
+pub fn load_scene(
+    path: &Path,
+    defaults: &[(String, String)],
+    lenient: bool,
+) -> Result<SceneDescription, SceneError> {
+    let mut diag = Diagnostics {
+        lenient,
+        warnings: Vec::new(),
+    };
+    let mut params: HashMap<String, String> = defaults.iter().cloned().collect();
+    let root = read_file(path, &mut params, 0, &mut diag)?;
+    if root.tag != "scene" {
+        return Err(root.error("the root element must be <scene>"));
+    }
+    root.check_attributes(&["version"], &["version"], &mut diag)?;
+    let version = root.attr("version").unwrap_or_default();
+    let valid_version =
+        version.split('.').count() == 3 && version.split('.').all(|p| p.parse::<u32>().is_ok());
+    if !valid_version {
+        return Err(root.error(format!(
+            "invalid version \"{version}\" (expected e.g. \"3.0.0\")"
+        )));
+    }
+    let mut builder = Builder::new(&root, diag)?;
+    builder.build_scene(&root)?;
+    builder.finish(&root)
+}
+
+/// Reads and parses one XML file, substituting parameters and expanding includes.
+pub(crate) fn read_file(
+    path: &Path,
+    params: &mut HashMap<String, String>,
+    depth: usize,
+    diag: &mut Diagnostics,
+) -> Result<Element, SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        file: path.to_owned(),
+        source,
+    })?;
+    let file: Arc<Path> = Arc::from(path);
+    let options = roxmltree::ParsingOptions {
+        allow_dtd: true,
+        ..Default::default()
+    };
+    let doc = roxmltree::Document::parse_with_options(&text, options).map_err(|e| {
+        let pos = e.pos();
+        SceneError::Syntax {
+            location: Location {
+                file: file.clone(),
+                line: pos.row,
+                column: pos.col,
+            },
+            message: e.to_string(),
+        }
+    })?;
+    let mut reader = Reader {
+        doc: &doc,
+        file,
+        params,
+        depth,
+        diag,
+    };
+    let mut out = reader.convert(doc.root_element())?;
+    match out.len() {
+        1 => Ok(out.remove(0)),
+        // The root itself was a <default> or <include>: not a scene file.
+        _ => Err(SceneError::Element {
+            location: Location {
+                file: Arc::from(path),
+                line: 1,
+                column: 1,
+            },
+            element: format!("<{}>", doc.root_element().tag_name().name()),
+            message: "not a valid root element".into(),
+        }),
+    }
+}
+
+/// State of reading one file.
+struct Reader<'d, 'p> {
+    doc: &'d roxmltree::Document<'d>,
+    file: Arc<Path>,
+    params: &'p mut HashMap<String, String>,
+    depth: usize,
+    diag: &'p mut Diagnostics,
+}
+
+impl Reader<'_, '_> {
+    /// Converts one element; returns the elements that replace it (none for `<default>`, the
+    /// included file's children for `<include>`).
+    fn convert(&mut self, node: roxmltree::Node) -> Result<Vec<Element>, SceneError> {
+        let pos = self.doc.text_pos_at(node.range().start);
+        let location = Location {
+            file: self.file.clone(),
+            line: pos.row,
+            column: pos.col,
+        };
+        let tag = node.tag_name().name().to_owned();
+        let mut el = Element {
+            tag,
+            attrs: Vec::new(),
+            children: Vec::new(),
+            location,
+        };
+        // Attributes first unsubstituted, so that errors can describe the element.
+        el.attrs = node
+            .attributes()
+            .map(|a| (a.name().to_owned(), a.value().to_owned()))
+            .collect();
+        let mut substituted = Vec::with_capacity(el.attrs.len());
+        for (k, v) in &el.attrs {
+            substituted.push((
+                k.clone(),
+                substitute(v, self.params).map_err(|m| el.error(m))?,
+            ));
+        }
+        el.attrs = substituted;
+
+        match el.tag.as_str() {
+            "default" => {
+                el.check_attributes(&["name", "value"], &["name", "value"], self.diag)?;
+                let name = el.attr("name").unwrap_or_default();
+                if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+                    return Err(el.error(format!("invalid parameter name \"{name}\"")));
+                }
+                // Command-line values (already present) win over the file's defaults.
+                self.params
+                    .entry(name.to_owned())
+                    .or_insert_with(|| el.attr("value").unwrap_or_default().to_owned());
+                Ok(Vec::new())
+            }
+            "include" => {
+                el.check_attributes(&["filename", "name"], &["filename"], self.diag)?;
+                let path = el.resolve_path(el.attr("filename").unwrap_or_default());
+                if !path.is_file() {
+                    return Err(el.error(format!("included file \"{}\" not found", path.display())));
+                }
+                if self.depth + 1 > MAX_INCLUDE_DEPTH {
+                    return Err(el.error(format!(
+                        "includes nested deeper than {MAX_INCLUDE_DEPTH} (an include cycle?)"
+                    )));
+                }
+                let root = read_file(&path, self.params, self.depth + 1, self.diag)?;
+                if root.tag == "scene" {
+                    Ok(root.children)
+                } else {
+                    Ok(vec![root])
+                }
+            }
+            _ => {
+                for child in node.children() {
+                    if child.is_element() {
+                        let converted = self.convert(child)?;
+                        el.children.extend(converted);
+                    } else if child.is_text() && !child.text().unwrap_or_default().trim().is_empty()
+                    {
+                        let p = self.doc.text_pos_at(child.range().start);
+                        let loc = Location {
+                            file: self.file.clone(),
+                            line: p.row,
+                            column: p.col,
+                        };
+                        let err = SceneError::Element {
+                            location: loc,
+                            element: el.describe(),
+                            message: "unexpected text content".into(),
+                        };
+                        self.diag.unknown(err)?;
+                    }
+                }
+                Ok(vec![el])
+            }
+        }
+    }
+}
+
+/// Replaces every `$name` in `value` by the parameter's value. A `$` not followed by a known
+/// parameter name is an error, as in Mitsuba.
+fn substitute(value: &str, params: &HashMap<String, String>) -> Result<String, String> {
+    if !value.contains('$') {
+        return Ok(value.to_owned());
+    }
+    let mut out = String::with_capacity(value.len());
+    let mut rest = value;
+    while let Some(i) = rest.find('$') {
+        out.push_str(&rest[..i]);
+        let after = &rest[i + 1..];
+        let len = after
+            .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+            .unwrap_or(after.len());
+        let name = &after[..len];
+        if name.is_empty() {
+            return Err(format!(
+                "a \"$\" must be followed by a parameter name in \"{value}\""
+            ));
+        }
+        match params.get(name) {
+            Some(v) => out.push_str(v),
+            None => return Err(format!("undefined parameter \"${name}\" (add <default name=\"{name}\" value=\"...\"/> or -D {name}=...)")),
+        }
+        rest = &after[len..];
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+/// Instantiates plugins from the element tree into a [`SceneDescription`].
+pub(crate) struct Builder<'a> {
+    /// Warnings and the lenient flag.
+    pub diag: Diagnostics,
+    /// Every element with an `id`.
+    ids: HashMap<String, &'a Element>,
+    /// Already built BSDFs with an id → index into `bsdfs`.
+    bsdf_ids: HashMap<String, usize>,
+    /// Already built textures with an id.
+    texture_ids: HashMap<String, Texture>,
+    /// Ids being built (reference cycle detection).
+    building: Vec<String>,
+    /// Decoded images by (path, raw).
+    pub bitmaps: HashMap<(PathBuf, bool), Arc<Bitmap>>,
+    /// All materials.
+    pub bsdfs: Vec<Bsdf>,
+    /// Index of the default material (diffuse 0.5), once needed.
+    default_bsdf: Option<usize>,
+    /// All shapes.
+    pub shapes: Vec<ShapeDesc>,
+    /// Emitters that are not area lights.
+    pub emitters: Vec<EmitterDesc>,
+    /// The sensor, once seen.
+    pub camera: Option<CameraDesc>,
+    /// The sampler's sample count.
+    pub sample_count: Option<u32>,
+    /// The integrator.
+    pub integrator: Option<IntegratorDesc>,
+}
+
+impl<'a> Builder<'a> {
+    /// Indexes every `id` in the tree (duplicates are an error).
+    fn new(root: &'a Element, diag: Diagnostics) -> Result<Self, SceneError> {
+        let mut ids = HashMap::new();
+        fn collect<'a>(
+            el: &'a Element,
+            ids: &mut HashMap<String, &'a Element>,
+        ) -> Result<(), SceneError> {
+            if el.tag != "ref" {
+                if let Some(id) = el.attr("id") {
+                    if let Some(prev) = ids.insert(id.to_owned(), el) {
+                        return Err(el.error(format!(
+                            "duplicate id \"{id}\" (first defined at {})",
+                            prev.location
+                        )));
+                    }
+                }
+            }
+            el.children.iter().try_for_each(|c| collect(c, ids))
+        }
+        collect(root, &mut ids)?;
+        Ok(Self {
+            diag,
+            ids,
+            bsdf_ids: HashMap::new(),
+            texture_ids: HashMap::new(),
+            building: Vec::new(),
+            bitmaps: HashMap::new(),
+            bsdfs: Vec::new(),
+            default_bsdf: None,
+            shapes: Vec::new(),
+            emitters: Vec::new(),
+            camera: None,
+            sample_count: None,
+            integrator: None,
+        })
+    }
+
+    /// The element a `<ref id="…">` points to.
+    pub fn resolve_ref(&mut self, r: &'a Element) -> Result<&'a Element, SceneError> {
+        r.check_attributes(&["id", "name"], &["id"], &mut self.diag)?;
+        let id = r.attr("id").unwrap_or_default();
+        self.ids
+            .get(id)
+            .copied()
+            .ok_or_else(|| r.error(format!("reference to unknown id \"{id}\"")))
+    }
+
+    /// Follows `el` if it is a `<ref>`, otherwise returns it.
+    pub fn deref(&mut self, el: &'a Element) -> Result<&'a Element, SceneError> {
+        if el.tag == "ref" {
+            self.resolve_ref(el)
+        } else {
+            Ok(el)
+        }
+    }
+
+    /// Marks `id` as under construction; errors on a reference cycle.
+    fn enter(&mut self, el: &Element) -> Result<Option<String>, SceneError> {
+        let Some(id) = el.attr("id") else {
+            return Ok(None);
+        };
+        if self.building.iter().any(|b| b == id) {
+            return Err(el.error(format!("reference cycle through id \"{id}\"")));
+        }
+        self.building.push(id.to_owned());
+        Ok(Some(id.to_owned()))
+    }
+
+    fn leave(&mut self, id: Option<String>) {
+        if id.is_some() {
+            self.building.pop();
+        }
+    }
+
+    /// The index in `bsdfs` of the BSDF declared by `el` (a `<bsdf>` or a `<ref>` to one);
+    /// a BSDF with an id is built once.
+    pub fn bsdf_index(&mut self, el: &'a Element) -> Result<usize, SceneError> {
+        let target = self.deref(el)?;
+        if target.tag != "bsdf" {
+            return Err(el.error(format!(
+                "expected a <bsdf>, but this refers to {}",
+                target.describe()
+            )));
+        }
+        if let Some(id) = target.attr("id") {
+            if let Some(&i) = self.bsdf_ids.get(id) {
+                return Ok(i);
+            }
+        }
+        let guard = self.enter(target)?;
+        let built = bsdfs::build_bsdf(self, target);
+        self.leave(guard);
+        self.bsdfs.push(built?);
+        let index = self.bsdfs.len() - 1;
+        if let Some(id) = target.attr("id") {
+            self.bsdf_ids.insert(id.to_owned(), index);
+        }
+        Ok(index)
+    }
+
+    /// The BSDF declared by `el` (a `<bsdf>` or a `<ref>` to one), as a value.
+    pub fn bsdf_value(&mut self, el: &'a Element) -> Result<Bsdf, SceneError> {
+        let i = self.bsdf_index(el)?;
+        Ok(self.bsdfs[i].clone())
+    }
+
+    /// The default material (Mitsuba: diffuse, reflectance 0.5) for shapes without a BSDF.
+    pub fn default_bsdf(&mut self) -> usize {
+        if let Some(i) = self.default_bsdf {
+            return i;
+        }
+        self.bsdfs.push(Bsdf::Diffuse(Diffuse {
+            reflectance: Texture::Constant(Rgb::splat(0.5)),
+        }));
+        let i = self.bsdfs.len() - 1;
+        self.default_bsdf = Some(i);
+        i
+    }
+
+    /// The texture declared by `el` (a `<texture>` or a `<ref>` to one); built once per id.
+    pub fn texture_value(&mut self, el: &'a Element) -> Result<Texture, SceneError> {
+        let target = self.deref(el)?;
+        if target.tag != "texture" {
+            return Err(el.error(format!(
+                "expected a <texture>, but this refers to {}",
+                target.describe()
+            )));
+        }
+        if let Some(t) = target.attr("id").and_then(|id| self.texture_ids.get(id)) {
+            return Ok(t.clone());
+        }
+        let guard = self.enter(target)?;
+        let built = textures::build_texture(self, target);
+        self.leave(guard);
+        let t = built?;
+        if let Some(id) = target.attr("id") {
+            self.texture_ids.insert(id.to_owned(), t.clone());
+        }
+        Ok(t)
+    }
+
+    /// Instantiates every top-level element of the scene in document order.
+    fn build_scene(&mut self, root: &'a Element) -> Result<(), SceneError> {
+        for el in &root.children {
+            match el.tag.as_str() {
+                "bsdf" => {
+                    self.bsdf_index(el)?;
+                }
+                "texture" => {
+                    self.texture_value(el)?;
+                }
+                "shape" => shapes::build_shape(self, el)?,
+                "emitter" => emitters::build_emitter(self, el)?,
+                "sensor" => {
+                    let camera = sensors::build_sensor(self, el)?;
+                    if self.camera.is_some() {
+                        self.diag
+                            .warn(el, "more than one sensor: only the first is used");
+                    } else {
+                        self.camera = Some(camera);
+                    }
+                }
+                "integrator" => self.integrator = Some(sensors::build_integrator(self, el)?),
+                "ref" => {
+                    let err = el.error("top-level <ref> is not supported: reference objects from inside a shape or BSDF");
+                    self.diag.unknown(err)?;
+                }
+                _ => {
+                    let err = el.error(format!("unexpected element <{}> in <scene>", el.tag));
+                    self.diag.unknown(err)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Assembles the description; a scene without a sensor gets Mitsuba's default camera.
+    fn finish(mut self, root: &Element) -> Result<SceneDescription, SceneError> {
+        let camera = match self.camera.take() {
+            Some(c) => c,
+            None => {
+                self.diag.warn(root, "no <sensor>: using a default perspective camera (fov 45°, 768x576) at the origin looking along +z");
+                sensors::default_camera()
+            }
+        };
+        Ok(SceneDescription {
+            camera,
+            sample_count: self.sample_count,
+            integrator: self.integrator,
+            bsdfs: self.bsdfs,
+            shapes: self.shapes,
+            emitters: self.emitters,
+            warnings: self.diag.warnings,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests;

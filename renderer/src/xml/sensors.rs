@@ -1,0 +1,316 @@
+//! `<sensor>` (`perspective`, `thinlens`) with its `<film>` (`hdrfilm`), `<rfilter>` and
+//! `<sampler>`, and the `<integrator>`.
+
+use super::props::Props;
+use super::{Builder, Element, SceneError};
+use crate::description::{CameraDesc, FovAxis, IntegratorDesc};
+use glam::Mat4;
+
+/// Mitsuba's default film size.
+const DEFAULT_WIDTH: u32 = 768;
+const DEFAULT_HEIGHT: u32 = 576;
+
+/// Largest accepted film side (guards against absurd allocations).
+const MAX_FILM_SIDE: i64 = 1 << 16;
+
+/// The camera used when a scene has no `<sensor>`.
+pub(super) fn default_camera() -> CameraDesc {
+    CameraDesc {
+        to_world: Mat4::IDENTITY,
+        fov: 45.0,
+        fov_axis: FovAxis::X,
+        near_clip: 0.01,
+        far_clip: 10_000.0,
+        aperture_radius: 0.0,
+        focus_distance: 10_000.0,
+        width: DEFAULT_WIDTH,
+        height: DEFAULT_HEIGHT,
+    }
+}
+
+/// Builds the camera of a `<sensor>` element (film and sampler included).
+pub(super) fn build_sensor<'a>(
+    b: &mut Builder<'a>,
+    el: &'a Element,
+) -> Result<CameraDesc, SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    if kind != "perspective" && kind != "thinlens" {
+        return Err(el.error(format!(
+            "unknown plugin \"{kind}\" (supported sensors: perspective, thinlens)"
+        )));
+    }
+    let mut p = Props::parse(b, el)?;
+
+    let (mut width, mut height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
+    for film in p.objects(&["film"]) {
+        (width, height) = build_film(b, film)?;
+    }
+    for sampler in p.objects(&["sampler"]) {
+        b.sample_count = Some(build_sampler(b, sampler)?);
+    }
+
+    let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+    let (fov, fov_axis) = parse_fov(&mut p)?;
+    let near_clip = p.float_or("near_clip", 0.01)?;
+    let far_clip = p.float_or("far_clip", 10_000.0)?;
+    if near_clip <= 0.0 {
+        return Err(p
+            .element_of("near_clip")
+            .error("\"near_clip\" must be greater than zero"));
+    }
+    if near_clip >= far_clip {
+        return Err(p
+            .element_of("near_clip")
+            .error("\"near_clip\" must be smaller than \"far_clip\""));
+    }
+    let (aperture_radius, focus_distance) = if kind == "thinlens" {
+        let Some(r) = p.float("aperture_radius")? else {
+            return Err(el.error("missing parameter \"aperture_radius\""));
+        };
+        if r < 0.0 {
+            return Err(p
+                .element_of("aperture_radius")
+                .error("\"aperture_radius\" must not be negative"));
+        }
+        let focus = p.positive_float_or("focus_distance", far_clip)?;
+        (r, focus)
+    } else {
+        (0.0, p.float_or("focus_distance", far_clip)?)
+    };
+    // A camera frame must be rigid: Mitsuba rejects scale factors (a mirror is allowed).
+    let m3 = glam::Mat3::from_mat4(to_world);
+    let scaled = [m3.x_axis, m3.y_axis, m3.z_axis]
+        .iter()
+        .any(|c| (c.length() - 1.0).abs() > 1e-3);
+    if scaled {
+        return Err(p
+            .element_of("to_world")
+            .error("scale factors in the camera's to_world are not allowed"));
+    }
+    p.ignore(b, &["shutter_open", "shutter_close"], "no motion blur");
+    p.finish(b)?;
+    Ok(CameraDesc {
+        to_world,
+        fov: fov as f32,
+        fov_axis,
+        near_clip: near_clip as f32,
+        far_clip: far_clip as f32,
+        aperture_radius: aperture_radius as f32,
+        focus_distance: focus_distance as f32,
+        width,
+        height,
+    })
+}
+
+/// `fov` + `fov_axis`, or a 35 mm-equivalent `focal_length` (default "50mm") as Mitsuba.
+fn parse_fov(p: &mut Props) -> Result<(f64, FovAxis), SceneError> {
+    if p.has("fov") && p.has("focal_length") {
+        return Err(p
+            .element_of("focal_length")
+            .error("give either \"fov\" or \"focal_length\", not both"));
+    }
+    let (fov, axis) = if let Some(fov) = p.float("fov")? {
+        let axis_el = p.element_of("fov_axis");
+        let axis = match p
+            .string("fov_axis")?
+            .unwrap_or("x")
+            .to_ascii_lowercase()
+            .as_str()
+        {
+            "x" => FovAxis::X,
+            "y" => FovAxis::Y,
+            "diagonal" => FovAxis::Diagonal,
+            "smaller" => FovAxis::Smaller,
+            "larger" => FovAxis::Larger,
+            other => {
+                return Err(axis_el.error(format!(
+                    "unknown fov_axis \"{other}\" (use x, y, diagonal, smaller or larger)"
+                )))
+            }
+        };
+        (fov, axis)
+    } else {
+        let el = p.element_of("focal_length");
+        let f = p.string("focal_length")?.unwrap_or("50mm");
+        let mm = f.trim().strip_suffix("mm").unwrap_or(f).trim();
+        let value: f64 = match mm.parse::<f64>() {
+            Ok(v) if v > 0.0 && v.is_finite() => v,
+            _ => {
+                return Err(el.error(format!(
+                    "could not parse focal length \"{f}\" (expected e.g. \"50mm\")"
+                )))
+            }
+        };
+        let fov = 2.0
+            * ((36.0f64 * 36.0 + 24.0 * 24.0).sqrt() / (2.0 * value))
+                .atan()
+                .to_degrees();
+        (fov, FovAxis::Diagonal)
+    };
+    if !(fov > 0.0 && fov < 180.0) {
+        return Err(p.element_of("fov").error(format!(
+            "the field of view must be in (0, 180) degrees, got {fov}"
+        )));
+    }
+    Ok((fov, axis))
+}
+
+/// `hdrfilm`: width, height and the reconstruction filter.
+fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(u32, u32), SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    if kind != "hdrfilm" {
+        let err = el.error(format!(
+            "unknown plugin \"{kind}\" (supported films: hdrfilm)"
+        ));
+        b.diag.unknown(err)?;
+    }
+    let mut p = Props::parse(b, el)?;
+    let mut side = |name: &str, default: u32| -> Result<u32, SceneError> {
+        let e = p.element_of(name);
+        match p.int(name)? {
+            None => Ok(default),
+            Some(v) if (1..=MAX_FILM_SIDE).contains(&v) => Ok(v as u32),
+            Some(v) => Err(e.error(format!(
+                "\"{name}\" must be in 1..={MAX_FILM_SIDE}, got {v}"
+            ))),
+        }
+    };
+    let width = side("width", DEFAULT_WIDTH)?;
+    let height = side("height", DEFAULT_HEIGHT)?;
+    for f in p.objects(&["rfilter"]) {
+        f.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+        match f.attr("type").unwrap_or_default() {
+            "box" => {
+                let fp = Props::parse(b, f)?;
+                fp.finish(b)?;
+            }
+            "gaussian" | "tent" | "mitchell" | "catmullrom" | "lanczos" => {
+                b.diag.warn(
+                    f,
+                    "reconstruction filter replaced by \"box\": one sample lands in one pixel",
+                );
+            }
+            other => {
+                let err = f.error(format!(
+                    "unknown plugin \"{other}\" (supported rfilters: box)"
+                ));
+                b.diag.unknown(err)?;
+            }
+        }
+    }
+    p.ignore(
+        b,
+        &[
+            "pixel_format",
+            "component_format",
+            "file_format",
+            "banner",
+            "sample_border",
+            "compensate",
+        ],
+        "the renderer writes float32 RGB",
+    );
+    if p.has("crop_offset_x")
+        || p.has("crop_offset_y")
+        || p.has("crop_width")
+        || p.has("crop_height")
+    {
+        return Err(el.error("film cropping (crop_*) is not supported"));
+    }
+    p.finish(b)?;
+    Ok((width, height))
+}
+
+/// Any of Mitsuba's samplers: only `sample_count` matters here (the renderer uses its own
+/// deterministic per-pixel random streams).
+fn build_sampler<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<u32, SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    const SAMPLERS: [&str; 5] = [
+        "independent",
+        "stratified",
+        "multijitter",
+        "orthogonal",
+        "ldsampler",
+    ];
+    if !SAMPLERS.contains(&kind) {
+        let err = el.error(format!(
+            "unknown plugin \"{kind}\" (supported samplers: {})",
+            SAMPLERS.join(", ")
+        ));
+        b.diag.unknown(err)?;
+    } else if kind != "independent" {
+        b.diag.warn(el, "sampler treated as \"independent\"");
+    }
+    let mut p = Props::parse(b, el)?;
+    let count_el = p.element_of("sample_count");
+    let count = match p.int("sample_count")? {
+        None => 4,
+        Some(v) if (1..=i64::from(u32::MAX)).contains(&v) => v as u32,
+        Some(v) => {
+            return Err(count_el.error(format!("\"sample_count\" must be positive, got {v}")))
+        }
+    };
+    p.ignore(
+        b,
+        &["seed", "jitter", "strength", "dimension"],
+        "the renderer seeds its own random streams",
+    );
+    p.finish(b)?;
+    Ok(count)
+}
+
+/// `<integrator>`: the plugin name, `max_depth` and `rr_depth`.
+pub(super) fn build_integrator<'a>(
+    b: &mut Builder<'a>,
+    el: &'a Element,
+) -> Result<IntegratorDesc, SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    const INTEGRATORS: [&str; 4] = ["path", "sppm", "volpath", "direct"];
+    if !INTEGRATORS.contains(&kind) {
+        let err = el.error(format!(
+            "unknown plugin \"{kind}\" (supported integrators: {})",
+            INTEGRATORS.join(", ")
+        ));
+        b.diag.unknown(err)?;
+    }
+    let mut p = Props::parse(b, el)?;
+    let depth_el = p.element_of("max_depth");
+    let max_depth = match p.int("max_depth")? {
+        None => -1,
+        Some(v) if v >= -1 && v <= i64::from(i32::MAX) => v as i32,
+        Some(v) => {
+            return Err(depth_el.error(format!(
+                "\"max_depth\" must be -1 (unbounded) or >= 0, got {v}"
+            )))
+        }
+    };
+    let rr_el = p.element_of("rr_depth");
+    let rr_depth = match p.int("rr_depth")? {
+        None => 5,
+        Some(v) if v >= 0 && v <= i64::from(u32::MAX) => v as u32,
+        Some(v) => return Err(rr_el.error(format!("\"rr_depth\" must be >= 0, got {v}"))),
+    };
+    p.ignore(
+        b,
+        &[
+            "hide_emitters",
+            "photon_count",
+            "initial_radius",
+            "alpha",
+            "samples_per_pass",
+            "emitter_samples",
+            "bsdf_samples",
+        ],
+        "set on the command line / in the config instead",
+    );
+    p.finish(b)?;
+    Ok(IntegratorDesc {
+        kind: kind.to_owned(),
+        max_depth,
+        rr_depth,
+    })
+}

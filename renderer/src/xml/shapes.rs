@@ -1,0 +1,471 @@
+//! `<shape>` plugins: `rectangle`, `cube`, `sphere`, `disk`, `obj`, `ply`. Meshes are moved to
+//! world space here (positions by `to_world`, normals by its inverse transpose) and follow
+//! Mitsuba 3's loaders: polygons fan-triangulated around their first corner, file normals used
+//! when present, otherwise angle-weighted smooth vertex normals computed in world space unless
+//! `face_normals` is true; OBJ texture coordinates stored as (u, 1 − v) (`flip_tex_coords`,
+//! default true for OBJ, false for PLY); `flip_normals` reverses the winding and the normals.
+
+use super::emitters::area_radiance;
+use super::props::Props;
+use super::{Builder, Element, SceneError};
+use crate::description::{Geometry, ShapeDesc, TriangleMesh};
+use glam::{Mat3, Mat4, Vec2, Vec3};
+use std::path::Path;
+
+/// Builds a shape (with its BSDF and area emitter) and adds it to the scene.
+pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    const SHAPES: [&str; 6] = ["rectangle", "cube", "sphere", "disk", "obj", "ply"];
+    if !SHAPES.contains(&kind) {
+        let err = el.error(format!(
+            "unknown plugin \"{kind}\" (supported shapes: {})",
+            SHAPES.join(", ")
+        ));
+        return b.diag.unknown(err);
+    }
+    let mut p = Props::parse(b, el)?;
+    let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+    let flip_normals = p.bool_or("flip_normals", false)?;
+
+    let geometry = match kind {
+        "rectangle" => Geometry::Mesh(rectangle(to_world, flip_normals)),
+        "cube" => Geometry::Mesh(cube(to_world, flip_normals)),
+        "disk" => Geometry::Disk {
+            to_world,
+            flip_normals,
+        },
+        "sphere" => {
+            let center = p.vector("center")?.unwrap_or(Vec3::ZERO);
+            let radius = p.positive_float_or("radius", 1.0)? as f32;
+            // Mitsuba: to_world · translate(center) · scale(radius); must stay a sphere.
+            let m3 = Mat3::from_mat4(to_world);
+            let scales = [m3.x_axis.length(), m3.y_axis.length(), m3.z_axis.length()];
+            let s = scales[0];
+            if scales.iter().any(|v| (v - s).abs() > 1e-4 * s.max(1e-12)) || s == 0.0 {
+                return Err(p
+                    .element_of("to_world")
+                    .error("a sphere's to_world must not scale non-uniformly"));
+            }
+            Geometry::Sphere {
+                center: to_world.transform_point3(center),
+                radius: radius * s,
+                flip_normals,
+            }
+        }
+        _ => {
+            let file_el = p.element_of("filename");
+            let Some(filename) = p.string("filename")? else {
+                return Err(el.error("missing parameter \"filename\""));
+            };
+            let face_normals = p.bool_or("face_normals", false)?;
+            let flip_tex = p.bool_or("flip_tex_coords", kind == "obj")?;
+            let path = file_el.resolve_path(filename);
+            let raw = if kind == "obj" {
+                load_obj(&path)
+            } else {
+                load_ply(&path)
+            };
+            let raw = raw.map_err(|m| {
+                file_el.error(format!("cannot load mesh \"{}\": {m}", path.display()))
+            })?;
+            let mesh = finish_mesh(raw, to_world, face_normals, flip_normals, flip_tex)
+                .map_err(|m| file_el.error(format!("mesh \"{}\": {m}", path.display())))?;
+            Geometry::Mesh(mesh)
+        }
+    };
+
+    // Nested or referenced BSDF and area emitter.
+    let mut bsdf = None;
+    let mut emission = None;
+    for obj in p.unnamed_objects() {
+        let target = b.deref(obj)?;
+        match target.tag.as_str() {
+            "bsdf" => {
+                if bsdf.is_some() {
+                    return Err(obj.error("a shape can have only one BSDF"));
+                }
+                bsdf = Some(b.bsdf_index(obj)?);
+            }
+            "emitter" => {
+                if emission.is_some() {
+                    return Err(obj.error("a shape can have only one emitter"));
+                }
+                emission = area_radiance(b, target)?;
+            }
+            _ => {
+                let err = obj.error(format!("unexpected {} inside a shape", target.describe()));
+                b.diag.unknown(err)?;
+            }
+        }
+    }
+    p.finish(b)?;
+    let bsdf = match bsdf {
+        Some(i) => i,
+        None => b.default_bsdf(),
+    };
+    let name = el
+        .attr("id")
+        .map(str::to_owned)
+        .unwrap_or_else(|| format!("{kind}#{}", b.shapes.len()));
+    b.shapes.push(ShapeDesc {
+        name,
+        geometry,
+        bsdf,
+        emission,
+    });
+    Ok(())
+}
+
+/// Mitsuba's `rectangle`: [−1, 1]² in the z = 0 plane, normal +z, uv = ((x+1)/2, (y+1)/2).
+/// Mitsuba's rectangle is analytic with normal `to_world⁻ᵀ·ẑ`, so a mirroring `to_world` must
+/// not turn it around: the winding is reversed to compensate.
+fn rectangle(to_world: Mat4, flip_normals: bool) -> TriangleMesh {
+    let local = [
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(1.0, 1.0, 0.0),
+        Vec3::new(-1.0, 1.0, 0.0),
+    ];
+    let uvs = vec![
+        Vec2::new(0.0, 0.0),
+        Vec2::new(1.0, 0.0),
+        Vec2::new(1.0, 1.0),
+        Vec2::new(0.0, 1.0),
+    ];
+    let mut mesh = TriangleMesh {
+        positions: local
+            .iter()
+            .map(|p| to_world.transform_point3(*p))
+            .collect(),
+        normals: None,
+        uvs: Some(uvs),
+        indices: vec![[0, 1, 2], [2, 3, 0]],
+    };
+    let mirrored = Mat3::from_mat4(to_world).determinant() < 0.0;
+    if mirrored != flip_normals {
+        reverse_winding(&mut mesh);
+    }
+    mesh
+}
+
+/// Mitsuba's `cube`: [−1, 1]³ as 6 quads with their own vertices, normals and uvs (the same
+/// vertex order as Mitsuba's, so textures land identically).
+fn cube(to_world: Mat4, flip_normals: bool) -> TriangleMesh {
+    // Per face: outward normal and its four corners, in Mitsuba's order.
+    #[rustfmt::skip]
+    let faces: [([f32; 3], [[f32; 3]; 4]); 6] = [
+        ([0.0, -1.0, 0.0], [[1.0, -1.0, -1.0], [1.0, -1.0, 1.0], [-1.0, -1.0, 1.0], [-1.0, -1.0, -1.0]]),
+        ([0.0, 1.0, 0.0], [[1.0, 1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, 1.0, 1.0], [1.0, 1.0, 1.0]]),
+        ([1.0, 0.0, 0.0], [[1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [1.0, 1.0, 1.0], [1.0, -1.0, 1.0]]),
+        ([0.0, 0.0, 1.0], [[1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0], [-1.0, -1.0, 1.0]]),
+        ([-1.0, 0.0, 0.0], [[-1.0, -1.0, 1.0], [-1.0, 1.0, 1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, -1.0]]),
+        ([0.0, 0.0, -1.0], [[1.0, 1.0, -1.0], [1.0, -1.0, -1.0], [-1.0, -1.0, -1.0], [-1.0, 1.0, -1.0]]),
+    ];
+    let corner_uv = [
+        Vec2::new(0.0, 1.0),
+        Vec2::new(1.0, 1.0),
+        Vec2::new(1.0, 0.0),
+        Vec2::new(0.0, 0.0),
+    ];
+    let mut mesh = TriangleMesh {
+        normals: Some(Vec::new()),
+        uvs: Some(Vec::new()),
+        ..Default::default()
+    };
+    for (f, (n, corners)) in faces.iter().enumerate() {
+        let base = (4 * f) as u32;
+        for (c, p) in corners.iter().enumerate() {
+            mesh.positions.push(Vec3::from(*p));
+            if let Some(ns) = mesh.normals.as_mut() {
+                ns.push(Vec3::from(*n));
+            }
+            if let Some(uvs) = mesh.uvs.as_mut() {
+                uvs.push(corner_uv[c]);
+            }
+        }
+        mesh.indices.push([base, base + 1, base + 2]);
+        mesh.indices.push([base + 3, base, base + 2]);
+    }
+    transform_mesh(&mut mesh, to_world);
+    if flip_normals {
+        flip(&mut mesh);
+    }
+    mesh
+}
+
+/// A mesh as read from a file (object space), before normals are settled.
+#[derive(Debug, Default)]
+struct RawMesh {
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    uvs: Option<Vec<Vec2>>,
+    /// Polygons (any corner count ≥ 3), indices into the vertex arrays.
+    polygons: Vec<Vec<u32>>,
+}
+
+/// Triangulates, transforms and settles the normals of a loaded mesh.
+fn finish_mesh(
+    raw: RawMesh,
+    to_world: Mat4,
+    face_normals: bool,
+    flip_normals: bool,
+    flip_tex: bool,
+) -> Result<TriangleMesh, String> {
+    let n = raw.positions.len();
+    if raw.positions.iter().any(|p| !p.is_finite()) {
+        return Err("vertex positions are not finite".into());
+    }
+    let mut indices = Vec::with_capacity(raw.polygons.len());
+    for poly in &raw.polygons {
+        if let Some(bad) = poly.iter().find(|&&i| i as usize >= n) {
+            return Err(format!(
+                "face refers to vertex {bad}, but there are only {n} vertices"
+            ));
+        }
+        // Fan around the first corner (Mitsuba: quads split along corners 0–2).
+        for k in 1..poly.len().saturating_sub(1) {
+            indices.push([poly[0], poly[k], poly[k + 1]]);
+        }
+    }
+    if indices.is_empty() {
+        return Err("the mesh has no faces".into());
+    }
+    let uvs = raw.uvs.map(|uv| {
+        if flip_tex {
+            uv.into_iter().map(|t| Vec2::new(t.x, 1.0 - t.y)).collect()
+        } else {
+            uv
+        }
+    });
+    let file_normals = raw
+        .normals
+        .filter(|ns| ns.iter().all(|v| v.is_finite() && v.length_squared() > 0.0));
+    let mut mesh = TriangleMesh {
+        positions: raw.positions,
+        normals: file_normals,
+        uvs,
+        indices,
+    };
+    transform_mesh(&mut mesh, to_world);
+    if face_normals {
+        mesh.normals = None;
+    } else if mesh.normals.is_none() {
+        mesh.normals = Some(smooth_normals(&mesh.positions, &mesh.indices));
+    }
+    if flip_normals {
+        flip(&mut mesh);
+    }
+    Ok(mesh)
+}
+
+/// Moves a mesh to world space: positions by `m`, normals by its inverse transpose (normals are
+/// dropped, and later recomputed, if `m` is singular).
+fn transform_mesh(mesh: &mut TriangleMesh, m: Mat4) {
+    if m == Mat4::IDENTITY {
+        return;
+    }
+    for p in &mut mesh.positions {
+        *p = m.transform_point3(*p);
+    }
+    let m3 = Mat3::from_mat4(m);
+    let det = m3.determinant();
+    if let Some(ns) = mesh.normals.as_mut() {
+        if det.abs() > f32::MIN_POSITIVE && det.is_finite() {
+            let inv_t = m3.inverse().transpose();
+            for v in ns.iter_mut() {
+                *v = (inv_t * *v).normalize_or(Vec3::Z);
+            }
+        } else {
+            mesh.normals = None;
+        }
+    }
+}
+
+/// Angle-weighted vertex normals (Mitsuba's `recompute_vertex_normals`): each triangle adds its
+/// unit normal times its corner angle to its three vertices. Vertices on degenerate triangles
+/// only keep +z.
+fn smooth_normals(positions: &[Vec3], indices: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut acc = vec![Vec3::ZERO; positions.len()];
+    for tri in indices {
+        let p = tri.map(|i| positions[i as usize]);
+        let Some(n) = (p[1] - p[0]).cross(p[2] - p[0]).try_normalize() else {
+            continue;
+        };
+        for k in 0..3 {
+            let e1 = p[(k + 1) % 3] - p[k];
+            let e2 = p[(k + 2) % 3] - p[k];
+            let (Some(d1), Some(d2)) = (e1.try_normalize(), e2.try_normalize()) else {
+                continue;
+            };
+            let angle = d1.dot(d2).clamp(-1.0, 1.0).acos();
+            acc[tri[k] as usize] += n * angle;
+        }
+    }
+    acc.into_iter().map(|v| v.normalize_or(Vec3::Z)).collect()
+}
+
+fn reverse_winding(mesh: &mut TriangleMesh) {
+    for t in &mut mesh.indices {
+        t.swap(1, 2);
+    }
+}
+
+/// `flip_normals`: the other side becomes the front.
+fn flip(mesh: &mut TriangleMesh) {
+    reverse_winding(mesh);
+    if let Some(ns) = mesh.normals.as_mut() {
+        for v in ns.iter_mut() {
+            *v = -*v;
+        }
+    }
+}
+
+/// Reads a Wavefront OBJ (all objects/groups merged into one mesh, as Mitsuba).
+fn load_obj(path: &Path) -> Result<RawMesh, String> {
+    if !path.is_file() {
+        return Err("file not found".into());
+    }
+    let options = tobj::LoadOptions {
+        single_index: true,
+        triangulate: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    // Materials are irrelevant (the XML assigns the BSDF): never fail on a missing .mtl.
+    let (models, _materials) = tobj::load_obj_buf(
+        &mut std::io::BufReader::new(std::fs::File::open(path).map_err(|e| e.to_string())?),
+        &options,
+        |_| Ok(Default::default()),
+    )
+    .map_err(|e| format!("invalid OBJ: {e}"))?;
+    let mut raw = RawMesh::default();
+    let all_normals = models.iter().all(|m| !m.mesh.normals.is_empty());
+    let any_uvs = models.iter().any(|m| !m.mesh.texcoords.is_empty());
+    let mut normals = Vec::new();
+    let mut uvs = Vec::new();
+    for model in &models {
+        let m = &model.mesh;
+        let base = raw.positions.len() as u32;
+        let count = m.positions.len() / 3;
+        raw.positions.extend(
+            m.positions
+                .chunks_exact(3)
+                .map(|c| Vec3::new(c[0], c[1], c[2])),
+        );
+        if all_normals {
+            if m.normals.len() != m.positions.len() {
+                return Err("normal count differs from vertex count".into());
+            }
+            normals.extend(
+                m.normals
+                    .chunks_exact(3)
+                    .map(|c| Vec3::new(c[0], c[1], c[2])),
+            );
+        }
+        if any_uvs {
+            if m.texcoords.is_empty() {
+                uvs.extend(std::iter::repeat_n(Vec2::ZERO, count));
+            } else if m.texcoords.len() / 2 == count {
+                uvs.extend(m.texcoords.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])));
+            } else {
+                return Err("texture coordinate count differs from vertex count".into());
+            }
+        }
+        // Polygons: face_arities lists corner counts (empty = all triangles).
+        let mut offset = 0usize;
+        let arities: Vec<u32> = if m.face_arities.is_empty() {
+            vec![3; m.indices.len() / 3]
+        } else {
+            m.face_arities.clone()
+        };
+        for a in arities {
+            let end = offset + a as usize;
+            let Some(corners) = m.indices.get(offset..end) else {
+                return Err("inconsistent face data".into());
+            };
+            if a >= 3 {
+                raw.polygons
+                    .push(corners.iter().map(|i| base + i).collect());
+            }
+            offset = end;
+        }
+    }
+    if all_normals && !models.is_empty() {
+        raw.normals = Some(normals);
+    }
+    if any_uvs {
+        raw.uvs = Some(uvs);
+    }
+    Ok(raw)
+}
+
+/// Reads a PLY (ASCII or binary) with `vertex` (x, y, z, optional nx/ny/nz and u/v, s/t or
+/// texture_u/texture_v) and `face` (`vertex_indices` or `vertex_index`) elements.
+fn load_ply(path: &Path) -> Result<RawMesh, String> {
+    use ply_rs_bw::parser::Parser;
+    use ply_rs_bw::ply::{DefaultElement, Property};
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let mut reader = std::io::BufReader::new(file);
+    let ply = Parser::<DefaultElement>::new()
+        .read_ply(&mut reader)
+        .map_err(|e| format!("invalid PLY: {e}"))?;
+    let scalar =
+        |e: &DefaultElement, k: &str| -> Option<f32> { e.get(k).and_then(|p| p.to_f32_lossy()) };
+    let vertices = ply.payload.get("vertex").ok_or("no \"vertex\" element")?;
+    let faces = ply.payload.get("face").ok_or("no \"face\" element")?;
+    let mut raw = RawMesh::default();
+    let has = |k: &str| vertices.first().is_some_and(|v| v.contains_key(k));
+    let has_normals = has("nx") && has("ny") && has("nz");
+    let uv_keys = [
+        ("u", "v"),
+        ("s", "t"),
+        ("texture_u", "texture_v"),
+        ("texture_s", "texture_t"),
+    ]
+    .into_iter()
+    .find(|(u, v)| has(u) && has(v));
+    let mut normals = Vec::new();
+    let mut uvs = Vec::new();
+    for v in vertices {
+        let get = |k: &str| scalar(v, k).ok_or_else(|| format!("vertex without numeric \"{k}\""));
+        raw.positions
+            .push(Vec3::new(get("x")?, get("y")?, get("z")?));
+        if has_normals {
+            normals.push(Vec3::new(get("nx")?, get("ny")?, get("nz")?));
+        }
+        if let Some((ku, kv)) = uv_keys {
+            uvs.push(Vec2::new(get(ku)?, get(kv)?));
+        }
+    }
+    for f in faces {
+        let list = f
+            .get("vertex_indices")
+            .or_else(|| f.get("vertex_index"))
+            .ok_or("face without \"vertex_indices\"")?;
+        let idx: Vec<i64> = match list {
+            Property::ListChar(l) => l.iter().map(|&x| x as i64).collect(),
+            Property::ListUChar(l) => l.iter().map(|&x| x as i64).collect(),
+            Property::ListShort(l) => l.iter().map(|&x| x as i64).collect(),
+            Property::ListUShort(l) => l.iter().map(|&x| x as i64).collect(),
+            Property::ListInt(l) => l.iter().map(|&x| x as i64).collect(),
+            Property::ListUInt(l) => l.iter().map(|&x| x as i64).collect(),
+            _ => return Err("face indices are not an integer list".into()),
+        };
+        if idx.len() < 3 {
+            continue;
+        }
+        if let Some(bad) = idx.iter().find(|&&i| i < 0 || i > i64::from(u32::MAX)) {
+            return Err(format!("invalid vertex index {bad}"));
+        }
+        raw.polygons
+            .push(idx.into_iter().map(|i| i as u32).collect());
+    }
+    if has_normals {
+        raw.normals = Some(normals);
+    }
+    if uv_keys.is_some() {
+        raw.uvs = Some(uvs);
+    }
+    Ok(raw)
+}

@@ -1,0 +1,112 @@
+//! `<texture>` plugins: `checkerboard` and `bitmap` (PNG or EXR, paths relative to the XML file).
+
+use super::props::Props;
+use super::{Builder, Element, SceneError};
+use crate::image_io;
+use crate::spectrum::SpectrumKind;
+use crate::texture::{Bitmap, BitmapFilter, Texture};
+use glam::{Mat3, Mat4};
+use std::sync::Arc;
+
+/// Builds the texture declared by a `<texture>` element.
+pub(super) fn build_texture<'a>(
+    b: &mut Builder<'a>,
+    el: &'a Element,
+) -> Result<Texture, SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    let mut p = Props::parse(b, el)?;
+    let tex = match kind {
+        "checkerboard" => {
+            let refl = SpectrumKind::Reflectance;
+            let color0 = p
+                .constant_color(b, "color0", refl)?
+                .unwrap_or(glam::Vec3::splat(0.4));
+            let color1 = p
+                .constant_color(b, "color1", refl)?
+                .unwrap_or(glam::Vec3::splat(0.2));
+            Texture::Checkerboard {
+                color0,
+                color1,
+                to_uv: to_uv(&mut p)?,
+            }
+        }
+        "bitmap" => {
+            let file_el = p.element_of("filename");
+            let Some(filename) = p.string("filename")? else {
+                return Err(el.error("missing parameter \"filename\""));
+            };
+            let raw = p.bool_or("raw", false)?;
+            let filter_el = p.element_of("filter_type");
+            let filter = match p.string("filter_type")?.unwrap_or("bilinear") {
+                "bilinear" => BitmapFilter::Bilinear,
+                "nearest" => BitmapFilter::Nearest,
+                other => {
+                    return Err(filter_el.error(format!(
+                        "unknown filter_type \"{other}\" (use \"bilinear\" or \"nearest\")"
+                    )))
+                }
+            };
+            let wrap_el = p.element_of("wrap_mode");
+            match p.string("wrap_mode")?.unwrap_or("repeat") {
+                "repeat" => {}
+                other => b.diag.unknown(wrap_el.error(format!(
+                    "wrap_mode \"{other}\" is not supported (only \"repeat\")"
+                )))?,
+            }
+            let to_uv = to_uv(&mut p)?;
+            let path = file_el.resolve_path(filename);
+            let key = (path.clone(), raw);
+            let image = match b.bitmaps.get(&key) {
+                Some(img) => img.clone(),
+                None => {
+                    let (width, height, texels) = image_io::read_rgb_image_encoded(&path, raw)
+                        .map_err(|e| file_el.error(format!("cannot load bitmap: {e}")))?;
+                    if texels.is_empty() {
+                        return Err(
+                            file_el.error(format!("bitmap \"{}\" is empty", path.display()))
+                        );
+                    }
+                    let img = Arc::new(Bitmap {
+                        width,
+                        height,
+                        texels,
+                    });
+                    b.bitmaps.insert(key, img.clone());
+                    img
+                }
+            };
+            Texture::Bitmap {
+                image,
+                filter,
+                to_uv,
+            }
+        }
+        other => {
+            let err = el.error(format!(
+                "unknown plugin \"{other}\" (supported textures: checkerboard, bitmap)"
+            ));
+            b.diag.unknown(err)?;
+            return Ok(Texture::Constant(glam::Vec3::splat(0.5)));
+        }
+    };
+    p.finish(b)?;
+    Ok(tex)
+}
+
+/// `to_uv`: Mitsuba takes the 2-D affine part (x/y rows and columns plus the translation) of
+/// the 4×4 transform written in the file.
+fn to_uv(p: &mut Props) -> Result<Mat3, SceneError> {
+    Ok(p.transform("to_uv")?
+        .map(uv_affine)
+        .unwrap_or(Mat3::IDENTITY))
+}
+
+/// The 2-D affine part of a 4×4 transform, as a 3×3 matrix acting on (u, v, 1).
+pub(crate) fn uv_affine(m: Mat4) -> Mat3 {
+    Mat3::from_cols(
+        glam::Vec3::new(m.x_axis.x, m.x_axis.y, 0.0),
+        glam::Vec3::new(m.y_axis.x, m.y_axis.y, 0.0),
+        glam::Vec3::new(m.w_axis.x, m.w_axis.y, 1.0),
+    )
+}
