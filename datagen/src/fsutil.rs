@@ -9,15 +9,28 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// Distinguishes temp files of concurrent writers inside one process.
 static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
-/// A temp-file path next to `path`, unique per process and call; it starts with `.` and
-/// contains `.tmp` so checks and clean-up can recognise leftovers of killed runs.
+/// A short tag of this machine (hash of its host name), so a shared directory can tell whose
+/// leftover temp files it may clean: process ids are only meaningful on their own host.
+pub fn host_tag() -> String {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+        .unwrap_or_default();
+    format!("{:016x}", crate::rng::hash_str(host.trim()))
+}
+
+/// A temp-file path next to `path`, unique per host, process and call:
+/// `.<name>.tmp-<pid>-<counter>-<host tag>`. Leftovers of killed runs are recognisable.
 pub fn temp_path(path: &Path) -> PathBuf {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let k = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
-    path.with_file_name(format!(".{name}.tmp{}-{k}", std::process::id()))
+    path.with_file_name(format!(
+        ".{name}.tmp-{}-{k}-{}",
+        std::process::id(),
+        host_tag()
+    ))
 }
 
 /// Writes `bytes` to `path` atomically: readers see the old file or the whole new one, never
@@ -76,9 +89,11 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// Removes leftover temp files (names containing `.tmp` and starting with `.`) of processes
-/// that are no longer running, recursively under `dir`. Returns how many were removed.
+/// Removes leftover temp files of [`temp_path`] made on this host by processes that are no
+/// longer running, recursively under `dir` (temp files of other hosts are left alone: their
+/// writers may still be alive). Returns how many were removed.
 pub fn remove_stale_temps(dir: &Path) -> usize {
+    let host = host_tag();
     let mut removed = 0;
     let Ok(entries) = std::fs::read_dir(dir) else {
         return 0;
@@ -88,16 +103,18 @@ pub fn remove_stale_temps(dir: &Path) -> usize {
         let name = entry.file_name().to_string_lossy().into_owned();
         if path.is_dir() {
             removed += remove_stale_temps(&path);
-        } else if name.starts_with('.') && name.contains(".tmp") {
-            let pid = name
-                .rsplit(".tmp")
-                .next()
-                .and_then(|s| s.split('-').next())
-                .and_then(|s| s.parse::<u32>().ok());
-            let alive = pid.is_some_and(|p| Path::new(&format!("/proc/{p}")).exists());
-            if !alive && std::fs::remove_file(&path).is_ok() {
-                removed += 1;
-            }
+            continue;
+        }
+        let Some((_, tail)) = name.split_once(".tmp-") else {
+            continue;
+        };
+        let mut fields = tail.splitn(3, '-');
+        let pid = fields.next().and_then(|p| p.parse::<u32>().ok());
+        let _counter = fields.next();
+        let tag_ok = fields.next().is_some_and(|t| t.starts_with(&host));
+        let alive = pid.is_some_and(|p| Path::new(&format!("/proc/{p}")).exists());
+        if name.starts_with('.') && tag_ok && !alive && std::fs::remove_file(&path).is_ok() {
+            removed += 1;
         }
     }
     removed

@@ -2,9 +2,14 @@
 //! families written as Mitsuba 3 XML + PLY, kill-safe sharded rendering of references and input
 //! bundles, the dataset manifest, dataset checks and contact sheets. See `docs/datagen.md`.
 
+pub mod check;
 pub mod config;
+pub mod contact_sheet;
+pub mod exr_canon;
 pub mod families;
 pub mod fsutil;
+pub mod jobs;
+pub mod manifest;
 pub mod mesh;
 pub mod plan;
 pub mod ply;

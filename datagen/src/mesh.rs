@@ -226,7 +226,17 @@ pub fn blob(rng: &mut Rng, radius: f32, lobes: u32, bumpiness: f32, rings: u32) 
             tris.push([ring(i, j), ring(i + 1, j + 1), ring(i + 1, j)]);
         }
     }
-    // Winding above is outward-facing for a star-shaped surface; make that the normal side.
+    // Make the winding face outwards (positive enclosed volume), then derive normals from it.
+    let probe = Mesh {
+        positions: mesh.positions.clone(),
+        triangles: tris.clone(),
+        ..Mesh::default()
+    };
+    if signed_volume(&probe) < 0.0 {
+        for t in &mut tris {
+            t.swap(1, 2);
+        }
+    }
     let mut normals = vec![Vec3::ZERO; mesh.positions.len()];
     for t in &tris {
         let p = |k: usize| mesh.positions[t[k] as usize];

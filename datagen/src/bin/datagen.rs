@@ -1,11 +1,18 @@
 //! `datagen`: generate randomized scenes, render datasets (sharded, kill-safe), assemble and
 //! check manifests, and draw contact sheets. See `docs/datagen.md`.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
+use datagen::check::check_dataset;
 use datagen::config::Config;
+use datagen::contact_sheet::{write_contact_sheet, SheetLayout};
 use datagen::families::{generate, scene_list};
+use datagen::jobs::{render_dataset, RenderOptions};
+use datagen::manifest::{assemble_manifest, Manifest};
+use datagen::plan::{Plan, Shard};
 use datagen::scene::write_scene_files;
+// PENDING use datagen::sppm_backend::SppmBackend;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::PathBuf;
 
 /// Dataset generation for multi-level SPPM post-reconstruction.
@@ -27,27 +34,189 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Render references and input bundles into OUT (resumable; shards share OUT).
+    Render {
+        /// Dataset config (TOML).
+        #[arg(long)]
+        config: PathBuf,
+        /// Dataset directory (shared by all shards).
+        #[arg(long)]
+        out: PathBuf,
+        /// Run shard I of N (0-based). Default: from SLURM_ARRAY_TASK_ID/SLURM_ARRAY_TASK_COUNT
+        /// or JOB_COMPLETION_INDEX/DATAGEN_SHARD_COUNT when set, else the whole dataset.
+        #[arg(long, value_parser = Shard::parse)]
+        shard: Option<Shard>,
+        /// Worker threads per render (0 = all cores; output does not depend on it).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// No progress bars.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Assemble OUT/manifest.json from the job records (done automatically by the last shard).
+    Manifest {
+        /// Dataset config (TOML).
+        #[arg(long)]
+        config: PathBuf,
+        /// Dataset directory.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Verify a dataset against its manifest; exit status 1 on any problem.
+    Check {
+        /// Dataset directory.
+        dir: PathBuf,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Write a PNG grid of a dataset's reference images.
+    ContactSheet {
+        /// Dataset directory.
+        dir: PathBuf,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+        /// Tiles per row.
+        #[arg(long, default_value_t = 8)]
+        columns: usize,
+        /// Tile width in pixels.
+        #[arg(long, default_value_t = 160)]
+        tile: usize,
+    },
 }
 
 fn main() {
-    if let Err(e) = run(Cli::parse()) {
-        eprintln!("datagen: error: {e:#}");
-        std::process::exit(1);
+    match run(Cli::parse()) {
+        Ok(code) => std::process::exit(code),
+        Err(e) => {
+            eprintln!("datagen: error: {e:#}");
+            std::process::exit(2);
+        }
     }
 }
 
-fn run(cli: Cli) -> Result<()> {
+/// Runs a command; returns the exit status.
+fn run(cli: Cli) -> Result<i32> {
     match cli.command {
         Command::Scenes { config, out } => {
             let config = Config::load(&config)?;
             let list = scene_list(&config);
             for (index, (id, _)) in list.iter().enumerate() {
                 let scene = generate(&config, index);
-                let xml = write_scene_files(&scene, &out.join(id))
+                write_scene_files(&scene, &out.join(id))
                     .with_context(|| format!("writing scene {id}"))?;
-                println!("{}", xml.display());
             }
-            Ok(())
+            eprintln!("wrote {} scenes to {}", list.len(), out.display());
+            Ok(0)
+        }
+        Command::Render {
+            config,
+            out,
+            shard,
+            threads,
+            quiet,
+        } => {
+            let config = Config::load(&config)?;
+            let env_shard =
+                Shard::from_env(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?;
+            let shard = shard.or(env_shard).unwrap_or(Shard::ALL);
+            let options = RenderOptions {
+                shard,
+                threads,
+                progress: !quiet,
+            };
+            let report: datagen::jobs::RenderReport = {
+                let _ = (&config, &out, options, render_dataset);
+                bail!("PENDING renderer xml")
+            };
+            eprintln!(
+                "shard {}/{}: {} jobs rendered, {} already done, {} files; manifest {}",
+                shard.index,
+                shard.count,
+                report.rendered,
+                report.skipped,
+                report.samples,
+                if report.manifest_complete {
+                    "complete"
+                } else {
+                    "waiting for other shards"
+                }
+            );
+            Ok(0)
+        }
+        Command::Manifest { config, out } => {
+            let config = Config::load(&config)?;
+            let plan = Plan::new(&config);
+            match assemble_manifest(&out, &config, &plan)? {
+                Some(m) => {
+                    eprintln!(
+                        "{}: {} scenes, {} samples",
+                        out.join("manifest.json").display(),
+                        m.scenes.len(),
+                        m.samples.len()
+                    );
+                    Ok(0)
+                }
+                None => bail!(
+                    "{}: not every job has finished (rerun `datagen render` for the missing shards)",
+                    out.display()
+                ),
+            }
+        }
+        Command::Check { dir, quiet } => {
+            let bar = ProgressBar::with_draw_target(
+                None,
+                if quiet {
+                    ProgressDrawTarget::hidden()
+                } else {
+                    ProgressDrawTarget::stderr()
+                },
+            );
+            bar.set_style(
+                ProgressStyle::with_template("check {bar:40} {pos}/{len} files ETA {eta}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            let report = check_dataset(&dir, |done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            });
+            bar.finish_and_clear();
+            for p in &report.problems {
+                println!("BAD {p}");
+            }
+            if report.ok() {
+                println!("ok: {} files checked, no problems", report.files);
+                Ok(0)
+            } else {
+                println!(
+                    "{} problem(s) in {} files checked",
+                    report.problems.len(),
+                    report.files
+                );
+                Ok(1)
+            }
+        }
+        Command::ContactSheet {
+            dir,
+            out,
+            columns,
+            tile,
+        } => {
+            let manifest = Manifest::load(&dir)?;
+            let files: Vec<PathBuf> = manifest
+                .scenes
+                .iter()
+                .map(|s| dir.join(&s.reference))
+                .collect();
+            let layout = SheetLayout {
+                columns,
+                tile_width: tile,
+                gap: 2,
+            };
+            let n = write_contact_sheet(&files, layout, &out)?;
+            eprintln!("{}: {n} references", out.display());
+            Ok(0)
         }
     }
 }

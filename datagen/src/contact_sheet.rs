@@ -1,0 +1,122 @@
+//! Contact sheets: a PNG grid of a dataset's reference images (tone-mapped for display), in
+//! scene-id order so families appear in blocks.
+
+use anyhow::{bail, Context, Result};
+use bundle::{read_rgb_exr_image, Image};
+use std::path::{Path, PathBuf};
+
+/// Layout of a contact sheet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SheetLayout {
+    /// Tiles per row.
+    pub columns: usize,
+    /// Tile width in pixels (images are resampled to it, keeping their aspect ratio).
+    pub tile_width: usize,
+    /// Gap between tiles in pixels.
+    pub gap: usize,
+}
+
+/// Display transform: exposure so that the 95th-percentile luminance maps to 0.9, a Reinhard
+/// shoulder, then the sRGB curve. Returns 8-bit RGB.
+pub fn tonemap(img: &Image) -> Vec<[u8; 3]> {
+    let lum: Vec<f32> = img
+        .data
+        .chunks(img.channels)
+        .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
+        .filter(|v| v.is_finite())
+        .collect();
+    let mut sorted = lum.clone();
+    sorted.sort_by(f32::total_cmp);
+    let p95 = sorted
+        .get((sorted.len() as f32 * 0.95) as usize)
+        .copied()
+        .unwrap_or(1.0);
+    let exposure = if p95 > 1e-6 { 0.9 / p95 } else { 1.0 };
+    let encode = |v: f32| {
+        let v = if v.is_finite() {
+            (v * exposure).max(0.0)
+        } else {
+            0.0
+        };
+        let v = v / (1.0 + 0.25 * v) * 1.25; // gentle shoulder, 1 ↦ 1
+        let s = if v <= 0.003_130_8 {
+            12.92 * v
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        };
+        (s.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+    };
+    img.data
+        .chunks(img.channels)
+        .map(|p| [encode(p[0]), encode(p[1]), encode(p[2])])
+        .collect()
+}
+
+/// Box-resamples an 8-bit RGB image to `tw`×`th`.
+fn resample(src: &[[u8; 3]], w: usize, h: usize, tw: usize, th: usize) -> Vec<[u8; 3]> {
+    let mut out = vec![[0u8; 3]; tw * th];
+    for ty in 0..th {
+        let (y0, y1) = (ty * h / th, ((ty + 1) * h / th).max(ty * h / th + 1));
+        for tx in 0..tw {
+            let (x0, x1) = (tx * w / tw, ((tx + 1) * w / tw).max(tx * w / tw + 1));
+            let mut acc = [0u32; 3];
+            let mut n = 0;
+            for y in y0..y1.min(h) {
+                for x in x0..x1.min(w) {
+                    for c in 0..3 {
+                        acc[c] += u32::from(src[y * w + x][c]);
+                    }
+                    n += 1;
+                }
+            }
+            let n = n.max(1);
+            out[ty * tw + tx] = [(acc[0] / n) as u8, (acc[1] / n) as u8, (acc[2] / n) as u8];
+        }
+    }
+    out
+}
+
+/// Builds the sheet from reference EXRs and writes it as PNG. Returns the image count.
+pub fn write_contact_sheet(files: &[PathBuf], layout: SheetLayout, out: &Path) -> Result<usize> {
+    if files.is_empty() {
+        bail!("no reference images to put on a contact sheet");
+    }
+    let images = files
+        .iter()
+        .map(|f| read_rgb_exr_image(f).map_err(anyhow::Error::from))
+        .collect::<Result<Vec<_>>>()?;
+    let first = &images[0];
+    let tw = layout.tile_width.max(1);
+    let th = (tw * first.height / first.width.max(1)).max(1);
+    let cols = layout.columns.max(1).min(images.len());
+    let rows = images.len().div_ceil(cols);
+    let g = layout.gap;
+    let (sw, sh) = (cols * tw + (cols + 1) * g, rows * th + (rows + 1) * g);
+    let mut sheet = image::RgbImage::from_pixel(sw as u32, sh as u32, image::Rgb([24, 24, 24]));
+    for (k, img) in images.iter().enumerate() {
+        let tile = resample(&tonemap(img), img.width, img.height, tw, th);
+        let (ox, oy) = (g + (k % cols) * (tw + g), g + (k / cols) * (th + g));
+        for y in 0..th {
+            for x in 0..tw {
+                sheet.put_pixel(
+                    (ox + x) as u32,
+                    (oy + y) as u32,
+                    image::Rgb(tile[y * tw + x]),
+                );
+            }
+        }
+    }
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)?;
+    }
+    let mut bytes = Vec::new();
+    sheet
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .context("encoding PNG")?;
+    crate::fsutil::write_atomic(out, &bytes)
+        .with_context(|| format!("writing {}", out.display()))?;
+    Ok(images.len())
+}

@@ -1,0 +1,327 @@
+//! Running the dataset's render jobs: skip a job whose record and outputs are intact, else
+//! (re)write its scene files, render, write every output atomically, then its record; finally
+//! assemble the manifest when every job of every shard is done. Rendering itself is behind
+//! [`SampleRenderer`] so the bookkeeping is independent of the integrator.
+
+use crate::config::Config;
+use crate::exr_canon::sort_header_attributes;
+use crate::families::generate;
+use crate::fsutil::{remove_stale_temps, sha256_file, temp_path, write_atomic};
+use crate::manifest::{
+    assemble_manifest, config_fingerprint, outputs_intact, read_record, to_json, JobRecord,
+    SampleEntry, SceneEntry, MANIFEST_FORMAT,
+};
+use crate::plan::{Job, Plan, Shard};
+use crate::scene::write_scene_files;
+use anyhow::{bail, Context, Result};
+use bundle::{write_bundle, write_rgb_exr_image, Bundle, Image};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::path::Path;
+use std::time::Instant;
+
+/// What one render run needs to know.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSpec {
+    /// Scene id (written into bundle metadata).
+    pub scene_id: String,
+    /// Render seed.
+    pub seed: u64,
+    /// Photons per pass.
+    pub photons_per_pass: u64,
+    /// Pass counts to deliver (ascending); the reference uses only the last.
+    pub passes: Vec<u32>,
+    /// Maximum path depth.
+    pub max_depth: u32,
+    /// Worker threads (0 = all cores); results do not depend on it.
+    pub threads: usize,
+}
+
+/// Renders references and input bundles of one scene file.
+pub trait SampleRenderer: Sync {
+    /// Renders the long reference run and returns its RGB reference image.
+    fn reference(
+        &self,
+        xml: &Path,
+        spec: &RunSpec,
+        on_pass: &mut (dyn FnMut(u32) + Send),
+    ) -> Result<Image>;
+
+    /// Renders one continuing input run, handing over a bundle at each of `spec.passes`.
+    fn inputs(
+        &self,
+        xml: &Path,
+        spec: &RunSpec,
+        on_bundle: &mut (dyn FnMut(Bundle) -> Result<()> + Send),
+        on_pass: &mut (dyn FnMut(u32) + Send),
+    ) -> Result<()>;
+}
+
+/// Options of a `datagen render` invocation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderOptions {
+    /// Which jobs this process runs.
+    pub shard: Shard,
+    /// Worker threads per render (0 = all cores).
+    pub threads: usize,
+    /// Draw progress bars on stderr.
+    pub progress: bool,
+}
+
+/// Counts of a finished invocation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RenderReport {
+    /// Jobs rendered now.
+    pub rendered: usize,
+    /// Jobs skipped because their outputs were already valid.
+    pub skipped: usize,
+    /// Files (bundles + references) this shard is responsible for.
+    pub samples: usize,
+    /// Whether `manifest.json` is complete (all shards done).
+    pub manifest_complete: bool,
+}
+
+/// Relative amount of work of a job, for the overall progress bar's ETA.
+fn job_work(config: &Config, job: &Job) -> u64 {
+    let pixels = u64::from(config.width) * u64::from(config.height);
+    let r = &config.render;
+    match job {
+        Job::Reference { .. } => {
+            u64::from(r.reference_passes) * (r.reference_photons_per_pass + 2 * pixels)
+        }
+        Job::Inputs { .. } => {
+            u64::from(*r.passes.last().unwrap_or(&0)) * (r.photons_per_pass + 2 * pixels)
+        }
+    }
+}
+
+/// Output files of a job.
+fn job_files(config: &Config, job: &Job) -> usize {
+    match job {
+        Job::Reference { .. } => 1,
+        Job::Inputs { .. } => config.render.passes.len(),
+    }
+}
+
+/// Runs this shard's jobs of `config` into the dataset directory `root`.
+pub fn render_dataset(
+    config: &Config,
+    root: &Path,
+    options: RenderOptions,
+    renderer: &dyn SampleRenderer,
+) -> Result<RenderReport> {
+    std::fs::create_dir_all(root).with_context(|| format!("creating {}", root.display()))?;
+    remove_stale_temps(root);
+    let plan = Plan::new(config);
+    let fingerprint = config_fingerprint(config);
+    let mine = plan.shard_jobs(options.shard);
+    let multi = MultiProgress::with_draw_target(if options.progress {
+        ProgressDrawTarget::stderr()
+    } else {
+        ProgressDrawTarget::hidden()
+    });
+    let total_work: u64 = mine.iter().map(|&j| job_work(config, &plan.jobs[j])).sum();
+    let overall = multi.add(ProgressBar::new(total_work.max(1)));
+    overall.set_style(
+        ProgressStyle::with_template(
+            "{prefix} [{elapsed_precise}] {wide_bar} {percent:>3}% {msg} ETA {eta_precise}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let shard = options.shard;
+    overall.set_prefix(format!("shard {}/{}", shard.index, shard.count));
+    let total_files: usize = mine.iter().map(|&j| job_files(config, &plan.jobs[j])).sum();
+    let mut report = RenderReport {
+        samples: total_files,
+        ..Default::default()
+    };
+    let mut files_done = 0;
+    let mut work_done = 0u64;
+    overall.set_message(format!("{files_done}/{total_files} samples"));
+    for &j in &mine {
+        let job = plan.jobs[j];
+        let work = job_work(config, &job);
+        let existing = read_record(root, &plan, &job, &fingerprint);
+        if existing.is_some_and(|r| outputs_intact(root, &r)) {
+            report.skipped += 1;
+        } else {
+            let passes = match job {
+                Job::Reference { .. } => config.render.reference_passes,
+                Job::Inputs { .. } => *config.render.passes.last().unwrap_or(&0),
+            };
+            let bar = multi.add(ProgressBar::new(u64::from(passes)));
+            bar.set_style(
+                ProgressStyle::with_template("  {msg:24} {bar:30} {pos}/{len} passes {per_sec}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            let scene_id = &plan.scenes[job.scene()].id;
+            bar.set_message(match job {
+                Job::Reference { .. } => format!("{scene_id} reference"),
+                Job::Inputs { seed_index, .. } => format!("{scene_id} seed {seed_index}"),
+            });
+            let start = Instant::now();
+            let mut on_pass = |pass: u32| {
+                bar.set_position(u64::from(pass));
+                overall.set_position(work_done + work * u64::from(pass) / u64::from(passes.max(1)));
+            };
+            let record = run_job(
+                config,
+                root,
+                &plan,
+                &job,
+                &fingerprint,
+                options,
+                renderer,
+                &mut on_pass,
+            )
+            .with_context(|| format!("job {}", plan.record_path(&job)))?;
+            bar.finish_and_clear();
+            multi.remove(&bar);
+            write_atomic(&root.join(plan.record_path(&job)), &to_json(&record))
+                .with_context(|| format!("writing {}", plan.record_path(&job)))?;
+            // Wall-clock timing is useful but not reproducible: it lives outside the records.
+            let timing = serde_json::json!({ "seconds": start.elapsed().as_secs_f64() });
+            let _ = write_atomic(&root.join(plan.timing_path(&job)), &to_json(&timing));
+            report.rendered += 1;
+        }
+        files_done += job_files(config, &job);
+        overall.set_message(format!("{files_done}/{total_files} samples"));
+        work_done += work;
+        overall.set_position(work_done);
+    }
+    overall.finish();
+    report.manifest_complete = assemble_manifest(root, config, &plan)?.is_some();
+    Ok(report)
+}
+
+/// Renders one job and writes its outputs; returns its record (not yet written).
+#[allow(clippy::too_many_arguments)]
+fn run_job(
+    config: &Config,
+    root: &Path,
+    plan: &Plan,
+    job: &Job,
+    fingerprint: &str,
+    options: RenderOptions,
+    renderer: &dyn SampleRenderer,
+    on_pass: &mut (dyn FnMut(u32) + Send),
+) -> Result<JobRecord> {
+    let sp = &plan.scenes[job.scene()];
+    let scene = generate(config, sp.index);
+    let xml = write_scene_files(&scene, &root.join(sp.scene_dir()))?;
+    let r = &config.render;
+    let seed = plan.render_seed(job);
+    let mut record = JobRecord {
+        format: MANIFEST_FORMAT.into(),
+        config_sha256: fingerprint.to_owned(),
+        scene: None,
+        samples: Vec::new(),
+    };
+    match *job {
+        Job::Reference { .. } => {
+            let spec = RunSpec {
+                scene_id: sp.id.clone(),
+                seed,
+                photons_per_pass: r.reference_photons_per_pass,
+                passes: vec![r.reference_passes],
+                max_depth: r.max_depth,
+                threads: options.threads,
+            };
+            let image = renderer.reference(&xml, &spec, on_pass)?;
+            if (image.width, image.height) != (config.width as usize, config.height as usize) {
+                bail!(
+                    "{}: reference is {}x{}, config says {}x{}",
+                    xml.display(),
+                    image.width,
+                    image.height,
+                    config.width,
+                    config.height
+                );
+            }
+            let rel = sp.reference();
+            let path = root.join(&rel);
+            write_output(&path, |tmp| {
+                write_rgb_exr_image(tmp, &image).map_err(Into::into)
+            })?;
+            record.scene = Some(SceneEntry {
+                id: sp.id.clone(),
+                family: sp.family,
+                split: sp.split,
+                xml: sp.scene_xml(),
+                reference: rel,
+                reference_sha256: sha256_file(&path)?,
+                reference_seed: seed,
+                reference_passes: r.reference_passes,
+                reference_photons: r.reference_photons_per_pass,
+            });
+        }
+        Job::Inputs { seed_index, .. } => {
+            let spec = RunSpec {
+                scene_id: sp.id.clone(),
+                seed,
+                photons_per_pass: r.photons_per_pass,
+                passes: r.passes.clone(),
+                max_depth: r.max_depth,
+                threads: options.threads,
+            };
+            let mut on_bundle = |mut b: Bundle| -> Result<()> {
+                let passes = b.meta.passes;
+                if !r.passes.contains(&passes) {
+                    bail!("renderer delivered a bundle at {passes} passes, not a configured count");
+                }
+                // Wall-clock seconds would make reruns differ; timings go to `timings/`.
+                b.meta.seconds = 0.0;
+                let rel = plan.bundle_path(sp.index, seed_index, passes);
+                let path = root.join(&rel);
+                write_output(&path, |tmp| {
+                    write_bundle(tmp, &b)?;
+                    // Byte-reproducible headers (see `exr_canon`).
+                    let mut bytes = std::fs::read(tmp)?;
+                    sort_header_attributes(&mut bytes)?;
+                    std::fs::write(tmp, &bytes)?;
+                    Ok(())
+                })?;
+                record.samples.push(SampleEntry {
+                    bundle: rel,
+                    scene: sp.id.clone(),
+                    family: sp.family,
+                    split: sp.split,
+                    seed,
+                    seed_index,
+                    passes,
+                    photons: r.photons_per_pass,
+                    reference: sp.reference(),
+                    sha256: sha256_file(&path)?,
+                });
+                Ok(())
+            };
+            renderer.inputs(&xml, &spec, &mut on_bundle, on_pass)?;
+            let got: Vec<u32> = record.samples.iter().map(|s| s.passes).collect();
+            if got != r.passes {
+                bail!(
+                    "renderer delivered bundles at {got:?} passes, expected {:?}",
+                    r.passes
+                );
+            }
+        }
+    }
+    Ok(record)
+}
+
+/// Writes an output through `write` into a unique temp file, then renames it into place.
+fn write_output(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("creating {}", parent.display()))?;
+    }
+    let tmp = temp_path(path);
+    let result = write(&tmp).and_then(|()| {
+        std::fs::File::open(&tmp)
+            .and_then(|f| f.sync_all())
+            .with_context(|| format!("syncing {}", tmp.display()))?;
+        std::fs::rename(&tmp, path).with_context(|| format!("renaming onto {}", path.display()))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}

@@ -1,0 +1,197 @@
+//! The dataset manifest (`manifest.json`, read by the training side) and the per-job
+//! completion records (`records/<scene>/<job>.json`) it is assembled from. A record is written
+//! last, after all of its job's outputs, so its presence means the job finished; the manifest
+//! is the sorted union of all records and is identical however the jobs were sharded.
+
+use crate::config::Config;
+use crate::fsutil::{sha256_bytes, sha256_file, write_if_changed};
+use crate::plan::{Job, Plan, Split};
+use crate::scene::Family;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Format identifier of `manifest.json` and of job records.
+pub const MANIFEST_FORMAT: &str = "sppm-ml-dataset/1";
+
+/// File name of the manifest in the dataset root.
+pub const MANIFEST_FILE: &str = "manifest.json";
+
+/// One input bundle of the dataset.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SampleEntry {
+    /// Bundle EXR path relative to the dataset root.
+    pub bundle: String,
+    /// Scene id.
+    pub scene: String,
+    /// Scene family.
+    pub family: Family,
+    /// Split of the scene.
+    pub split: Split,
+    /// Render seed of the input run (< 2³²).
+    pub seed: u64,
+    /// Seed number 0..seeds within the scene.
+    pub seed_index: u32,
+    /// SPPM passes accumulated in this bundle.
+    pub passes: u32,
+    /// Photons per pass.
+    pub photons: u64,
+    /// Reference EXR path relative to the dataset root.
+    pub reference: String,
+    /// Lower-case hex SHA-256 of the bundle file.
+    pub sha256: String,
+}
+
+/// One scene of the dataset with its reference.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneEntry {
+    /// Scene id.
+    pub id: String,
+    /// Family.
+    pub family: Family,
+    /// Split.
+    pub split: Split,
+    /// Scene XML path relative to the dataset root.
+    pub xml: String,
+    /// Reference EXR path relative to the dataset root.
+    pub reference: String,
+    /// Lower-case hex SHA-256 of the reference file.
+    pub reference_sha256: String,
+    /// Render seed of the reference run.
+    pub reference_seed: u64,
+    /// Passes of the reference run.
+    pub reference_passes: u32,
+    /// Photons per pass of the reference run.
+    pub reference_photons: u64,
+}
+
+/// What a finished job produced (`records/<scene>/<job>.json`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobRecord {
+    /// [`MANIFEST_FORMAT`].
+    pub format: String,
+    /// Fingerprint of the configuration the job ran under.
+    pub config_sha256: String,
+    /// The scene entry (reference jobs).
+    pub scene: Option<SceneEntry>,
+    /// The sample entries (input jobs), ascending passes.
+    pub samples: Vec<SampleEntry>,
+}
+
+impl JobRecord {
+    /// (relative path, sha256) of every output file of the job.
+    pub fn outputs(&self) -> Vec<(&str, &str)> {
+        let mut out: Vec<(&str, &str)> = self
+            .samples
+            .iter()
+            .map(|s| (s.bundle.as_str(), s.sha256.as_str()))
+            .collect();
+        if let Some(s) = &self.scene {
+            out.push((s.reference.as_str(), s.reference_sha256.as_str()));
+        }
+        out
+    }
+}
+
+/// The whole dataset description (`manifest.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// [`MANIFEST_FORMAT`].
+    pub format: String,
+    /// Config preset name.
+    pub name: String,
+    /// Fingerprint of the configuration.
+    pub config_sha256: String,
+    /// Image width of every bundle and reference.
+    pub width: u32,
+    /// Image height of every bundle and reference.
+    pub height: u32,
+    /// Which level of the reference run the reference image is (`y`).
+    pub reference_level: String,
+    /// Scenes in id order.
+    pub scenes: Vec<SceneEntry>,
+    /// Samples ordered by (scene, seed_index, passes).
+    pub samples: Vec<SampleEntry>,
+    /// The configuration itself.
+    pub config: Config,
+}
+
+impl Manifest {
+    /// Reads `DIR/manifest.json`.
+    pub fn load(root: &Path) -> anyhow::Result<Self> {
+        let path = root.join(MANIFEST_FILE);
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+    }
+}
+
+/// Fingerprint of a configuration: SHA-256 of its canonical JSON.
+pub fn config_fingerprint(config: &Config) -> String {
+    // Serialising plain structs cannot fail.
+    sha256_bytes(serde_json::to_string(config).unwrap_or_default().as_bytes())
+}
+
+/// Reads a job record if it exists, parses and belongs to `fingerprint`.
+pub fn read_record(root: &Path, plan: &Plan, job: &Job, fingerprint: &str) -> Option<JobRecord> {
+    let text = std::fs::read_to_string(root.join(plan.record_path(job))).ok()?;
+    let record: JobRecord = serde_json::from_str(&text).ok()?;
+    (record.format == MANIFEST_FORMAT && record.config_sha256 == fingerprint).then_some(record)
+}
+
+/// True when every output of the record exists with the recorded checksum.
+pub fn outputs_intact(root: &Path, record: &JobRecord) -> bool {
+    record
+        .outputs()
+        .iter()
+        .all(|(path, sha)| sha256_file(&root.join(path)).is_ok_and(|s| s == *sha))
+}
+
+/// Pretty JSON with a trailing newline.
+pub fn to_json<T: Serialize>(value: &T) -> Vec<u8> {
+    let mut text = serde_json::to_string_pretty(value).unwrap_or_default();
+    text.push('\n');
+    text.into_bytes()
+}
+
+/// Assembles `manifest.json` from the records if every job of the plan has a record of this
+/// config; writes it atomically (only when its bytes change) and returns it. Returns `None`
+/// (writing nothing) while jobs are missing. Concurrent callers write identical bytes.
+pub fn assemble_manifest(
+    root: &Path,
+    config: &Config,
+    plan: &Plan,
+) -> anyhow::Result<Option<Manifest>> {
+    let fingerprint = config_fingerprint(config);
+    let mut scenes = Vec::new();
+    let mut samples = Vec::new();
+    for job in &plan.jobs {
+        let Some(record) = read_record(root, plan, job, &fingerprint) else {
+            return Ok(None);
+        };
+        scenes.extend(record.scene);
+        samples.extend(record.samples);
+    }
+    scenes.sort_by(|a, b| a.id.cmp(&b.id));
+    samples.sort_by(|a, b| {
+        (&a.scene, a.seed_index, a.passes).cmp(&(&b.scene, b.seed_index, b.passes))
+    });
+    let manifest = Manifest {
+        format: MANIFEST_FORMAT.into(),
+        name: config.name.clone(),
+        config_sha256: fingerprint,
+        width: config.width,
+        height: config.height,
+        reference_level: "y".into(),
+        scenes,
+        samples,
+        config: config.clone(),
+    };
+    let path = root.join(MANIFEST_FILE);
+    write_if_changed(&path, &to_json(&manifest))
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(Some(manifest))
+}

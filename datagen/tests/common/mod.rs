@@ -1,0 +1,56 @@
+//! Shared helpers of the datagen integration tests: tiny configs, directory snapshots.
+
+#![allow(dead_code)]
+
+use datagen::config::Config;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The tiny preset shrunk further for tests: 16×16, the given passes and seeds.
+pub fn test_config(width: u32, passes: &[u32], seeds: u32, reference_passes: u32) -> Config {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/datagen/tiny.toml");
+    let mut c = Config::load(&root).expect("tiny config parses");
+    c.width = width;
+    c.height = width;
+    c.render.passes = passes.to_vec();
+    c.render.seeds = seeds;
+    c.render.reference_passes = reference_passes;
+    c
+}
+
+/// A fresh empty directory under the system temp dir.
+pub fn fresh_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("datagen-it-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Every regular file under `root` (relative path → bytes), except wall-clock `timings/`.
+pub fn snapshot(root: &Path) -> BTreeMap<String, Vec<u8>> {
+    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
+        for e in std::fs::read_dir(dir).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk(root, &p, out);
+            } else {
+                let rel = p.strip_prefix(root).unwrap().to_string_lossy().into_owned();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(root, root, &mut out);
+    out.retain(|k, _| !k.starts_with("timings/"));
+    out
+}
+
+/// Asserts two snapshots hold the same files with the same bytes, naming the first difference.
+pub fn assert_same(a: &BTreeMap<String, Vec<u8>>, b: &BTreeMap<String, Vec<u8>>) {
+    let ka: Vec<_> = a.keys().collect();
+    let kb: Vec<_> = b.keys().collect();
+    assert_eq!(ka, kb, "different file sets");
+    for (k, v) in a {
+        assert!(v == &b[k], "{k} differs");
+    }
+}

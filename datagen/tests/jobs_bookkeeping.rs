@@ -1,0 +1,215 @@
+//! Dataset bookkeeping with a deterministic stand-in renderer (fast): sharding gives the same
+//! files as one process, reruns skip valid work and redo damaged work, the manifest is complete
+//! and `check` names truncated and non-finite files.
+
+mod common;
+
+use anyhow::Result;
+use bundle::{read_bundle, write_bundle, Bundle, BundleMeta, Image};
+use common::{assert_same, fresh_dir, snapshot, test_config};
+use datagen::check::check_dataset;
+use datagen::jobs::{render_dataset, RenderOptions, RunSpec, SampleRenderer};
+use datagen::manifest::Manifest;
+use datagen::plan::Shard;
+use datagen::rng::hash_seq;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Images are hashes of (seed, passes, pixel): deterministic, distinct per sample.
+#[derive(Default)]
+struct StandIn {
+    runs: AtomicUsize,
+}
+
+fn value(seed: u64, passes: u32, i: usize, c: usize) -> f32 {
+    (hash_seq(&[seed, u64::from(passes), i as u64, c as u64]) % 1000) as f32 / 1000.0
+}
+
+fn image(spec: &RunSpec, w: usize, h: usize, channels: usize, passes: u32, salt: usize) -> Image {
+    let mut img = Image::new(w, h, channels);
+    for (i, v) in img.data.iter_mut().enumerate() {
+        *v = value(spec.seed, passes, i, salt);
+    }
+    img
+}
+
+fn size(xml: &Path) -> (usize, usize) {
+    let text = std::fs::read_to_string(xml).unwrap();
+    let grab = |name: &str| -> usize {
+        let key = format!("name=\"{name}\" value=\"");
+        let at = text.find(&key).unwrap() + key.len();
+        text[at..].split('"').next().unwrap().parse().unwrap()
+    };
+    (grab("width"), grab("height"))
+}
+
+impl SampleRenderer for StandIn {
+    fn reference(
+        &self,
+        xml: &Path,
+        spec: &RunSpec,
+        _: &mut (dyn FnMut(u32) + Send),
+    ) -> Result<Image> {
+        self.runs.fetch_add(1, Ordering::SeqCst);
+        let (w, h) = size(xml);
+        Ok(image(spec, w, h, 3, spec.passes[0], 0))
+    }
+
+    fn inputs(
+        &self,
+        xml: &Path,
+        spec: &RunSpec,
+        on_bundle: &mut (dyn FnMut(Bundle) -> Result<()> + Send),
+        on_pass: &mut (dyn FnMut(u32) + Send),
+    ) -> Result<()> {
+        self.runs.fetch_add(1, Ordering::SeqCst);
+        let (w, h) = size(xml);
+        for &p in &spec.passes {
+            on_pass(p);
+            on_bundle(Bundle {
+                meta: BundleMeta {
+                    scene: spec.scene_id.clone(),
+                    seed: spec.seed,
+                    passes: p,
+                    photons_per_pass: spec.photons_per_pass,
+                    seconds: 1.5,
+                    integrator: "sppm-ml".into(),
+                    width: w as u32,
+                    height: h as u32,
+                },
+                levels: (0..5).map(|l| image(spec, w, h, 3, p, l + 1)).collect(),
+                variance: image(spec, w, h, 5, p, 10),
+                albedo: image(spec, w, h, 3, p, 11),
+                normal: image(spec, w, h, 3, p, 12),
+                depth: image(spec, w, h, 1, p, 13),
+                radius: Some(image(spec, w, h, 5, p, 14)),
+            })?;
+        }
+        Ok(())
+    }
+}
+
+fn options(shard: Shard) -> RenderOptions {
+    RenderOptions {
+        shard,
+        threads: 1,
+        progress: false,
+    }
+}
+
+#[test]
+fn three_concurrent_shards_equal_one_process_and_reruns_skip() {
+    let config = test_config(16, &[2, 4], 2, 8);
+    let single = fresh_dir("fake-single");
+    let r = StandIn::default();
+    let report = render_dataset(&config, &single, options(Shard::ALL), &r).unwrap();
+    assert!(report.manifest_complete);
+    assert_eq!(report.rendered, 5 * 3);
+    let manifest = Manifest::load(&single).unwrap();
+    assert_eq!(manifest.scenes.len(), 5);
+    assert_eq!(manifest.samples.len(), 5 * 2 * 2);
+    assert!(check_dataset(&single, |_, _| {}).ok());
+
+    let sharded = fresh_dir("fake-sharded");
+    std::thread::scope(|s| {
+        for i in 0..3 {
+            let (config, dir) = (&config, &sharded);
+            s.spawn(move || {
+                let r = StandIn::default();
+                render_dataset(config, dir, options(Shard::new(i, 3).unwrap()), &r).unwrap();
+            });
+        }
+    });
+    assert_same(&snapshot(&single), &snapshot(&sharded));
+
+    // A rerun finds everything valid and renders nothing.
+    let again = StandIn::default();
+    let report = render_dataset(&config, &single, options(Shard::ALL), &again).unwrap();
+    assert_eq!((report.rendered, report.skipped), (0, 15));
+    assert_eq!(again.runs.load(Ordering::SeqCst), 0);
+    std::fs::remove_dir_all(&single).unwrap();
+    std::fs::remove_dir_all(&sharded).unwrap();
+}
+
+#[test]
+fn damaged_outputs_are_named_by_check_and_redone_by_render() {
+    let config = test_config(16, &[2, 4], 1, 8);
+    let dir = fresh_dir("fake-damage");
+    render_dataset(&config, &dir, options(Shard::ALL), &StandIn::default()).unwrap();
+    let clean = snapshot(&dir);
+    let manifest = Manifest::load(&dir).unwrap();
+
+    // Truncate one bundle; put a NaN into another (a valid EXR, new checksum).
+    let truncated = manifest.samples[0].bundle.clone();
+    let bytes = std::fs::read(dir.join(&truncated)).unwrap();
+    std::fs::write(dir.join(&truncated), &bytes[..bytes.len() / 2]).unwrap();
+    let nan = manifest.samples[3].bundle.clone();
+    let mut b = read_bundle(&dir.join(&nan)).unwrap();
+    b.levels[2].set(3, 5, 1, f32::NAN);
+    write_bundle(&dir.join(&nan), &b).unwrap();
+    // Delete a reference.
+    let missing = manifest.scenes[2].reference.clone();
+    std::fs::remove_file(dir.join(&missing)).unwrap();
+
+    let report = check_dataset(&dir, |_, _| {});
+    assert!(!report.ok());
+    let text = report.problems.join("\n");
+    assert!(
+        report
+            .problems
+            .iter()
+            .any(|p| p.starts_with(&truncated) && p.contains("truncated")),
+        "{text}"
+    );
+    assert!(
+        report
+            .problems
+            .iter()
+            .any(|p| p.starts_with(&nan) && p.contains("NaN") && p.contains("z2")),
+        "{text}"
+    );
+    assert!(
+        report.problems.iter().any(|p| p.starts_with(&missing)),
+        "{text}"
+    );
+    // Exactly the three damaged files are named.
+    let named: std::collections::BTreeSet<&str> = report
+        .problems
+        .iter()
+        .map(|p| p.split(':').next().unwrap())
+        .collect();
+    assert_eq!(named.len(), 3, "{text}");
+
+    // Rendering again redoes exactly the three damaged jobs and restores the dataset.
+    let r = StandIn::default();
+    let report = render_dataset(&config, &dir, options(Shard::ALL), &r).unwrap();
+    assert_eq!(report.rendered, 3);
+    assert_same(&clean, &snapshot(&dir));
+    assert!(check_dataset(&dir, |_, _| {}).ok());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn manifest_waits_for_all_shards() {
+    let config = test_config(16, &[2], 1, 4);
+    let dir = fresh_dir("fake-partial");
+    let report = render_dataset(
+        &config,
+        &dir,
+        options(Shard::new(0, 2).unwrap()),
+        &StandIn::default(),
+    )
+    .unwrap();
+    assert!(!report.manifest_complete);
+    assert!(!dir.join("manifest.json").exists());
+    let report = render_dataset(
+        &config,
+        &dir,
+        options(Shard::new(1, 2).unwrap()),
+        &StandIn::default(),
+    )
+    .unwrap();
+    assert!(report.manifest_complete);
+    assert!(check_dataset(&dir, |_, _| {}).ok());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
