@@ -1,1 +1,269 @@
-fn main() {}
+//! `render`: renders a Mitsuba 3 XML scene with the path tracer or (multi-level) SPPM and
+//! writes a float32 RGB EXR and optionally a tone-mapped sRGB PNG.
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use renderer::film::{with_threads, Film};
+use renderer::image_io::{write_png_srgb, write_rgb_exr};
+use renderer::integrators::path::PathTracer;
+use renderer::scene::Scene;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// Which light-transport algorithm renders the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum IntegratorKind {
+    /// Unidirectional path tracer with NEE + MIS (Mitsuba's `path`).
+    Path,
+    /// Single-level stochastic progressive photon mapping (the baseline).
+    Sppm,
+    /// Multi-level SPPM: writes sample bundles with five bandwidths.
+    SppmMl,
+}
+
+/// Render a Mitsuba 3 XML scene.
+#[derive(Debug, Parser)]
+#[command(version, about)]
+struct Cli {
+    /// The scene file (Mitsuba 3 XML).
+    scene: PathBuf,
+    /// Light-transport algorithm.
+    #[arg(long, value_enum, default_value_t = IntegratorKind::Path)]
+    integrator: IntegratorKind,
+    /// Output: an RGB EXR for `path`; the bundle path or prefix for the SPPM integrators.
+    #[arg(long)]
+    out: PathBuf,
+    /// Also write a tone-mapped (clamped, sRGB) PNG preview here.
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// Random seed; the same seed and settings give a bit-identical image for any thread count.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Override a `<default name=… value=…>` of the scene file: `-D spp=64` (repeatable).
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
+    define: Vec<(String, String)>,
+    /// Turn unsupported plugins/attributes into warnings instead of errors.
+    #[arg(long)]
+    lenient: bool,
+    /// Longest path (Mitsuba's `max_depth`; −1 = unbounded). Default: the file's, else −1.
+    #[arg(long, allow_hyphen_values = true)]
+    max_depth: Option<i32>,
+    /// Depth at which Russian roulette starts. Default: the file's, else 5.
+    #[arg(long)]
+    rr_depth: Option<u32>,
+
+    /// Path tracer: samples per pixel. Default: the file's sampler `sample_count`, else 16.
+    #[arg(long, help_heading = "Path tracer")]
+    spp: Option<u32>,
+
+    /// SPPM: photons traced per pass.
+    #[arg(long, default_value_t = 100_000, help_heading = "SPPM")]
+    photons: u64,
+    /// SPPM: pass counts at which to write a bundle, e.g. `100,200,400` (the run stops at the last).
+    #[arg(long, value_delimiter = ',', help_heading = "SPPM")]
+    passes: Vec<u32>,
+    /// SPPM: stop after this many seconds instead (a bundle is written at the end).
+    #[arg(long, help_heading = "SPPM")]
+    time: Option<f64>,
+    /// SPPM: k of the k-nearest-photon initial radius.
+    #[arg(long, default_value_t = renderer::integrators::sppm::DEFAULT_KNN, help_heading = "SPPM")]
+    knn: usize,
+    /// SPPM: cap on the initial radius in world units (default: 1/50 of the scene's diagonal).
+    #[arg(long, help_heading = "SPPM")]
+    max_radius: Option<f32>,
+}
+
+fn parse_define(s: &str) -> Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v.to_string())),
+        _ => Err(format!("expected NAME=VALUE, got '{s}'")),
+    }
+}
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
+    let cli = Cli::parse();
+    let t0 = Instant::now();
+    let desc = renderer::xml::load_scene(&cli.scene, &cli.define, cli.lenient)
+        .with_context(|| format!("loading {}", cli.scene.display()))?;
+    for w in &desc.warnings {
+        eprintln!("warning: {w}");
+    }
+    let scene = Scene::build(&desc).with_context(|| format!("building {}", cli.scene.display()))?;
+    eprintln!(
+        "loaded {} ({} shapes, {} lights) in {:.2} s",
+        cli.scene.display(),
+        scene.shapes.len(),
+        scene.lights.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    with_threads(cli.threads, || match cli.integrator {
+        IntegratorKind::Path => run_path(&cli, &scene),
+        IntegratorKind::Sppm => run_sppm(&cli, &scene, false),
+        IntegratorKind::SppmMl => run_sppm(&cli, &scene, true),
+    })?
+}
+
+/// Depth settings: command line, else the scene file's integrator, else Mitsuba's defaults.
+fn depths(cli: &Cli, scene: &Scene) -> (i32, u32) {
+    let file = scene.integrator.as_ref();
+    let max_depth = cli.max_depth.or(file.map(|i| i.max_depth)).unwrap_or(-1);
+    let rr_depth = cli.rr_depth.or(file.map(|i| i.rr_depth)).unwrap_or(5);
+    (max_depth, rr_depth)
+}
+
+/// A progress bar over `total` units of work, labelled with `unit`.
+fn progress_bar(total: u64, unit: &str) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    let template = format!("{{elapsed_precise}} [{{wide_bar}}] {{human_pos}}/{{human_len}} {unit} ({{per_sec}}, ETA {{eta}})");
+    bar.set_style(ProgressStyle::with_template(&template).expect("valid template").progress_chars("=> "));
+    bar
+}
+
+/// Writes the EXR and, if asked, the PNG preview of a film.
+fn write_outputs(film: &Film, exr: &Path, png: Option<&Path>) -> Result<()> {
+    write_rgb_exr(exr, film.width, film.height, &film.pixels)?;
+    if let Some(png) = png {
+        write_png_srgb(png, film.width, film.height, &film.pixels)?;
+    }
+    Ok(())
+}
+
+/// The `path` integrator.
+fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
+    let spp = cli.spp.or(scene.sample_count).unwrap_or(16);
+    if spp == 0 {
+        bail!("--spp must be at least 1");
+    }
+    let (max_depth, rr_depth) = depths(cli, scene);
+    let res = scene.camera.resolution();
+    let total = res.x as u64 * res.y as u64 * spp as u64;
+    let bar = progress_bar(total, "samples");
+    let t = Instant::now();
+    let film = PathTracer { max_depth, rr_depth }.render(scene, spp, cli.seed, Some(&bar));
+    bar.finish_and_clear();
+    let secs = t.elapsed().as_secs_f64();
+    eprintln!(
+        "path: {}x{} at {spp} spp, max_depth {max_depth}, in {secs:.2} s ({:.2} M samples/s); mean RGB {:?}",
+        res.x,
+        res.y,
+        total as f64 / secs / 1e6,
+        film.mean().to_array()
+    );
+    write_outputs(&film, &cli.out, cli.png.as_deref())
+}
+
+// ---------------------------------------------------------------------------------------------
+// SPPM dispatch arm: owned by the SPPM integrator (renderer::integrators::sppm). It receives the
+// parsed command line (--photons, --passes, --time, --seed, --out, --png, depths) and the scene.
+// ---------------------------------------------------------------------------------------------
+
+/// The `sppm` (single-level) and `sppm-ml` (multi-level) integrators: one continuing run that
+/// writes a bundle `<out>_p<passes>.exr` at each `--passes` checkpoint (or once at `--time`).
+fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
+    use renderer::integrators::sppm::{
+        render_sppm, SppmMode, SppmSettings, StopCondition, DEFAULT_MAX_DEPTH,
+    };
+    if cli.passes.is_empty() && cli.time.is_none() {
+        bail!("SPPM needs --passes N[,N…] and/or --time SECONDS");
+    }
+    if cli.passes.contains(&0) {
+        bail!("--passes values must be at least 1");
+    }
+    let mode = if multi_level { SppmMode::MultiLevel } else { SppmMode::Single };
+    let settings = SppmSettings {
+        photons_per_pass: cli.photons,
+        seed: cli.seed,
+        max_radius: cli.max_radius,
+        knn: cli.knn,
+        mode,
+        // SPPM bounds eye (delta/glossy) and photon bounces; the file's depth is the path
+        // tracer's and is not used.
+        max_depth: cli.max_depth.filter(|&d| d > 0).map_or(DEFAULT_MAX_DEPTH, |d| d as u32),
+        threads: cli.threads,
+        scene_name: cli.scene.display().to_string(),
+        ..SppmSettings::default()
+    };
+    let stop = StopCondition { checkpoints: cli.passes.clone(), seconds: cli.time };
+    let target = cli.passes.iter().copied().max();
+    let bar = match target {
+        Some(n) => progress_bar(n as u64, "passes"),
+        None => ProgressBar::new_spinner(),
+    };
+    if target.is_none() {
+        bar.set_style(
+            ProgressStyle::with_template("{elapsed_precise} {spinner} pass {pos} {msg}")
+                .expect("valid template"),
+        );
+    }
+    let res = scene.camera.resolution();
+    let mut last_bundle = None;
+    let summary = render_sppm(
+        scene,
+        &settings,
+        &stop,
+        |b| {
+            let mut name = cli.out.as_os_str().to_owned();
+            name.push(format!("_p{:04}.exr", b.meta.passes));
+            let path = PathBuf::from(name);
+            bundle::write_bundle(&path, &b)?;
+            bar.println(format!(
+                "pass {:5}: wrote {} ({:.1} s)",
+                b.meta.passes,
+                path.display(),
+                b.meta.seconds
+            ));
+            last_bundle = Some(b);
+            Ok(())
+        },
+        |p| {
+            bar.set_position(p.pass as u64);
+            bar.set_message(format!(
+                "{:.2} passes/s, {:.2} M photons/s",
+                p.pass as f64 / p.elapsed,
+                p.photons_emitted as f64 / p.elapsed / 1e6
+            ));
+        },
+    )?;
+    bar.finish_and_clear();
+    let secs = summary.seconds.max(1e-9);
+    eprintln!(
+        "{}: {}x{}, {} passes x {} photons in {secs:.2} s: {:.3} passes/s, {:.3} M photons/s \
+         (photon pass {:.2} s), {:.3} M visible points/s (eye paths + gathering {:.2} s)",
+        mode.name(),
+        res.x,
+        res.y,
+        summary.passes,
+        settings.photons_per_pass,
+        summary.passes as f64 / secs,
+        summary.photons_emitted as f64 / summary.photon_seconds.max(1e-9) / 1e6,
+        summary.photon_seconds,
+        summary.visible_points as f64 / summary.gather_seconds.max(1e-9) / 1e6,
+        summary.gather_seconds,
+    );
+    if let (Some(png), Some(b)) = (&cli.png, &last_bundle) {
+        // Preview: the sharpest level (y).
+        let y = &b.levels[0];
+        let pixels: Vec<_> = y
+            .data
+            .chunks_exact(3)
+            .map(|c| glam::Vec3::new(c[0], c[1], c[2]))
+            .collect();
+        write_png_srgb(png, res.x, res.y, &pixels)?;
+    }
+    Ok(())
+}
