@@ -271,7 +271,10 @@ mod tests {
         let white = spectrum_list_to_srgb(&[(360.0, 1.0), (830.0, 1.0)], SpectrumKind::Reflectance);
         // Mitsuba's own 1000-step integration gives 0.99898, 0.99887, 0.99880: match it exactly,
         // and (1, 1, 1) to within that discretisation error.
-        assert!(close(white, Rgb::new(0.998_983, 0.998_872, 0.998_802), 1e-5), "{white}");
+        assert!(
+            close(white, Rgb::new(0.998_983, 0.998_872, 0.998_802), 1e-5),
+            "{white}"
+        );
         assert!(close(white, Rgb::ONE, 1.5e-3), "{white}");
         // Over the visible range only, as many scene files write it (Mitsuba: 0.9953, 0.9998, 0.9949).
         let vis = spectrum_list_to_srgb(&[(400.0, 1.0), (700.0, 1.0)], SpectrumKind::Reflectance);

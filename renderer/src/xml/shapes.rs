@@ -238,9 +238,11 @@ fn finish_mesh(
             uv
         }
     });
+    // Unit-length file normals (zero or non-finite ones make the set unusable: recompute).
     let file_normals = raw
         .normals
-        .filter(|ns| ns.iter().all(|v| v.is_finite() && v.length_squared() > 0.0));
+        .filter(|ns| ns.iter().all(|v| v.is_finite() && v.length_squared() > 0.0))
+        .map(|ns| ns.into_iter().map(Vec3::normalize).collect());
     let mut mesh = TriangleMesh {
         positions: raw.positions,
         normals: file_normals,

@@ -1,1 +1,926 @@
-//! Tests of the XML importer.
+//! Tests of the XML importer: error reporting, parameters, transforms, meshes, includes, and
+//! the external validation scenes.
+
+use super::*;
+use crate::bsdf::MicrofacetKind;
+use crate::description::{EmitterDesc, FovAxis, Geometry, TriangleMesh};
+use glam::{Mat4, Vec2, Vec3, Vec4};
+use std::path::PathBuf;
+
+/// A fresh temporary directory for one test.
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("renderer-xml-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes `body` wrapped in a `<scene>` (the first body line is line 2 of the file).
+fn write_scene(dir: &Path, file: &str, body: &str) -> PathBuf {
+    let path = dir.join(file);
+    std::fs::write(
+        &path,
+        format!("<scene version=\"3.0.0\">\n{body}\n</scene>\n"),
+    )
+    .unwrap();
+    path
+}
+
+/// The 1-based line of the first line of `body` containing `marker`, in a file written by
+/// [`write_scene`].
+fn line_of(body: &str, marker: &str) -> usize {
+    body.lines()
+        .position(|l| l.contains(marker))
+        .expect("marker in body")
+        + 2
+}
+
+fn load(path: &Path) -> Result<SceneDescription, SceneError> {
+    load_scene(path, &[], false)
+}
+
+/// Asserts that loading fails with an error at `file:line` whose message contains `needle`.
+fn assert_error_at(path: &Path, line: usize, needle: &str) -> SceneError {
+    let err = load(path).expect_err("the scene must not load");
+    let msg = err.to_string();
+    let file = path.file_name().unwrap().to_string_lossy();
+    let loc = err
+        .location()
+        .unwrap_or_else(|| panic!("no location in: {msg}"));
+    assert_eq!(loc.line as usize, line, "wrong line in: {msg}");
+    assert!(
+        msg.contains(&format!("{file}:{line}:")),
+        "no file:line in: {msg}"
+    );
+    assert!(msg.contains(needle), "\"{needle}\" missing in: {msg}");
+    err
+}
+
+const SENSOR: &str = r#"<sensor type="perspective"><float name="fov" value="40"/>
+<film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="8"/></film></sensor>"#;
+
+#[test]
+fn error_unknown_plugin_names_file_line_and_element() {
+    let dir = temp_dir("unknown-plugin");
+    let body = format!("{SENSOR}\n<shape type=\"sphere\">\n    <bsdf type=\"foo\"/>\n</shape>");
+    let path = write_scene(&dir, "scene.xml", &body);
+    let err = assert_error_at(&path, line_of(&body, "\"foo\""), "unknown plugin \"foo\"");
+    assert!(err.to_string().contains("<bsdf type=\"foo\">"), "{err}");
+    // Column of the element start is reported too.
+    assert_eq!(err.location().unwrap().column, 5);
+    let body = format!("{SENSOR}\n<shape type=\"teapot\"/>");
+    let path = write_scene(&dir, "shape.xml", &body);
+    assert_error_at(&path, line_of(&body, "teapot"), "unknown plugin \"teapot\"");
+}
+
+#[test]
+fn error_bad_attribute_value() {
+    let dir = temp_dir("bad-attribute");
+    let body = format!("{SENSOR}\n<shape type=\"sphere\">\n<boolean name=\"flip_normals\" value=\"maybe\"/>\n</shape>");
+    let path = write_scene(&dir, "scene.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "maybe"),
+        "could not parse boolean value \"maybe\"",
+    );
+    let body = format!("{SENSOR}\n<bsdf type=\"roughconductor\"><string name=\"distribution\" value=\"phong\"/></bsdf>");
+    let path = write_scene(&dir, "dist.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "phong"),
+        "unknown microfacet distribution \"phong\"",
+    );
+    let body = format!("{SENSOR}\n<bsdf type=\"dielectric\">\n<string name=\"int_ior\" value=\"kryptonite\"/></bsdf>");
+    let path = write_scene(&dir, "ior.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "kryptonite"),
+        "unknown IOR name \"kryptonite\"",
+    );
+    // An unknown attribute on a known element.
+    let body = format!("{SENSOR}\n<shape type=\"sphere\" colour=\"red\"/>");
+    let path = write_scene(&dir, "attr.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "colour"),
+        "unknown attribute \"colour\"",
+    );
+}
+
+#[test]
+fn error_missing_mesh_file() {
+    let dir = temp_dir("missing-mesh");
+    let body = format!("{SENSOR}\n<shape type=\"obj\">\n  <string name=\"filename\" value=\"meshes/nope.obj\"/>\n</shape>");
+    let path = write_scene(&dir, "scene.xml", &body);
+    let err = assert_error_at(&path, line_of(&body, "nope.obj"), "cannot load mesh");
+    assert!(err.to_string().contains("meshes/nope.obj"), "{err}");
+    let body = format!("{SENSOR}\n<shape type=\"ply\">\n  <string name=\"filename\" value=\"nope.ply\"/>\n</shape>");
+    let path = write_scene(&dir, "ply.xml", &body);
+    assert_error_at(&path, line_of(&body, "nope.ply"), "nope.ply");
+}
+
+#[test]
+fn error_malformed_number() {
+    let dir = temp_dir("malformed-number");
+    let body = format!(
+        "{SENSOR}\n<shape type=\"sphere\">\n<float name=\"radius\" value=\"1.0.0\"/>\n</shape>"
+    );
+    let path = write_scene(&dir, "scene.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "1.0.0"),
+        "could not parse floating point value \"1.0.0\"",
+    );
+    let body = format!(
+        "{SENSOR}\n<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.5, x, 0.2\"/></bsdf>"
+    );
+    let path = write_scene(&dir, "rgb.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "0.5, x"),
+        "could not parse floating point value \"x\"",
+    );
+    let body = "<sensor type=\"perspective\"><film type=\"hdrfilm\">\n<integer name=\"width\" value=\"12.5\"/></film></sensor>";
+    let path = write_scene(&dir, "int.xml", body);
+    assert_error_at(
+        &path,
+        line_of(body, "12.5"),
+        "could not parse integer value \"12.5\"",
+    );
+    let body = format!("{SENSOR}\n<shape type=\"rectangle\"><transform name=\"to_world\">\n<matrix value=\"1 0 0\"/></transform></shape>");
+    let path = write_scene(&dir, "matrix.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "<matrix"),
+        "needs 16 (or 9) values, got 3",
+    );
+    let body = format!("{SENSOR}\n<bsdf type=\"diffuse\">\n<spectrum name=\"reflectance\" value=\"500:0.3, 400:0.2\"/></bsdf>");
+    let path = write_scene(&dir, "spectrum.xml", &body);
+    assert_error_at(&path, line_of(&body, "500:0.3"), "strictly increasing");
+}
+
+#[test]
+fn error_dangling_ref() {
+    let dir = temp_dir("dangling-ref");
+    let body = format!("{SENSOR}\n<shape type=\"sphere\">\n    <ref id=\"nothing\"/>\n</shape>");
+    let path = write_scene(&dir, "scene.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "nothing"),
+        "reference to unknown id \"nothing\"",
+    );
+    // A reference to an object of the wrong kind.
+    let body = format!(
+        "{SENSOR}\n<texture type=\"checkerboard\" id=\"tex\"/>\n<shape type=\"sphere\">\n<ref id=\"tex\"/>\n</shape>"
+    );
+    let path = write_scene(&dir, "kind.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "<ref id=\"tex\""),
+        "unexpected <texture type=\"checkerboard\" id=\"tex\">",
+    );
+    // A reference cycle.
+    let body = format!("{SENSOR}\n<bsdf type=\"twosided\" id=\"a\">\n<ref id=\"a\"/></bsdf>");
+    let path = write_scene(&dir, "cycle.xml", &body);
+    assert_error_at(&path, line_of(&body, "id=\"a\">"), "reference cycle");
+}
+
+#[test]
+fn other_errors_are_located_too() {
+    let dir = temp_dir("other-errors");
+    // Unknown parameter.
+    let body = format!(
+        "{SENSOR}\n<bsdf type=\"diffuse\">\n<float name=\"roughness\" value=\"0.3\"/></bsdf>"
+    );
+    let path = write_scene(&dir, "param.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "roughness"),
+        "unknown parameter \"roughness\" of <bsdf type=\"diffuse\">",
+    );
+    // Wrong value type.
+    let body = format!(
+        "{SENSOR}\n<shape type=\"sphere\">\n<string name=\"radius\" value=\"big\"/></shape>"
+    );
+    let path = write_scene(&dir, "type.xml", &body);
+    assert_error_at(
+        &path,
+        line_of(&body, "big"),
+        "wrong type (expected float, got string)",
+    );
+    // Undefined $parameter.
+    let body =
+        format!("{SENSOR}\n<shape type=\"sphere\">\n<float name=\"radius\" value=\"$r\"/></shape>");
+    let path = write_scene(&dir, "param-undefined.xml", &body);
+    assert_error_at(&path, line_of(&body, "$r"), "undefined parameter \"$r\"");
+    // Malformed XML.
+    let path = dir.join("syntax.xml");
+    std::fs::write(
+        &path,
+        "<scene version=\"3.0.0\">\n<shape type=\"sphere\">\n</scene>\n",
+    )
+    .unwrap();
+    let err = load(&path).unwrap_err();
+    assert!(matches!(err, SceneError::Syntax { .. }), "{err}");
+    assert!(err.to_string().contains("syntax.xml:3:"), "{err}");
+    // Missing scene file.
+    let err = load(&dir.join("absent.xml")).unwrap_err();
+    assert!(err.to_string().contains("absent.xml"), "{err}");
+    // Missing version.
+    let path = dir.join("version.xml");
+    std::fs::write(&path, "<scene>\n</scene>\n").unwrap();
+    assert!(load(&path)
+        .unwrap_err()
+        .to_string()
+        .contains("missing attribute \"version\""));
+}
+
+#[test]
+fn lenient_turns_unknown_plugins_and_parameters_into_warnings() {
+    let dir = temp_dir("lenient");
+    let body = format!(
+        "{SENSOR}\n<bsdf type=\"foo\" id=\"m\"/>\n<shape type=\"sphere\"><ref id=\"m\"/>\n<float name=\"wobble\" value=\"1\"/></shape>\n<shape type=\"teapot\"/>"
+    );
+    let path = write_scene(&dir, "scene.xml", &body);
+    assert!(load(&path).is_err());
+    let scene = load_scene(&path, &[], true).expect("lenient load");
+    assert_eq!(scene.shapes.len(), 1);
+    assert_eq!(scene.warnings.len(), 3, "{:?}", scene.warnings);
+    assert!(scene.warnings[0].contains("scene.xml:4:") && scene.warnings[0].contains("\"foo\""));
+    // Malformed values stay errors even in lenient mode.
+    let body =
+        format!("{SENSOR}\n<shape type=\"sphere\"><float name=\"radius\" value=\"x\"/></shape>");
+    let path = write_scene(&dir, "bad.xml", &body);
+    assert!(load_scene(&path, &[], true).is_err());
+}
+
+#[test]
+fn default_parameters_and_command_line_overrides() {
+    let dir = temp_dir("defaults");
+    let body = r#"<default name="res" value="32"/>
+<default name="spp" value="64"/>
+<default name="col" value="0.25"/>
+<sensor type="perspective"><float name="fov" value="$fov_deg"/>
+  <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+  <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="${res}"/></film>
+</sensor>
+<bsdf type="diffuse" id="d"><rgb name="reflectance" value="$col, 0.5, $col"/></bsdf>"#;
+    // `${res}` is not Mitsuba syntax: "$" must be followed by a name.
+    let path = write_scene(&dir, "scene.xml", body);
+    let fov = [("fov_deg".to_owned(), "30".to_owned())];
+    assert!(load_scene(&path, &fov, false)
+        .unwrap_err()
+        .to_string()
+        .contains("must be followed by a parameter name"));
+    let body = body.replace("${res}", "$res");
+    let path = write_scene(&dir, "scene.xml", &body);
+    // Without -D fov_deg the file does not load.
+    assert!(load(&path)
+        .unwrap_err()
+        .to_string()
+        .contains("undefined parameter \"$fov_deg\""));
+    let scene = load_scene(&path, &fov, false).unwrap();
+    assert_eq!((scene.camera.width, scene.camera.height), (32, 32));
+    assert_eq!(scene.camera.fov, 30.0);
+    assert_eq!(scene.sample_count, Some(64));
+    let Bsdf::Diffuse(d) = &scene.bsdfs[0] else {
+        panic!("diffuse expected")
+    };
+    assert_eq!(d.reflectance.mean(), Vec3::new(0.25, 0.5, 0.25));
+    // Command-line values override the file's defaults.
+    let overrides = [
+        fov[0].clone(),
+        ("res".to_owned(), "8".to_owned()),
+        ("spp".to_owned(), "4".to_owned()),
+    ];
+    let scene = load_scene(&path, &overrides, false).unwrap();
+    assert_eq!(
+        (scene.camera.width, scene.camera.height, scene.sample_count),
+        (8, 8, Some(4))
+    );
+    // A longer parameter name is not confused with a shorter one.
+    let params: HashMap<String, String> =
+        [("a".into(), "1".into()), ("ab".into(), "2".into())].into();
+    assert_eq!(substitute("$ab-$a", &params).unwrap(), "2-1");
+}
+
+/// Parses `<transform>` children given as text.
+fn transform_of(ops: &str) -> Mat4 {
+    let dir = temp_dir(&format!(
+        "transform-{:x}",
+        ops.len() * 31 + ops.bytes().map(|b| b as usize).sum::<usize>()
+    ));
+    let body = format!(
+        "<sensor type=\"perspective\"><transform name=\"to_world\">{ops}</transform></sensor>\n<emitter type=\"point\"><transform name=\"to_world\">{ops}</transform></emitter>"
+    );
+    let path = write_scene(&dir, "t.xml", &body);
+    let scene = load_scene(&path, &[], false);
+    // Sensors reject scaling, so read the matrix through a rectangle too.
+    let rect =
+        format!("<shape type=\"rectangle\"><transform name=\"to_world\">{ops}</transform></shape>");
+    let path2 = write_scene(&dir, "r.xml", &format!("{SENSOR}\n{rect}"));
+    let rs = load(&path2).unwrap();
+    let Geometry::Mesh(m) = &rs.shapes[0].geometry else {
+        panic!()
+    };
+    // Recover the affine matrix from the rectangle's corners (-1,-1,0), (1,-1,0), (-1,1,0) and
+    // the camera/point light when available.
+    let origin = (m.positions[0] + m.positions[2]) * 0.5;
+    let x = (m.positions[1] - m.positions[0]) * 0.5;
+    let y = (m.positions[3] - m.positions[0]) * 0.5;
+    match scene {
+        Ok(s) => {
+            assert!(
+                (s.camera.to_world.w_axis.truncate() - origin)
+                    .abs()
+                    .max_element()
+                    < 1e-4
+            );
+            s.camera.to_world
+        }
+        Err(_) => Mat4::from_cols(x.extend(0.0), y.extend(0.0), Vec4::ZERO, origin.extend(1.0)),
+    }
+}
+
+fn assert_mat_close(a: Mat4, b: Mat4) {
+    assert!(a.abs_diff_eq(b, 1e-5), "\n{a}\n!=\n{b}");
+}
+
+#[test]
+fn transforms_compose_in_file_order() {
+    let mut diag = Diagnostics::default();
+    let parse = |ops: &str, diag: &mut Diagnostics| {
+        let dir = temp_dir("compose");
+        let path = dir.join("t.xml");
+        std::fs::write(
+            &path,
+            format!("<transform name=\"to_world\">{ops}</transform>"),
+        )
+        .unwrap();
+        let mut params = HashMap::new();
+        let el = read_file(&path, &mut params, 0, diag).unwrap();
+        transform::parse_transform(&el, diag).unwrap()
+    };
+    // translate then scale: S·T, so the translation is scaled too.
+    let m = parse(
+        r#"<translate x="1" y="2" z="3"/><scale value="2"/>"#,
+        &mut diag,
+    );
+    #[rustfmt::skip]
+    let expected = Mat4::from_cols_array(&[
+        2.0, 0.0, 0.0, 0.0,
+        0.0, 2.0, 0.0, 0.0,
+        0.0, 0.0, 2.0, 0.0,
+        2.0, 4.0, 6.0, 1.0,
+    ]);
+    assert_mat_close(m, expected);
+    // scale then translate: T·S.
+    let m = parse(
+        r#"<scale x="2" y="3"/><translate value="1, 2, 3"/>"#,
+        &mut diag,
+    );
+    let expected = Mat4::from_cols(
+        Vec4::new(2.0, 0.0, 0.0, 0.0),
+        Vec4::new(0.0, 3.0, 0.0, 0.0),
+        Vec4::Z,
+        Vec4::new(1.0, 2.0, 3.0, 1.0),
+    );
+    assert_mat_close(m, expected);
+    // rotate 90° about z, then translate x: (1,0,0) → (0,1,0) → (1,1,0).
+    let m = parse(r#"<rotate z="1" angle="90"/><translate x="1"/>"#, &mut diag);
+    assert!((m.transform_point3(Vec3::X) - Vec3::new(1.0, 1.0, 0.0)).length() < 1e-6);
+    // translate then rotate: (1,0,0) → (2,0,0) → (0,2,0).
+    let m = parse(
+        r#"<translate x="1"/><rotate value="0 0 1" angle="90"/>"#,
+        &mut diag,
+    );
+    assert!((m.transform_point3(Vec3::X) - Vec3::new(0.0, 2.0, 0.0)).length() < 1e-6);
+    // matrix is row-major.
+    let m = parse(
+        r#"<matrix value="1 0 0 5  0 1 0 6  0 0 1 7  0 0 0 1"/>"#,
+        &mut diag,
+    );
+    assert_mat_close(m, Mat4::from_translation(Vec3::new(5.0, 6.0, 7.0)));
+    // lookat: looking from (0,0,-5) at the origin with y up gives left = +x... as Mitsuba:
+    // dir = +z, left = up × dir = y × z = +x, up' = dir × left = z × x = +y.
+    let m = parse(
+        r#"<lookat origin="0, 0, -5" target="0, 0, 0" up="0, 1, 0"/>"#,
+        &mut diag,
+    );
+    assert_mat_close(m, Mat4::from_translation(Vec3::new(0.0, 0.0, -5.0)));
+    // Looking along −x from (3, 0, 0): dir = −x, left = y × (−x) = +z, up' = (−x) × z = +y.
+    let m = parse(
+        r#"<lookat origin="3, 0, 0" target="0, 0, 0" up="0, 1, 0"/>"#,
+        &mut diag,
+    );
+    let expected = Mat4::from_cols(Vec4::Z, Vec4::Y, -Vec4::X, Vec4::new(3.0, 0.0, 0.0, 1.0));
+    assert_mat_close(m, expected);
+    // lookat, then translate: the camera moves in world space.
+    let m = parse(
+        r#"<lookat origin="3, 0, 0" target="0, 0, 0" up="0, 1, 0"/><translate y="1"/>"#,
+        &mut diag,
+    );
+    assert_mat_close(m, Mat4::from_translation(Vec3::Y) * expected);
+    assert!(diag.warnings.is_empty());
+    // Through a whole scene: the camera's to_world and a rectangle's corners agree.
+    let m = transform_of(r#"<rotate x="1" angle="30"/><translate x="1" y="-2"/>"#);
+    let expected = Mat4::from_translation(Vec3::new(1.0, -2.0, 0.0))
+        * Mat4::from_rotation_x(30f32.to_radians());
+    assert_mat_close(m, expected);
+}
+
+/// Writes a mesh file and loads it as the only shape of a scene.
+fn load_mesh(dir: &Path, file: &str, contents: &str, extra: &str) -> TriangleMesh {
+    std::fs::write(dir.join(file), contents).unwrap();
+    let kind = if file.ends_with(".obj") { "obj" } else { "ply" };
+    let body = format!("{SENSOR}\n<shape type=\"{kind}\"><string name=\"filename\" value=\"{file}\"/>{extra}</shape>");
+    let scene = load(&write_scene(dir, "scene.xml", &body)).unwrap();
+    match &scene.shapes[0].geometry {
+        Geometry::Mesh(m) => m.clone(),
+        other => panic!("mesh expected, got {other:?}"),
+    }
+}
+
+/// A quad with a lifted corner: v0 is shared by both triangles, whose normals are +z and
+/// (1, −1, 1)/√3 with corner angles 45° and 60° at v0 (hand-computed below).
+const QUAD_OBJ: &str =
+    "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 0.75\nf 1/1 2/2 3/3 4/4\n";
+
+#[test]
+fn obj_without_normals_gets_angle_weighted_smooth_normals() {
+    let dir = temp_dir("obj-smooth");
+    let m = load_mesh(&dir, "quad.obj", QUAD_OBJ, "");
+    assert_eq!(m.indices, vec![[0, 1, 2], [0, 2, 3]]);
+    let n = m.normals.as_ref().expect("smooth normals");
+    // v0: (π/4)·ẑ + (π/3)·(1, −1, 1)/√3, normalised (Mitsuba prints 0.3705, −0.3705, 0.8518).
+    let a = std::f32::consts::FRAC_PI_4 * Vec3::Z
+        + std::f32::consts::FRAC_PI_3 * Vec3::new(1.0, -1.0, 1.0) / 3f32.sqrt();
+    assert!((n[0] - a.normalize()).length() < 1e-5, "{}", n[0]);
+    assert!((n[0] - Vec3::new(0.3705, -0.3705, 0.8518)).length() < 1e-3);
+    assert!((n[1] - Vec3::Z).length() < 1e-6);
+    assert!((n[3] - Vec3::new(1.0, -1.0, 1.0).normalize()).length() < 1e-6);
+    // OBJ texture coordinates are stored as (u, 1 − v).
+    let uv = m.uvs.as_ref().unwrap();
+    assert_eq!(uv[0], Vec2::new(0.0, 1.0));
+    assert_eq!(uv[3], Vec2::new(0.0, 0.25));
+    // face_normals: no vertex normals at all.
+    let m = load_mesh(
+        &dir,
+        "quad.obj",
+        QUAD_OBJ,
+        r#"<boolean name="face_normals" value="true"/>"#,
+    );
+    assert!(m.normals.is_none());
+    // flip_normals reverses the winding and the normals.
+    let m = load_mesh(
+        &dir,
+        "quad.obj",
+        QUAD_OBJ,
+        r#"<boolean name="flip_normals" value="true"/>"#,
+    );
+    assert_eq!(m.indices, vec![[0, 2, 1], [0, 3, 2]]);
+    assert!((m.normals.unwrap()[1] + Vec3::Z).length() < 1e-6);
+}
+
+#[test]
+fn obj_with_normals_keeps_them_and_transforms_by_inverse_transpose() {
+    let dir = temp_dir("obj-normals");
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 1 0 1\nvn 0 0 1\nvn 0 0 1\nf 1//1 2//2 3//3\n";
+    let m = load_mesh(&dir, "tri.obj", obj, "");
+    let n = m.normals.as_ref().unwrap();
+    assert!((n[0] - Vec3::new(1.0, 0.0, 1.0).normalize()).length() < 1e-6);
+    assert!(m.uvs.is_none());
+    // Non-uniform scale: positions scale by (2, 1, 1); normals by the inverse transpose
+    // (1/2, 1, 1), renormalised: (1, 0, 1) → (0.5, 0, 1)/|…|.
+    let m = load_mesh(
+        &dir,
+        "tri.obj",
+        obj,
+        r#"<transform name="to_world"><scale x="2"/></transform>"#,
+    );
+    assert_eq!(m.positions[1], Vec3::new(2.0, 0.0, 0.0));
+    let n = m.normals.as_ref().unwrap();
+    assert!(
+        (n[0] - Vec3::new(0.5, 0.0, 1.0).normalize()).length() < 1e-6,
+        "{}",
+        n[0]
+    );
+    // face_normals drops file normals too.
+    let m = load_mesh(
+        &dir,
+        "tri.obj",
+        obj,
+        r#"<boolean name="face_normals" value="true"/>"#,
+    );
+    assert!(m.normals.is_none());
+    // Malformed OBJ: an error naming the mesh file and the XML line.
+    std::fs::write(dir.join("bad.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
+    let body = format!(
+        "{SENSOR}\n<shape type=\"obj\"><string name=\"filename\" value=\"bad.obj\"/></shape>"
+    );
+    let err = load(&write_scene(&dir, "bad.xml", &body))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("bad.xml:4:") && err.contains("bad.obj"),
+        "{err}"
+    );
+}
+
+#[test]
+fn ply_ascii_and_binary_with_and_without_normals() {
+    let dir = temp_dir("ply");
+    let header = |props: &str, nv: usize, nf: usize, fmt: &str| {
+        format!("ply\nformat {fmt} 1.0\nelement vertex {nv}\n{props}element face {nf}\nproperty list uchar int vertex_indices\nend_header\n")
+    };
+    let xyz = "property float x\nproperty float y\nproperty float z\n";
+    // A quad (4 corners → 2 triangles) with uv, no normals: smooth normals, uv kept as is.
+    let ply = header(
+        &format!("{xyz}property float u\nproperty float v\n"),
+        4,
+        1,
+        "ascii",
+    ) + "0 0 0 0 0.25\n1 0 0 1 0.25\n1 1 0 1 1\n0 1 0 0 1\n4 0 1 2 3\n";
+    let m = load_mesh(&dir, "quad.ply", &ply, "");
+    assert_eq!(m.indices, vec![[0, 1, 2], [0, 2, 3]]);
+    assert!(m
+        .normals
+        .as_ref()
+        .unwrap()
+        .iter()
+        .all(|n| (*n - Vec3::Z).length() < 1e-6));
+    assert_eq!(m.uvs.as_ref().unwrap()[0], Vec2::new(0.0, 0.25));
+    let m = load_mesh(
+        &dir,
+        "quad.ply",
+        &ply,
+        r#"<boolean name="face_normals" value="true"/>"#,
+    );
+    assert!(m.normals.is_none());
+    // With normals, binary little-endian.
+    let mut bin = header(
+        &format!("{xyz}property float nx\nproperty float ny\nproperty float nz\n"),
+        3,
+        1,
+        "binary_little_endian",
+    )
+    .into_bytes();
+    for v in [
+        [0.0f32, 0.0, 0.0, 0.0, 1.0, 0.0],
+        [1.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, -1.0, 0.0, 1.0, 0.0],
+    ] {
+        for x in v {
+            bin.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    bin.push(3);
+    for i in [0i32, 1, 2] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    std::fs::write(dir.join("tri.ply"), &bin).unwrap();
+    let body = format!("{SENSOR}\n<shape type=\"ply\"><string name=\"filename\" value=\"tri.ply\"/><transform name=\"to_world\"><translate y=\"2\"/></transform></shape>");
+    let scene = load(&write_scene(&dir, "bin.xml", &body)).unwrap();
+    let Geometry::Mesh(m) = &scene.shapes[0].geometry else {
+        panic!()
+    };
+    assert_eq!(m.positions[2], Vec3::new(0.0, 2.0, -1.0));
+    assert_eq!(m.normals.as_ref().unwrap()[1], Vec3::Y);
+    // An out-of-range face index is an error, not a panic.
+    let bad = header(xyz, 3, 1, "ascii") + "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n";
+    std::fs::write(dir.join("bad.ply"), bad).unwrap();
+    let body = format!(
+        "{SENSOR}\n<shape type=\"ply\"><string name=\"filename\" value=\"bad.ply\"/></shape>"
+    );
+    let err = load(&write_scene(&dir, "bad.xml", &body))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("vertex 7") && err.contains("bad.ply"), "{err}");
+}
+
+#[test]
+fn include_and_references_across_files() {
+    let dir = temp_dir("include");
+    std::fs::create_dir_all(dir.join("parts/meshes")).unwrap();
+    std::fs::write(
+        dir.join("parts/meshes/tri.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    // The included file's relative paths resolve against its own folder.
+    std::fs::write(
+        dir.join("parts/materials.xml"),
+        "<scene version=\"3.0.0\">\n<bsdf type=\"conductor\" id=\"gold\"><string name=\"material\" value=\"Au\"/></bsdf>\n<shape type=\"obj\"><string name=\"filename\" value=\"meshes/tri.obj\"/><ref id=\"gold\"/></shape>\n</scene>\n",
+    )
+    .unwrap();
+    let body = format!("{SENSOR}\n<include filename=\"parts/materials.xml\"/>\n<shape type=\"sphere\"><ref id=\"gold\"/></shape>");
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert_eq!(scene.shapes.len(), 2);
+    assert_eq!(scene.shapes[0].bsdf, scene.shapes[1].bsdf);
+    let Bsdf::Conductor(c) = &scene.bsdfs[scene.shapes[1].bsdf] else {
+        panic!("conductor expected")
+    };
+    assert_eq!(c.ior, ior::conductor_ior("Au"));
+    // A missing include and an error inside an included file are both located.
+    let body = format!("{SENSOR}\n<include filename=\"nope.xml\"/>");
+    assert_error_at(
+        &write_scene(&dir, "missing.xml", &body),
+        line_of(&body, "nope"),
+        "included file",
+    );
+    std::fs::write(
+        dir.join("parts/broken.xml"),
+        "<scene version=\"3.0.0\">\n\n<bsdf type=\"velvet\"/>\n</scene>\n",
+    )
+    .unwrap();
+    let body = format!("{SENSOR}\n<include filename=\"parts/broken.xml\"/>");
+    let err = load(&write_scene(&dir, "broken.xml", &body))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("broken.xml:3:") && err.contains("velvet"),
+        "{err}"
+    );
+    // An include cycle ends with an error.
+    std::fs::write(
+        dir.join("self.xml"),
+        "<scene version=\"3.0.0\">\n<include filename=\"self.xml\"/>\n</scene>\n",
+    )
+    .unwrap();
+    assert!(load(&dir.join("self.xml"))
+        .unwrap_err()
+        .to_string()
+        .contains("nested deeper"));
+}
+
+#[test]
+fn bsdf_defaults_follow_mitsuba() {
+    let dir = temp_dir("bsdf-defaults");
+    let body = format!(
+        "{SENSOR}
+<bsdf type=\"diffuse\"/>
+<bsdf type=\"dielectric\"/>
+<bsdf type=\"roughconductor\"/>
+<bsdf type=\"plastic\"/>
+<bsdf type=\"roughdielectric\"><string name=\"distribution\" value=\"ggx\"/><float name=\"alpha_u\" value=\"0.2\"/><float name=\"alpha_v\" value=\"0.3\"/><string name=\"int_ior\" value=\"water\"/><float name=\"ext_ior\" value=\"1\"/></bsdf>
+<bsdf type=\"twosided\"><bsdf type=\"roughplastic\"><float name=\"alpha\" value=\"0.4\"/></bsdf></bsdf>
+<bsdf type=\"conductor\"><rgb name=\"eta\" value=\"0.2, 0.9, 1.1\"/><rgb name=\"k\" value=\"3.9, 2.4, 2.1\"/></bsdf>
+<bsdf type=\"diffuse\"><texture type=\"checkerboard\" name=\"reflectance\"><transform name=\"to_uv\"><scale x=\"4\" y=\"2\"/></transform></texture></bsdf>"
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    let b = &scene.bsdfs;
+    let Bsdf::Diffuse(d) = &b[0] else { panic!() };
+    assert_eq!(d.reflectance.mean(), Vec3::splat(0.5));
+    let Bsdf::Dielectric(d) = &b[1] else { panic!() };
+    assert!((d.eta - 1.5046 / 1.000_277).abs() < 1e-6);
+    let Bsdf::RoughConductor(c) = &b[2] else {
+        panic!()
+    };
+    assert_eq!(
+        (c.roughness.kind, c.roughness.alpha_u, c.roughness.alpha_v),
+        (MicrofacetKind::Beckmann, 0.1, 0.1)
+    );
+    assert!(
+        c.ior.is_none(),
+        "material defaults to \"none\": a perfect mirror"
+    );
+    let Bsdf::Plastic(p) = &b[3] else { panic!() };
+    assert!((p.eta - 1.49 / 1.000_277).abs() < 1e-6);
+    assert_eq!(p.diffuse_reflectance.mean(), Vec3::splat(0.5));
+    let Bsdf::RoughDielectric(r) = &b[4] else {
+        panic!()
+    };
+    assert_eq!(
+        (r.roughness.kind, r.roughness.alpha_u, r.roughness.alpha_v),
+        (MicrofacetKind::Ggx, 0.2, 0.3)
+    );
+    assert!((r.eta - 1.333).abs() < 1e-6);
+    // The nested roughplastic is built first, then the twosided wrapping a copy of it.
+    let Bsdf::TwoSided { front, back } = &b[6] else {
+        panic!("{:?}", b[6])
+    };
+    assert!(matches!(**front, Bsdf::RoughPlastic(_)) && matches!(**back, Bsdf::RoughPlastic(_)));
+    let Bsdf::Conductor(c) = &b[7] else { panic!() };
+    assert_eq!(c.ior.unwrap().eta, Vec3::new(0.2, 0.9, 1.1));
+    let Bsdf::Diffuse(d) = &b[8] else { panic!() };
+    let Texture::Checkerboard {
+        color0,
+        color1,
+        to_uv,
+    } = &d.reflectance
+    else {
+        panic!()
+    };
+    assert_eq!((*color0, *color1), (Vec3::splat(0.4), Vec3::splat(0.2)));
+    assert_eq!(*to_uv * Vec3::new(1.0, 1.0, 1.0), Vec3::new(4.0, 2.0, 1.0));
+}
+
+#[test]
+fn spectra_emitters_and_cameras() {
+    let dir = temp_dir("spectra");
+    let body = r#"<sensor type="thinlens">
+  <float name="fov" value="30"/><string name="fov_axis" value="smaller"/>
+  <float name="aperture_radius" value="0.1"/><float name="focus_distance" value="4"/>
+  <transform name="to_world"><lookat origin="0, 0, -5" target="0, 0, 0" up="0, 1, 0"/></transform>
+  <film type="hdrfilm"><rfilter type="gaussian"/></film>
+</sensor>
+<integrator type="path"><integer name="max_depth" value="8"/></integrator>
+<shape type="sphere">
+  <bsdf type="diffuse"><spectrum name="reflectance" value="400:1, 700:1"/></bsdf>
+  <emitter type="area"><spectrum name="radiance" value="3"/></emitter>
+</shape>
+<emitter type="spot"><rgb name="intensity" value="5"/><float name="cutoff_angle" value="40"/></emitter>
+<emitter type="directional"><vector name="direction" value="0, -2, 0"/></emitter>
+<emitter type="point"><point name="position" x="1" y="2" z="3"/><spectrum name="intensity" value="400:1, 700:1"/></emitter>"#;
+    let scene = load(&write_scene(&dir, "scene.xml", body)).unwrap();
+    let c = &scene.camera;
+    assert_eq!(
+        (c.width, c.height, c.fov, c.fov_axis),
+        (768, 576, 30.0, FovAxis::Smaller)
+    );
+    assert_eq!((c.aperture_radius, c.focus_distance), (0.1, 4.0));
+    assert_eq!(
+        scene.integrator.as_ref().map(|i| (i.max_depth, i.rr_depth)),
+        Some((8, 5))
+    );
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
+    assert!(scene.warnings[0].contains("gaussian"));
+    // A constant reflectance spectrum of one is white.
+    let Bsdf::Diffuse(d) = &scene.bsdfs[0] else {
+        panic!()
+    };
+    assert!((d.reflectance.mean() - Vec3::ONE).abs().max_element() < 1e-2);
+    // A uniform emission spectrum is D65-unbalanced (Mitsuba: 3.614, 2.845, 2.727).
+    let e = scene.shapes[0].emission.unwrap();
+    assert!(
+        (e - Vec3::new(3.61438, 2.84487, 2.72675))
+            .abs()
+            .max_element()
+            < 1e-3,
+        "{e}"
+    );
+    match &scene.emitters[..] {
+        [EmitterDesc::Spot {
+            intensity,
+            cutoff_angle,
+            beam_width,
+            ..
+        }, EmitterDesc::Directional {
+            direction,
+            irradiance,
+        }, EmitterDesc::Point {
+            position,
+            intensity: pi,
+        }] => {
+            assert_eq!(
+                (*intensity, *cutoff_angle, *beam_width),
+                (Vec3::splat(5.0), 40.0, 30.0)
+            );
+            assert_eq!((*direction, *irradiance), (-Vec3::Y, Vec3::ONE));
+            assert_eq!(*position, Vec3::new(1.0, 2.0, 3.0));
+            // An emission spectrum of one over 400–700 nm (Mitsuba: 1.1997, 0.9495, 0.9034).
+            assert!(
+                (*pi - Vec3::new(1.19969, 0.94952, 0.903443))
+                    .abs()
+                    .max_element()
+                    < 1e-3,
+                "{pi}"
+            );
+        }
+        other => panic!("unexpected emitters {other:?}"),
+    }
+}
+
+#[test]
+fn never_panics_on_garbage() {
+    let dir = temp_dir("garbage");
+    let cases = [
+        "",
+        "<",
+        "<scene/>",
+        "<scene version=\"3.0.0\"><shape/></scene>",
+        "<scene version=\"3.0.0\"><shape type=\"sphere\"><float/></shape></scene>",
+        "<scene version=\"3.0.0\"><shape type=\"cube\"><transform name=\"to_world\"><scale value=\"0\"/></transform></shape></scene>",
+        "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"inf\"/></sensor></scene>",
+        "<scene version=\"3.0.0\"><sensor type=\"perspective\"><film type=\"hdrfilm\"><integer name=\"width\" value=\"-4\"/></film></sensor></scene>",
+        "<scene version=\"3.0.0\"><shape type=\"sphere\"><transform name=\"to_world\"><lookat origin=\"0,0,0\" target=\"0,0,0\"/></transform></shape></scene>",
+        "<scene version=\"3.0.0\"><bsdf type=\"twosided\"/></scene>",
+        "<scene version=\"3.0.0\"><bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\"><string name=\"filename\" value=\"none.png\"/></texture></bsdf></scene>",
+        "<scene version=\"3.0.0\"><shape type=\"obj\"><string name=\"filename\" value=\".\"/></shape></scene>",
+        "<scene version=\"x\"></scene>",
+        "<scene version=\"3.0.0\"><default name=\"\" value=\"1\"/></scene>",
+        "<scene version=\"3.0.0\"><emitter type=\"area\"/></scene>",
+    ];
+    for (i, text) in cases.iter().enumerate() {
+        let path = dir.join(format!("g{i}.xml"));
+        std::fs::write(&path, text).unwrap();
+        let result = std::panic::catch_unwind(|| load_scene(&path, &[], false));
+        match result {
+            Ok(Ok(_)) if i == 5 => {} // a flat cube is legal
+            Ok(Ok(_)) => panic!("case {i} should fail: {text}"),
+            Ok(Err(e)) => assert!(
+                e.to_string().contains(&format!("g{i}.xml")),
+                "case {i}: {e}"
+            ),
+            Err(_) => panic!("case {i} panicked: {text}"),
+        }
+    }
+}
+
+#[test]
+fn bitmap_texture_loads_relative_to_the_xml_file() {
+    let dir = temp_dir("bitmap");
+    std::fs::create_dir_all(dir.join("tex")).unwrap();
+    let pixels = [Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+    crate::image_io::write_png_srgb(&dir.join("tex/a.png"), 2, 1, &pixels).unwrap();
+    crate::image_io::write_rgb_exr(
+        &dir.join("tex/b.exr"),
+        2,
+        1,
+        &[Vec3::splat(2.0), Vec3::splat(4.0)],
+    )
+    .unwrap();
+    let body = format!(
+        "{SENSOR}
+<texture type=\"bitmap\" id=\"a\"><string name=\"filename\" value=\"tex/a.png\"/><string name=\"filter_type\" value=\"nearest\"/></texture>
+<bsdf type=\"diffuse\"><ref name=\"reflectance\" id=\"a\"/></bsdf>
+<bsdf type=\"plastic\"><texture type=\"bitmap\" name=\"diffuse_reflectance\"><string name=\"filename\" value=\"tex/b.exr\"/></texture></bsdf>"
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    let Bsdf::Diffuse(d) = &scene.bsdfs[0] else {
+        panic!()
+    };
+    let Texture::Bitmap { image, filter, .. } = &d.reflectance else {
+        panic!()
+    };
+    assert_eq!(
+        (image.width, image.height, *filter),
+        (2, 1, crate::texture::BitmapFilter::Nearest)
+    );
+    assert_eq!(image.texels[0], Vec3::new(1.0, 0.0, 0.0));
+    let Bsdf::Plastic(p) = &scene.bsdfs[1] else {
+        panic!()
+    };
+    assert_eq!(p.diffuse_reflectance.mean(), Vec3::splat(3.0));
+}
+
+/// The external validation scenes (`../shared/scenes/external/*/scene.xml`) must load.
+#[test]
+fn external_scenes_load() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/scenes/external");
+    let Ok(entries) = std::fs::read_dir(&root) else {
+        eprintln!("skipped: {} not present", root.display());
+        return;
+    };
+    let mut loaded = 0;
+    for entry in entries.flatten() {
+        let path = entry.path().join("scene.xml");
+        if !path.is_file() {
+            continue;
+        }
+        let scene = load(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            scene.warnings.is_empty(),
+            "{}: {:?}",
+            path.display(),
+            scene.warnings
+        );
+        assert_eq!((scene.camera.width, scene.camera.height), (128, 128));
+        let name = entry.file_name().to_string_lossy().into_owned();
+        match name.as_str() {
+            "cbox" => {
+                assert_eq!(scene.shapes.len(), 8);
+                // Mitsuba 3.9 scalar_rgb: the light's spectrum → (20.7108, 10.8546, 2.77115).
+                let e = scene.shapes[0].emission.unwrap();
+                assert!(
+                    (e - Vec3::new(20.7108, 10.8546, 2.77115))
+                        .abs()
+                        .max_element()
+                        < 2e-3,
+                    "{e}"
+                );
+                assert_eq!(scene.camera.fov_axis, FovAxis::Smaller);
+                // The light is translated by −0.5 in y (its OBJ sits at y = 548.8).
+                let Geometry::Mesh(m) = &scene.shapes[0].geometry else {
+                    panic!()
+                };
+                assert!(m.positions.iter().all(|p| (p.y - 548.3).abs() < 1e-3));
+            }
+            "veach-mis" => {
+                assert_eq!(scene.shapes.len(), 10);
+                // The two mirroring scales cancel.
+                assert!((scene.camera.to_world.x_axis.truncate().length() - 1.0).abs() < 1e-6);
+            }
+            "water-caustic" => {
+                let water = scene.shapes.iter().find(|s| s.name == "Water").unwrap();
+                let Geometry::Mesh(m) = &water.geometry else {
+                    panic!()
+                };
+                assert_eq!((m.positions.len(), m.indices.len()), (63_768, 102_938));
+            }
+            _ => {}
+        }
+        loaded += 1;
+    }
+    assert!(loaded >= 3, "only {loaded} external scenes found");
+}
