@@ -51,7 +51,7 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
                     "cutoff_angle must be in (0, 180], got {cutoff_angle}"
                 )));
             }
-            if !(beam_width > 0.0) {
+            if beam_width.is_nan() || beam_width <= 0.0 {
                 return Err(p
                     .element_of("beam_width")
                     .error(format!("beam_width must be positive, got {beam_width}")));

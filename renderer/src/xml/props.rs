@@ -521,20 +521,6 @@ impl<'a> Props<'a> {
         out
     }
 
-    /// Takes every unnamed nested plugin or `<ref>` (shapes use these for their BSDF/emitter).
-    pub fn unnamed_objects(&mut self) -> Vec<&'a Element> {
-        let mut out = Vec::new();
-        for p in &mut self.items {
-            if let Value::Object(o) = p.value {
-                if p.name.is_empty() || o.tag == "ref" {
-                    p.used = true;
-                    out.push(o);
-                }
-            }
-        }
-        out
-    }
-
     /// Marks `names` as known but unused by this renderer: each one given yields a warning.
     pub fn ignore(&mut self, b: &mut Builder<'a>, names: &[&str], why: &str) {
         for name in names {

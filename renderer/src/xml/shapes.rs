@@ -78,7 +78,8 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
     // Nested or referenced BSDF and area emitter.
     let mut bsdf = None;
     let mut emission = None;
-    for obj in p.unnamed_objects() {
+    // Named or not (`<bsdf name="bsdf">` is common in exported scenes).
+    for obj in p.objects(&["bsdf", "emitter", "ref"]) {
         let target = b.deref(obj)?;
         match target.tag.as_str() {
             "bsdf" => {

@@ -665,7 +665,8 @@ fn bsdf_defaults_follow_mitsuba() {
 <bsdf type=\"roughdielectric\"><string name=\"distribution\" value=\"ggx\"/><float name=\"alpha_u\" value=\"0.2\"/><float name=\"alpha_v\" value=\"0.3\"/><string name=\"int_ior\" value=\"water\"/><float name=\"ext_ior\" value=\"1\"/></bsdf>
 <bsdf type=\"twosided\"><bsdf type=\"roughplastic\"><float name=\"alpha\" value=\"0.4\"/></bsdf></bsdf>
 <bsdf type=\"conductor\"><rgb name=\"eta\" value=\"0.2, 0.9, 1.1\"/><rgb name=\"k\" value=\"3.9, 2.4, 2.1\"/></bsdf>
-<bsdf type=\"diffuse\"><texture type=\"checkerboard\" name=\"reflectance\"><transform name=\"to_uv\"><scale x=\"4\" y=\"2\"/></transform></texture></bsdf>"
+<bsdf type=\"diffuse\"><texture type=\"checkerboard\" name=\"reflectance\"><transform name=\"to_uv\"><scale x=\"4\" y=\"2\"/></transform></texture></bsdf>
+<shape type=\"sphere\"><bsdf type=\"thindielectric\" name=\"bsdf\"/></shape>"
     );
     let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
     let b = &scene.bsdfs;
@@ -702,6 +703,8 @@ fn bsdf_defaults_follow_mitsuba() {
     assert!(matches!(**front, Bsdf::RoughPlastic(_)) && matches!(**back, Bsdf::RoughPlastic(_)));
     let Bsdf::Conductor(c) = &b[7] else { panic!() };
     assert_eq!(c.ior.unwrap().eta, Vec3::new(0.2, 0.9, 1.1));
+    // A nested BSDF may carry a name attribute.
+    assert!(matches!(b[scene.shapes[0].bsdf], Bsdf::ThinDielectric(_)));
     let Bsdf::Diffuse(d) = &b[8] else { panic!() };
     let Texture::Checkerboard {
         color0,
