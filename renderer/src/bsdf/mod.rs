@@ -31,6 +31,8 @@ mod thindielectric;
 pub mod warp;
 
 #[cfg(test)]
+mod mitsuba_reference;
+#[cfg(test)]
 mod tests;
 
 use crate::spectrum::Rgb;

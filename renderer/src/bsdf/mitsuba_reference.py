@@ -1,0 +1,159 @@
+#!/usr/bin/env python3
+"""Generate `mitsuba_reference.rs`: BSDF values computed by Mitsuba 3 itself, which the Rust
+tests compare against (eval, pdf in both transport modes at random direction pairs, and
+directional albedos by 10^6-sample Monte Carlo).
+
+Usage (needs `pip install mitsuba`; development only, never a runtime dependency):
+    python3 renderer/src/bsdf/mitsuba_reference.py > renderer/src/bsdf/mitsuba_reference.rs
+"""
+import numpy as np
+import mitsuba as mi
+
+mi.set_variant("llvm_ad_rgb")
+import drjit as dr
+
+# (name, Mitsuba dict, Rust constructor expression, two-sided directions?)
+AU_ETA = [0.143, 0.374, 1.442]
+AU_K = [3.983, 2.385, 1.603]
+
+
+def rgb(v):
+    return {"type": "rgb", "value": v}
+
+
+CASES = [
+    ("diffuse", {"type": "diffuse", "reflectance": rgb([0.8, 0.5, 0.2])},
+     "diffuse(rgb(0.8, 0.5, 0.2))", False),
+    ("roughconductor beckmann 0.3 Au",
+     {"type": "roughconductor", "distribution": "beckmann", "alpha": 0.3, "eta": rgb(AU_ETA), "k": rgb(AU_K)},
+     "rough_conductor(rough(Beckmann, 0.3, 0.3), gold())", False),
+    ("roughconductor ggx aniso 0.1/0.4 Au",
+     {"type": "roughconductor", "distribution": "ggx", "alpha_u": 0.1, "alpha_v": 0.4, "eta": rgb(AU_ETA), "k": rgb(AU_K)},
+     "rough_conductor(rough(Ggx, 0.1, 0.4), gold())", False),
+    ("roughconductor beckmann aniso 0.5/0.2 none",
+     {"type": "roughconductor", "distribution": "beckmann", "alpha_u": 0.5, "alpha_v": 0.2},
+     "rough_conductor(rough(Beckmann, 0.5, 0.2), None)", False),
+    ("roughdielectric beckmann 0.3 1.5",
+     {"type": "roughdielectric", "distribution": "beckmann", "alpha": 0.3, "int_ior": 1.5, "ext_ior": 1.0},
+     "rough_dielectric(rough(Beckmann, 0.3, 0.3), 1.5)", True),
+    ("roughdielectric ggx aniso 0.15/0.45 1.33",
+     {"type": "roughdielectric", "distribution": "ggx", "alpha_u": 0.15, "alpha_v": 0.45, "int_ior": 1.33, "ext_ior": 1.0},
+     "rough_dielectric(rough(Ggx, 0.15, 0.45), 1.33)", True),
+    ("plastic 1.49",
+     {"type": "plastic", "int_ior": 1.49, "ext_ior": 1.0, "diffuse_reflectance": rgb([0.5, 0.3, 0.1])},
+     "plastic(1.49, rgb(0.5, 0.3, 0.1), false)", False),
+    ("plastic nonlinear 1.6",
+     {"type": "plastic", "int_ior": 1.6, "ext_ior": 1.0, "nonlinear": True, "diffuse_reflectance": rgb([0.9, 0.6, 0.2])},
+     "plastic(1.6, rgb(0.9, 0.6, 0.2), true)", False),
+    ("roughplastic ggx 0.3",
+     {"type": "roughplastic", "distribution": "ggx", "alpha": 0.3, "int_ior": 1.49, "ext_ior": 1.0, "diffuse_reflectance": rgb([0.5, 0.4, 0.3])},
+     "rough_plastic(rough(Ggx, 0.3, 0.3), 1.49, rgb(0.5, 0.4, 0.3), false)", False),
+    ("roughplastic beckmann 0.15 nonlinear",
+     {"type": "roughplastic", "distribution": "beckmann", "alpha": 0.15, "int_ior": 1.5, "ext_ior": 1.0, "nonlinear": True, "diffuse_reflectance": rgb([0.8, 0.2, 0.5])},
+     "rough_plastic(rough(Beckmann, 0.15, 0.15), 1.5, rgb(0.8, 0.2, 0.5), true)", False),
+    ("twosided diffuse / roughconductor",
+     {"type": "twosided",
+      "a": {"type": "diffuse", "reflectance": rgb([0.6, 0.6, 0.6])},
+      "b": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.3, "eta": rgb(AU_ETA), "k": rgb(AU_K)}},
+     "two_sided(diffuse(constant(0.6)), rough_conductor(rough(Ggx, 0.3, 0.3), gold()))", True),
+    ("dielectric 1.5", {"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0},
+     "dielectric(1.5)", True),
+    ("thindielectric 1.5", {"type": "thindielectric", "int_ior": 1.5, "ext_ior": 1.0},
+     "thin_dielectric(1.5)", True),
+    ("conductor Au", {"type": "conductor", "eta": rgb(AU_ETA), "k": rgb(AU_K)},
+     "conductor(gold())", False),
+]
+
+
+def rand_dirs(rng, n, two_sided):
+    z = rng.uniform(-1 if two_sided else 0, 1, n)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    s = np.sqrt(np.maximum(0, 1 - z * z))
+    return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1).astype(np.float32)
+
+
+def vec(a):
+    return mi.Vector3f(mi.Float(a[:, 0].copy()), mi.Float(a[:, 1].copy()), mi.Float(a[:, 2].copy()))
+
+
+def f32(x):
+    return f"{float(x):.8e}"
+
+
+def main():
+    rng = np.random.default_rng(2024)
+    evals, albedos = [], []
+    for ci, (name, d, rust, two_sided) in enumerate(CASES):
+        bsdf = mi.load_dict(d)
+        # Direction pairs: half random, half near the specular configuration where glossy
+        # lobes have their mass.
+        n = 48
+        wo = rand_dirs(rng, n, two_sided)
+        wi = rand_dirs(rng, n, two_sided)
+        for k in range(n // 2):
+            mirror = np.array([-wo[k, 0], -wo[k, 1], wo[k, 2]])
+            jitter = rng.normal(0, 0.15, 3)
+            v = mirror + jitter
+            if rng.uniform() < 0.5 and two_sided:
+                v[2] = -v[2]  # near the transmitted side too
+            wi[k] = (v / np.linalg.norm(v)).astype(np.float32)
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = vec(wo)
+        out = {}
+        for mode_name, mode in (("rad", mi.TransportMode.Radiance), ("imp", mi.TransportMode.Importance)):
+            ctx = mi.BSDFContext(mode)
+            val = np.array(bsdf.eval(ctx, si, vec(wi)))  # f·|cos θ|, shape (3, n)
+            out[mode_name] = np.broadcast_to(val.reshape(3, -1), (3, n))
+        pdf = np.broadcast_to(np.array(bsdf.pdf(mi.BSDFContext(), si, vec(wi))).reshape(-1), (n,))
+        for k in range(n):
+            c = abs(float(wi[k, 2]))
+            if c < 1e-3:
+                continue
+            fr = out["rad"][:, k] / c
+            fi = out["imp"][:, k] / c
+            evals.append((ci, wo[k], wi[k], fr, fi, pdf[k]))
+        # Directional albedos (mean sample weight), 10^6 samples, both modes.
+        for t in ([8.0, 45.0, 80.0] + ([135.0, 172.0] if two_sided else [])):
+            th = np.radians(t)
+            w = np.array([[np.sin(th) * np.cos(0.7), np.sin(th) * np.sin(0.7), np.cos(th)]], dtype=np.float32)
+            m = 1_000_000
+            si2 = dr.zeros(mi.SurfaceInteraction3f, m)
+            si2.wi = mi.Vector3f(float(w[0, 0]), float(w[0, 1]), float(w[0, 2]))
+            for mode_name, mode in (("rad", mi.TransportMode.Radiance), ("imp", mi.TransportMode.Importance)):
+                u = rng.random((3, m)).astype(np.float32)
+                bs, weight = bsdf.sample(mi.BSDFContext(mode), si2, mi.Float(u[0]), mi.Point2f(mi.Float(u[1]), mi.Float(u[2])))
+                wgt = np.broadcast_to(np.array(weight).reshape(3, -1), (3, m))
+                wgt = np.where(np.isfinite(wgt), wgt, 0)
+                albedos.append((ci, w[0], mode_name, wgt.mean(axis=1), wgt.std(axis=1) / np.sqrt(m)))
+
+    print("//! Reference values computed by Mitsuba 3 (" + mi.__version__ + ", llvm_ad_rgb) for the")
+    print("//! BSDF tests; generated by `mitsuba_reference.py` in this folder — do not edit by hand.")
+    print("")
+    print("/// Test BSDFs, as constructor expressions of `tests.rs` (index = case id).")
+    print("pub const CASES: &[&str] = &[")
+    for name, _, rust, _ in CASES:
+        print(f'    "{name}",')
+    print("];")
+    print("")
+    print("/// (case, wo, wi, f radiance (no cosine), f importance, pdf).")
+    print("#[allow(clippy::type_complexity)]")
+    print("pub const EVALS: &[(usize, [f32; 3], [f32; 3], [f32; 3], [f32; 3], f32)] = &[")
+    for ci, wo, wi, fr, fi, p in evals:
+        print(f"    ({ci}, [{', '.join(f32(x) for x in wo)}], [{', '.join(f32(x) for x in wi)}], "
+              f"[{', '.join(f32(x) for x in fr)}], [{', '.join(f32(x) for x in fi)}], {f32(p)}),")
+    print("];")
+    print("")
+    print("/// (case, wo, importance mode?, mean sample weight, its standard error).")
+    print("#[allow(clippy::type_complexity)]")
+    print("pub const ALBEDOS: &[(usize, [f32; 3], bool, [f32; 3], [f32; 3])] = &[")
+    for ci, w, mode, mean, err in albedos:
+        print(f"    ({ci}, [{', '.join(f32(x) for x in w)}], {'true' if mode == 'imp' else 'false'}, "
+              f"[{', '.join(f32(x) for x in mean)}], [{', '.join(f32(x) for x in err)}]),")
+    print("];")
+    import sys
+    for name, _, rust, _ in CASES:
+        print(f"// {rust}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
