@@ -487,6 +487,10 @@ impl<'a> Builder<'a> {
 
     /// The BSDF declared by `el` (a `<bsdf>` or a `<ref>` to one), as a value.
     pub fn bsdf_value(&mut self, el: &'a Element) -> Result<Bsdf, SceneError> {
+        // An anonymous nested BSDF (e.g. inside `twosided`) is not a scene material itself.
+        if el.tag == "bsdf" && el.attr("id").is_none() {
+            return bsdfs::build_bsdf(self, el);
+        }
         let i = self.bsdf_index(el)?;
         Ok(self.bsdfs[i].clone())
     }

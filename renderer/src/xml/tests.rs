@@ -696,16 +696,16 @@ fn bsdf_defaults_follow_mitsuba() {
         (MicrofacetKind::Ggx, 0.2, 0.3)
     );
     assert!((r.eta - 1.333).abs() < 1e-6);
-    // The nested roughplastic is built first, then the twosided wrapping a copy of it.
-    let Bsdf::TwoSided { front, back } = &b[6] else {
-        panic!("{:?}", b[6])
+    // The twosided wraps its anonymous roughplastic (which is no scene material itself).
+    let Bsdf::TwoSided { front, back } = &b[5] else {
+        panic!("{:?}", b[5])
     };
     assert!(matches!(**front, Bsdf::RoughPlastic(_)) && matches!(**back, Bsdf::RoughPlastic(_)));
-    let Bsdf::Conductor(c) = &b[7] else { panic!() };
+    let Bsdf::Conductor(c) = &b[6] else { panic!() };
     assert_eq!(c.ior.unwrap().eta, Vec3::new(0.2, 0.9, 1.1));
     // A nested BSDF may carry a name attribute.
     assert!(matches!(b[scene.shapes[0].bsdf], Bsdf::ThinDielectric(_)));
-    let Bsdf::Diffuse(d) = &b[8] else { panic!() };
+    let Bsdf::Diffuse(d) = &b[7] else { panic!() };
     let Texture::Checkerboard {
         color0,
         color1,
