@@ -3,7 +3,7 @@
 
 use crate::bsdf::Bsdf;
 use crate::spectrum::Rgb;
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3};
 
 /// A triangle mesh in world space.
 #[derive(Debug, Clone, Default)]
@@ -29,6 +29,9 @@ pub enum Geometry {
         center: Vec3,
         /// Radius in world units.
         radius: f32,
+        /// Orientation (object to world, orthogonal): Mitsuba keeps the rotation of a sphere's
+        /// `to_world`, and its uv parameterisation (textures) is in the rotated frame.
+        rotation: Mat3,
         /// Normals point inwards.
         flip_normals: bool,
     },

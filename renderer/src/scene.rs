@@ -562,6 +562,7 @@ mod tests {
             geometry: Geometry::Sphere {
                 center,
                 radius,
+                rotation: glam::Mat3::IDENTITY,
                 flip_normals: false,
             },
             bsdf: 0,

@@ -203,6 +203,7 @@ mod tests {
                 geometry: Geometry::Sphere {
                     center: Vec3::ZERO,
                     radius: 1.0,
+                    rotation: glam::Mat3::IDENTITY,
                     flip_normals: false,
                 },
                 bsdf: 0,
@@ -227,6 +228,7 @@ mod tests {
                 geometry: Geometry::Sphere {
                     center: Vec3::ZERO,
                     radius: 1.0,
+                    rotation: glam::Mat3::IDENTITY,
                     flip_normals: true,
                 },
                 bsdf: 0,

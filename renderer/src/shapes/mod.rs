@@ -62,8 +62,11 @@ impl Shape {
             Geometry::Sphere {
                 center,
                 radius,
+                rotation,
                 flip_normals,
-            } => Shape::Sphere(Sphere::new(*center, *radius, *flip_normals)),
+            } => {
+                Shape::Sphere(Sphere::new(*center, *radius, *flip_normals).with_rotation(*rotation))
+            }
             Geometry::Disk {
                 to_world,
                 flip_normals,

@@ -3,7 +3,7 @@
 use super::{AreaSample, HitGeometry};
 use crate::math::{coordinate_system, direction_to_spherical_uv, Ray};
 use crate::sampling::square_to_uniform_sphere;
-use glam::{Vec2, Vec3, Vec3A};
+use glam::{Mat3, Vec2, Vec3, Vec3A};
 use std::f32::consts::PI;
 
 /// A sphere in world space.
@@ -15,6 +15,11 @@ pub struct Sphere {
     pub radius: f32,
     /// Normals point inwards.
     pub flip_normals: bool,
+    /// Object-to-world rotation (orthogonal). Only the uv parameterisation and the tangent
+    /// depend on it: Mitsuba computes a sphere's uvs in its rotated object frame.
+    pub rotation: Mat3,
+    /// World-to-object rotation (the transpose of `rotation`).
+    pub to_local: Mat3,
 }
 
 impl Sphere {
@@ -24,6 +29,17 @@ impl Sphere {
             center,
             radius: radius.abs(),
             flip_normals,
+            rotation: Mat3::IDENTITY,
+            to_local: Mat3::IDENTITY,
+        }
+    }
+
+    /// The same sphere with an object frame rotated by `rotation` (orthogonal, object to world).
+    pub fn with_rotation(self, rotation: Mat3) -> Self {
+        Sphere {
+            rotation,
+            to_local: rotation.transpose(),
+            ..self
         }
     }
 
@@ -78,12 +94,14 @@ impl Sphere {
 
     /// Shading data at the hit of `ray` at distance `t`.
     pub fn hit_geometry(&self, ray: &Ray, t: f32) -> HitGeometry {
-        let local = self.outward(ray.at(t));
+        let dir = self.outward(ray.at(t));
         // Reproject onto the surface to remove the error of o + t·d.
-        let p = self.center + local * self.radius;
-        let n = if self.flip_normals { -local } else { local };
+        let p = self.center + dir * self.radius;
+        let n = if self.flip_normals { -dir } else { dir };
+        // uv and ∂p/∂u in the object frame (Mitsuba: φ about local z, θ from local +z).
+        let local = self.to_local * dir;
         let uv = direction_to_spherical_uv(local);
-        let dpdu = Vec3::new(-local.y, local.x, 0.0);
+        let dpdu = self.rotation * Vec3::new(-local.y, local.x, 0.0);
         let dpdu = if dpdu.length_squared() > 1e-12 {
             dpdu
         } else {
@@ -101,9 +119,10 @@ impl Sphere {
     /// A point uniformly distributed over the sphere.
     pub fn sample_area(&self, u: Vec2) -> AreaSample {
         let local = square_to_uniform_sphere(u);
-        let n = if self.flip_normals { -local } else { local };
+        let dir = self.rotation * local;
+        let n = if self.flip_normals { -dir } else { dir };
         AreaSample {
-            p: self.center + local * self.radius,
+            p: self.center + dir * self.radius,
             n,
             uv: direction_to_spherical_uv(local),
             pdf: 1.0 / self.area(),
@@ -127,5 +146,30 @@ mod tests {
             .is_infinite());
         let g = s.hit_geometry(&Ray::new(Vec3::ZERO, Vec3::Z), 4.0);
         assert!((g.ng + Vec3::Z).length() < 1e-5);
+    }
+
+    /// Mitsuba computes uvs in the sphere's rotated object frame: with the object frame rotated
+    /// 90° about x (local +z → world −y, local +y → world +z), the world point on +z lies at
+    /// local +y: φ = π/2 → u = 1/4, θ = π/2 → v = 1/2; the world bottom (−y) is the local pole
+    /// θ = 0 → v = 0. Unrotated, the same world point would have v = 0 instead.
+    #[test]
+    fn uv_is_computed_in_the_rotated_object_frame() {
+        let rot = Mat3::from_rotation_x(std::f32::consts::FRAC_PI_2);
+        let s = Sphere::new(Vec3::ZERO, 2.0, false).with_rotation(rot);
+        let g = s.hit_geometry(&Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z), 3.0);
+        assert!((g.p - Vec3::new(0.0, 0.0, 2.0)).length() < 1e-5);
+        assert!((g.uv - Vec2::new(0.25, 0.5)).length() < 1e-5, "{:?}", g.uv);
+        let g = s.hit_geometry(&Ray::new(Vec3::new(0.0, -5.0, 0.0), Vec3::Y), 3.0);
+        assert!(g.uv.y.abs() < 1e-5, "{:?}", g.uv);
+        // ∂p/∂u is tangent: perpendicular to the normal.
+        assert!(g.dpdu.dot(g.ng).abs() < 1e-5);
+        let plain = Sphere::new(Vec3::ZERO, 2.0, false);
+        let g = plain.hit_geometry(&Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z), 3.0);
+        assert!(g.uv.y.abs() < 1e-5, "{:?}", g.uv);
+        // Area samples: the point and the uv agree with the hit geometry of the same point.
+        let a = s.sample_area(Vec2::new(0.3, 0.7));
+        let dir = a.p / 2.0;
+        let g = s.hit_geometry(&Ray::new(dir * 5.0, -dir), 3.0);
+        assert!((g.p - a.p).length() < 1e-4 && (g.uv - a.uv).length() < 1e-4);
     }
 }

@@ -50,6 +50,9 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
             Geometry::Sphere {
                 center: to_world.transform_point3(center),
                 radius: radius * s,
+                // Uniform scale s: the 3x3 part divided by s is orthogonal (Mitsuba's polar
+                // decomposition gives the same rotation).
+                rotation: m3 * (1.0 / s),
                 flip_normals,
             }
         }

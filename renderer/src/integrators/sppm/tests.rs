@@ -74,6 +74,7 @@ fn furnace(rho: f32) -> Scene {
             geometry: Geometry::Sphere {
                 center: Vec3::ZERO,
                 radius: 1.0,
+                rotation: glam::Mat3::IDENTITY,
                 flip_normals: true,
             },
             bsdf: 0,
