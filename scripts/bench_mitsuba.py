@@ -23,6 +23,7 @@ import argparse
 import json
 import os
 import re
+import resource
 import subprocess
 import sys
 import time
@@ -45,15 +46,16 @@ def bench_mitsuba(variant, spp, repeats):
     warm = mi.render(scene, integrator=integrator, spp=spp, seed=0)
     dr.eval(warm)
     dr.sync_thread()
-    best = float("inf")
+    best, best_cpu = float("inf"), float("inf")
     for k in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         img = mi.render(scene, integrator=integrator, spp=spp, seed=1 + k)
         dr.eval(img)
         dr.sync_thread()
         _ = img.numpy() if hasattr(img, "numpy") else img
         best = min(best, time.perf_counter() - t0)
-    return RES * RES * spp / best, best
+        best_cpu = min(best_cpu, time.process_time() - c0)
+    return RES * RES * spp / best, best, best_cpu
 
 
 def bench_ours(binary, spp, threads, out_dir):
@@ -66,9 +68,12 @@ def bench_ours(binary, spp, threads, out_dir):
         cmd += ["--max-depth", str(MAX_DEPTH)]
     else:
         sys.exit("render has no --max-depth option: cannot set max_depth 8 on cbox")
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
     if proc.returncode != 0:
         sys.exit(f"render failed ({proc.returncode}):\n{proc.stderr[-2000:]}")
     # Prefer the renderer's own figure when it prints one (rendering only, no scene load).
@@ -78,7 +83,7 @@ def bench_ours(binary, spp, threads, out_dir):
         if m:
             reported = float(m.group(1)) * {"": 1, "k": 1e3, "M": 1e6, "G": 1e9}[m.group(2)]
             break
-    return RES * RES * spp / wall, wall, reported, cmd
+    return RES * RES * spp / wall, wall, reported, cmd, cpu
 
 
 def main():
@@ -106,9 +111,10 @@ def main():
             proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
             if proc.returncode != 0:
                 sys.exit(f"Mitsuba {variant} failed:\n{proc.stderr[-2000:]}")
-            sps, sec = json.loads(proc.stdout.strip().splitlines()[-1])
-            results[f"mitsuba_{variant}"] = {"samples_per_s": sps, "seconds": sec, "spp": spp}
-            rows.append((f"Mitsuba 3 `{variant}` (all cores)", spp, sec, sps, None))
+            sps, sec, cpu = json.loads(proc.stdout.strip().splitlines()[-1])
+            results[f"mitsuba_{variant}"] = {"samples_per_s": sps, "seconds": sec, "cpu_seconds": cpu,
+                                             "spp": spp}
+            rows.append((f"Mitsuba 3 `{variant}` (all cores)", spp, sec, sps, None, cpu))
     if not args.mitsuba_only:
         if not args.no_build:
             subprocess.run(["cargo", "build", "--release", "-p", "renderer", "--bin", "render"], cwd=ROOT,
@@ -116,18 +122,23 @@ def main():
         out_dir = ROOT / "out" / "bench"
         out_dir.mkdir(parents=True, exist_ok=True)
         for t in [int(x) for x in args.threads.split(",")]:
-            sps, wall, reported, cmd = bench_ours(args.bin, args.ours_spp, t, out_dir)
-            results[f"ours_t{t}"] = {"samples_per_s_wall": sps, "seconds_wall": wall,
+            sps, wall, reported, cmd, cpu = bench_ours(args.bin, args.ours_spp, t, out_dir)
+            results[f"ours_t{t}"] = {"samples_per_s_wall": sps, "seconds_wall": wall, "cpu_seconds": cpu,
                                      "samples_per_s_reported": reported, "spp": args.ours_spp,
                                      "command": " ".join(cmd)}
-            rows.append((f"ours `render --integrator path --threads {t}`", args.ours_spp, wall, sps, reported))
+            rows.append((f"ours `render --integrator path --threads {t}`", args.ours_spp, wall, sps, reported, cpu))
 
-    print(f"Path tracing, {CBOX.parent.name} {RES}x{RES}, max_depth {MAX_DEPTH}, {os.cpu_count()} CPUs\n")
-    print("| renderer | spp | seconds | samples/s (wall) | samples/s (reported) |")
-    print("|---|---|---|---|---|")
-    for name, spp, sec, sps, rep in rows:
+    load = os.getloadavg()
+    print(f"Path tracing, {CBOX.parent.name} {RES}x{RES}, max_depth {MAX_DEPTH}, {os.cpu_count()} CPUs, "
+          f"load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}\n")
+    print("CPU: process CPU seconds of the timed part (ours: the whole process, scene load included);")
+    print("samples per CPU-second is what each renderer gets out of a core, whatever else the machine runs.\n")
+    print("| renderer | spp | seconds | samples/s (wall) | samples/s (reported) | CPU s | samples per CPU-s |")
+    print("|---|---|---|---|---|---|---|")
+    for name, spp, sec, sps, rep, cpu in rows:
         rep_s = f"{rep / 1e6:.3f} M" if rep else "–"
-        print(f"| {name} | {spp} | {sec:.2f} | {sps / 1e6:.3f} M | {rep_s} |")
+        per_cpu = f"{RES * RES * spp / cpu / 1e6:.3f} M" if cpu > 0 else "–"
+        print(f"| {name} | {spp} | {sec:.2f} | {sps / 1e6:.3f} M | {rep_s} | {cpu:.2f} | {per_cpu} |")
     llvm = results.get("mitsuba_llvm_ad_rgb", {}).get("samples_per_s")
     scalar = results.get("mitsuba_scalar_rgb", {}).get("samples_per_s")
     ours = {k: v["samples_per_s_wall"] for k, v in results.items() if k.startswith("ours_t")}
@@ -137,6 +148,12 @@ def main():
             print(f"{k} / Mitsuba llvm_ad_rgb = {v / llvm:.2f}x")
         if scalar:
             print(f"{k} / Mitsuba scalar_rgb = {v / scalar:.2f}x")
+    per_cpu = {k: RES * RES * v["spp"] / v["cpu_seconds"] for k, v in results.items()
+               if isinstance(v, dict) and v.get("cpu_seconds")}
+    for k, v in per_cpu.items():
+        for m in ("mitsuba_llvm_ad_rgb", "mitsuba_scalar_rgb"):
+            if k.startswith("ours_t") and m in per_cpu:
+                print(f"{k} / {m}, samples per CPU-second = {v / per_cpu[m]:.2f}x")
     if "ours_t1" in ours and len(ours) > 1:
         for k, v in ours.items():
             if k != "ours_t1":
