@@ -15,4 +15,5 @@ pub mod plan;
 pub mod ply;
 pub mod rng;
 pub mod scene;
+pub mod sppm_backend;
 pub mod xml;

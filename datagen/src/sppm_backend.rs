@@ -72,7 +72,9 @@ impl SampleRenderer for SppmBackend {
             checkpoints: spec.passes.clone(),
             seconds: None,
         };
-        render_sppm(&scene, &settings(spec), &stop, on_bundle, |p| on_pass(p.pass))?;
+        render_sppm(&scene, &settings(spec), &stop, on_bundle, |p| {
+            on_pass(p.pass)
+        })?;
         Ok(())
     }
 }

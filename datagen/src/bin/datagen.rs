@@ -11,7 +11,7 @@ use datagen::jobs::{render_dataset, RenderOptions};
 use datagen::manifest::{assemble_manifest, Manifest};
 use datagen::plan::{Plan, Shard};
 use datagen::scene::write_scene_files;
-// PENDING use datagen::sppm_backend::SppmBackend;
+use datagen::sppm_backend::SppmBackend;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::PathBuf;
 
@@ -126,10 +126,7 @@ fn run(cli: Cli) -> Result<i32> {
                 threads,
                 progress: !quiet,
             };
-            let report: datagen::jobs::RenderReport = {
-                let _ = (&config, &out, options, render_dataset);
-                bail!("PENDING renderer xml")
-            };
+            let report = render_dataset(&config, &out, options, &SppmBackend)?;
             eprintln!(
                 "shard {}/{}: {} jobs rendered, {} already done, {} files; manifest {}",
                 shard.index,

@@ -130,7 +130,11 @@ fn depths(cli: &Cli, scene: &Scene) -> (i32, u32) {
 fn progress_bar(total: u64, unit: &str) -> ProgressBar {
     let bar = ProgressBar::new(total);
     let template = format!("{{elapsed_precise}} [{{wide_bar}}] {{human_pos}}/{{human_len}} {unit} ({{per_sec}}, ETA {{eta}})");
-    bar.set_style(ProgressStyle::with_template(&template).expect("valid template").progress_chars("=> "));
+    bar.set_style(
+        ProgressStyle::with_template(&template)
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
     bar
 }
 
@@ -154,7 +158,11 @@ fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
     let total = res.x as u64 * res.y as u64 * spp as u64;
     let bar = progress_bar(total, "samples");
     let t = Instant::now();
-    let film = PathTracer { max_depth, rr_depth }.render(scene, spp, cli.seed, Some(&bar));
+    let film = PathTracer {
+        max_depth,
+        rr_depth,
+    }
+    .render(scene, spp, cli.seed, Some(&bar));
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     eprintln!(
@@ -184,7 +192,11 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
     if cli.passes.contains(&0) {
         bail!("--passes values must be at least 1");
     }
-    let mode = if multi_level { SppmMode::MultiLevel } else { SppmMode::Single };
+    let mode = if multi_level {
+        SppmMode::MultiLevel
+    } else {
+        SppmMode::Single
+    };
     let settings = SppmSettings {
         photons_per_pass: cli.photons,
         seed: cli.seed,
@@ -193,12 +205,18 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
         mode,
         // SPPM bounds eye (delta/glossy) and photon bounces; the file's depth is the path
         // tracer's and is not used.
-        max_depth: cli.max_depth.filter(|&d| d > 0).map_or(DEFAULT_MAX_DEPTH, |d| d as u32),
+        max_depth: cli
+            .max_depth
+            .filter(|&d| d > 0)
+            .map_or(DEFAULT_MAX_DEPTH, |d| d as u32),
         threads: cli.threads,
         scene_name: cli.scene.display().to_string(),
         ..SppmSettings::default()
     };
-    let stop = StopCondition { checkpoints: cli.passes.clone(), seconds: cli.time };
+    let stop = StopCondition {
+        checkpoints: cli.passes.clone(),
+        seconds: cli.time,
+    };
     let target = cli.passes.iter().copied().max();
     let bar = match target {
         Some(n) => progress_bar(n as u64, "passes"),

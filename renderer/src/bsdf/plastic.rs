@@ -70,7 +70,7 @@ impl Plastic {
             let p_diff = 1.0 - p_spec;
             let wi = square_to_cosine_hemisphere(u);
             let pdf = p_diff * square_to_cosine_hemisphere_pdf(wi);
-            if !(pdf > 0.0) {
+            if pdf.is_nan() || pdf <= 0.0 {
                 return None;
             }
             let f_i = fresnel_dielectric(wi.z, self.eta).r;

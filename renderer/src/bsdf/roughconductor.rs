@@ -24,7 +24,7 @@ impl RoughConductor {
         let weight =
             conductor_reflectance(&self.ior, wo.dot(m)) * g1 * self.specular_reflectance.eval(uv);
         let pdf = pdf_m / (4.0 * wi.dot(m));
-        if g1 <= 0.0 || !(pdf > 0.0) {
+        if g1 <= 0.0 || (pdf.is_nan() || pdf <= 0.0) {
             return None;
         }
         Some(BsdfSample {

@@ -23,7 +23,7 @@ impl RoughDielectric {
         let distr = MicrofacetDistribution::new(&self.roughness);
         // Sample a normal visible from the side `wo` is on (the distribution is symmetric).
         let (m, pdf_m) = distr.sample(wo * cos_o.signum(), u);
-        if !(pdf_m > 0.0) {
+        if pdf_m.is_nan() || pdf_m <= 0.0 {
             return None;
         }
         let f = fresnel_dielectric(wo.dot(m), self.eta);
@@ -50,7 +50,7 @@ impl RoughDielectric {
         let g1 = distr.smith_g1(wi, m);
         weight *= g1;
         let pdf = pdf_m * lobe_pdf * dwh_dwi.abs();
-        if g1 <= 0.0 || !(pdf > 0.0) || !pdf.is_finite() {
+        if g1 <= 0.0 || (pdf.is_nan() || pdf <= 0.0) || !pdf.is_finite() {
             return None;
         }
         Some(BsdfSample {
@@ -68,7 +68,7 @@ impl RoughDielectric {
         let eta = if wo.z > 0.0 { self.eta } else { 1.0 / self.eta };
         let h = wo + wi * if reflect { 1.0 } else { eta };
         let len2 = h.length_squared();
-        if !(len2 > 0.0) {
+        if len2.is_nan() || len2 <= 0.0 {
             return None;
         }
         let m = h / len2.sqrt();

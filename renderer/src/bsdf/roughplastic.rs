@@ -202,7 +202,7 @@ impl RoughPlastic {
             square_to_cosine_hemisphere(u)
         };
         let pdf = self.pdf_with(&tables, wo, wi);
-        if !(pdf > 0.0) {
+        if pdf.is_nan() || pdf <= 0.0 {
             return None;
         }
         let f = self.eval_with(&tables, wo, wi, uv);

@@ -1,0 +1,297 @@
+//! `infer`: post-reconstruction in one command (SPEC §6). Reads a multi-level SPPM bundle, or
+//! renders one from a Mitsuba XML scene first, and combines its five levels with trained
+//! weights; writes the result as EXR (+ PNG previews) and, given a reference, the relMSE of
+//! every input level and of the output.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle, Image};
+use clap::Parser;
+use indicatif::{ProgressBar, ProgressStyle};
+use infer::preview::{write_side_by_side, write_weight_map, Panel};
+use infer::{reconstruct_tiled, ErrorReport, TrainedModel};
+use model::backend::Backend;
+use model::features::{pack, planar_reference};
+
+/// Reconstruct a multi-level SPPM render with a trained combiner network.
+///
+/// Either `--input bundle.exr` (written by `render --integrator sppm-ml` or `datagen`) or
+/// `--scene scene.xml` (renders the bundle first).
+#[derive(Debug, Parser)]
+#[command(version, about)]
+struct Cli {
+    /// Trained model directory (`model.json` + `model.bpk`, as written by `train`).
+    #[arg(long, default_value = "models/default")]
+    model: PathBuf,
+    /// Sample bundle to reconstruct.
+    #[arg(long, conflicts_with = "scene", required_unless_present = "scene")]
+    input: Option<PathBuf>,
+    /// Render this Mitsuba 3 XML scene with multi-level SPPM first, then reconstruct.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Output EXR (RGB). Default with `--scene`: `out/<scene name>/ours.exr`.
+    #[arg(long, required_unless_present = "scene")]
+    output: Option<PathBuf>,
+    /// Reference RGB EXR: report relMSE of every input level and of the output.
+    #[arg(long)]
+    reference: Option<PathBuf>,
+    /// Also write PNG previews: the output, standard SPPM | ours | reference, the weight map.
+    #[arg(long)]
+    png: bool,
+    /// Tensor backend.
+    #[arg(long, default_value = "flex", value_parser = Backend::parse)]
+    backend: Backend,
+    /// Tile side in pixels (a halo covering the receptive field is added); 0 = whole image.
+    #[arg(long, default_value_t = 128)]
+    tile: usize,
+
+    /// `--scene`: SPPM passes to render.
+    #[arg(long, default_value_t = 64, help_heading = "Rendering (--scene)")]
+    passes: u32,
+    /// `--scene`: photons traced per pass.
+    #[arg(long, default_value_t = 100_000, help_heading = "Rendering (--scene)")]
+    photons: u64,
+    /// `--scene`: random seed of the render.
+    #[arg(long, default_value_t = 1, help_heading = "Rendering (--scene)")]
+    seed: u64,
+    /// `--scene`: worker threads of the renderer (0 = all cores).
+    #[arg(long, default_value_t = 0, help_heading = "Rendering (--scene)")]
+    threads: usize,
+    /// `--scene`: override a `<default name=… value=…>` of the scene, e.g. `-D res=128`.
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define, help_heading = "Rendering (--scene)")]
+    define: Vec<(String, String)>,
+}
+
+fn parse_define(s: &str) -> Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v.to_string())),
+        _ => Err(format!("expected NAME=VALUE, got '{s}'")),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(&cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// `<stem><suffix>` next to `path` (e.g. `out.exr` → `out_compare.png`).
+fn sibling(path: &Path, suffix: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    path.with_file_name(format!("{stem}{suffix}"))
+}
+
+fn run(cli: &Cli) -> Result<()> {
+    let device = cli.backend.device().map_err(anyhow::Error::msg)?;
+    let model = TrainedModel::open(&cli.model, &device)
+        .with_context(|| format!("loading model {}", cli.model.display()))?;
+    eprintln!(
+        "model {}: preset {:?}, window {}×{}, receptive radius {} px, backend {:?}",
+        cli.model.display(),
+        model.config.preset,
+        model.config.window,
+        model.config.window,
+        model.config.receptive_radius(),
+        cli.backend
+    );
+
+    let (bundle, output) = match (&cli.input, &cli.scene) {
+        (Some(input), _) => {
+            let bundle = read_bundle(input)?;
+            let output = cli
+                .output
+                .clone()
+                .expect("clap requires --output with --input");
+            (bundle, output)
+        }
+        (None, Some(scene)) => {
+            let name = scene
+                .parent()
+                .and_then(|p| p.file_name())
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "scene".into());
+            let output = cli
+                .output
+                .clone()
+                .unwrap_or_else(|| PathBuf::from("out").join(name).join("ours.exr"));
+            let bundle = render_bundle(cli, scene)?;
+            if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
+            }
+            let bundle_path = sibling(&output, "_bundle.exr");
+            write_bundle(&bundle_path, &bundle)?;
+            eprintln!("wrote {} (the multi-level bundle)", bundle_path.display());
+            (bundle, output)
+        }
+        (None, None) => bail!("give --input bundle.exr or --scene scene.xml"),
+    };
+    let source = cli
+        .input
+        .as_ref()
+        .or(cli.scene.as_ref())
+        .expect("one of them is set");
+    let packed = pack(&bundle).with_context(|| format!("bundle {}", source.display()))?;
+    let reference = match &cli.reference {
+        Some(path) => {
+            let image = read_rgb_exr_image(path)?;
+            let planar = planar_reference(&image, packed.width, packed.height)
+                .with_context(|| format!("reference {}", path.display()))?;
+            Some(planar)
+        }
+        None => None,
+    };
+
+    let t = Instant::now();
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{wide_bar}] tile {pos}/{len} (ETA {eta})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    let result = reconstruct_tiled(&model, &packed, cli.tile, &device, |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    });
+    bar.finish_and_clear();
+    let seconds = t.elapsed().as_secs_f64();
+    eprintln!(
+        "reconstructed {}×{} in {seconds:.2} s ({} px tiles)",
+        packed.width, packed.height, cli.tile
+    );
+
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    write_rgb_exr_image(
+        &output,
+        &interleave(&result.image, packed.width, packed.height),
+    )?;
+    let mut written = vec![output.clone()];
+    if cli.png {
+        let png = output.with_extension("png");
+        let (w, h) = (packed.width, packed.height);
+        write_side_by_side(
+            &png,
+            w,
+            h,
+            &[Panel {
+                planes: &result.image,
+            }],
+        )?;
+        let mut panels = vec![
+            Panel {
+                planes: packed.level(1),
+            },
+            Panel {
+                planes: &result.image,
+            },
+        ];
+        if let Some(r) = &reference {
+            panels.push(Panel { planes: r });
+        }
+        let compare = sibling(&output, "_compare.png");
+        write_side_by_side(&compare, w, h, &panels)?;
+        let weights = sibling(&output, "_weights.png");
+        write_weight_map(&weights, w, h, &result.shares)?;
+        written.extend([png, compare, weights]);
+    }
+    if let Some(r) = &reference {
+        let report = ErrorReport::new(&packed, &result.image, r);
+        print!("{}", report.to_text());
+        let json = sibling(&output, "_report.json");
+        let text = serde_json::to_string_pretty(&report)?;
+        let tmp = sibling(&output, "_report.json.tmp");
+        std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+        std::fs::rename(&tmp, &json).with_context(|| format!("writing {}", json.display()))?;
+        written.push(json);
+    }
+    println!("wrote:");
+    for p in written {
+        println!("  {}", p.display());
+    }
+    Ok(())
+}
+
+/// Planar RGB → an interleaved RGB [`Image`].
+fn interleave(planes: &[f32], width: usize, height: usize) -> Image {
+    let pixels = width * height;
+    let mut image = Image::new(width, height, 3);
+    for p in 0..pixels {
+        for c in 0..3 {
+            image.data[p * 3 + c] = planes[c * pixels + p];
+        }
+    }
+    image
+}
+
+/// Renders `scene` with multi-level SPPM for `--passes` passes and returns the bundle.
+fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
+    use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
+    if cli.passes == 0 {
+        bail!("--passes must be at least 1");
+    }
+    let desc = renderer::xml::load_scene(scene_path, &cli.define, false)
+        .with_context(|| format!("loading {}", scene_path.display()))?;
+    for w in &desc.warnings {
+        eprintln!("warning: {w}");
+    }
+    let scene = renderer::scene::Scene::build(&desc)
+        .with_context(|| format!("building {}", scene_path.display()))?;
+    let settings = SppmSettings {
+        photons_per_pass: cli.photons,
+        seed: cli.seed,
+        mode: SppmMode::MultiLevel,
+        threads: cli.threads,
+        scene_name: scene_path.display().to_string(),
+        ..SppmSettings::default()
+    };
+    let stop = StopCondition {
+        checkpoints: vec![cli.passes],
+        seconds: None,
+    };
+    let bar = ProgressBar::new(cli.passes as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{wide_bar}] {pos}/{len} passes ({msg}, ETA {eta})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    let mut result = None;
+    render_sppm(
+        &scene,
+        &settings,
+        &stop,
+        |b| {
+            result = Some(b);
+            Ok(())
+        },
+        |p| {
+            bar.set_position(p.pass as u64);
+            bar.set_message(format!(
+                "{:.2} passes/s, {:.2} M photons/s",
+                p.pass as f64 / p.elapsed,
+                p.photons_emitted as f64 / p.elapsed / 1e6
+            ));
+        },
+    )?;
+    bar.finish_and_clear();
+    let bundle = result.context("the renderer wrote no bundle")?;
+    eprintln!(
+        "rendered {} passes × {} photons in {:.1} s",
+        bundle.meta.passes, bundle.meta.photons_per_pass, bundle.meta.seconds
+    );
+    Ok(bundle)
+}

@@ -1,0 +1,147 @@
+//! Tiled reconstruction equals the untiled one; model directories round-trip; the `infer`
+//! binary reports bad input with the file name and a non-zero exit.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use burn::tensor::Device;
+use infer::{reconstruct_tiled, TrainedModel};
+use model::features::pack;
+use model::synthetic::synthetic_bundle;
+use model::training::save_burnpack;
+use model::{ModelConfig, Preset, Weighting};
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("infer-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn model(preset: Preset, weighting: Weighting, seed: u64) -> TrainedModel {
+    let mut config = ModelConfig::preset(preset);
+    config.weighting = weighting;
+    let network = config.init(seed, &Device::flex());
+    TrainedModel {
+        dir: PathBuf::new(),
+        config,
+        network,
+    }
+}
+
+/// Largest |a − b| / max(|b|, 1e-3) over all samples.
+fn max_relative_difference(a: &[f32], b: &[f32]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| ((x - y).abs() / y.abs().max(1e-3)) as f64)
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn tiled_equals_untiled_on_an_odd_sized_image() {
+    // 53×41 with 16-px tiles: 4×3 tiles, ragged last row and column; the small preset's halo
+    // (12 px) is most of a tile, so halos overlap several neighbours.
+    let (bundle, _) = synthetic_bundle(53, 41, 0.3, 7);
+    let packed = pack(&bundle).unwrap();
+    let device = Device::flex();
+    for (preset, weighting) in [
+        (Preset::Small, Weighting::Relu),
+        (Preset::Tiny, Weighting::Softmax),
+    ] {
+        let m = model(preset, weighting, 11);
+        let whole = reconstruct_tiled(&m, &packed, 0, &device, |_, _| {});
+        let mut calls = 0;
+        let tiled = reconstruct_tiled(&m, &packed, 16, &device, |done, total| {
+            calls += 1;
+            assert_eq!((done, total), (calls, 12));
+        });
+        assert_eq!(calls, 12);
+        let d = max_relative_difference(&tiled.image, &whole.image);
+        assert!(
+            d <= 1e-5,
+            "{preset:?}: tiled differs from untiled by {d:e} (relative)"
+        );
+        let d = max_relative_difference(&tiled.shares, &whole.shares);
+        assert!(d <= 1e-5, "{preset:?}: weight shares differ by {d:e}");
+        assert!(whole.image.iter().all(|v| v.is_finite()));
+        // Shares are a partition of the weight at every pixel.
+        let pixels = packed.pixels();
+        for p in 0..pixels {
+            let s: f32 = (0..4).map(|l| whole.shares[l * pixels + p]).sum();
+            assert!((s - 1.0).abs() < 1e-4, "shares sum to {s} at pixel {p}");
+        }
+    }
+}
+
+#[test]
+fn saved_model_directory_reloads_to_identical_output() {
+    let dir = temp_dir("roundtrip");
+    let m = model(Preset::Tiny, Weighting::Relu, 5);
+    save_burnpack(&m.network, &dir.join("model.bpk")).unwrap();
+    std::fs::write(
+        dir.join("model.json"),
+        serde_json::to_string(&m.config).unwrap(),
+    )
+    .unwrap();
+    let device = Device::flex();
+    let loaded = TrainedModel::open(&dir, &device).unwrap();
+    assert_eq!(loaded.config, m.config);
+    let (bundle, _) = synthetic_bundle(19, 13, 0.2, 3);
+    let packed = pack(&bundle).unwrap();
+    let a = reconstruct_tiled(&m, &packed, 0, &device, |_, _| {});
+    let b = reconstruct_tiled(&loaded, &packed, 0, &device, |_, _| {});
+    assert_eq!(a, b);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn missing_or_broken_model_files_are_named() {
+    let dir = temp_dir("broken");
+    let device = Device::flex();
+    let err = TrainedModel::open(&dir, &device).err().unwrap().to_string();
+    assert!(err.contains("model.json"), "{err}");
+    std::fs::write(dir.join("model.json"), "{\"preset\": \"tiny\"").unwrap();
+    let err = TrainedModel::open(&dir, &device).err().unwrap().to_string();
+    assert!(err.contains("model.json"), "{err}");
+    let config = ModelConfig::preset(Preset::Tiny);
+    std::fs::write(
+        dir.join("model.json"),
+        serde_json::to_string(&config).unwrap(),
+    )
+    .unwrap();
+    let err = TrainedModel::open(&dir, &device).err().unwrap().to_string();
+    assert!(err.contains("model.bpk"), "{err}");
+    // Weights of another architecture do not load silently.
+    let other = ModelConfig::preset(Preset::Small).init(1, &device);
+    save_burnpack(&other, &dir.join("model.bpk")).unwrap();
+    assert!(TrainedModel::open(&dir, &device).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn cli_names_a_missing_bundle_and_exits_non_zero() {
+    let dir = temp_dir("cli");
+    let m = model(Preset::Tiny, Weighting::Relu, 5);
+    save_burnpack(&m.network, &dir.join("model.bpk")).unwrap();
+    std::fs::write(
+        dir.join("model.json"),
+        serde_json::to_string(&m.config).unwrap(),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_infer"))
+        .arg("--model")
+        .arg(&dir)
+        .arg("--input")
+        .arg(dir.join("nope.exr"))
+        .arg("--output")
+        .arg(dir.join("out.exr"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("nope.exr"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!dir.join("out.exr").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,346 @@
+//! The multi-level combination of paper Eq. 6 with image-border handling.
+//!
+//! ŷ_c = Σ_j Σ_{i∈Ω_c} w^j_i (ỹ_i + z̃^j_c − z̃^j_i) / Σ_j Σ_{i∈Ω_c} w^j_i
+//!
+//! rewritten as Σ_j [Σ_i w^j_i (ỹ_i − z̃^j_i) + (Σ_i w^j_i) z̃^j_c] / W_c, so the window gather
+//! is needed only for the differences d^j = ỹ − z̃^j. The gather is `unfold4d` on an explicitly
+//! zero-padded input: with padding in the unfold options Burn would run a one-hot convolution.
+//! Window entries outside the image get zero weight and W_c is the sum of the remaining ones,
+//! so the weights are renormalised over the pixels that exist.
+
+use burn::tensor::module::unfold4d;
+use burn::tensor::ops::{PadMode, UnfoldOptions};
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::model::LEVELS;
+
+/// Number of correlated estimates z̃1..z̃4 (m − 1).
+const PAIRS: usize = LEVELS - 1;
+
+/// 1 where window entry k of pixel p lies inside the `height`×`width` image, else 0; shape
+/// `[1, 1, 1, window², height·width]`, entries ordered like `unfold4d` (row-major offsets).
+pub fn inside_mask(height: usize, width: usize, window: usize, device: &Device) -> Tensor<5> {
+    let r = (window / 2) as isize;
+    let area = window * window;
+    let pixels = height * width;
+    let mut mask = vec![0.0f32; area * pixels];
+    for ki in 0..window {
+        for kj in 0..window {
+            let row = &mut mask[(ki * window + kj) * pixels..][..pixels];
+            for py in 0..height {
+                let sy = py as isize + ki as isize - r;
+                if sy < 0 || sy >= height as isize {
+                    continue;
+                }
+                for px in 0..width {
+                    let sx = px as isize + kj as isize - r;
+                    if sx >= 0 && sx < width as isize {
+                        row[py * width + px] = 1.0;
+                    }
+                }
+            }
+        }
+    }
+    Tensor::from_data(TensorData::new(mask, [1, 1, 1, area, pixels]), device)
+}
+
+/// Positive weights masked to the image: `weights` `[B, 4·|Ω|, H, W]` → `[B, 4, 1, |Ω|, H·W]`.
+fn masked_weights(weights: Tensor<4>, window: usize) -> Tensor<5> {
+    let [batch, channels, height, width] = weights.dims();
+    let area = window * window;
+    assert_eq!(
+        channels,
+        PAIRS * area,
+        "weights need (m-1)*window^2 = {} channels, got {channels}",
+        PAIRS * area
+    );
+    let mask = inside_mask(height, width, window, &weights.device());
+    weights.reshape([batch, PAIRS, 1, area, height * width]) * mask
+}
+
+/// Combines the five levels with per-pixel window weights (paper Eq. 6).
+///
+/// `levels`: raw linear colours `[B, 15, H, W]` ordered ỹ, z̃1..z̃4 (RGB each);
+/// `weights`: positive weights `[B, 4·window², H, W]`, pair-major then window row-major;
+/// returns ŷ `[B, 3, H, W]`.
+pub fn combine(levels: Tensor<4>, weights: Tensor<4>, window: usize) -> Tensor<4> {
+    let [batch, channels, height, width] = levels.dims();
+    assert_eq!(
+        channels,
+        3 * LEVELS,
+        "levels need 15 channels, got {channels}"
+    );
+    assert_eq!(window % 2, 1, "window must be odd");
+    let r = window / 2;
+    let area = window * window;
+    let pixels = height * width;
+
+    let y = levels.clone().narrow(1, 0, 3);
+    let z = levels.narrow(1, 3, 3 * PAIRS);
+    let differences = y.repeat_dim(1, PAIRS) - z.clone();
+    let padded = differences.pad([(r, r), (r, r)], PadMode::Constant(0.0));
+    let gathered = unfold4d(
+        padded,
+        [window, window],
+        UnfoldOptions::new([1, 1], [0, 0], [1, 1]),
+    )
+    .reshape([batch, PAIRS, 3, area, pixels]);
+
+    let w = masked_weights(weights, window);
+    let weight_sums = w.clone().sum_dim(3); // [B, 4, 1, 1, HW]
+    let window_term = (gathered * w).sum_dim(3); // [B, 4, 3, 1, HW]
+    let centre_term = weight_sums.clone() * z.reshape([batch, PAIRS, 3, 1, pixels]);
+    let numerator = (window_term + centre_term).sum_dim(1); // [B, 1, 3, 1, HW]
+    let normaliser = weight_sums.sum_dim(1); // [B, 1, 1, 1, HW]
+    (numerator / normaliser).reshape([batch, 3, height, width])
+}
+
+/// Share of the total weight each pair j carries at each pixel, `[B, 4, H, W]` (sums to 1):
+/// channel 0 is the sharpest correlated level z̃1, channel 3 the smoothest z̃4 (paper Fig. 6).
+pub fn level_weight_shares(weights: Tensor<4>, window: usize) -> Tensor<4> {
+    let [batch, _, height, width] = weights.dims();
+    let sums = masked_weights(weights, window).sum_dim(3); // [B, 4, 1, 1, HW]
+    let total = sums.clone().sum_dim(1);
+    (sums / total).reshape([batch, PAIRS, height, width])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Tensor;
+
+    fn device() -> Device {
+        Device::flex()
+    }
+
+    fn tensor4(data: Vec<f32>, shape: [usize; 4]) -> Tensor<4> {
+        Tensor::from_data(TensorData::new(data, shape), &device())
+    }
+
+    fn values(t: Tensor<4>) -> Vec<f32> {
+        t.into_data().try_to_vec::<f32>().unwrap()
+    }
+
+    /// Small deterministic pseudo-random numbers in [lo, hi).
+    fn noise(n: usize, seed: u32, lo: f32, hi: f32) -> Vec<f32> {
+        let mut s = seed.wrapping_mul(747796405).wrapping_add(2891336453);
+        (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 17;
+                s ^= s << 5;
+                lo + (hi - lo) * (s >> 8) as f32 / (1u32 << 24) as f32
+            })
+            .collect()
+    }
+
+    /// Eq. 6 evaluated literally with loops, skipping window pixels outside the image.
+    fn combine_reference(
+        levels: &[f32],
+        weights: &[f32],
+        h: usize,
+        w: usize,
+        window: usize,
+    ) -> Vec<f32> {
+        let r = (window / 2) as isize;
+        let hw = h * w;
+        let at =
+            |level: usize, ch: usize, y: usize, x: usize| levels[(level * 3 + ch) * hw + y * w + x];
+        let mut out = vec![0.0f32; 3 * hw];
+        for cy in 0..h {
+            for cx in 0..w {
+                for ch in 0..3 {
+                    let (mut num, mut den) = (0.0f64, 0.0f64);
+                    for j in 0..4 {
+                        for ki in 0..window {
+                            for kj in 0..window {
+                                let iy = cy as isize + ki as isize - r;
+                                let ix = cx as isize + kj as isize - r;
+                                if iy < 0 || ix < 0 || iy >= h as isize || ix >= w as isize {
+                                    continue;
+                                }
+                                let (iy, ix) = (iy as usize, ix as usize);
+                                let k = ki * window + kj;
+                                let wt =
+                                    weights[(j * window * window + k) * hw + cy * w + cx] as f64;
+                                let v = at(0, ch, iy, ix) + at(j + 1, ch, cy, cx)
+                                    - at(j + 1, ch, iy, ix);
+                                num += wt * v as f64;
+                                den += wt;
+                            }
+                        }
+                    }
+                    out[ch * hw + cy * w + cx] = (num / den) as f32;
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn hand_computed_two_pixel_image_with_borders() {
+        // 1x2 image, window 3, all weights 1: pixel 0 sees itself and pixel 1 in each of the
+        // four pairs, so W = 8. Per pair Σ_i (y_i + z_c − z_i) = y0 + y1 + z_c − z_other:
+        // pixel 0: (4+2−4) + (4+0−0) + (4+1−1) + (4+5−9) = 10 → 1.25
+        // pixel 1: (4+4−2) + (4+0−0) + (4+1−1) + (4+9−5) = 22 → 2.75
+        let per_level = [[1.0, 3.0], [2.0, 4.0], [0.0, 0.0], [1.0, 1.0], [5.0, 9.0]];
+        let mut levels = Vec::new();
+        for level in per_level {
+            for _ in 0..3 {
+                levels.extend(level);
+            }
+        }
+        let levels = tensor4(levels, [1, 15, 1, 2]);
+        let weights = tensor4(vec![1.0; 4 * 9 * 2], [1, 36, 1, 2]);
+        let out = values(combine(levels, weights, 3));
+        for ch in 0..3 {
+            assert!((out[ch * 2] - 1.25).abs() < 1e-6, "{out:?}");
+            assert!((out[ch * 2 + 1] - 2.75).abs() < 1e-6, "{out:?}");
+        }
+    }
+
+    #[test]
+    fn hand_computed_single_entry_weights() {
+        // Only pair 4's entry pointing at the right neighbour (offset (0,+1), k = 5) is non-zero
+        // at pixel 0: ŷ_0 = y_1 + z4_0 − z4_1 = 3 + 5 − 9 = −1. At pixel 1 that entry points
+        // outside the image and is masked out, so only pair 2's centre (k = 4) counts:
+        // ŷ_1 = y_1 + z2_1 − z2_1 = 3.
+        let per_level = [[1.0, 3.0], [2.0, 4.0], [0.0, 0.0], [1.0, 1.0], [5.0, 9.0]];
+        let mut levels = Vec::new();
+        for level in per_level {
+            for _ in 0..3 {
+                levels.extend(level);
+            }
+        }
+        let mut weights = vec![0.0f32; 36 * 2];
+        weights[(3 * 9 + 5) * 2] = 2.0; // pair 4, k = 5, pixel 0
+        weights[(3 * 9 + 5) * 2 + 1] = 7.0; // pair 4, k = 5, pixel 1: outside → ignored
+        weights[(9 + 4) * 2 + 1] = 0.5; // pair 2, centre, pixel 1
+        let out = values(combine(
+            tensor4(levels, [1, 15, 1, 2]),
+            tensor4(weights, [1, 36, 1, 2]),
+            3,
+        ));
+        for ch in 0..3 {
+            assert!((out[ch * 2] + 1.0).abs() < 1e-6, "{out:?}");
+            assert!((out[ch * 2 + 1] - 3.0).abs() < 1e-6, "{out:?}");
+        }
+    }
+
+    #[test]
+    fn matches_literal_eq6_on_random_image_with_borders() {
+        let (h, w, window) = (5, 4, 5);
+        let hw = h * w;
+        let levels = noise(15 * hw, 1, 0.0, 2.0);
+        let weights = noise(4 * window * window * hw, 2, 0.01, 1.0);
+        let expected = combine_reference(&levels, &weights, h, w, window);
+        let got = values(combine(
+            tensor4(levels, [1, 15, h, w]),
+            tensor4(weights, [1, 4 * window * window, h, w]),
+            window,
+        ));
+        for (g, e) in got.iter().zip(&expected) {
+            assert!((g - e).abs() < 1e-5, "{g} vs {e}");
+        }
+    }
+
+    #[test]
+    fn identical_levels_are_reproduced_whatever_the_weights() {
+        let (b, h, w, window) = (2, 6, 7, 5);
+        let hw = h * w;
+        let image = noise(b * 3 * hw, 3, 0.0, 10.0);
+        let mut levels = Vec::new();
+        for bi in 0..b {
+            for _ in 0..5 {
+                levels.extend_from_slice(&image[bi * 3 * hw..(bi + 1) * 3 * hw]);
+            }
+        }
+        for seed in [4, 5, 6] {
+            let weights = noise(b * 4 * window * window * hw, seed, 1e-4, 100.0);
+            let out = values(combine(
+                tensor4(levels.clone(), [b, 15, h, w]),
+                tensor4(weights, [b, 4 * window * window, h, w]),
+                window,
+            ));
+            for (o, e) in out.iter().zip(&image) {
+                assert!((o - e).abs() <= 1e-5 * e.abs().max(1.0), "{o} vs {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn weight_shares_sum_to_one() {
+        let (h, w, window) = (3, 4, 3);
+        let weights = noise(36 * h * w, 7, 0.0, 1.0);
+        let shares = values(level_weight_shares(tensor4(weights, [1, 36, h, w]), window));
+        for p in 0..h * w {
+            let s: f32 = (0..4).map(|j| shares[j * h * w + p]).sum();
+            assert!((s - 1.0).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn finite_difference_gradient_through_the_combination() {
+        let (h, w, window) = (3, 4, 3);
+        let hw = h * w;
+        let ad = device().autodiff();
+        let levels = noise(15 * hw, 8, 0.0, 1.0);
+        let weights = noise(36 * hw, 9, 0.2, 1.0);
+        let probe = noise(3 * hw, 10, -1.0, 1.0);
+        let objective = |levels: Tensor<4>, weights: Tensor<4>, device: &Device| -> Tensor<1> {
+            let probe =
+                Tensor::<4>::from_data(TensorData::new(probe.clone(), [1, 3, h, w]), device);
+            (combine(levels, weights, window) * probe).sum()
+        };
+        let lv = Tensor::<4>::from_data(TensorData::new(levels.clone(), [1, 15, h, w]), &ad)
+            .require_grad();
+        let wt = Tensor::<4>::from_data(TensorData::new(weights.clone(), [1, 36, h, w]), &ad)
+            .require_grad();
+        let grads = objective(lv.clone(), wt.clone(), &ad).backward();
+        let g_levels = lv
+            .grad(&grads)
+            .unwrap()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+        let g_weights = wt
+            .grad(&grads)
+            .unwrap()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+
+        let eval = |levels: &[f32], weights: &[f32]| -> f64 {
+            let d = device();
+            let v = objective(
+                tensor4(levels.to_vec(), [1, 15, h, w]),
+                tensor4(weights.to_vec(), [1, 36, h, w]),
+                &d,
+            );
+            v.into_data().try_to_vec::<f32>().unwrap()[0] as f64
+        };
+        let eps = 1e-2f32;
+        for i in (0..levels.len()).step_by(7) {
+            let (mut up, mut down) = (levels.clone(), levels.clone());
+            up[i] += eps;
+            down[i] -= eps;
+            let fd = (eval(&up, &weights) - eval(&down, &weights)) / (2.0 * eps as f64);
+            assert!(
+                (fd - g_levels[i] as f64).abs() < 2e-3 + 1e-2 * fd.abs(),
+                "levels[{i}]: fd {fd} vs {}",
+                g_levels[i]
+            );
+        }
+        for i in (0..weights.len()).step_by(11) {
+            let (mut up, mut down) = (weights.clone(), weights.clone());
+            up[i] += eps;
+            down[i] -= eps;
+            let fd = (eval(&levels, &up) - eval(&levels, &down)) / (2.0 * eps as f64);
+            assert!(
+                (fd - g_weights[i] as f64).abs() < 2e-3 + 1e-2 * fd.abs(),
+                "weights[{i}]: fd {fd} vs {}",
+                g_weights[i]
+            );
+        }
+    }
+}

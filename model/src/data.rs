@@ -1,0 +1,471 @@
+//! The patch dataset: manifest reading, bad-data screening, a bounded image cache, seeded
+//! shuffling and flips, and batch assembly.
+//!
+//! Memory stays bounded for any dataset size: images are loaded lazily and at most
+//! `cache_images` packed images are held at once. An epoch visits the images in a shuffled
+//! order, in groups of `cache_images`; the patches of one group are shuffled together, so each
+//! image is loaded once per epoch while batches still mix several images.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use rand_core::{RngCore, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use serde::Deserialize;
+
+use crate::features::{pack, planar_reference, PackedImage, COLOUR_CHANNELS};
+use crate::model::INPUT_CHANNELS;
+
+/// One entry of a dataset's `manifest.json` (paths relative to the manifest's directory).
+#[derive(Clone, Debug, Deserialize)]
+pub struct ManifestSample {
+    /// The sample bundle EXR.
+    pub bundle: PathBuf,
+    /// Scene identifier (samples of one scene share a reference).
+    pub scene: String,
+    /// `train`, `val` or `test`.
+    pub split: String,
+    /// The scene's reference RGB EXR.
+    pub reference: PathBuf,
+}
+
+/// A dataset manifest: `{ "samples": [ ... ] }`; other top-level keys are ignored.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Manifest {
+    /// All samples of all splits.
+    pub samples: Vec<ManifestSample>,
+}
+
+impl Manifest {
+    /// Reads `<root>/manifest.json`.
+    pub fn read(root: &Path) -> Result<Self, String> {
+        let path = root.join("manifest.json");
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+}
+
+/// A sample that was screened out, with the file and the reason.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BadSample {
+    /// The offending file (bundle or reference).
+    pub file: PathBuf,
+    /// What is wrong with it.
+    pub reason: String,
+}
+
+/// A loaded image: network input, raw colours and the planar reference.
+#[derive(Clone, Debug)]
+pub struct Sample {
+    /// Features and raw levels.
+    pub packed: PackedImage,
+    /// Planar RGB reference.
+    pub reference: Vec<f32>,
+}
+
+/// Loads and checks one bundle and its reference.
+pub fn load_sample(bundle_path: &Path, reference_path: &Path) -> Result<Sample, BadSample> {
+    let bad = |file: &Path, reason: String| BadSample {
+        file: file.to_owned(),
+        reason,
+    };
+    if !reference_path.exists() {
+        return Err(bad(reference_path, "missing reference".into()));
+    }
+    let bundle = bundle::read_bundle(bundle_path).map_err(|e| bad(bundle_path, e.to_string()))?;
+    let packed = pack(&bundle).map_err(|e| bad(bundle_path, e.to_string()))?;
+    let reference = bundle::read_rgb_exr_image(reference_path)
+        .map_err(|e| bad(reference_path, e.to_string()))?;
+    let reference = planar_reference(&reference, packed.width, packed.height)
+        .map_err(|e| bad(reference_path, e.to_string()))?;
+    Ok(Sample { packed, reference })
+}
+
+/// Where a sample's pixels come from: files, or memory (tests, synthetic data).
+#[derive(Clone, Debug)]
+pub enum SampleSource {
+    /// Bundle and reference EXR files.
+    Files {
+        /// Bundle path.
+        bundle: PathBuf,
+        /// Reference path.
+        reference: PathBuf,
+    },
+    /// An already loaded sample.
+    Memory(Arc<Sample>),
+}
+
+/// One usable image of a split.
+#[derive(Clone, Debug)]
+pub struct ImageEntry {
+    /// Where to load it from.
+    pub source: SampleSource,
+    /// Scene identifier.
+    pub scene: String,
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+}
+
+/// One training patch: image, top-left corner, flips.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PatchRef {
+    /// Index into the dataset's images.
+    pub image: usize,
+    /// Left column.
+    pub x: usize,
+    /// Top row.
+    pub y: usize,
+    /// Mirror left-right.
+    pub flip_x: bool,
+    /// Mirror top-bottom.
+    pub flip_y: bool,
+}
+
+/// A batch on the host, planar per patch.
+#[derive(Clone, Debug)]
+pub struct HostBatch {
+    /// Patches in the batch.
+    pub len: usize,
+    /// Patch side.
+    pub size: usize,
+    /// `[B, 27, P, P]`.
+    pub features: Vec<f32>,
+    /// `[B, 15, P, P]`.
+    pub levels: Vec<f32>,
+    /// `[B, 3, P, P]`.
+    pub reference: Vec<f32>,
+}
+
+/// A batch as tensors on a device.
+#[derive(Clone, Debug)]
+pub struct Batch {
+    /// Network input `[B, 27, P, P]`.
+    pub features: Tensor<4>,
+    /// Raw colours `[B, 15, P, P]`.
+    pub levels: Tensor<4>,
+    /// Reference `[B, 3, P, P]`.
+    pub reference: Tensor<4>,
+}
+
+impl HostBatch {
+    /// Uploads the batch to `device`.
+    pub fn to_device(&self, device: &Device) -> Batch {
+        let (b, p) = (self.len, self.size);
+        let t = |data: &Vec<f32>, channels: usize| {
+            Tensor::<4>::from_data(TensorData::new(data.clone(), [b, channels, p, p]), device)
+        };
+        Batch {
+            features: t(&self.features, INPUT_CHANNELS),
+            levels: t(&self.levels, COLOUR_CHANNELS),
+            reference: t(&self.reference, 3),
+        }
+    }
+}
+
+/// Top-left positions of `patch`-wide windows along a side of `size` pixels with `stride`,
+/// plus one flush with the far edge so every pixel is covered.
+pub fn patch_positions(size: usize, patch: usize, stride: usize) -> Vec<usize> {
+    if size < patch {
+        return Vec::new();
+    }
+    let mut positions: Vec<usize> = (0..=size - patch).step_by(stride.max(1)).collect();
+    if *positions.last().unwrap() != size - patch {
+        positions.push(size - patch);
+    }
+    positions
+}
+
+/// A split of a dataset, cut into patches, with a bounded cache of loaded images.
+pub struct PatchDataset {
+    /// Usable images.
+    pub images: Vec<ImageEntry>,
+    /// Samples screened out when the dataset was opened.
+    pub bad: Vec<BadSample>,
+    /// Patch side.
+    pub patch: usize,
+    /// Patch stride.
+    pub stride: usize,
+    cache_images: usize,
+    cache: Vec<(usize, Arc<Sample>)>,
+}
+
+impl PatchDataset {
+    /// Opens the `split` of the dataset in `root`, loading each image once to screen out bad
+    /// data (NaN/Inf, missing reference, mismatched sizes or channels, smaller than a patch).
+    pub fn open(
+        root: &Path,
+        split: &str,
+        patch: usize,
+        stride: usize,
+        cache_images: usize,
+    ) -> Result<Self, String> {
+        let manifest = Manifest::read(root)?;
+        let mut images = Vec::new();
+        let mut bad = Vec::new();
+        for entry in manifest.samples.iter().filter(|s| s.split == split) {
+            let bundle = root.join(&entry.bundle);
+            let reference = root.join(&entry.reference);
+            match load_sample(&bundle, &reference) {
+                Ok(sample) => {
+                    let (width, height) = (sample.packed.width, sample.packed.height);
+                    if width < patch || height < patch {
+                        bad.push(BadSample {
+                            file: bundle,
+                            reason: format!(
+                                "image {width}x{height} is smaller than the {patch}x{patch} patch"
+                            ),
+                        });
+                        continue;
+                    }
+                    images.push(ImageEntry {
+                        source: SampleSource::Files { bundle, reference },
+                        scene: entry.scene.clone(),
+                        width,
+                        height,
+                    });
+                }
+                Err(b) => bad.push(b),
+            }
+        }
+        Ok(Self::from_parts(images, bad, patch, stride, cache_images))
+    }
+
+    /// A dataset over in-memory samples (synthetic data, tests).
+    pub fn from_samples(samples: Vec<Sample>, patch: usize, stride: usize) -> Self {
+        let images = samples
+            .into_iter()
+            .enumerate()
+            .map(|(i, s)| ImageEntry {
+                width: s.packed.width,
+                height: s.packed.height,
+                scene: format!("memory-{i}"),
+                source: SampleSource::Memory(Arc::new(s)),
+            })
+            .collect();
+        Self::from_parts(images, Vec::new(), patch, stride, usize::MAX)
+    }
+
+    fn from_parts(
+        images: Vec<ImageEntry>,
+        bad: Vec<BadSample>,
+        patch: usize,
+        stride: usize,
+        cache_images: usize,
+    ) -> Self {
+        Self {
+            images,
+            bad,
+            patch,
+            stride,
+            cache_images: cache_images.max(1),
+            cache: Vec::new(),
+        }
+    }
+
+    /// Patches of image `index` without flips, in raster order.
+    pub fn image_patches(&self, index: usize, stride: usize) -> Vec<PatchRef> {
+        let entry = &self.images[index];
+        let mut out = Vec::new();
+        for y in patch_positions(entry.height, self.patch, stride) {
+            for x in patch_positions(entry.width, self.patch, stride) {
+                out.push(PatchRef {
+                    image: index,
+                    x,
+                    y,
+                    flip_x: false,
+                    flip_y: false,
+                });
+            }
+        }
+        out
+    }
+
+    /// Number of training patches per epoch.
+    pub fn patches_per_epoch(&self) -> usize {
+        (0..self.images.len())
+            .map(|i| self.image_patches(i, self.stride).len())
+            .sum()
+    }
+
+    /// The patch order of `epoch`: a function of (seed, epoch) only, so a resumed run visits
+    /// exactly the patches an uninterrupted one would.
+    pub fn epoch_plan(&self, seed: u64, epoch: usize) -> Vec<PatchRef> {
+        let mut rng =
+            Pcg64Mcg::seed_from_u64(seed ^ (epoch as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut order: Vec<usize> = (0..self.images.len()).collect();
+        shuffle(&mut order, &mut rng);
+        let mut plan = Vec::new();
+        for group in order.chunks(self.cache_images.min(self.images.len().max(1))) {
+            let mut patches: Vec<PatchRef> = group
+                .iter()
+                .flat_map(|&i| self.image_patches(i, self.stride))
+                .collect();
+            shuffle(&mut patches, &mut rng);
+            for p in &mut patches {
+                let bits = rng.next_u32();
+                p.flip_x = bits & 1 == 1;
+                p.flip_y = bits & 2 == 2;
+            }
+            plan.extend(patches);
+        }
+        plan
+    }
+
+    /// The loaded image `index`, from the cache or freshly loaded (evicting the least recently
+    /// used one when the cache is full).
+    pub fn sample(&mut self, index: usize) -> Result<Arc<Sample>, BadSample> {
+        if let Some(pos) = self.cache.iter().position(|(i, _)| *i == index) {
+            let hit = self.cache.remove(pos);
+            let sample = hit.1.clone();
+            self.cache.push(hit);
+            return Ok(sample);
+        }
+        let sample = match &self.images[index].source {
+            SampleSource::Memory(s) => s.clone(),
+            SampleSource::Files { bundle, reference } => Arc::new(load_sample(bundle, reference)?),
+        };
+        if self.cache.len() >= self.cache_images {
+            self.cache.remove(0);
+        }
+        self.cache.push((index, sample.clone()));
+        Ok(sample)
+    }
+
+    /// Cuts the patches of `refs` into a host batch.
+    pub fn batch(&mut self, refs: &[PatchRef]) -> Result<HostBatch, BadSample> {
+        let p = self.patch;
+        let mut batch = HostBatch {
+            len: refs.len(),
+            size: p,
+            features: Vec::with_capacity(refs.len() * INPUT_CHANNELS * p * p),
+            levels: Vec::with_capacity(refs.len() * COLOUR_CHANNELS * p * p),
+            reference: Vec::with_capacity(refs.len() * 3 * p * p),
+        };
+        for r in refs {
+            let sample = self.sample(r.image)?;
+            let (w, h) = (sample.packed.width, sample.packed.height);
+            crop(
+                &sample.packed.features,
+                INPUT_CHANNELS,
+                w,
+                h,
+                r,
+                p,
+                &mut batch.features,
+            );
+            crop(
+                &sample.packed.levels,
+                COLOUR_CHANNELS,
+                w,
+                h,
+                r,
+                p,
+                &mut batch.levels,
+            );
+            crop(&sample.reference, 3, w, h, r, p, &mut batch.reference);
+        }
+        Ok(batch)
+    }
+}
+
+/// Appends the `p`×`p` window of `r` from planar `channels`×`h`×`w` data, flipped as `r` says
+/// (the same flip for every channel).
+fn crop(
+    src: &[f32],
+    channels: usize,
+    w: usize,
+    h: usize,
+    r: &PatchRef,
+    p: usize,
+    out: &mut Vec<f32>,
+) {
+    for c in 0..channels {
+        let plane = &src[c * w * h..(c + 1) * w * h];
+        for row in 0..p {
+            let sy = r.y + if r.flip_y { p - 1 - row } else { row };
+            let line = &plane[sy * w + r.x..sy * w + r.x + p];
+            if r.flip_x {
+                out.extend(line.iter().rev());
+            } else {
+                out.extend_from_slice(line);
+            }
+        }
+    }
+}
+
+/// Fisher–Yates shuffle driven by a PCG stream.
+fn shuffle<T>(items: &mut [T], rng: &mut Pcg64Mcg) {
+    for i in (1..items.len()).rev() {
+        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+        items.swap(i, j);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp_sample(w: usize, h: usize) -> Sample {
+        let pixels = w * h;
+        let plane = |c: usize| (0..pixels).map(move |i| (c * 1000 + i) as f32);
+        Sample {
+            packed: PackedImage {
+                width: w,
+                height: h,
+                features: (0..INPUT_CHANNELS).flat_map(plane).collect(),
+                levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
+            },
+            reference: (0..3).flat_map(plane).collect(),
+        }
+    }
+
+    #[test]
+    fn positions_cover_the_image() {
+        assert_eq!(patch_positions(10, 4, 4), vec![0, 4, 6]);
+        assert_eq!(patch_positions(8, 4, 4), vec![0, 4]);
+        assert_eq!(patch_positions(3, 4, 4), Vec::<usize>::new());
+    }
+
+    #[test]
+    fn flips_are_consistent_across_channels() {
+        let mut ds = PatchDataset::from_samples(vec![ramp_sample(5, 4)], 2, 1);
+        let r = PatchRef {
+            image: 0,
+            x: 1,
+            y: 2,
+            flip_x: true,
+            flip_y: true,
+        };
+        let b = ds.batch(&[r]).unwrap();
+        // Unflipped window rows are pixels (2,1),(2,2) / (3,1),(3,2) = indices 11,12 / 16,17;
+        // flipped both ways: 17,16 / 12,11, in every channel with its channel offset.
+        for c in 0..3 {
+            let off = (c * 1000) as f32;
+            assert_eq!(
+                &b.reference[c * 4..c * 4 + 4],
+                &[off + 17.0, off + 16.0, off + 12.0, off + 11.0]
+            );
+        }
+        for c in [0, 26] {
+            let off = (c * 1000) as f32;
+            assert_eq!(b.features[c * 4], off + 17.0);
+        }
+    }
+
+    #[test]
+    fn epoch_plan_is_a_seeded_permutation() {
+        let ds = PatchDataset::from_samples(vec![ramp_sample(8, 8), ramp_sample(6, 8)], 4, 2);
+        let a = ds.epoch_plan(7, 3);
+        assert_eq!(a, ds.epoch_plan(7, 3));
+        assert_ne!(a, ds.epoch_plan(7, 4));
+        assert_eq!(a.len(), ds.patches_per_epoch());
+        let mut keys: Vec<_> = a.iter().map(|p| (p.image, p.x, p.y)).collect();
+        keys.sort();
+        keys.dedup();
+        assert_eq!(keys.len(), a.len());
+    }
+}

@@ -1,0 +1,189 @@
+//! Feature packing: a sample bundle → the 27 network input planes and the 15 raw colour planes.
+//!
+//! Channel order of the features: log(1+x) of ỹ, z̃1..z̃4 (RGB each, 15), log(1+x) of the five
+//! variances (5), albedo (3), shading normal (3), depth divided by the image's largest depth (1).
+//! The log transform tames the HDR range for the network only; the combination itself uses the
+//! raw linear colours. Depth is normalised per whole image, before any tiling, so tiles of an
+//! image see the same values as the whole image.
+
+use bundle::{Bundle, Image};
+
+use crate::model::{INPUT_CHANNELS, LEVELS};
+
+/// Number of raw colour planes: five RGB estimates.
+pub const COLOUR_CHANNELS: usize = 3 * LEVELS;
+
+/// A whole image's network input in planar layout (`plane[c][y * width + x]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackedImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// [`INPUT_CHANNELS`] transformed feature planes.
+    pub features: Vec<f32>,
+    /// [`COLOUR_CHANNELS`] raw linear colour planes: ỹ RGB, z̃1 RGB, …, z̃4 RGB.
+    pub levels: Vec<f32>,
+}
+
+impl PackedImage {
+    /// Number of pixels.
+    pub fn pixels(&self) -> usize {
+        self.width * self.height
+    }
+
+    /// Raw planar RGB of level `level` (0 = ỹ, 1..4 = z̃1..z̃4).
+    pub fn level(&self, level: usize) -> &[f32] {
+        &self.levels[3 * level * self.pixels()..3 * (level + 1) * self.pixels()]
+    }
+}
+
+/// Why a bundle cannot be packed; the caller adds the file name.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum FeatureError {
+    /// A layer's shape disagrees with the bundle's resolution or channel count.
+    #[error("layer `{layer}`: expected {expected}, got {got}")]
+    Shape {
+        /// Layer name.
+        layer: String,
+        /// Expected `WxHxC`.
+        expected: String,
+        /// Found `WxHxC`.
+        got: String,
+    },
+    /// A sample is NaN or infinite.
+    #[error("non-finite value in layer `{layer}` channel `{channel}` at pixel ({x}, {y})")]
+    NonFinite {
+        /// Layer name.
+        layer: String,
+        /// Channel name.
+        channel: String,
+        /// Pixel column.
+        x: usize,
+        /// Pixel row.
+        y: usize,
+    },
+}
+
+/// Checks that `image` is `width`×`height`×`channels`.
+fn check(
+    image: &Image,
+    layer: &str,
+    width: usize,
+    height: usize,
+    channels: usize,
+) -> Result<(), FeatureError> {
+    if image.width != width
+        || image.height != height
+        || image.channels != channels
+        || image.data.len() != width * height * channels
+    {
+        return Err(FeatureError::Shape {
+            layer: layer.to_owned(),
+            expected: format!("{width}x{height}x{channels}"),
+            got: format!(
+                "{}x{}x{} ({} samples)",
+                image.width,
+                image.height,
+                image.channels,
+                image.data.len()
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Appends the planes of an interleaved image, transformed by `f`.
+fn push_planes(out: &mut Vec<f32>, image: &Image, f: impl Fn(f32) -> f32) {
+    for c in 0..image.channels {
+        out.extend(
+            image
+                .data
+                .iter()
+                .skip(c)
+                .step_by(image.channels)
+                .map(|&v| f(v)),
+        );
+    }
+}
+
+/// log(1+x) of a radiance or variance, clamped at zero first (estimates are non-negative; a
+/// tiny negative from float round-off must not become NaN).
+fn log_transform(v: f32) -> f32 {
+    v.max(0.0).ln_1p()
+}
+
+/// Packs a bundle into network features and raw colours, rejecting bad shapes and NaN/Inf.
+pub fn pack(bundle: &Bundle) -> Result<PackedImage, FeatureError> {
+    let width = bundle.meta.width as usize;
+    let height = bundle.meta.height as usize;
+    if bundle.levels.len() != LEVELS {
+        return Err(FeatureError::Shape {
+            layer: "levels".into(),
+            expected: format!("{LEVELS} levels"),
+            got: format!("{} levels", bundle.levels.len()),
+        });
+    }
+    for (name, level) in bundle::LEVEL_NAMES.iter().zip(&bundle.levels) {
+        check(level, name, width, height, 3)?;
+    }
+    check(&bundle.variance, "variance", width, height, LEVELS)?;
+    check(&bundle.albedo, "albedo", width, height, 3)?;
+    check(&bundle.normal, "normal", width, height, 3)?;
+    check(&bundle.depth, "depth", width, height, 1)?;
+    if let Some((layer, channel, x, y)) = bundle.find_non_finite() {
+        return Err(FeatureError::NonFinite {
+            layer: layer.into(),
+            channel: channel.into(),
+            x,
+            y,
+        });
+    }
+
+    let pixels = width * height;
+    let mut levels = Vec::with_capacity(COLOUR_CHANNELS * pixels);
+    for level in &bundle.levels {
+        push_planes(&mut levels, level, |v| v);
+    }
+    let mut features = Vec::with_capacity(INPUT_CHANNELS * pixels);
+    for level in &bundle.levels {
+        push_planes(&mut features, level, log_transform);
+    }
+    push_planes(&mut features, &bundle.variance, log_transform);
+    push_planes(&mut features, &bundle.albedo, |v| v);
+    push_planes(&mut features, &bundle.normal, |v| v);
+    let max_depth = bundle.depth.data.iter().fold(0.0f32, |m, &d| m.max(d));
+    let scale = if max_depth > 0.0 {
+        1.0 / max_depth
+    } else {
+        0.0
+    };
+    push_planes(&mut features, &bundle.depth, |d| d.max(0.0) * scale);
+    debug_assert_eq!(features.len(), INPUT_CHANNELS * pixels);
+    Ok(PackedImage {
+        width,
+        height,
+        features,
+        levels,
+    })
+}
+
+/// Converts an interleaved RGB reference image to planar layout, checking its size and values.
+pub fn planar_reference(
+    reference: &Image,
+    width: usize,
+    height: usize,
+) -> Result<Vec<f32>, FeatureError> {
+    check(reference, "reference", width, height, 3)?;
+    if let Some(i) = reference.data.iter().position(|v| !v.is_finite()) {
+        return Err(FeatureError::NonFinite {
+            layer: "reference".into(),
+            channel: ["R", "G", "B"][i % 3].into(),
+            x: (i / 3) % width,
+            y: (i / 3) / width,
+        });
+    }
+    let mut out = Vec::with_capacity(3 * width * height);
+    push_planes(&mut out, reference, |v| v);
+    Ok(out)
+}

@@ -1,0 +1,218 @@
+//! The kernel-predicting network (paper §4.3): configuration presets and the convolution stack.
+
+use burn::module::{Module, Param};
+use burn::nn::conv::Conv2d;
+use burn::nn::PaddingConfig2d;
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor, TensorData};
+use rand_core::{RngCore, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use serde::{Deserialize, Serialize};
+
+/// Number of network input channels: 5×3 colours + 5 variances + 7 G-buffer (paper §4.3).
+pub const INPUT_CHANNELS: usize = 27;
+
+/// Number of estimates combined: ỹ and z̃1..z̃4 (m = 5 in the paper).
+pub const LEVELS: usize = 5;
+
+/// Named network sizes; `paper` is exactly the published network.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Preset {
+    /// 10 layers of 5×5, 50 filters, 19×19 window, ≈ 2.34 M parameters.
+    Paper,
+    /// 6 layers of 5×5, 32 filters, 11×11 window: trains on a 2-core CPU.
+    Small,
+    /// 3 layers of 3×3, 12 filters, 5×5 window: for tests.
+    Tiny,
+}
+
+/// How raw network outputs become positive combination weights.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Weighting {
+    /// w = ReLU(out) + 1e-4 (the paper's choice).
+    Relu,
+    /// w = exp(out − max) (softmax once normalised).
+    Softmax,
+}
+
+/// Architecture of the network and of the combination window; saved next to the weights.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelConfig {
+    /// Preset this configuration was made from (informational).
+    pub preset: Preset,
+    /// Input channels of the first convolution (27).
+    pub in_channels: usize,
+    /// Number of hidden convolutions (each `filters` wide, followed by ReLU).
+    pub hidden_layers: usize,
+    /// Filters of each hidden convolution.
+    pub filters: usize,
+    /// Convolution kernel size (odd; "same" padding).
+    pub kernel: usize,
+    /// Combination window side |Ω| = window² (odd).
+    pub window: usize,
+    /// Positive-weight transform.
+    pub weighting: Weighting,
+}
+
+impl ModelConfig {
+    /// The configuration of a preset.
+    pub fn preset(preset: Preset) -> Self {
+        let (hidden_layers, filters, kernel, window) = match preset {
+            Preset::Paper => (9, 50, 5, 19),
+            Preset::Small => (5, 32, 5, 11),
+            Preset::Tiny => (2, 12, 3, 5),
+        };
+        Self {
+            preset,
+            in_channels: INPUT_CHANNELS,
+            hidden_layers,
+            filters,
+            kernel,
+            window,
+            weighting: Weighting::Relu,
+        }
+    }
+
+    /// Number of window entries |Ω|.
+    pub fn window_area(&self) -> usize {
+        self.window * self.window
+    }
+
+    /// Output channels of the last layer: (m − 1)·|Ω| weights per pixel.
+    pub fn out_channels(&self) -> usize {
+        (LEVELS - 1) * self.window_area()
+    }
+
+    /// Pixels of context one output pixel depends on (convolutions or window, whichever is
+    /// wider): the halo an image tile needs to be reconstructed exactly.
+    pub fn receptive_radius(&self) -> usize {
+        let conv = (self.hidden_layers + 1) * (self.kernel / 2);
+        conv.max(self.window / 2)
+    }
+
+    /// Checks the configuration for values the network cannot be built with.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.kernel % 2 == 0 || self.kernel == 0 {
+            return Err(format!("kernel must be odd, got {}", self.kernel));
+        }
+        if self.window % 2 == 0 || self.window == 0 {
+            return Err(format!("window must be odd, got {}", self.window));
+        }
+        if self.in_channels != INPUT_CHANNELS {
+            return Err(format!(
+                "in_channels must be {INPUT_CHANNELS}, got {}",
+                self.in_channels
+            ));
+        }
+        if self.hidden_layers == 0 || self.filters == 0 {
+            return Err("hidden_layers and filters must be positive".into());
+        }
+        Ok(())
+    }
+
+    /// Builds the network with Glorot-uniform weights and zero biases from `seed`.
+    ///
+    /// The initial weights are drawn on the host from a PCG stream, so every backend starts
+    /// from bit-identical parameters.
+    pub fn init(&self, seed: u64, device: &Device) -> Network {
+        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let mut hidden = Vec::with_capacity(self.hidden_layers);
+        let mut cin = self.in_channels;
+        for _ in 0..self.hidden_layers {
+            hidden.push(glorot_conv(
+                cin,
+                self.filters,
+                self.kernel,
+                &mut rng,
+                device,
+            ));
+            cin = self.filters;
+        }
+        let output = glorot_conv(cin, self.out_channels(), self.kernel, &mut rng, device);
+        Network {
+            hidden,
+            output,
+            weighting: self.weighting,
+        }
+    }
+}
+
+/// Uniform f32 in [0, 1) from the top 24 bits of a PCG draw.
+fn unit_f32(rng: &mut Pcg64Mcg) -> f32 {
+    (rng.next_u32() >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+}
+
+/// A "same"-padded convolution with Glorot-uniform weights and a zero bias.
+fn glorot_conv(
+    cin: usize,
+    cout: usize,
+    kernel: usize,
+    rng: &mut Pcg64Mcg,
+    device: &Device,
+) -> Conv2d {
+    let area = kernel * kernel;
+    let limit = (6.0 / ((cin + cout) * area) as f64).sqrt() as f32;
+    let weights: Vec<f32> = (0..cout * cin * area)
+        .map(|_| (2.0 * unit_f32(rng) - 1.0) * limit)
+        .collect();
+    let weight = Param::from_data(
+        TensorData::new(weights, [cout, cin, kernel, kernel]),
+        device,
+    );
+    let bias = Param::from_data(TensorData::new(vec![0.0f32; cout], [cout]), device);
+    let pad = kernel / 2;
+    Conv2d {
+        weight,
+        bias: Some(bias),
+        stride: [1, 1],
+        kernel_size: [kernel, kernel],
+        dilation: [1, 1],
+        groups: 1,
+        padding: PaddingConfig2d::Explicit(pad, pad, pad, pad),
+    }
+}
+
+/// The convolution stack: features `[B, 27, H, W]` → raw weights `[B, (m−1)·|Ω|, H, W]`.
+#[derive(Module, Debug)]
+pub struct Network {
+    /// Hidden convolutions, each followed by ReLU.
+    pub hidden: Vec<Conv2d>,
+    /// Last convolution producing one raw weight per level pair and window entry.
+    pub output: Conv2d,
+    /// Positive-weight transform applied by [`Network::weights`].
+    #[module(skip)]
+    pub weighting: Weighting,
+}
+
+impl Network {
+    /// Raw (unconstrained) network output.
+    pub fn forward(&self, features: Tensor<4>) -> Tensor<4> {
+        let mut x = features;
+        for conv in &self.hidden {
+            x = relu(conv.forward(x));
+        }
+        self.output.forward(x)
+    }
+
+    /// Positive, unnormalised combination weights `[B, (m−1)·|Ω|, H, W]` (normalisation happens
+    /// in the combination, after the out-of-image entries are masked).
+    pub fn weights(&self, features: Tensor<4>) -> Tensor<4> {
+        positive_weights(self.forward(features), self.weighting)
+    }
+}
+
+/// Applies the configured positive transform to raw network outputs.
+pub fn positive_weights(raw: Tensor<4>, weighting: Weighting) -> Tensor<4> {
+    match weighting {
+        Weighting::Relu => relu(raw).add_scalar(1e-4),
+        Weighting::Softmax => {
+            // Subtracting the per-pixel maximum keeps exp() finite; it cancels in the
+            // normalisation, so the result is the softmax over all entries.
+            let max = raw.clone().detach().max_dim(1);
+            (raw - max).exp()
+        }
+    }
+}

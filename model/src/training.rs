@@ -1,0 +1,383 @@
+//! The training loop: Adam steps on patch batches, per-epoch validation against the best single
+//! input level, checkpoints that resume exactly, and the saved weights.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::store::{BurnpackStore, ModuleSnapshot, SafetensorsStore};
+use burn::tensor::{Device, Tensor};
+use serde::{Deserialize, Serialize};
+
+use crate::combine::combine;
+use crate::data::{BadSample, Batch, PatchDataset};
+use crate::loss::relative_log_l1;
+use crate::metrics::relmse_sum_planar;
+use crate::model::{ModelConfig, Network, LEVELS};
+
+/// Optimisation settings (the parts of the train TOML the loop needs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainSettings {
+    /// Patches per batch.
+    pub batch: usize,
+    /// Epochs to run in total.
+    pub epochs: usize,
+    /// Adam learning rate.
+    pub lr: f64,
+    /// Seed of the initial weights and of the patch order.
+    pub seed: u64,
+}
+
+/// Validation result: relMSE of the output and of every input level on the same pixels.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Validation {
+    /// relMSE of the reconstruction.
+    pub output: f64,
+    /// relMSE of ỹ, z̃1..z̃4.
+    pub levels: [f64; LEVELS],
+}
+
+impl Validation {
+    /// The best (lowest) single input level as (index, relMSE).
+    pub fn best_level(&self) -> (usize, f64) {
+        self.levels
+            .iter()
+            .copied()
+            .enumerate()
+            .fold(
+                (0, f64::INFINITY),
+                |best, (i, v)| if v < best.1 { (i, v) } else { best },
+            )
+    }
+}
+
+/// One row of `metrics.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EpochReport {
+    /// 1-based epoch number.
+    pub epoch: usize,
+    /// Mean training loss over the epoch's batches.
+    pub train_loss: f64,
+    /// Validation result, if a validation split exists.
+    pub validation: Option<Validation>,
+    /// Patches trained on.
+    pub patches: usize,
+    /// Wall-clock seconds of the epoch (training and validation).
+    pub seconds: f64,
+}
+
+/// Progress of one batch, for progress bars.
+#[derive(Clone, Copy, Debug)]
+pub struct BatchProgress {
+    /// Patches done in this epoch.
+    pub done: usize,
+    /// Patches in this epoch.
+    pub total: usize,
+    /// Loss of this batch.
+    pub loss: f64,
+}
+
+/// Training state that is checkpointed besides the weights and the optimizer.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct CheckpointState {
+    model: ModelConfig,
+    settings: TrainSettings,
+    epochs_done: usize,
+    history: Vec<EpochReport>,
+}
+
+/// Adam with the paper's learning rate handled by the caller and ε = 1e-8 (Burn's default
+/// is 1e-5).
+pub fn adam() -> ModuleOptimizer {
+    AdamConfig::new().with_epsilon(1e-8).init()
+}
+
+/// Forward pass of network + combination: `[B, 3, P, P]` reconstruction of a batch.
+pub fn reconstruct(
+    model: &Network,
+    config: &ModelConfig,
+    features: Tensor<4>,
+    levels: Tensor<4>,
+) -> Tensor<4> {
+    combine(levels, model.weights(features), config.window)
+}
+
+/// One optimisation step; returns the updated model and the batch loss.
+pub fn train_step(
+    model: Network,
+    optim: &mut ModuleOptimizer,
+    config: &ModelConfig,
+    batch: Batch,
+    lr: f64,
+) -> (Network, f64) {
+    let prediction = reconstruct(&model, config, batch.features, batch.levels);
+    let loss = relative_log_l1(prediction, batch.reference);
+    let grads = loss.backward();
+    let value: f32 = loss.into_scalar::<f32>();
+    let grads = GradientsParams::from_grads(grads, &model);
+    (optim.step(lr, model, grads), value as f64)
+}
+
+/// Validates `model` (a validation copy on a plain device) on non-overlapping patches of
+/// `dataset`, pooling squared relative errors over all pixels.
+pub fn validate(
+    model: &Network,
+    config: &ModelConfig,
+    dataset: &mut PatchDataset,
+    batch: usize,
+    device: &Device,
+) -> Result<Validation, BadSample> {
+    let mut output = 0.0f64;
+    let mut levels = [0.0f64; LEVELS];
+    let mut count = 0usize;
+    let refs: Vec<_> = (0..dataset.images.len())
+        .flat_map(|i| dataset.image_patches(i, dataset.patch))
+        .collect();
+    for chunk in refs.chunks(batch.max(1)) {
+        let host = dataset.batch(chunk)?;
+        let b = host.to_device(device);
+        let prediction = reconstruct(model, config, b.features, b.levels);
+        let prediction = prediction
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("f32 output");
+        let p2 = host.size * host.size;
+        for k in 0..host.len {
+            let reference = &host.reference[k * 3 * p2..(k + 1) * 3 * p2];
+            output += relmse_sum_planar(&prediction[k * 3 * p2..(k + 1) * 3 * p2], reference);
+            let patch_levels = &host.levels[k * 3 * LEVELS * p2..(k + 1) * 3 * LEVELS * p2];
+            for (l, sum) in levels.iter_mut().enumerate() {
+                *sum += relmse_sum_planar(&patch_levels[l * 3 * p2..(l + 1) * 3 * p2], reference);
+            }
+            count += 3 * p2;
+        }
+    }
+    let n = count.max(1) as f64;
+    Ok(Validation {
+        output: output / n,
+        levels: levels.map(|s| s / n),
+    })
+}
+
+/// Saves a module as burnpack, atomically (temp file + rename).
+pub fn save_burnpack(model: &Network, path: &Path) -> Result<(), String> {
+    let tmp = temp_path(path);
+    let mut store = BurnpackStore::from_file(&tmp)
+        .auto_extension(false)
+        .overwrite(true);
+    model
+        .save_into(&mut store)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Saves a module as safetensors, atomically.
+pub fn save_safetensors(model: &Network, path: &Path) -> Result<(), String> {
+    let tmp = temp_path(path);
+    let mut store = SafetensorsStore::from_file(&tmp);
+    model
+        .save_into(&mut store)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Loads burnpack weights into a freshly built network of `config`.
+pub fn load_burnpack(
+    config: &ModelConfig,
+    path: &Path,
+    device: &Device,
+) -> Result<Network, String> {
+    if !path.exists() {
+        return Err(format!("{}: no such file", path.display()));
+    }
+    let mut model = config.init(0, device);
+    let mut store = BurnpackStore::from_file(path).auto_extension(false);
+    let result = model
+        .load_from(&mut store)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    if !result.is_success() || !result.missing.is_empty() {
+        return Err(format!(
+            "{}: weights do not match the model config: {result:?}",
+            path.display()
+        ));
+    }
+    Ok(model)
+}
+
+/// Writes `text` to `path` atomically.
+pub fn write_atomic(path: &Path, text: &str) -> Result<(), String> {
+    let tmp = temp_path(path);
+    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn temp_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp{}", std::process::id()))
+}
+
+/// A training run: model, optimizer, settings and history.
+pub struct Trainer {
+    /// The model being trained (on the autodiff device).
+    pub model: Network,
+    /// Adam and its moments.
+    pub optim: ModuleOptimizer,
+    /// Architecture.
+    pub config: ModelConfig,
+    /// Optimisation settings.
+    pub settings: TrainSettings,
+    /// Completed epochs.
+    pub epochs_done: usize,
+    /// Reports of the completed epochs.
+    pub history: Vec<EpochReport>,
+    device: Device,
+}
+
+impl Trainer {
+    /// A fresh run on `device` (autodiff is enabled on it here).
+    pub fn new(config: ModelConfig, settings: TrainSettings, device: &Device) -> Self {
+        let device = device.clone().autodiff();
+        let model = config.init(settings.seed, &device);
+        Self {
+            model,
+            optim: adam(),
+            config,
+            settings,
+            epochs_done: 0,
+            history: Vec::new(),
+            device,
+        }
+    }
+
+    /// The plain (non-autodiff) device used for validation.
+    pub fn plain_device(&self) -> Device {
+        self.device.clone().inner()
+    }
+
+    /// Trains one epoch and validates; `on_batch` is called after every batch.
+    pub fn run_epoch(
+        &mut self,
+        train: &mut PatchDataset,
+        val: Option<&mut PatchDataset>,
+        on_batch: &mut dyn FnMut(BatchProgress),
+    ) -> Result<EpochReport, BadSample> {
+        let start = Instant::now();
+        let epoch = self.epochs_done;
+        let plan = train.epoch_plan(self.settings.seed, epoch);
+        let total = plan.len();
+        let (mut loss_sum, mut batches, mut done) = (0.0, 0usize, 0usize);
+        for chunk in plan.chunks(self.settings.batch.max(1)) {
+            let batch = train.batch(chunk)?.to_device(&self.device);
+            let model = self.model.clone();
+            let (model, loss) = train_step(
+                model,
+                &mut self.optim,
+                &self.config,
+                batch,
+                self.settings.lr,
+            );
+            self.model = model;
+            loss_sum += loss;
+            batches += 1;
+            done += chunk.len();
+            on_batch(BatchProgress { done, total, loss });
+        }
+        let validation = match val {
+            Some(val) if !val.images.is_empty() => {
+                let plain = self.plain_device();
+                let valid = self.model.valid();
+                Some(validate(
+                    &valid,
+                    &self.config,
+                    val,
+                    self.settings.batch,
+                    &plain,
+                )?)
+            }
+            _ => None,
+        };
+        self.epochs_done += 1;
+        let report = EpochReport {
+            epoch: self.epochs_done,
+            train_loss: loss_sum / batches.max(1) as f64,
+            validation,
+            patches: done,
+            seconds: start.elapsed().as_secs_f64(),
+        };
+        self.history.push(report.clone());
+        Ok(report)
+    }
+
+    /// Writes `model.bpk`, `optimizer.bpk` and `state.json` into `dir` (each atomically;
+    /// `state.json` last, so a checkpoint is complete once it names the epoch).
+    pub fn save_checkpoint(&self, dir: &Path) -> Result<(), String> {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        save_burnpack(&self.model, &dir.join("model.bpk"))?;
+        let optim_path = dir.join("optimizer.bpk");
+        let tmp = temp_path(&optim_path);
+        self.optim
+            .save(&tmp)
+            .map_err(|e| format!("{}: {e:?}", optim_path.display()))?;
+        std::fs::rename(&tmp, &optim_path).map_err(|e| format!("{}: {e}", optim_path.display()))?;
+        let state = CheckpointState {
+            model: self.config.clone(),
+            settings: self.settings.clone(),
+            epochs_done: self.epochs_done,
+            history: self.history.clone(),
+        };
+        let json = serde_json::to_string_pretty(&state).expect("state serialises");
+        write_atomic(&dir.join("state.json"), &json)
+    }
+
+    /// Restores a run from a checkpoint directory; `settings` may raise the epoch count but must
+    /// otherwise match the checkpoint's.
+    pub fn resume(dir: &Path, settings: TrainSettings, device: &Device) -> Result<Self, String> {
+        let state_path = dir.join("state.json");
+        let text = std::fs::read_to_string(&state_path)
+            .map_err(|e| format!("{}: {e}", state_path.display()))?;
+        let state: CheckpointState =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", state_path.display()))?;
+        let same = |a: &TrainSettings, b: &TrainSettings| {
+            a.batch == b.batch && a.lr == b.lr && a.seed == b.seed
+        };
+        if !same(&state.settings, &settings) {
+            return Err(format!(
+                "{}: checkpoint settings {:?} differ from the config's {:?}",
+                state_path.display(),
+                state.settings,
+                settings
+            ));
+        }
+        let device = device.clone().autodiff();
+        let model = load_burnpack(&state.model, &dir.join("model.bpk"), &device)?;
+        let optim_path = dir.join("optimizer.bpk");
+        let optim = adam()
+            .load(&optim_path)
+            .map_err(|e| format!("{}: {e:?}", optim_path.display()))?;
+        Ok(Self {
+            model,
+            optim,
+            config: state.model,
+            settings,
+            epochs_done: state.epochs_done,
+            history: state.history,
+            device,
+        })
+    }
+
+    /// Writes the final weights (`model.bpk`, `model.safetensors`) and `model.json` (the
+    /// architecture) into `dir`.
+    pub fn save_final(&self, dir: &Path) -> Result<(), String> {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let valid = self.model.valid();
+        save_burnpack(&valid, &dir.join("model.bpk"))?;
+        save_safetensors(&valid, &dir.join("model.safetensors"))?;
+        let json = serde_json::to_string_pretty(&self.config).expect("config serialises");
+        write_atomic(&dir.join("model.json"), &json)
+    }
+}

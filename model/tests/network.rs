@@ -1,0 +1,247 @@
+//! Network-level tests: parameter count, save/load, exact resume, backend agreement, learning.
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+use model::data::PatchDataset;
+use model::synthetic::synthetic_sample;
+use model::training::{
+    load_burnpack, reconstruct, save_burnpack, validate, TrainSettings, Trainer,
+};
+use model::{ModelConfig, Preset};
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("model-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Parameter values of a module, flattened in visiting order.
+fn parameters(model: &model::Network) -> Vec<f32> {
+    let mut out = Vec::new();
+    for conv in model.hidden.iter().chain(std::iter::once(&model.output)) {
+        out.extend(conv.weight.val().into_data().try_to_vec::<f32>().unwrap());
+        out.extend(
+            conv.bias
+                .as_ref()
+                .unwrap()
+                .val()
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap(),
+        );
+    }
+    out
+}
+
+fn forward_values(
+    net: &model::Network,
+    config: &ModelConfig,
+    seed: u64,
+    device: &Device,
+) -> Vec<f32> {
+    let s = synthetic_sample(12, 10, 0.3, seed);
+    let f = Tensor::<4>::from_data(
+        TensorData::new(s.packed.features.clone(), [1, 27, 10, 12]),
+        device,
+    );
+    let l = Tensor::<4>::from_data(
+        TensorData::new(s.packed.levels.clone(), [1, 15, 10, 12]),
+        device,
+    );
+    reconstruct(net, config, f, l)
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap()
+}
+
+#[test]
+fn paper_preset_has_about_2_4_million_parameters() {
+    let config = ModelConfig::preset(Preset::Paper);
+    let net = config.init(0, &Device::flex());
+    let n = net.num_params();
+    println!("paper preset: {n} parameters");
+    // 27·25·50+50 + 8·(50·25·50+50) + 50·25·1444+1444 = 2 340 644.
+    assert_eq!(n, 2_340_644);
+    assert_eq!(config.out_channels(), 1444);
+    assert_eq!(net.hidden.len() + 1, 10);
+    // Zero biases, Glorot-uniform weights within ±sqrt(6 / (fan_in + fan_out)).
+    let limit = (6.0f32 / ((27 + 50) * 25) as f32).sqrt();
+    let w = net.hidden[0]
+        .weight
+        .val()
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    assert!(w.iter().all(|v| v.abs() <= limit));
+    assert!(w.iter().any(|v| v.abs() > 0.9 * limit));
+    let b = net
+        .output
+        .bias
+        .as_ref()
+        .unwrap()
+        .val()
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    assert!(b.iter().all(|&v| v == 0.0));
+}
+
+#[test]
+fn save_then_load_gives_identical_outputs() {
+    let device = Device::flex();
+    let config = ModelConfig::preset(Preset::Tiny);
+    let net = config.init(42, &device);
+    let dir = temp_dir("save-load");
+    let path = dir.join("model.bpk");
+    save_burnpack(&net, &path).unwrap();
+    let loaded = load_burnpack(&config, &path, &device).unwrap();
+    assert_eq!(
+        forward_values(&net, &config, 3, &device),
+        forward_values(&loaded, &config, 3, &device)
+    );
+    // A different config must be refused, not silently half-loaded.
+    assert!(load_burnpack(&ModelConfig::preset(Preset::Small), &path, &device).is_err());
+}
+
+fn tiny_sets() -> (PatchDataset, PatchDataset) {
+    let train = (0..3)
+        .map(|i| synthetic_sample(32, 32, 0.3, 100 + i))
+        .collect();
+    let val = vec![synthetic_sample(32, 32, 0.3, 200)];
+    (
+        PatchDataset::from_samples(train, 16, 8),
+        PatchDataset::from_samples(val, 16, 16),
+    )
+}
+
+#[test]
+fn resume_continues_exactly() {
+    let device = Device::flex();
+    let config = ModelConfig::preset(Preset::Tiny);
+    let settings = TrainSettings {
+        batch: 4,
+        epochs: 2,
+        lr: 1e-3,
+        seed: 5,
+    };
+    let (mut train, _) = tiny_sets();
+    let mut none = |_| {};
+
+    let mut straight = Trainer::new(config.clone(), settings.clone(), &device);
+    straight.run_epoch(&mut train, None, &mut none).unwrap();
+    straight.run_epoch(&mut train, None, &mut none).unwrap();
+
+    let dir = temp_dir("resume");
+    let mut first = Trainer::new(config.clone(), settings.clone(), &device);
+    first.run_epoch(&mut train, None, &mut none).unwrap();
+    first.save_checkpoint(&dir).unwrap();
+    drop(first);
+    let mut resumed = Trainer::resume(&dir, settings, &device).unwrap();
+    assert_eq!(resumed.epochs_done, 1);
+    resumed.run_epoch(&mut train, None, &mut none).unwrap();
+
+    let a = parameters(&straight.model);
+    let b = parameters(&resumed.model);
+    assert_eq!(a.len(), b.len());
+    let max_diff = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    assert_eq!(
+        max_diff, 0.0,
+        "resumed weights differ from the uninterrupted run"
+    );
+    assert_eq!(
+        straight.history[1].train_loss,
+        resumed.history[1].train_loss
+    );
+}
+
+#[test]
+#[allow(deprecated)]
+fn ndarray_and_flex_agree() {
+    let config = ModelConfig::preset(Preset::Tiny);
+    let flex = Device::flex();
+    let nd = Device::ndarray();
+    let a = forward_values(&config.init(9, &flex), &config, 4, &flex);
+    let b = forward_values(&config.init(9, &nd), &config, 4, &nd);
+    let max_diff = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
+        .fold(0.0f32, f32::max);
+    assert!(max_diff < 1e-4, "flex vs ndarray differ by {max_diff}");
+}
+
+#[cfg(feature = "wgpu")]
+#[test]
+fn wgpu_and_flex_agree_when_an_adapter_exists() {
+    let config = ModelConfig::preset(Preset::Tiny);
+    let flex = Device::flex();
+    let a = forward_values(&config.init(9, &flex), &config, 4, &flex);
+    let gpu = match std::panic::catch_unwind(|| {
+        let d = Device::wgpu(Default::default());
+        let _ = Tensor::<1>::zeros([1], &d).into_data();
+        d
+    }) {
+        Ok(d) => d,
+        Err(_) => {
+            eprintln!("skipped: no wgpu adapter on this machine");
+            return;
+        }
+    };
+    let b = forward_values(&config.init(9, &gpu), &config, 4, &gpu);
+    let max_diff = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
+        .fold(0.0f32, f32::max);
+    assert!(max_diff < 1e-4, "flex vs wgpu differ by {max_diff}");
+}
+
+#[test]
+fn training_beats_the_best_input_level() {
+    let device = Device::flex();
+    let config = ModelConfig::preset(Preset::Tiny);
+    let settings = TrainSettings {
+        batch: 4,
+        epochs: 6,
+        lr: 3e-3,
+        seed: 1,
+    };
+    let (mut train, mut val) = tiny_sets();
+    let mut trainer = Trainer::new(config.clone(), settings.clone(), &device);
+    let before = validate(&trainer.model.valid(), &config, &mut val, 4, &device).unwrap();
+    let mut none = |_| {};
+    for _ in 0..settings.epochs {
+        let r = trainer
+            .run_epoch(&mut train, Some(&mut val), &mut none)
+            .unwrap();
+        let v = r.validation.unwrap();
+        println!(
+            "epoch {}: loss {:.4} val {:.5} best level {:?}",
+            r.epoch,
+            r.train_loss,
+            v.output,
+            v.best_level()
+        );
+    }
+    let after = trainer.history.last().unwrap().validation.clone().unwrap();
+    let (best, best_value) = after.best_level();
+    println!(
+        "before {:.5}, after {:.5}, best input level z{best} {:.5}",
+        before.output, after.output, best_value
+    );
+    assert!(
+        after.output < before.output,
+        "training did not reduce the validation relMSE"
+    );
+    assert!(
+        after.output < best_value,
+        "output {} not below the best level {}",
+        after.output,
+        best_value
+    );
+}

@@ -1,0 +1,109 @@
+//! End-to-end test of `train`: a tiny on-disk dataset with bad samples, one run, a resume.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use model::synthetic::synthetic_bundle;
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("train-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes a dataset: 2 good train samples, 1 good val sample, and three bad train samples
+/// (NaN in a level, missing reference, reference of the wrong size).
+fn write_dataset(root: &Path) {
+    let mut samples = Vec::new();
+    let mut add = |name: &str, split: &str, seed: u64, corrupt: &str| {
+        let (mut b, mut reference) = synthetic_bundle(24, 24, 0.3, seed);
+        if corrupt == "nan" {
+            b.levels[2].data[17] = f32::NAN;
+        }
+        if corrupt == "size" {
+            reference = bundle::Image::new(20, 24, 3);
+        }
+        let bundle_rel = format!("{name}.exr");
+        let reference_rel = format!("{name}_ref.exr");
+        bundle::write_bundle(&root.join(&bundle_rel), &b).unwrap();
+        if corrupt != "missing" {
+            bundle::write_rgb_exr_image(&root.join(&reference_rel), &reference).unwrap();
+        }
+        samples.push(serde_json::json!({
+            "bundle": bundle_rel, "scene": name, "split": split, "reference": reference_rel
+        }));
+    };
+    add("good0", "train", 1, "");
+    add("good1", "train", 2, "");
+    add("val0", "val", 3, "");
+    add("nan", "train", 4, "nan");
+    add("noref", "train", 5, "missing");
+    add("badsize", "train", 6, "size");
+    let manifest = serde_json::json!({ "format": "test", "samples": samples });
+    std::fs::write(root.join("manifest.json"), manifest.to_string()).unwrap();
+}
+
+#[test]
+fn trains_reports_bad_data_and_resumes() {
+    let dir = temp_dir("run");
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    write_dataset(&data);
+    let out = dir.join("out");
+    let config = dir.join("tiny.toml");
+    let write_config = |epochs: usize| {
+        std::fs::write(
+            &config,
+            format!(
+                "dataset = {:?}\npreset = \"tiny\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = {epochs}\nseed = 3\noutput = {:?}\n",
+                data, out
+            ),
+        )
+        .unwrap();
+    };
+    write_config(1);
+    let run = |resume: bool| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_train"));
+        cmd.arg("--config").arg(&config);
+        if resume {
+            cmd.arg("--resume");
+        }
+        cmd.output().unwrap()
+    };
+    let first = run(false);
+    let stderr = String::from_utf8_lossy(&first.stderr);
+    assert!(first.status.success(), "{stderr}");
+    assert!(stderr.contains("3 bad sample(s)"), "{stderr}");
+    for name in ["nan.exr", "noref_ref.exr", "badsize_ref.exr"] {
+        assert!(stderr.contains(name), "bad file {name} not named: {stderr}");
+    }
+    assert!(stderr.contains("missing reference"), "{stderr}");
+    for f in [
+        "model.bpk",
+        "model.safetensors",
+        "model.json",
+        "metrics.csv",
+        "train.toml",
+        "checkpoint/state.json",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 2, "{csv}");
+    assert!(csv.lines().nth(1).unwrap().starts_with("1,"), "{csv}");
+
+    write_config(2);
+    let second = run(true);
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert!(second.status.success(), "{stderr}");
+    assert!(stderr.contains("resuming after epoch 1"), "{stderr}");
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+
+    // Unknown keys are rejected with the file name.
+    std::fs::write(&config, "dataset = \"x\"\npreset = \"tiny\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = 1\nseed = 3\noutput = \"o\"\nlearning_rate = 1\n").unwrap();
+    let bad = run(false);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("learning_rate"));
+}
