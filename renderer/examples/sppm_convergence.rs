@@ -4,10 +4,12 @@
 //! ```text
 //! cargo run --release -p renderer --example sppm_convergence -- \
 //!     scenes/validation/cornell-diffuse/scene.xml --res 64 --photons 4096 \
-//!     --passes 4096 --ref-spp 4096 --out target/conv/cornell
+//!     --passes 4096 --ref-spp 16384 --out out/convergence/cornell-diffuse
 //! ```
 //! Writes `<out>_ref.exr` (reused when present), `<out>.csv` (passes, seconds, relMSE per
-//! level) and `<out>_p<N>.exr` bundles of the last checkpoint.
+//! level) and `<out>_p<N>.exr` bundles of the last checkpoint; prints the relMSE table as
+//! markdown and, per level, whether it decreased at every doubling and ended ≤ `--target`.
+//! Plot the CSVs with the `convergence_plot` example (docs/validation.md).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -37,6 +39,15 @@ struct Args {
     /// Reference samples per pixel (path tracer, unbounded depth with RR).
     #[arg(long, default_value_t = 4096)]
     ref_spp: u32,
+    /// Reference path tracer's `max_depth` (−1: unbounded, Russian roulette from depth 5).
+    #[arg(long, default_value_t = -1, allow_hyphen_values = true)]
+    ref_max_depth: i32,
+    /// SPPM bound on eye delta/glossy bounces and photon bounces.
+    #[arg(long, default_value_t = renderer::integrators::sppm::DEFAULT_MAX_DEPTH)]
+    max_depth: u32,
+    /// Target relMSE at the last checkpoint (reported, not enforced).
+    #[arg(long, default_value_t = 3e-3)]
+    target: f64,
     /// Seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -85,6 +96,27 @@ fn rel_mse(img: &Image, reference: &Image) -> f64 {
         / n
 }
 
+/// Prints the relMSE table as markdown and, per level, whether it decreased at every
+/// checkpoint and ended at or below `target`.
+fn print_summary(table: &[(u32, Vec<f64>)], target: f64) {
+    println!("| passes | {} |", LEVEL_NAMES.join(" | "));
+    println!("|---|{}", "---|".repeat(LEVEL_NAMES.len()));
+    for (passes, values) in table {
+        let cells: Vec<String> = values.iter().map(|e| format!("{e:.2e}")).collect();
+        println!("| {passes} | {} |", cells.join(" | "));
+    }
+    for (l, name) in LEVEL_NAMES.iter().enumerate() {
+        let series: Vec<f64> = table.iter().map(|(_, v)| v[l]).collect();
+        let monotone = series.windows(2).all(|w| w[1] < w[0]);
+        let last = series.last().copied().unwrap_or(f64::NAN);
+        println!(
+            "{name}: decreases at every doubling: {}; final {last:.2e} {} {target:.0e}",
+            if monotone { "yes" } else { "NO" },
+            if last <= target { "<=" } else { ">" }
+        );
+    }
+}
+
 fn path_with_suffix(prefix: &std::path::Path, suffix: &str) -> PathBuf {
     let mut s = prefix.as_os_str().to_owned();
     s.push(suffix);
@@ -106,7 +138,10 @@ fn main() -> Result<()> {
         read_rgb_exr_image(&ref_path)?
     } else {
         let t = Instant::now();
-        let pt = PathTracer::default();
+        let pt = PathTracer {
+            max_depth: args.ref_max_depth,
+            ..PathTracer::default()
+        };
         let film = with_threads(args.threads, || {
             pt.render(&scene, args.ref_spp, 1_000_003, None)
         })?;
@@ -140,10 +175,12 @@ fn main() -> Result<()> {
             SppmMode::MultiLevel
         },
         threads: args.threads,
+        max_depth: args.max_depth,
         scene_name: args.scene.display().to_string(),
         ..SppmSettings::default()
     };
     let mut rows = vec![format!("passes,seconds,{}", LEVEL_NAMES.join(","))];
+    let mut table: Vec<(u32, Vec<f64>)> = Vec::new();
     let last = *checkpoints.last().context("--passes must be at least 64")?;
     let stop = StopCondition {
         checkpoints,
@@ -154,11 +191,13 @@ fn main() -> Result<()> {
         &settings,
         &stop,
         |b| {
-            let errs: Vec<String> = b
+            let values: Vec<f64> = b
                 .levels
                 .iter()
-                .map(|l| format!("{:.4e}", rel_mse(&downsample(l, 4), &reference)))
+                .map(|l| rel_mse(&downsample(l, 4), &reference))
                 .collect();
+            let errs: Vec<String> = values.iter().map(|e| format!("{e:.4e}")).collect();
+            table.push((b.meta.passes, values));
             eprintln!(
                 "passes {:5} ({:7.1}s): relMSE {}",
                 b.meta.passes,
@@ -184,5 +223,6 @@ fn main() -> Result<()> {
     let csv = path_with_suffix(&args.out, ".csv");
     std::fs::write(&csv, rows.join("\n") + "\n")?;
     eprintln!("wrote {}", csv.display());
+    print_summary(&table, args.target);
     Ok(())
 }
