@@ -305,12 +305,12 @@ pub struct ShelfConfig {
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     /// The file could not be read.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// Config path.
         path: String,
-        /// Cause.
-        source: std::io::Error,
+        /// Cause (part of the message, not a separate `source`, so chains print it once).
+        cause: std::io::Error,
     },
     /// TOML syntax or schema error (the message names line, column and field).
     #[error("{path}: {message}")]
@@ -334,9 +334,9 @@ impl Config {
     /// Reads, parses and validates a configuration file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let p = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        let text = std::fs::read_to_string(path).map_err(|cause| ConfigError::Io {
             path: p.clone(),
-            source,
+            cause,
         })?;
         Self::parse(&text, &p)
     }

@@ -61,12 +61,12 @@ pub fn lathe(profile: &[ProfilePoint], segments: u32, sweep: Option<(f32, f32)>)
     let mut rings: Vec<(Vec2, Vec2)> = Vec::new(); // (r,y), normal(nr, ny)
     let mut ring_of_segment_start: Vec<usize> = Vec::new();
     let mut ring_of_segment_end: Vec<usize> = Vec::new();
-    for i in 0..n {
-        let pos = Vec2::new(profile[i].r, profile[i].y);
+    for (i, point) in profile.iter().enumerate() {
+        let pos = Vec2::new(point.r, point.y);
         let before = (i > 0).then(|| seg_normal(i - 1));
         let after = (i + 1 < n).then(|| seg_normal(i));
         match (before, after) {
-            (Some(b), Some(a)) if profile[i].sharp => {
+            (Some(b), Some(a)) if point.sharp => {
                 ring_of_segment_end.push(rings.len());
                 rings.push((pos, b));
                 ring_of_segment_start.push(rings.len());

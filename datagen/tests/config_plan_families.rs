@@ -1,0 +1,296 @@
+//! Configs, plans and scene families without rendering: every preset parses with the intended
+//! sizes; config errors name the file and the field or value; shards partition the jobs
+//! exactly; splits are by scene and cover every family; scheduler variables map to shards;
+//! every generated scene of the `small` preset is deterministic, distinct, loads in the
+//! renderer's strict importer at the configured size, respects its family's configured ranges
+//! and has its family's defining feature (glass, water, metal, thin lens, hidden lights).
+
+mod common;
+
+use common::fresh_dir;
+use datagen::config::Config;
+use datagen::families::{generate, scene_list};
+use datagen::plan::{Plan, Shard, Split};
+use datagen::scene::{write_scene_files, Family};
+use renderer::bsdf::Bsdf;
+use renderer::description::{EmitterDesc, FovAxis, SceneDescription};
+use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::path::{Path, PathBuf};
+
+fn preset_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../configs/datagen/{name}.toml"))
+}
+
+fn preset(name: &str) -> Config {
+    Config::load(&preset_path(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+fn per_family(config: &Config) -> BTreeMap<Family, usize> {
+    let mut m = BTreeMap::new();
+    for (_, f) in scene_list(config) {
+        *m.entry(f).or_default() += 1;
+    }
+    m
+}
+
+#[test]
+fn presets_parse_with_intended_sizes() {
+    let tiny = preset("tiny");
+    assert_eq!((tiny.width, tiny.height), (32, 32));
+    assert_eq!(
+        per_family(&tiny).values().copied().collect::<Vec<_>>(),
+        [1; 5]
+    );
+
+    let small = preset("small");
+    assert_eq!((small.width, small.height), (128, 128));
+    let counts = per_family(&small);
+    assert_eq!(counts.len(), 5);
+    assert!(counts.values().all(|&n| n >= 5), "{counts:?}");
+    assert_eq!(small.render.passes.len(), 3);
+
+    let paper = preset("paper");
+    assert_eq!((paper.width, paper.height), (1280, 720));
+    assert_eq!(paper.scene_count(), 60);
+    assert_eq!(paper.render.passes, [100, 200, 400]);
+    assert_eq!(paper.render.seeds, 10);
+    assert_eq!(paper.render.photons_per_pass, 100_000);
+}
+
+#[test]
+fn config_errors_name_file_and_field() {
+    let text = std::fs::read_to_string(preset_path("tiny")).unwrap();
+
+    let typo = text.replacen("photons_per_pass =", "photon_per_pass =", 1);
+    let e = Config::parse(&typo, "typo.toml").unwrap_err().to_string();
+    assert!(
+        e.contains("typo.toml") && e.contains("photon_per_pass"),
+        "{e}"
+    );
+
+    let descending = text.replacen("passes = [2, 4]", "passes = [4, 2]", 1);
+    assert_ne!(
+        descending, text,
+        "tiny.toml no longer has `passes = [2, 4]`"
+    );
+    let e = Config::parse(&descending, "desc.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("desc.toml") && e.contains("strictly ascending"),
+        "{e}"
+    );
+
+    let split = text.replacen("train = 0.6", "train = 0.7", 1);
+    assert_ne!(split, text, "tiny.toml no longer has `train = 0.6`");
+    let e = Config::parse(&split, "split.toml").unwrap_err().to_string();
+    assert!(e.contains("sum to 1"), "{e}");
+
+    let e = Config::parse(
+        &text.replacen("[families.glass]", "[families.glas]", 1),
+        "f.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("glas"), "{e}");
+}
+
+#[test]
+fn shards_partition_the_jobs() {
+    let plan = Plan::new(&preset("small"));
+    // Per scene: one reference and one input job per seed.
+    assert_eq!(plan.jobs.len(), 40 * 4);
+    for n in 1..=7u32 {
+        let mut seen = vec![0u32; plan.jobs.len()];
+        for i in 0..n {
+            let mine = plan.shard_jobs(Shard::new(i, n).unwrap());
+            // Balanced within one job.
+            let ideal = plan.jobs.len() as f64 / f64::from(n);
+            assert!(
+                (mine.len() as f64 - ideal).abs() < 1.0,
+                "{n}: {}",
+                mine.len()
+            );
+            for j in mine {
+                seen[j] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&c| c == 1), "N = {n}: not a partition");
+    }
+    // Render seeds are distinct per job and fit in 32 bits.
+    let seeds: HashSet<u64> = plan.jobs.iter().map(|j| plan.render_seed(j)).collect();
+    assert_eq!(seeds.len(), plan.jobs.len());
+    assert!(seeds.iter().all(|&s| s <= u64::from(u32::MAX)));
+}
+
+#[test]
+fn splits_are_by_scene_and_cover_every_family() {
+    let config = preset("small");
+    let plan = Plan::new(&config);
+    let mut by_split: BTreeMap<&str, Vec<Family>> = BTreeMap::new();
+    for s in &plan.scenes {
+        let name = match s.split {
+            Split::Train => "train",
+            Split::Val => "val",
+            Split::Test => "test",
+        };
+        by_split.entry(name).or_default().push(s.family);
+    }
+    // 40 scenes × (0.7, 0.15, 0.15) → 28, 6, 6.
+    assert_eq!(by_split["train"].len(), 28);
+    assert_eq!(by_split["val"].len(), 6);
+    assert_eq!(by_split["test"].len(), 6);
+    for (split, families) in &by_split {
+        let distinct: BTreeSet<_> = families.iter().collect();
+        assert_eq!(distinct.len(), 5, "{split} misses a family: {families:?}");
+    }
+    // Same config → same plan; another master seed → another assignment.
+    let again = Plan::new(&config);
+    assert!(plan.scenes.iter().zip(&again.scenes).all(|(a, b)| a == b));
+    let mut other = config.clone();
+    other.seed += 1;
+    let other = Plan::new(&other);
+    assert!(plan
+        .scenes
+        .iter()
+        .zip(&other.scenes)
+        .any(|(a, b)| a.split != b.split));
+}
+
+#[test]
+fn shard_arguments_and_scheduler_variables() {
+    assert_eq!(Shard::parse("2/3"), Ok(Shard { index: 2, count: 3 }));
+    for bad in ["3/3", "0/0", "a/3", "1", "-1/3"] {
+        let e = Shard::parse(bad).unwrap_err();
+        assert!(e.contains(bad), "{bad}: {e}");
+    }
+    let env = |vars: &'static [(&'static str, &'static str)]| {
+        move |k: &str| {
+            vars.iter()
+                .find(|(n, _)| *n == k)
+                .map(|(_, v)| v.to_string())
+        }
+    };
+    assert_eq!(Shard::from_env(env(&[])), Ok(None));
+    // Slurm: 1-based array 1-4 → task 3 is shard 2 of 4.
+    assert_eq!(
+        Shard::from_env(env(&[
+            ("SLURM_ARRAY_TASK_ID", "3"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+        ])),
+        Ok(Some(Shard { index: 2, count: 4 }))
+    );
+    assert_eq!(
+        Shard::from_env(env(&[
+            ("JOB_COMPLETION_INDEX", "5"),
+            ("DATAGEN_SHARD_COUNT", "8"),
+        ])),
+        Ok(Some(Shard { index: 5, count: 8 }))
+    );
+    let e = Shard::from_env(env(&[("JOB_COMPLETION_INDEX", "5")])).unwrap_err();
+    assert!(e.contains("DATAGEN_SHARD_COUNT"), "{e}");
+    let e = Shard::from_env(env(&[
+        ("JOB_COMPLETION_INDEX", "8"),
+        ("DATAGEN_SHARD_COUNT", "8"),
+    ]))
+    .unwrap_err();
+    assert!(e.contains('8'), "{e}");
+    let e = Shard::from_env(env(&[
+        ("SLURM_ARRAY_TASK_ID", "x"),
+        ("SLURM_ARRAY_TASK_COUNT", "4"),
+    ]))
+    .unwrap_err();
+    assert!(e.contains("SLURM_ARRAY_TASK_ID"), "{e}");
+}
+
+fn has_bsdf(d: &SceneDescription, pred: impl Fn(&Bsdf) -> bool + Copy) -> bool {
+    fn any(b: &Bsdf, pred: &dyn Fn(&Bsdf) -> bool) -> bool {
+        match b {
+            Bsdf::TwoSided { front, back } => any(front, pred) || any(back, pred),
+            other => pred(other),
+        }
+    }
+    d.shapes.iter().any(|s| any(&d.bsdfs[s.bsdf], &pred))
+}
+
+fn within(v: f32, range: Option<[f32; 2]>) -> bool {
+    range.is_none_or(|[lo, hi]| v >= lo - 1e-3 && v <= hi + 1e-3)
+}
+
+#[test]
+fn small_scenes_are_deterministic_distinct_loadable_and_true_to_family() {
+    let config = preset("small");
+    let dir = fresh_dir("families");
+    let f = &config.families;
+    let mut xmls = HashSet::new();
+    for (index, (id, family)) in scene_list(&config).into_iter().enumerate() {
+        let scene = generate(&config, index);
+        assert_eq!(scene.id, id);
+        assert_eq!(scene.files(), generate(&config, index).files(), "{id}");
+        assert!(xmls.insert(scene.xml.clone()), "{id} repeats a scene");
+
+        let xml = write_scene_files(&scene, &dir.join(&id)).unwrap();
+        let d = renderer::xml::load_scene(&xml, &[], false).unwrap_or_else(|e| panic!("{id}: {e}"));
+        assert!(d.warnings.is_empty(), "{id}: {:?}", d.warnings);
+        assert_eq!((d.camera.width, d.camera.height), (128, 128), "{id}");
+        assert!(matches!(d.camera.fov_axis, FovAxis::X), "{id}");
+        let area_lights = d.shapes.iter().filter(|s| s.emission.is_some()).count();
+        let lights = area_lights
+            + d.emitters
+                .iter()
+                .filter(|e| !matches!(e, EmitterDesc::Constant { .. }))
+                .count();
+        assert!(lights >= 1, "{id}: no light");
+        let dielectric = has_bsdf(&d, |b| {
+            matches!(b, Bsdf::Dielectric(_) | Bsdf::RoughDielectric(_))
+        });
+        let metal = has_bsdf(&d, |b| {
+            matches!(b, Bsdf::Conductor(_) | Bsdf::RoughConductor(_))
+        });
+        let fov = match family {
+            Family::Room => {
+                assert!(area_lights >= 1, "{id}: rooms are lit by area lights");
+                f.room.as_ref().map(|c| c.fov)
+            }
+            Family::Glass => {
+                assert!(dielectric, "{id}: no glass");
+                assert_eq!(lights, 1, "{id}: one small light");
+                f.glass.as_ref().map(|c| c.fov)
+            }
+            Family::Water => {
+                assert!(dielectric, "{id}: no water surface");
+                assert!(
+                    d.emitters.iter().any(|e| matches!(
+                        e,
+                        EmitterDesc::Directional { .. } | EmitterDesc::Spot { .. }
+                    )),
+                    "{id}: neither sun nor spot"
+                );
+                f.water.as_ref().map(|c| c.fov)
+            }
+            Family::Metal => {
+                assert!(metal, "{id}: no metal");
+                assert_eq!(lights, 1, "{id}: one small light");
+                f.metal.as_ref().map(|c| c.fov)
+            }
+            Family::Shelf => {
+                let c = f.shelf.as_ref().unwrap();
+                assert!(
+                    within(d.camera.aperture_radius, Some(c.aperture_radius))
+                        && d.camera.aperture_radius > 0.0,
+                    "{id}: aperture {}",
+                    d.camera.aperture_radius
+                );
+                assert!(d.camera.focus_distance > 0.0, "{id}");
+                Some(c.fov)
+            }
+        };
+        assert!(within(d.camera.fov, fov), "{id}: fov {}", d.camera.fov);
+        if family != Family::Shelf {
+            assert_eq!(d.camera.aperture_radius, 0.0, "{id}: pinhole expected");
+        }
+        renderer::scene::Scene::build(&d).unwrap_or_else(|e| panic!("{id}: {e}"));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
