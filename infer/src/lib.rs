@@ -1,6 +1,7 @@
 //! Post-reconstruction (SPEC §6): trained model directories, tiled inference with a halo that
 //! covers the receptive field, error reports against a reference, and PNG previews.
 
+pub mod evaluate;
 pub mod model_dir;
 pub mod preview;
 pub mod report;

@@ -1,0 +1,233 @@
+//! The `evaluate` configuration file (TOML) and the list of scenes it resolves to: explicit
+//! XML + reference pairs and/or the scenes of one split of a `datagen` dataset.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+
+/// `configs/eval/<name>.toml`. Relative paths are relative to the current directory (run from
+/// the repository root), like the train and datagen configs.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct EvalConfig {
+    /// Trained model directory (`model.json` + `model.bpk`).
+    pub model: PathBuf,
+    /// Where results.json, the plots, the images and index.html are written.
+    pub output: PathBuf,
+    /// Photons emitted per SPPM pass (both runs).
+    pub photons_per_pass: u64,
+    /// Pass counts at which the multi-level run is reconstructed, e.g. `[16, 32, 64, 128]`.
+    pub passes: Vec<u32>,
+    /// Render seed (both runs use it).
+    pub seed: u64,
+    /// Inference tile side in pixels (0 = whole image).
+    #[serde(default = "default_tile")]
+    pub tile: usize,
+    /// Renderer worker threads (0 = all cores).
+    #[serde(default)]
+    pub threads: usize,
+    /// Tensor backend name (`flex`, `ndarray`, `wgpu`).
+    #[serde(default = "default_backend")]
+    pub backend: String,
+    /// Bound on SPPM eye (delta/glossy) and photon bounces; default the renderer's (16).
+    #[serde(default)]
+    pub max_depth: Option<u32>,
+    /// Explicit scenes.
+    #[serde(default)]
+    pub scenes: Vec<SceneEntry>,
+    /// Scenes of a dataset split.
+    #[serde(default)]
+    pub dataset: Option<DatasetSource>,
+}
+
+/// One explicit scene.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneEntry {
+    /// Name shown in the report (default: the XML's parent directory name or file stem).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Mitsuba 3 XML scene.
+    pub xml: PathBuf,
+    /// Reference RGB EXR of the same resolution.
+    pub reference: PathBuf,
+}
+
+/// The scenes of one split of a dataset written by `datagen`.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatasetSource {
+    /// Dataset directory (holds `manifest.json`).
+    pub dir: PathBuf,
+    /// Split to evaluate (`test` normally).
+    #[serde(default = "default_split")]
+    pub split: String,
+    /// Evaluate only the first N scenes of the split (in manifest order).
+    #[serde(default)]
+    pub limit: Option<usize>,
+}
+
+fn default_tile() -> usize {
+    128
+}
+
+fn default_backend() -> String {
+    "flex".into()
+}
+
+fn default_split() -> String {
+    "test".into()
+}
+
+/// A scene to evaluate, with resolved paths.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EvalScene {
+    /// Name used in the report and for file names.
+    pub name: String,
+    /// Mitsuba 3 XML scene.
+    pub xml: PathBuf,
+    /// Reference RGB EXR.
+    pub reference: PathBuf,
+}
+
+/// The part of a dataset manifest `evaluate` reads (the manifest has more keys).
+#[derive(Deserialize)]
+struct Manifest {
+    scenes: Vec<ManifestScene>,
+}
+
+#[derive(Deserialize)]
+struct ManifestScene {
+    id: String,
+    split: String,
+    xml: PathBuf,
+    reference: PathBuf,
+}
+
+impl EvalConfig {
+    /// Reads and checks a config file; errors name the file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let config: EvalConfig =
+            toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        config
+            .validate()
+            .with_context(|| format!("config {}", path.display()))?;
+        Ok(config)
+    }
+
+    /// Checks values the run cannot use.
+    pub fn validate(&self) -> Result<()> {
+        if self.photons_per_pass == 0 {
+            bail!("photons_per_pass must be positive");
+        }
+        if self.passes.is_empty() || self.passes.contains(&0) {
+            bail!("passes must be a non-empty list of positive pass counts");
+        }
+        if self.scenes.is_empty() && self.dataset.is_none() {
+            bail!("no scenes: give [[scenes]] entries and/or a [dataset]");
+        }
+        if self.max_depth == Some(0) {
+            bail!("max_depth must be positive");
+        }
+        Ok(())
+    }
+
+    /// Pass checkpoints, sorted and deduplicated.
+    pub fn pass_counts(&self) -> Vec<u32> {
+        let mut p = self.passes.clone();
+        p.sort_unstable();
+        p.dedup();
+        p
+    }
+
+    /// All scenes: the explicit ones, then the dataset split's. Missing files are errors here,
+    /// before anything is rendered.
+    pub fn resolve_scenes(&self) -> Result<Vec<EvalScene>> {
+        let mut out = Vec::new();
+        for s in &self.scenes {
+            let name = s.name.clone().unwrap_or_else(|| scene_name(&s.xml));
+            out.push(EvalScene {
+                name,
+                xml: s.xml.clone(),
+                reference: s.reference.clone(),
+            });
+        }
+        if let Some(d) = &self.dataset {
+            let path = d.dir.join("manifest.json");
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let manifest: Manifest =
+                serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+            let mut chosen: Vec<EvalScene> = manifest
+                .scenes
+                .into_iter()
+                .filter(|s| s.split == d.split)
+                .map(|s| EvalScene {
+                    name: s.id,
+                    xml: d.dir.join(s.xml),
+                    reference: d.dir.join(s.reference),
+                })
+                .collect();
+            if chosen.is_empty() {
+                bail!("{}: no scene in split \"{}\"", path.display(), d.split);
+            }
+            if let Some(n) = d.limit {
+                chosen.truncate(n);
+            }
+            out.extend(chosen);
+        }
+        for s in &out {
+            for p in [&s.xml, &s.reference] {
+                if !p.is_file() {
+                    bail!("scene {}: {} does not exist", s.name, p.display());
+                }
+            }
+        }
+        let mut names: Vec<&str> = out.iter().map(|s| s.name.as_str()).collect();
+        names.sort_unstable();
+        if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+            bail!("two scenes are named \"{}\": give them distinct names", w[0]);
+        }
+        Ok(out)
+    }
+}
+
+/// Default scene name: the XML's parent directory if the file is `scene.xml`, else its stem.
+fn scene_name(xml: &Path) -> String {
+    let stem = xml
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into());
+    if stem == "scene" {
+        if let Some(parent) = xml.parent().and_then(|p| p.file_name()) {
+            return parent.to_string_lossy().into_owned();
+        }
+    }
+    stem
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_keys_are_rejected_and_defaults_apply() {
+        let base = "model = \"m\"\noutput = \"o\"\nphotons_per_pass = 10\npasses = [4, 2, 4]\nseed = 1\n\
+                    [[scenes]]\nxml = \"a/b/scene.xml\"\nreference = \"r.exr\"\n";
+        let c: EvalConfig = toml::from_str(base).unwrap();
+        c.validate().unwrap();
+        assert_eq!(c.tile, 128);
+        assert_eq!(c.backend, "flex");
+        assert_eq!(c.pass_counts(), vec![2, 4]);
+        assert_eq!(scene_name(&c.scenes[0].xml), "b");
+        assert_eq!(scene_name(Path::new("x/cbox.xml")), "cbox");
+        let bad = format!("{base}colour = 3\n");
+        assert!(toml::from_str::<EvalConfig>(&bad).is_err());
+        let zero = base.replace("[4, 2, 4]", "[0, 2]");
+        let c: EvalConfig = toml::from_str(&zero).unwrap();
+        assert!(c.validate().is_err());
+    }
+}

@@ -1,0 +1,274 @@
+//! The self-contained HTML report: summary, per-scene tables, plots and comparison images
+//! (PNGs embedded as base64 data URIs, so the page can be moved or mailed on its own).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Result;
+
+use super::images::base64;
+use super::{read_output_file, EvalResults};
+use crate::report::LEVEL_NAMES;
+
+/// Escapes text for HTML element content and attribute values.
+pub fn escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+fn sci(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.3e}")
+    } else {
+        "–".into()
+    }
+}
+
+fn opt_sci(v: Option<f64>) -> String {
+    v.map_or_else(|| "–".into(), sci)
+}
+
+fn percent(v: Option<f64>) -> String {
+    v.filter(|x| x.is_finite())
+        .map_or_else(|| "–".into(), |x| format!("{:+.1} %", 100.0 * x))
+}
+
+/// An `<img>` with the PNG `name` (in `dir`) embedded.
+fn embedded_img(dir: &Path, name: &str, alt: &str, class: &str) -> Result<String> {
+    let bytes = read_output_file(dir, name)?;
+    Ok(format!(
+        "<img class=\"{class}\" alt=\"{}\" src=\"data:image/png;base64,{}\">",
+        escape(alt),
+        base64(&bytes)
+    ))
+}
+
+const STYLE: &str = "body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}\
+table{border-collapse:collapse;margin:0.8em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}\
+th{background:#eee}td.l,th.l{text-align:left}.win{color:#070;font-weight:bold}.loss{color:#a00}\
+img.px{image-rendering:pixelated;width:100%;max-width:1100px}img.plot{width:100%;max-width:1120px}\
+.note{background:#f6f6f0;border-left:4px solid #cc9;padding:0.5em 1em}.fail{color:#a00}";
+
+/// Renders the page. Images are read back from `dir` (where `evaluate` wrote them).
+pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
+    let s = &results.summary;
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <title>SPPM evaluation</title><style>{STYLE}</style></head><body>\n\
+         <h1>Standard SPPM vs multi-level SPPM + neural reconstruction</h1>\n"
+    );
+    let c = &results.config;
+    let _ = writeln!(
+        h,
+        "<p>Model <code>{}</code> ({:?} preset, {}×{} window); {} photons per pass; passes {:?}; \
+         seed {}; renderer threads {}; backend {}.</p>",
+        escape(&c.model.display().to_string()),
+        results.model.preset,
+        results.model.window,
+        results.model.window,
+        c.photons_per_pass,
+        c.passes,
+        c.seed,
+        if c.threads == 0 {
+            "all".to_string()
+        } else {
+            c.threads.to_string()
+        },
+        escape(&c.backend)
+    );
+    let _ = writeln!(
+        h,
+        "<h2>Summary at {} passes</h2>\n<p>Ours better than standard SPPM at equal time on \
+         <b>{} of {}</b> evaluated scenes; median ratio ours/standard <b>{}</b>, geometric mean \
+         {}; ours better than its best input level on {}; median multi-level overhead per pass \
+         {}. {} scene(s) failed.</p>",
+        s.passes,
+        s.ours_better_equal_time,
+        s.scenes - s.failed,
+        s.median_ratio_equal_time
+            .map_or_else(|| "–".into(), |v| format!("{v:.3}")),
+        s.geomean_ratio_equal_time
+            .map_or_else(|| "–".into(), |v| format!("{v:.3}")),
+        s.ours_better_than_best_input,
+        percent(s.median_overhead),
+        s.failed
+    );
+    h.push_str(
+        "<table><tr><th class=\"l\">scene</th><th>ours s<br>(render+inf.)</th><th>ours relMSE</th>\
+         <th>standard relMSE<br>equal time</th><th>ratio</th><th>standard relMSE<br>equal passes</th>\
+         <th>best input</th><th>overhead</th></tr>\n",
+    );
+    for r in &results.scenes {
+        let name = escape(&r.name);
+        let last = r
+            .eval
+            .as_ref()
+            .and_then(|e| e.checkpoints.iter().find(|c| c.passes == s.passes));
+        match (last, &r.error) {
+            (Some(c), _) => {
+                let best = c
+                    .level_relmse
+                    .iter()
+                    .copied()
+                    .fold(f64::INFINITY, f64::min);
+                let class = if c.ratio_equal_time < 1.0 {
+                    "win"
+                } else {
+                    "loss"
+                };
+                let _ = writeln!(
+                    h,
+                    "<tr><td class=\"l\"><a href=\"#{name}\">{name}</a></td><td>{:.2}</td><td>{}</td>\
+                     <td>{}{}</td><td class=\"{class}\">{:.3}</td><td>{}</td><td>{} ({})</td><td>{}</td></tr>",
+                    c.total_seconds,
+                    sci(c.ours_relmse),
+                    sci(c.standard_equal_time.relmse),
+                    if c.standard_equal_time.extrapolated {
+                        "*"
+                    } else {
+                        ""
+                    },
+                    c.ratio_equal_time,
+                    opt_sci(c.standard_equal_passes),
+                    sci(best),
+                    escape(&c.best_level),
+                    percent(c.overhead)
+                );
+            }
+            (None, err) => {
+                let _ = writeln!(
+                    h,
+                    "<tr><td class=\"l\">{name}</td><td class=\"l fail\" colspan=\"7\">failed: {}</td></tr>",
+                    escape(err.as_deref().unwrap_or("no checkpoint at this pass count"))
+                );
+            }
+        }
+    }
+    h.push_str(
+        "</table>\n<p>* standard SPPM's curve did not reach that time; its nearest end point is \
+         used.</p>\n",
+    );
+    let _ = writeln!(
+        h,
+        "<div class=\"note\"><p><b>Method.</b> {}</p><p><b>Not included.</b> {}</p></div>",
+        escape(&results.method),
+        escape(&results.ablation_dual_vs_multi)
+    );
+
+    for r in &results.scenes {
+        let name = escape(&r.name);
+        let _ = writeln!(h, "<h2 id=\"{name}\">{name}</h2>");
+        let _ = writeln!(
+            h,
+            "<p><code>{}</code>, reference <code>{}</code></p>",
+            escape(&r.xml.display().to_string()),
+            escape(&r.reference.display().to_string())
+        );
+        let Some(e) = &r.eval else {
+            let _ = writeln!(
+                h,
+                "<p class=\"fail\">failed: {}</p>",
+                escape(r.error.as_deref().unwrap_or("unknown error"))
+            );
+            continue;
+        };
+        h.push_str("<table><tr><th>passes</th><th>render s</th><th>inference s</th><th>ours s</th><th>ours</th>");
+        for l in LEVEL_NAMES {
+            let _ = write!(h, "<th>input {l}</th>");
+        }
+        h.push_str(
+            "<th>standard<br>equal time</th><th>ratio</th><th>standard<br>equal passes</th>\
+             <th>standard s<br>equal passes</th><th>overhead</th></tr>\n",
+        );
+        for c in &e.checkpoints {
+            let class = if c.ratio_equal_time < 1.0 {
+                "win"
+            } else {
+                "loss"
+            };
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{}</td>",
+                c.passes,
+                c.render_seconds,
+                c.inference_seconds,
+                c.total_seconds,
+                sci(c.ours_relmse)
+            );
+            for v in &c.level_relmse {
+                let _ = write!(h, "<td>{}</td>", sci(*v));
+            }
+            let _ = writeln!(
+                h,
+                "<td>{}{}</td><td class=\"{class}\">{:.3}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                sci(c.standard_equal_time.relmse),
+                if c.standard_equal_time.extrapolated {
+                    "*"
+                } else {
+                    ""
+                },
+                c.ratio_equal_time,
+                opt_sci(c.standard_equal_passes),
+                c.standard_seconds_equal_passes
+                    .map_or_else(|| "–".into(), |v| format!("{v:.2}")),
+                percent(c.overhead)
+            );
+        }
+        h.push_str("</table>\n");
+        if let Some(p) = &r.plot {
+            h.push_str(&embedded_img(dir, p, &format!("{} convergence", r.name), "plot")?);
+            h.push_str("<p>Left: relMSE against wall time (ours at render + inference time; input levels at render time). Right: against passes.</p>\n");
+        }
+        if let Some(p) = &r.comparison {
+            h.push_str(&embedded_img(dir, p, &format!("{} comparison", r.name), "px")?);
+            let (sp, ss) = r
+                .comparison_standard
+                .map_or((0, f64::NAN), |p| (p.passes, p.seconds));
+            let ours = e.checkpoints.last();
+            let _ = writeln!(
+                h,
+                "<p>Left to right: standard SPPM ({sp} passes, {ss:.2} s) | ours ({} passes, {:.2} s \
+                 incl. inference) | reference | relative error of standard SPPM | relative error of \
+                 ours (per-pixel relMSE summand, log colour scale over three decades up to {}).</p>",
+                ours.map_or(0, |c| c.passes),
+                ours.map_or(f64::NAN, |c| c.total_seconds),
+                r.error_scale
+                    .map_or_else(|| "–".into(), |v| sci(f64::from(v)))
+            );
+        }
+        if let Some(p) = &r.inputs {
+            h.push_str(&embedded_img(dir, p, &format!("{} inputs", r.name), "px")?);
+            h.push_str("<p>Input levels at the last checkpoint, sharpest to smoothest: ỹ, z̃1, z̃2, z̃3, z̃4.</p>\n");
+        }
+    }
+    h.push_str("</body></html>\n");
+    Ok(h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn escapes_markup() {
+        assert_eq!(
+            escape("a<b>&\"c'"),
+            "a&lt;b&gt;&amp;&quot;c&#39;".to_string()
+        );
+        assert_eq!(percent(Some(0.123)), "+12.3 %");
+        assert_eq!(percent(None), "–");
+        assert_eq!(sci(f64::NAN), "–");
+    }
+}

@@ -1,0 +1,139 @@
+//! The two SPPM runs of a scene — multi-level (bundles for the network) and standard
+//! single-level (the baseline) — with wall times that exclude the evaluator's own work.
+//!
+//! `render_sppm` reports `meta.seconds` measured from its start, so time spent in the
+//! checkpoint callback (assembling the bundle, storing it) would count against every later
+//! checkpoint. The standard run has many checkpoints (a dense convergence curve), so this
+//! would handicap it. Each run therefore records, per checkpoint, the time from the end of the
+//! pass to the end of the callback, and later checkpoints subtract the sum: the corrected time
+//! is pure rendering. The multi-level pipeline's own bundle assembly is charged to it again by
+//! the caller (as part of the reconstruction cost).
+
+use std::sync::Mutex;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use bundle::Bundle;
+use indicatif::{ProgressBar, ProgressStyle};
+use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
+use renderer::scene::Scene;
+
+/// A bundle with its corrected render time.
+pub struct TimedBundle {
+    /// The bundle as `render_sppm` made it.
+    pub bundle: Bundle,
+    /// Render seconds up to this checkpoint, without the evaluator's callback time.
+    pub render_seconds: f64,
+    /// Seconds `render_sppm` spent assembling this bundle after the pass ended.
+    pub assembly_seconds: f64,
+}
+
+/// Settings shared by both runs.
+#[derive(Clone, Debug)]
+pub struct RunSettings {
+    /// Photons per pass.
+    pub photons_per_pass: u64,
+    /// Seed.
+    pub seed: u64,
+    /// Worker threads (0 = all).
+    pub threads: usize,
+    /// Bound on eye/photon bounces (`None`: the renderer's default).
+    pub max_depth: Option<u32>,
+    /// Scene name for bundle metadata.
+    pub scene_name: String,
+}
+
+/// Renders `scene` in `mode` and hands every checkpoint bundle to `keep`, which returns what
+/// to store (e.g. the bundle itself, or only its error). Returns the kept values with their
+/// corrected times.
+pub fn run_timed<T: Send>(
+    scene: &Scene,
+    settings: &RunSettings,
+    mode: SppmMode,
+    stop: &StopCondition,
+    label: &str,
+    mut keep: impl FnMut(Bundle) -> Result<T> + Send,
+) -> Result<Vec<(T, f64, f64)>> {
+    let mut sppm = SppmSettings {
+        photons_per_pass: settings.photons_per_pass,
+        seed: settings.seed,
+        mode,
+        threads: settings.threads,
+        scene_name: settings.scene_name.clone(),
+        ..SppmSettings::default()
+    };
+    if let Some(d) = settings.max_depth {
+        sppm.max_depth = d;
+    }
+    let bar = ProgressBar::new(stop.checkpoints.iter().copied().max().unwrap_or(0) as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{prefix} {elapsed_precise} [{wide_bar}] {pos}/{len} passes ({msg})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_prefix(label.to_string());
+    // End of the last pass (set by `progress`, read by the checkpoint callback) and the
+    // callback time accumulated so far.
+    let pass_end: Mutex<Option<Instant>> = Mutex::new(None);
+    let mut overhead = 0.0f64;
+    let mut kept = Vec::new();
+    render_sppm(
+        scene,
+        &sppm,
+        stop,
+        |b| {
+            let entered = Instant::now();
+            let end = pass_end
+                .lock()
+                .expect("progress lock")
+                .unwrap_or(entered);
+            let assembly = (entered - end).as_secs_f64();
+            let render_seconds = b.meta.seconds - overhead;
+            let value = keep(b)?;
+            kept.push((value, render_seconds, assembly));
+            overhead += end.elapsed().as_secs_f64();
+            Ok(())
+        },
+        |p| {
+            *pass_end.lock().expect("progress lock") = Some(Instant::now());
+            bar.set_position(p.pass as u64);
+            bar.set_message(format!("{:.2} passes/s", p.pass as f64 / p.elapsed));
+        },
+    )
+    .with_context(|| format!("{label}: rendering"))?;
+    bar.finish_and_clear();
+    Ok(kept)
+}
+
+/// Loads and builds a Mitsuba XML scene, printing the loader's warnings.
+pub fn load_scene(xml: &std::path::Path) -> Result<Scene> {
+    let desc = renderer::xml::load_scene(xml, &[], false)
+        .with_context(|| format!("loading {}", xml.display()))?;
+    for w in &desc.warnings {
+        eprintln!("warning: {}: {w}", xml.display());
+    }
+    Scene::build(&desc).with_context(|| format!("building {}", xml.display()))
+}
+
+/// Multi-level run: one bundle per configured pass count.
+pub fn multi_level(
+    scene: &Scene,
+    settings: &RunSettings,
+    passes: &[u32],
+) -> Result<Vec<TimedBundle>> {
+    let stop = StopCondition {
+        checkpoints: passes.to_vec(),
+        seconds: None,
+    };
+    let kept = run_timed(scene, settings, SppmMode::MultiLevel, &stop, "multi-level", Ok)?;
+    Ok(kept
+        .into_iter()
+        .map(|(bundle, render_seconds, assembly_seconds)| TimedBundle {
+            bundle,
+            render_seconds,
+            assembly_seconds,
+        })
+        .collect())
+}

@@ -1,0 +1,201 @@
+//! Evaluation of one scene: the multi-level run reconstructed at every checkpoint, the
+//! standard SPPM run to (at least) the same wall time, and their comparison at equal time,
+//! at equal passes, and per pass (overhead).
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use bundle::read_rgb_exr_image;
+use burn::tensor::Device;
+use model::features::{pack, planar_reference};
+use model::metrics::relmse_planar;
+use renderer::integrators::sppm::{SppmMode, StopCondition};
+use serde::Serialize;
+
+use super::compare::{dense_checkpoints, relmse_at_time, CurvePoint, Interpolated};
+use super::config::EvalScene;
+use super::runs::{load_scene, multi_level, run_timed, RunSettings};
+use crate::report::LEVEL_NAMES;
+use crate::{reconstruct_tiled, ErrorReport, TrainedModel};
+
+/// The standard run stops once its wall time exceeds the slowest multi-level total by this
+/// factor, so every equal-time point is bracketed by two of its checkpoints.
+const STANDARD_TIME_MARGIN: f64 = 1.25;
+/// The standard run's dense checkpoints go up to this multiple of the largest pass count.
+const STANDARD_PASS_CAP_FACTOR: u32 = 64;
+
+/// Results at one multi-level checkpoint.
+#[derive(Clone, Debug, Serialize)]
+pub struct Checkpoint {
+    /// Passes of the multi-level run.
+    pub passes: u32,
+    /// Multi-level render seconds.
+    pub render_seconds: f64,
+    /// Reconstruction seconds: bundle assembly + feature packing + network + combination.
+    pub inference_seconds: f64,
+    /// render + inference: the time ours is charged at equal-time comparisons.
+    pub total_seconds: f64,
+    /// relMSE of the reconstruction.
+    pub ours_relmse: f64,
+    /// relMSE of the input levels ỹ, z̃1..z̃4.
+    pub level_relmse: Vec<f64>,
+    /// Name of the best input level.
+    pub best_level: String,
+    /// Standard SPPM's relMSE at `total_seconds` (log-log interpolation of its curve).
+    pub standard_equal_time: Interpolated,
+    /// ours / standard at equal time (< 1: ours is better).
+    pub ratio_equal_time: f64,
+    /// Standard SPPM's relMSE after the same number of passes, if it got there.
+    pub standard_equal_passes: Option<f64>,
+    /// Standard SPPM's render seconds for the same number of passes.
+    pub standard_seconds_equal_passes: Option<f64>,
+    /// Multi-level render time per pass over single-level's, minus one (paper Table 2).
+    pub overhead: Option<f64>,
+}
+
+/// Everything measured on one scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct SceneEval {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// One entry per configured pass count.
+    pub checkpoints: Vec<Checkpoint>,
+    /// Standard SPPM's convergence curve (dense checkpoints).
+    pub standard: Vec<CurvePoint>,
+}
+
+/// Images of the last checkpoint, planar linear RGB, for the previews.
+pub struct SceneImages {
+    /// Standard SPPM at (about) ours' total time.
+    pub standard: Vec<f32>,
+    /// Passes and seconds of that standard image.
+    pub standard_at: CurvePoint,
+    /// Ours.
+    pub ours: Vec<f32>,
+    /// The reference.
+    pub reference: Vec<f32>,
+    /// Input levels ỹ, z̃1..z̃4.
+    pub levels: Vec<Vec<f32>>,
+}
+
+/// Evaluates one scene.
+pub fn evaluate_scene(
+    scene: &EvalScene,
+    settings: &RunSettings,
+    passes: &[u32],
+    model: &TrainedModel,
+    tile: usize,
+    device: &Device,
+) -> Result<(SceneEval, SceneImages)> {
+    let built = load_scene(&scene.xml)?;
+    let res = built.camera.resolution();
+    let (width, height) = (res.x as usize, res.y as usize);
+    let reference = read_rgb_exr_image(&scene.reference)?;
+    let reference = planar_reference(&reference, width, height)
+        .with_context(|| format!("reference {}", scene.reference.display()))?;
+
+    // (a) multi-level + inference.
+    let bundles = multi_level(&built, settings, passes)?;
+    let mut checkpoints = Vec::new();
+    let mut last_ours = Vec::new();
+    let mut last_levels = Vec::new();
+    for tb in &bundles {
+        let t = Instant::now();
+        let packed = pack(&tb.bundle).with_context(|| {
+            format!("{}: bundle at {} passes", scene.name, tb.bundle.meta.passes)
+        })?;
+        let rec = reconstruct_tiled(model, &packed, tile, device, |_, _| {});
+        let inference_seconds = t.elapsed().as_secs_f64() + tb.assembly_seconds;
+        let report = ErrorReport::new(&packed, &rec.image, &reference);
+        checkpoints.push(Checkpoint {
+            passes: tb.bundle.meta.passes,
+            render_seconds: tb.render_seconds,
+            inference_seconds,
+            total_seconds: tb.render_seconds + inference_seconds,
+            ours_relmse: report.output,
+            level_relmse: report.levels.clone(),
+            best_level: report.best_level.clone(),
+            standard_equal_time: Interpolated {
+                relmse: f64::NAN,
+                extrapolated: true,
+            },
+            ratio_equal_time: f64::NAN,
+            standard_equal_passes: None,
+            standard_seconds_equal_passes: None,
+            overhead: None,
+        });
+        last_levels = (0..LEVEL_NAMES.len())
+            .map(|l| packed.level(l).to_vec())
+            .collect();
+        last_ours = rec.image;
+    }
+
+    // (b) standard SPPM, past the slowest multi-level total.
+    let max_total = checkpoints
+        .iter()
+        .map(|c| c.total_seconds)
+        .fold(0.0, f64::max);
+    let max_passes = passes.iter().copied().max().unwrap_or(1);
+    let stop = StopCondition {
+        checkpoints: dense_checkpoints(passes, max_passes.saturating_mul(STANDARD_PASS_CAP_FACTOR)),
+        seconds: Some(max_total * STANDARD_TIME_MARGIN + 1e-3),
+    };
+    let kept = run_timed(&built, settings, SppmMode::Single, &stop, "standard", |b| {
+        // The single level fills every level layer; z1 is the documented one to read.
+        let image = planar_reference(&b.levels[1], width, height)
+            .with_context(|| format!("{}: standard SPPM bundle", scene.name))?;
+        let relmse = relmse_planar(&image, &reference);
+        Ok((b.meta.passes, relmse, image))
+    })?;
+    let standard: Vec<CurvePoint> = kept
+        .iter()
+        .map(|((passes, relmse, _), seconds, _)| CurvePoint {
+            passes: *passes,
+            seconds: *seconds,
+            relmse: *relmse,
+        })
+        .collect();
+
+    // (c) equal time, (d) overhead.
+    for c in &mut checkpoints {
+        if let Some(i) = relmse_at_time(&standard, c.total_seconds) {
+            c.standard_equal_time = i;
+            c.ratio_equal_time = c.ours_relmse / i.relmse;
+        }
+        if let Some(p) = standard.iter().find(|p| p.passes == c.passes) {
+            c.standard_equal_passes = Some(p.relmse);
+            c.standard_seconds_equal_passes = Some(p.seconds);
+            if p.seconds > 0.0 {
+                c.overhead = Some(c.render_seconds / p.seconds - 1.0);
+            }
+        }
+    }
+
+    // The standard image shown next to ours: the first checkpoint at or past ours' total time.
+    let last_total = checkpoints.last().map_or(0.0, |c| c.total_seconds);
+    let idx = standard
+        .iter()
+        .position(|p| p.seconds >= last_total)
+        .unwrap_or(standard.len().saturating_sub(1));
+    let (standard_image, standard_at) = match kept.into_iter().nth(idx) {
+        Some(((_, _, image), _, _)) => (image, standard[idx]),
+        None => anyhow::bail!("{}: the standard run produced no bundle", scene.name),
+    };
+    Ok((
+        SceneEval {
+            width,
+            height,
+            checkpoints,
+            standard,
+        },
+        SceneImages {
+            standard: standard_image,
+            standard_at,
+            ours: last_ours,
+            reference,
+            levels: last_levels,
+        },
+    ))
+}
