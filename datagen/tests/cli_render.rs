@@ -67,9 +67,11 @@ fn shards_kill_resume_and_check() {
 
     // Reference: one uninterrupted process.
     let single = work.join("single");
+    let start = Instant::now();
     ok(render(&config, &single, &["--threads", "2"])
         .output()
         .unwrap());
+    let full_run = start.elapsed();
     let reference = snapshot(&single);
     let manifest = Manifest::load(&single).unwrap();
     assert_eq!(manifest.scenes.len(), 5);
@@ -95,19 +97,24 @@ fn shards_kill_resume_and_check() {
     }
     assert_same(&reference, &snapshot(&sharded));
 
-    // Kill -9 at several moments, resume, compare.
-    for (k, delay_ms) in [5u64, 60, 250].into_iter().enumerate() {
+    // Kill -9 at several moments (fractions of an uninterrupted run, so on any machine the
+    // kill lands mid-run: during a render, between jobs or inside a write), resume, compare.
+    for (k, fraction) in [0.02f64, 0.25, 0.5].into_iter().enumerate() {
         let dir = work.join(format!("killed{k}"));
         let mut child = render(&config, &dir, &["--threads", "1"]).spawn().unwrap();
+        let delay = full_run.mul_f64(fraction);
         let start = Instant::now();
-        while start.elapsed() < Duration::from_millis(delay_ms) {
-            if child.try_wait().unwrap().is_some() {
-                break;
-            }
+        let mut finished = false;
+        while start.elapsed() < delay && !finished {
+            finished = child.try_wait().unwrap().is_some();
             std::thread::sleep(Duration::from_millis(1));
         }
         let _ = child.kill(); // SIGKILL
         let _ = child.wait();
+        assert!(
+            !finished && !dir.join("manifest.json").exists(),
+            "kill {k} at {delay:?} came after the run had finished ({full_run:?} uninterrupted)"
+        );
         ok(render(&config, &dir, &["--threads", "2"]).output().unwrap());
         assert_same(&reference, &snapshot(&dir));
         let out = ok(datagen(&["check", dir.to_str().unwrap(), "--quiet"])
