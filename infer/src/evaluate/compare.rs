@@ -167,10 +167,11 @@ mod tests {
         assert_eq!(c[..8], [1, 2, 3, 4, 5, 6, 7, 8]);
         assert!(c.contains(&12) && c.contains(&100) && c.contains(&64));
         assert!(c.windows(2).all(|w| w[0] < w[1]));
-        // Four points per doubling: consecutive ratios ≤ 2^(1/4) once rounding stops mattering.
+        // Four points per doubling: consecutive ratios ≈ 2^(1/4) = 1.19 (plus rounding) once
+        // the counts are large enough for rounding not to matter.
         assert!(c
             .windows(2)
             .filter(|w| w[0] >= 16 && w[1] <= 64)
-            .all(|w| w[1] as f64 / w[0] as f64 <= 1.2));
+            .all(|w| w[1] as f64 / w[0] as f64 <= 1.25));
     }
 }

@@ -159,8 +159,8 @@ impl EvalConfig {
             let path = d.dir.join("manifest.json");
             let text = std::fs::read_to_string(&path)
                 .with_context(|| format!("reading {}", path.display()))?;
-            let manifest: Manifest =
-                serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+            let manifest: Manifest = serde_json::from_str(&text)
+                .with_context(|| format!("parsing {}", path.display()))?;
             let mut chosen: Vec<EvalScene> = manifest
                 .scenes
                 .into_iter()
@@ -189,7 +189,10 @@ impl EvalConfig {
         let mut names: Vec<&str> = out.iter().map(|s| s.name.as_str()).collect();
         names.sort_unstable();
         if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-            bail!("two scenes are named \"{}\": give them distinct names", w[0]);
+            bail!(
+                "two scenes are named \"{}\": give them distinct names",
+                w[0]
+            );
         }
         Ok(out)
     }
@@ -215,7 +218,8 @@ mod tests {
 
     #[test]
     fn unknown_keys_are_rejected_and_defaults_apply() {
-        let base = "model = \"m\"\noutput = \"o\"\nphotons_per_pass = 10\npasses = [4, 2, 4]\nseed = 1\n\
+        let base =
+            "model = \"m\"\noutput = \"o\"\nphotons_per_pass = 10\npasses = [4, 2, 4]\nseed = 1\n\
                     [[scenes]]\nxml = \"a/b/scene.xml\"\nreference = \"r.exr\"\n";
         let c: EvalConfig = toml::from_str(base).unwrap();
         c.validate().unwrap();

@@ -118,11 +118,7 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
             .and_then(|e| e.checkpoints.iter().find(|c| c.passes == s.passes));
         match (last, &r.error) {
             (Some(c), _) => {
-                let best = c
-                    .level_relmse
-                    .iter()
-                    .copied()
-                    .fold(f64::INFINITY, f64::min);
+                let best = c.level_relmse.iter().copied().fold(f64::INFINITY, f64::min);
                 let class = if c.ratio_equal_time < 1.0 {
                     "win"
                 } else {
@@ -228,11 +224,21 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
         }
         h.push_str("</table>\n");
         if let Some(p) = &r.plot {
-            h.push_str(&embedded_img(dir, p, &format!("{} convergence", r.name), "plot")?);
+            h.push_str(&embedded_img(
+                dir,
+                p,
+                &format!("{} convergence", r.name),
+                "plot",
+            )?);
             h.push_str("<p>Left: relMSE against wall time (ours at render + inference time; input levels at render time). Right: against passes.</p>\n");
         }
         if let Some(p) = &r.comparison {
-            h.push_str(&embedded_img(dir, p, &format!("{} comparison", r.name), "px")?);
+            h.push_str(&embedded_img(
+                dir,
+                p,
+                &format!("{} comparison", r.name),
+                "px",
+            )?);
             let (sp, ss) = r
                 .comparison_standard
                 .map_or((0, f64::NAN), |p| (p.passes, p.seconds));

@@ -190,14 +190,17 @@ mod tests {
         let mean = (map[0] + map[1]) as f64 / 2.0;
         let relmse = model::metrics::relmse_planar(&image, &reference);
         assert!((mean - relmse).abs() < 1e-6, "{mean} vs {relmse}");
-        // Pixel 0: reference (1, 0, 1), mean 2/3, error 0.25 in R only.
-        let expected = 0.25 / ((2.0f32 / 3.0).powi(2) + 0.01) / 3.0;
-        assert!((map[0] - expected).abs() < 1e-6);
+        // Planar layout: pixel 0 is (1.5, 1, 0.5) against (1, 1, 1): squared errors 0.25, 0,
+        // 0.25 over 1² + 0.01; pixel 1 is (0, 0.2, 0) against black: 0.04 over 0.01.
+        assert!((map[0] - 0.5 / 1.01 / 3.0).abs() < 1e-6, "{}", map[0]);
+        assert!((map[1] - 0.04 / 0.01 / 3.0).abs() < 1e-5, "{}", map[1]);
     }
 
     #[test]
     fn error_colours_are_monotone_in_brightness() {
-        let errors: Vec<f32> = (0..=30).map(|i| 10f32.powf(-3.0 + i as f32 / 10.0)).collect();
+        let errors: Vec<f32> = (0..=30)
+            .map(|i| 10f32.powf(-3.0 + i as f32 / 10.0))
+            .collect();
         let panel = error_panel(&errors, 1.0);
         let lum: Vec<u32> = panel
             .chunks(3)

@@ -217,11 +217,8 @@ fn evaluate_one(
         )?;
         let comparison = format!("{stem}_compare.png");
         images::write_atomic(&config.output.join(&comparison), &row)?;
-        let levels: Vec<images::Panel> = imgs
-            .levels
-            .iter()
-            .map(|l| srgb_panel(l, pixels))
-            .collect();
+        let levels: Vec<images::Panel> =
+            imgs.levels.iter().map(|l| srgb_panel(l, pixels)).collect();
         let inputs = format!("{stem}_inputs.png");
         images::write_atomic(
             &config.output.join(&inputs),

@@ -41,7 +41,11 @@ fn curves(eval: &SceneEval, by_time: bool) -> Vec<Curve> {
     let mut out = vec![Curve {
         label: "standard SPPM".into(),
         colour: STANDARD,
-        points: loggable(eval.standard.iter().map(|p| (x(p.seconds, p.passes), p.relmse))),
+        points: loggable(
+            eval.standard
+                .iter()
+                .map(|p| (x(p.seconds, p.passes), p.relmse)),
+        ),
         dashed: false,
     }];
     out.push(Curve {
@@ -116,6 +120,8 @@ fn draw(path: &Path, title: &str, eval: &SceneEval) -> Result<(), Box<dyn std::e
             .configure_mesh()
             // Log axes: plotters' minor grid lines crowd the decades; keep the major ones.
             .light_line_style(TRANSPARENT)
+            .x_labels(8)
+            .y_labels(8)
             .x_desc(if by_time { "seconds" } else { "passes" })
             .y_desc("relMSE")
             .x_label_formatter(&|v| {

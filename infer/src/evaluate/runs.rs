@@ -85,10 +85,7 @@ pub fn run_timed<T: Send>(
         stop,
         |b| {
             let entered = Instant::now();
-            let end = pass_end
-                .lock()
-                .expect("progress lock")
-                .unwrap_or(entered);
+            let end = pass_end.lock().expect("progress lock").unwrap_or(entered);
             let assembly = (entered - end).as_secs_f64();
             let render_seconds = b.meta.seconds - overhead;
             let value = keep(b)?;
@@ -127,7 +124,14 @@ pub fn multi_level(
         checkpoints: passes.to_vec(),
         seconds: None,
     };
-    let kept = run_timed(scene, settings, SppmMode::MultiLevel, &stop, "multi-level", Ok)?;
+    let kept = run_timed(
+        scene,
+        settings,
+        SppmMode::MultiLevel,
+        &stop,
+        "multi-level",
+        Ok,
+    )?;
     Ok(kept
         .into_iter()
         .map(|(bundle, render_seconds, assembly_seconds)| TimedBundle {

@@ -1,0 +1,289 @@
+//! The `evaluate` binary end to end on a 16×16 open box lit by an area light, with a randomly
+//! initialised tiny model: explicit scenes and a dataset split, every output file written,
+//! finite numbers, every scene on the HTML page; bad configs fail naming the file.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use burn::tensor::Device;
+use model::training::save_burnpack;
+use model::{ModelConfig, Preset};
+use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
+
+/// A diffuse box open towards the camera (a small Cornell box) with an area light under the
+/// ceiling.
+const BOX_XML: &str = r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+        <transform name="to_world">
+            <lookat origin="0, 0, 3.9" target="0, 0, 0" up="0, 1, 0"/>
+        </transform>
+        <film type="hdrfilm">
+            <integer name="width" value="16"/>
+            <integer name="height" value="16"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <bsdf type="diffuse" id="white">
+        <rgb name="reflectance" value="0.7, 0.7, 0.7"/>
+    </bsdf>
+    <bsdf type="diffuse" id="red">
+        <rgb name="reflectance" value="0.7, 0.1, 0.1"/>
+    </bsdf>
+    <shape type="rectangle">
+        <transform name="to_world">
+            <scale x="0.25" y="0.25" z="0.25"/>
+            <rotate x="1" angle="90"/>
+            <translate y="0.99"/>
+        </transform>
+        <ref id="white"/>
+        <emitter type="area">
+            <rgb name="radiance" value="15, 15, 15"/>
+        </emitter>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate x="1" angle="-90"/><translate y="-1"/></transform>
+        <ref id="white"/>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate x="1" angle="90"/><translate y="1"/></transform>
+        <ref id="white"/>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><translate z="-1"/></transform>
+        <ref id="white"/>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate y="1" angle="-90"/><translate x="1"/></transform>
+        <ref id="white"/>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate y="1" angle="90"/><translate x="-1"/></transform>
+        <ref id="red"/>
+    </shape>
+</scene>
+"#;
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("evaluate-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes the box scene to `dir/scene.xml` and a 48-pass reference to `dir/reference.exr`.
+fn box_scene(dir: &Path) -> (PathBuf, PathBuf) {
+    std::fs::create_dir_all(dir).unwrap();
+    let xml = dir.join("scene.xml");
+    std::fs::write(&xml, BOX_XML).unwrap();
+    let desc = renderer::xml::load_scene(&xml, &[], false).unwrap();
+    let scene = renderer::scene::Scene::build(&desc).unwrap();
+    let settings = SppmSettings {
+        photons_per_pass: 4000,
+        seed: 99,
+        mode: SppmMode::MultiLevel,
+        ..SppmSettings::default()
+    };
+    let stop = StopCondition {
+        checkpoints: vec![48],
+        seconds: None,
+    };
+    let mut reference = None;
+    render_sppm(
+        &scene,
+        &settings,
+        &stop,
+        |b| {
+            reference = Some(b.levels[0].clone());
+            Ok(())
+        },
+        |_| {},
+    )
+    .unwrap();
+    let path = dir.join("reference.exr");
+    bundle::write_rgb_exr_image(&path, &reference.unwrap()).unwrap();
+    (xml, path)
+}
+
+/// A randomly initialised tiny model directory.
+fn tiny_model(dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    let config = ModelConfig::preset(Preset::Tiny);
+    let network = config.init(3, &Device::flex());
+    save_burnpack(&network, &dir.join("model.bpk")).unwrap();
+    std::fs::write(
+        dir.join("model.json"),
+        serde_json::to_string(&config).unwrap(),
+    )
+    .unwrap();
+}
+
+fn toml_path(p: &Path) -> String {
+    format!("{:?}", p.display().to_string())
+}
+
+fn evaluate(config: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_evaluate"))
+        .arg("--config")
+        .arg(config)
+        .output()
+        .unwrap()
+}
+
+fn finite(v: &serde_json::Value, what: &str) -> f64 {
+    let x = v
+        .as_f64()
+        .unwrap_or_else(|| panic!("{what} is not a number: {v}"));
+    assert!(x.is_finite(), "{what} = {x}");
+    x
+}
+
+#[test]
+fn evaluates_explicit_and_dataset_scenes() {
+    let dir = temp_dir("run");
+    let (xml, reference) = box_scene(&dir.join("box"));
+    tiny_model(&dir.join("model"));
+    // A two-scene dataset: only the test scene must be evaluated.
+    let data = dir.join("data");
+    for id in ["000-box", "001-box"] {
+        std::fs::create_dir_all(data.join("scenes").join(id)).unwrap();
+        std::fs::copy(&xml, data.join("scenes").join(id).join("scene.xml")).unwrap();
+    }
+    std::fs::create_dir_all(data.join("references")).unwrap();
+    std::fs::copy(&reference, data.join("references/000-box.exr")).unwrap();
+    std::fs::copy(&reference, data.join("references/001-box.exr")).unwrap();
+    let manifest = serde_json::json!({
+        "format": "sppm-ml-dataset/1",
+        "scenes": [
+            {"id": "000-box", "split": "train", "xml": "scenes/000-box/scene.xml",
+             "reference": "references/000-box.exr"},
+            {"id": "001-box", "split": "test", "xml": "scenes/001-box/scene.xml",
+             "reference": "references/001-box.exr"}
+        ],
+        "samples": []
+    });
+    std::fs::write(data.join("manifest.json"), manifest.to_string()).unwrap();
+
+    let out = dir.join("out");
+    let config = dir.join("eval.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "model = {}\noutput = {}\nphotons_per_pass = 2000\npasses = [2, 4]\nseed = 5\n\
+             tile = 8\nthreads = 1\n\n[[scenes]]\nname = \"explicit-box\"\nxml = {}\n\
+             reference = {}\n\n[dataset]\ndir = {}\nsplit = \"test\"\n",
+            toml_path(&dir.join("model")),
+            toml_path(&out),
+            toml_path(&xml),
+            toml_path(&reference),
+            toml_path(&data)
+        ),
+    )
+    .unwrap();
+    let run = evaluate(&config);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "evaluate failed:\n{stderr}");
+
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let scenes = results["scenes"].as_array().unwrap();
+    let names: Vec<&str> = scenes.iter().map(|s| s["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["explicit-box", "001-box"]);
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    for s in scenes {
+        let name = s["name"].as_str().unwrap();
+        assert!(s["error"].is_null(), "{name}: {}", s["error"]);
+        assert!(html.contains(name), "the page does not mention {name}");
+        for key in ["plot", "comparison", "inputs"] {
+            let file = out.join(s[key].as_str().unwrap());
+            let bytes = std::fs::read(&file).unwrap();
+            assert!(
+                bytes.starts_with(b"\x89PNG"),
+                "{} is not a PNG",
+                file.display()
+            );
+        }
+        let eval = &s["eval"];
+        let checkpoints = eval["checkpoints"].as_array().unwrap();
+        let passes: Vec<u64> = checkpoints
+            .iter()
+            .map(|c| c["passes"].as_u64().unwrap())
+            .collect();
+        assert_eq!(passes, [2, 4]);
+        for c in checkpoints {
+            let render = finite(&c["render_seconds"], "render_seconds");
+            let inference = finite(&c["inference_seconds"], "inference_seconds");
+            let total = finite(&c["total_seconds"], "total_seconds");
+            assert!(render > 0.0 && inference > 0.0);
+            assert!((total - render - inference).abs() < 1e-9);
+            assert!(finite(&c["ours_relmse"], "ours_relmse") >= 0.0);
+            let levels = c["level_relmse"].as_array().unwrap();
+            assert_eq!(levels.len(), 5);
+            for l in levels {
+                assert!(finite(l, "level relMSE") > 0.0);
+            }
+            let std_eq = finite(
+                &c["standard_equal_time"]["relmse"],
+                "standard at equal time",
+            );
+            assert!(std_eq > 0.0);
+            finite(&c["ratio_equal_time"], "ratio");
+            // The standard run carries on past ours' total time: the point is interpolated.
+            assert_eq!(c["standard_equal_time"]["extrapolated"], false);
+            finite(&c["standard_equal_passes"], "standard at equal passes");
+            finite(&c["overhead"], "overhead");
+        }
+        // Standard SPPM's curve: sorted by passes and time, and it reaches ours' last total.
+        let curve = eval["standard"].as_array().unwrap();
+        let times: Vec<f64> = curve
+            .iter()
+            .map(|p| finite(&p["seconds"], "standard seconds"))
+            .collect();
+        assert!(times.windows(2).all(|w| w[0] <= w[1]), "{times:?}");
+        let last_total = finite(&checkpoints[1]["total_seconds"], "total");
+        assert!(*times.last().unwrap() >= last_total);
+    }
+    assert!(html.contains("data:image/png;base64,"));
+    assert!(html.contains("dual-vs-multi"));
+    let summary = &results["summary"];
+    assert_eq!(summary["scenes"], 2);
+    assert_eq!(summary["failed"], 0);
+    assert_eq!(summary["passes"], 4);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_configs_fail_naming_the_problem() {
+    let dir = temp_dir("bad");
+    let config = dir.join("eval.toml");
+    let base = format!(
+        "model = \"m\"\noutput = {}\nphotons_per_pass = 100\npasses = [2]\nseed = 1\n",
+        toml_path(&dir.join("out"))
+    );
+    // An unknown key.
+    std::fs::write(&config, format!("{base}photons = 3\n")).unwrap();
+    let run = evaluate(&config);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("eval.toml") && stderr.contains("photons"),
+        "{stderr}"
+    );
+    // A missing reference is found before anything is rendered.
+    std::fs::write(
+        &config,
+        format!(
+            "{base}[[scenes]]\nxml = {}\nreference = {}\n",
+            toml_path(&config),
+            toml_path(&dir.join("nope.exr"))
+        ),
+    )
+    .unwrap();
+    let run = evaluate(&config);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("nope.exr"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!dir.join("out").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
