@@ -16,6 +16,15 @@ struct Cli {
     /// Evaluation config (TOML), e.g. `configs/eval/small.toml`.
     #[arg(long)]
     config: PathBuf,
+    /// Override the config's model directory.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Override the config's output directory.
+    #[arg(long)]
+    output: Option<PathBuf>,
+    /// Evaluate only the first N scenes.
+    #[arg(long)]
+    limit: Option<usize>,
 }
 
 fn main() -> ExitCode {
@@ -32,7 +41,17 @@ fn main() -> ExitCode {
 
 /// Returns whether every scene was evaluated.
 fn run(cli: &Cli) -> Result<bool> {
-    let config = EvalConfig::load(&cli.config)?;
+    let mut config = EvalConfig::load(&cli.config)?;
+    if let Some(m) = &cli.model {
+        config.model = m.clone();
+    }
+    if let Some(o) = &cli.output {
+        config.output = o.clone();
+    }
+    if cli.limit.is_some() {
+        config.limit = cli.limit;
+    }
+    config.validate()?;
     let results = infer::evaluate::run(&config)?;
     let s = &results.summary;
     println!(

@@ -33,6 +33,9 @@ pub struct EvalConfig {
     /// Bound on SPPM eye (delta/glossy) and photon bounces; default the renderer's (16).
     #[serde(default)]
     pub max_depth: Option<u32>,
+    /// Evaluate only the first N scenes (explicit ones first, then the dataset's).
+    #[serde(default)]
+    pub limit: Option<usize>,
     /// Explicit scenes.
     #[serde(default)]
     pub scenes: Vec<SceneEntry>,
@@ -129,6 +132,9 @@ impl EvalConfig {
         if self.scenes.is_empty() && self.dataset.is_none() {
             bail!("no scenes: give [[scenes]] entries and/or a [dataset]");
         }
+        if self.limit == Some(0) {
+            bail!("limit must be positive");
+        }
         if self.max_depth == Some(0) {
             bail!("max_depth must be positive");
         }
@@ -178,6 +184,9 @@ impl EvalConfig {
                 chosen.truncate(n);
             }
             out.extend(chosen);
+        }
+        if let Some(n) = self.limit {
+            out.truncate(n);
         }
         for s in &out {
             for p in [&s.xml, &s.reference] {
