@@ -43,16 +43,16 @@ pub struct RunSettings {
     pub scene_name: String,
 }
 
-/// Renders `scene` in `mode` and hands every checkpoint bundle to `keep`, which returns what
-/// to store (e.g. the bundle itself, or only its error). Returns the kept values with their
-/// corrected times.
+/// Renders `scene` in `mode` and hands every checkpoint bundle, with its corrected render
+/// seconds, to `keep`, which returns what to store (e.g. the bundle itself, or only its
+/// error). Returns the kept values with their corrected render and assembly seconds.
 pub fn run_timed<T: Send>(
     scene: &Scene,
     settings: &RunSettings,
     mode: SppmMode,
     stop: &StopCondition,
     label: &str,
-    mut keep: impl FnMut(Bundle) -> Result<T> + Send,
+    mut keep: impl FnMut(Bundle, f64) -> Result<T> + Send,
 ) -> Result<Vec<(T, f64, f64)>> {
     let mut sppm = SppmSettings {
         photons_per_pass: settings.photons_per_pass,
@@ -88,7 +88,7 @@ pub fn run_timed<T: Send>(
             let end = pass_end.lock().expect("progress lock").unwrap_or(entered);
             let assembly = (entered - end).as_secs_f64();
             let render_seconds = b.meta.seconds - overhead;
-            let value = keep(b)?;
+            let value = keep(b, render_seconds)?;
             kept.push((value, render_seconds, assembly));
             overhead += end.elapsed().as_secs_f64();
             Ok(())
@@ -130,7 +130,7 @@ pub fn multi_level(
         SppmMode::MultiLevel,
         &stop,
         "multi-level",
-        Ok,
+        |b, _| Ok(b),
     )?;
     Ok(kept
         .into_iter()

@@ -142,16 +142,32 @@ pub fn evaluate_scene(
         checkpoints: dense_checkpoints(passes, max_passes.saturating_mul(STANDARD_PASS_CAP_FACTOR)),
         seconds: Some(max_total * STANDARD_TIME_MARGIN + 1e-3),
     };
-    let kept = run_timed(&built, settings, SppmMode::Single, &stop, "standard", |b| {
-        // The single level fills every level layer; z1 is the documented one to read.
-        let image = planar_reference(&b.levels[1], width, height)
-            .with_context(|| format!("{}: standard SPPM bundle", scene.name))?;
-        let relmse = relmse_planar(&image, &reference);
-        Ok((b.meta.passes, relmse, image))
-    })?;
+    // Only one standard image is kept for the comparison: the first checkpoint at or past
+    // ours' last total time (or the last one, if the run never got there).
+    let last_total = checkpoints.last().map_or(0.0, |c| c.total_seconds);
+    let mut shown: Option<(u32, f64, Vec<f32>)> = None;
+    let mut shown_final = false;
+    let kept = run_timed(
+        &built,
+        settings,
+        SppmMode::Single,
+        &stop,
+        "standard",
+        |b, seconds| {
+            // The single level fills every level layer; z1 is the documented one to read.
+            let image = planar_reference(&b.levels[1], width, height)
+                .with_context(|| format!("{}: standard SPPM bundle", scene.name))?;
+            let relmse = relmse_planar(&image, &reference);
+            if !shown_final {
+                shown_final = seconds >= last_total;
+                shown = Some((b.meta.passes, seconds, image));
+            }
+            Ok((b.meta.passes, relmse))
+        },
+    )?;
     let standard: Vec<CurvePoint> = kept
         .iter()
-        .map(|((passes, relmse, _), seconds, _)| CurvePoint {
+        .map(|((passes, relmse), seconds, _)| CurvePoint {
             passes: *passes,
             seconds: *seconds,
             relmse: *relmse,
@@ -173,16 +189,18 @@ pub fn evaluate_scene(
         }
     }
 
-    // The standard image shown next to ours: the first checkpoint at or past ours' total time.
-    let last_total = checkpoints.last().map_or(0.0, |c| c.total_seconds);
-    let idx = standard
-        .iter()
-        .position(|p| p.seconds >= last_total)
-        .unwrap_or(standard.len().saturating_sub(1));
-    let (standard_image, standard_at) = match kept.into_iter().nth(idx) {
-        Some(((_, _, image), _, _)) => (image, standard[idx]),
-        None => anyhow::bail!("{}: the standard run produced no bundle", scene.name),
+    let Some((shown_passes, shown_seconds, standard_image)) = shown else {
+        anyhow::bail!("{}: the standard run produced no bundle", scene.name);
     };
+    let standard_at = standard
+        .iter()
+        .copied()
+        .find(|p| p.passes == shown_passes)
+        .unwrap_or(CurvePoint {
+            passes: shown_passes,
+            seconds: shown_seconds,
+            relmse: relmse_planar(&standard_image, &reference),
+        });
     Ok((
         SceneEval {
             width,
