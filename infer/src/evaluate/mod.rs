@@ -34,8 +34,8 @@ does not provide yet.";
 pub const METHOD_NOTE: &str = "Equal time: ours is charged render seconds (multi-level SPPM up \
 to the checkpoint) plus inference seconds (bundle assembly, feature packing, network and \
 combination). Standard SPPM (single level) runs once with dense checkpoints (every configured \
-pass count plus four per doubling) until its wall time exceeds the slowest ours total by 25 %; \
-its relMSE at ours' total time is interpolated linearly in log(time)–log(relMSE) between the two \
+pass count plus four per doubling) until it has both the largest configured pass count and a \
+render time past the slowest ours total; its relMSE at ours' total time is interpolated linearly in log(time)–log(relMSE) between the two \
 checkpoints around it. Render times exclude the evaluator's own callback work (bundle assembly \
 and error computation at checkpoints), so the dense checkpoints do not slow the baseline. \
 Overhead = multi-level render seconds / single-level render seconds at the same pass count − 1.";

@@ -12,7 +12,7 @@
 use std::sync::Mutex;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{Context as _, Result};
 use bundle::Bundle;
 use indicatif::{ProgressBar, ProgressStyle};
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
@@ -43,9 +43,16 @@ pub struct RunSettings {
     pub scene_name: String,
 }
 
+/// Returned by the checkpoint callback to end a run early; not a failure.
+#[derive(Debug, thiserror::Error)]
+#[error("enough checkpoints")]
+struct Enough;
+
 /// Renders `scene` in `mode` and hands every checkpoint bundle, with its corrected render
 /// seconds, to `keep`, which returns what to store (e.g. the bundle itself, or only its
-/// error). Returns the kept values with their corrected render and assembly seconds.
+/// error). After each checkpoint `done(passes, corrected seconds)` may end the run (before
+/// the last checkpoint of `stop`). Returns the kept values with their corrected render and
+/// assembly seconds.
 pub fn run_timed<T: Send>(
     scene: &Scene,
     settings: &RunSettings,
@@ -53,6 +60,7 @@ pub fn run_timed<T: Send>(
     stop: &StopCondition,
     label: &str,
     mut keep: impl FnMut(Bundle, f64) -> Result<T> + Send,
+    done: impl Fn(u32, f64) -> bool + Send + Sync,
 ) -> Result<Vec<(T, f64, f64)>> {
     let mut sppm = SppmSettings {
         photons_per_pass: settings.photons_per_pass,
@@ -79,7 +87,7 @@ pub fn run_timed<T: Send>(
     let pass_end: Mutex<Option<Instant>> = Mutex::new(None);
     let mut overhead = 0.0f64;
     let mut kept = Vec::new();
-    render_sppm(
+    let outcome = render_sppm(
         scene,
         &sppm,
         stop,
@@ -88,9 +96,13 @@ pub fn run_timed<T: Send>(
             let end = pass_end.lock().expect("progress lock").unwrap_or(entered);
             let assembly = (entered - end).as_secs_f64();
             let render_seconds = b.meta.seconds - overhead;
+            let passes = b.meta.passes;
             let value = keep(b, render_seconds)?;
             kept.push((value, render_seconds, assembly));
             overhead += end.elapsed().as_secs_f64();
+            if done(passes, render_seconds) {
+                return Err(Enough.into());
+            }
             Ok(())
         },
         |p| {
@@ -98,10 +110,13 @@ pub fn run_timed<T: Send>(
             bar.set_position(p.pass as u64);
             bar.set_message(format!("{:.2} passes/s", p.pass as f64 / p.elapsed));
         },
-    )
-    .with_context(|| format!("{label}: rendering"))?;
+    );
     bar.finish_and_clear();
-    Ok(kept)
+    match outcome {
+        Ok(_) => Ok(kept),
+        Err(e) if e.downcast_ref::<Enough>().is_some() => Ok(kept),
+        Err(e) => Err(e.context(format!("{label}: rendering"))),
+    }
 }
 
 /// Loads and builds a Mitsuba XML scene, printing the loader's warnings.
@@ -131,6 +146,7 @@ pub fn multi_level(
         &stop,
         "multi-level",
         |b, _| Ok(b),
+        |_, _| false,
     )?;
     Ok(kept
         .into_iter()

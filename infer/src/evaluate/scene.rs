@@ -18,9 +18,6 @@ use super::runs::{load_scene, multi_level, run_timed, RunSettings};
 use crate::report::LEVEL_NAMES;
 use crate::{reconstruct_tiled, ErrorReport, TrainedModel};
 
-/// The standard run stops once its wall time exceeds the slowest multi-level total by this
-/// factor, so every equal-time point is bracketed by two of its checkpoints.
-const STANDARD_TIME_MARGIN: f64 = 1.25;
 /// The standard run's dense checkpoints go up to this multiple of the largest pass count.
 const STANDARD_PASS_CAP_FACTOR: u32 = 64;
 
@@ -138,9 +135,12 @@ pub fn evaluate_scene(
         .map(|c| c.total_seconds)
         .fold(0.0, f64::max);
     let max_passes = passes.iter().copied().max().unwrap_or(1);
+    // It stops at the first checkpoint that has both the largest configured pass count (for
+    // the equal-passes and overhead columns) and a render time past ours' slowest total (so
+    // every equal-time point is bracketed by two checkpoints), or at the pass cap.
     let stop = StopCondition {
         checkpoints: dense_checkpoints(passes, max_passes.saturating_mul(STANDARD_PASS_CAP_FACTOR)),
-        seconds: Some(max_total * STANDARD_TIME_MARGIN + 1e-3),
+        seconds: None,
     };
     // Only one standard image is kept for the comparison: the first checkpoint at or past
     // ours' last total time (or the last one, if the run never got there).
@@ -164,6 +164,7 @@ pub fn evaluate_scene(
             }
             Ok((b.meta.passes, relmse))
         },
+        |p, seconds| p >= max_passes && seconds > max_total,
     )?;
     let standard: Vec<CurvePoint> = kept
         .iter()
