@@ -95,10 +95,10 @@ impl ModelConfig {
 
     /// Checks the configuration for values the network cannot be built with.
     pub fn validate(&self) -> Result<(), String> {
-        if self.kernel % 2 == 0 || self.kernel == 0 {
+        if self.kernel.is_multiple_of(2) || self.kernel == 0 {
             return Err(format!("kernel must be odd, got {}", self.kernel));
         }
-        if self.window % 2 == 0 || self.window == 0 {
+        if self.window.is_multiple_of(2) || self.window == 0 {
             return Err(format!("window must be odd, got {}", self.window));
         }
         if self.in_channels != INPUT_CHANNELS {
