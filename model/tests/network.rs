@@ -201,6 +201,12 @@ fn wgpu_and_flex_agree_when_an_adapter_exists() {
     assert!(max_diff < 1e-4, "flex vs wgpu differ by {max_diff}");
 }
 
+#[cfg(not(feature = "wgpu"))]
+#[test]
+fn wgpu_and_flex_agree_when_an_adapter_exists() {
+    eprintln!("skipped: built without the `wgpu` feature (cargo test -p model --features wgpu)");
+}
+
 #[test]
 fn training_beats_the_best_input_level() {
     let device = Device::flex();
@@ -234,13 +240,17 @@ fn training_beats_the_best_input_level() {
         "before {:.5}, after {:.5}, best input level z{best} {:.5}",
         before.output, after.output, best_value
     );
+    // The untrained network already blurs the levels (≈ 0.96× the best level on this data), so
+    // ask for a clear margin on both: training must do the work, not the initial averaging.
     assert!(
-        after.output < before.output,
-        "training did not reduce the validation relMSE"
+        after.output < 0.8 * before.output,
+        "training did not reduce the validation relMSE enough: {} -> {}",
+        before.output,
+        after.output
     );
     assert!(
-        after.output < best_value,
-        "output {} not below the best level {}",
+        after.output < 0.8 * best_value,
+        "output {} not clearly below the best level {}",
         after.output,
         best_value
     );

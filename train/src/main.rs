@@ -12,7 +12,7 @@ use burn::module::Module;
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use model::data::PatchDataset;
-use model::training::{write_atomic, EpochReport, Trainer};
+use model::training::{load_burnpack, validate, write_atomic, EpochReport, Trainer};
 
 use config::TrainConfig;
 
@@ -26,6 +26,10 @@ struct Cli {
     /// Continue from the checkpoint in the output directory.
     #[arg(long)]
     resume: bool,
+    /// Instead of training, evaluate the final weights in the output directory (`model.bpk` +
+    /// `model.json`) on whole images of this split (e.g. `test`) and write `eval_<split>.json`.
+    #[arg(long, value_name = "SPLIT", conflicts_with = "resume")]
+    evaluate: Option<String>,
 }
 
 fn main() -> ExitCode {
@@ -44,7 +48,7 @@ const CSV_HEADER: &str = "epoch,train_loss,val_relmse,best_level,best_level_relm
 
 /// Formats one epoch as a `metrics.csv` row.
 fn csv_row(r: &EpochReport) -> String {
-    let names = ["y", "z1", "z2", "z3", "z4"];
+    let names = LEVEL_NAMES;
     match &r.validation {
         Some(v) => {
             let (best, best_value) = v.best_level();
@@ -71,6 +75,79 @@ fn csv_row(r: &EpochReport) -> String {
     }
 }
 
+/// Names of the input levels, in `Validation::levels` order.
+const LEVEL_NAMES: [&str; 5] = ["y", "z1", "z2", "z3", "z4"];
+
+/// `--evaluate SPLIT`: relMSE of the trained output and of every input level over whole images
+/// of `split`, pooled over all pixels; printed and written to `<output>/eval_<split>.json`.
+fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Result<()> {
+    let model_json = cfg.output.join("model.json");
+    let text = std::fs::read_to_string(&model_json)
+        .with_context(|| format!("{} (train first)", model_json.display()))?;
+    let model_config: model::ModelConfig =
+        serde_json::from_str(&text).with_context(|| model_json.display().to_string())?;
+    let net = load_burnpack(&model_config, &cfg.output.join("model.bpk"), device)
+        .map_err(anyhow::Error::msg)?;
+    // Screen with a 1-pixel patch, then evaluate each image as one patch of the smallest image
+    // side (whole images when a split has one size, as datagen writes them).
+    let mut ds = PatchDataset::open(&cfg.dataset, split, 1, 1, cfg.cache_images)
+        .map_err(anyhow::Error::msg)?;
+    report_bad(split, &ds, &cfg.output)?;
+    let side = ds
+        .images
+        .iter()
+        .map(|e| e.width.min(e.height))
+        .min()
+        .with_context(|| {
+            format!(
+                "{}: no usable samples in split `{split}`",
+                cfg.dataset.display()
+            )
+        })?;
+    ds.patch = side;
+    ds.stride = side;
+    let v = validate(&net, &model_config, &mut ds, 1, device)
+        .map_err(|b| anyhow::anyhow!("{}: {}", b.file.display(), b.reason))?;
+    let (best, best_value) = v.best_level();
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "split `{split}`: {} images of {side}x{side} ({} bad)",
+        ds.images.len(),
+        ds.bad.len()
+    )?;
+    writeln!(out, "relMSE output       {:.5e}", v.output)?;
+    for (name, value) in LEVEL_NAMES.iter().zip(v.levels) {
+        writeln!(out, "relMSE input {name:<6} {value:.5e}")?;
+    }
+    writeln!(
+        out,
+        "output / best input level ({}) = {:.3}",
+        LEVEL_NAMES[best],
+        v.output / best_value
+    )?;
+    let json = serde_json::json!({
+        "split": split,
+        "images": ds.images.len(),
+        "bad": ds.bad.len(),
+        "image_side": side,
+        "relmse_output": v.output,
+        "relmse_levels": LEVEL_NAMES
+            .iter()
+            .zip(v.levels)
+            .map(|(n, x)| (n.to_string(), serde_json::json!(x)))
+            .collect::<serde_json::Map<_, _>>(),
+        "best_level": LEVEL_NAMES[best],
+        "best_level_relmse": best_value,
+        "ratio_to_best_level": v.output / best_value,
+    });
+    write_atomic(
+        &cfg.output.join(format!("eval_{split}.json")),
+        &serde_json::to_string_pretty(&json)?,
+    )
+    .map_err(anyhow::Error::msg)
+}
+
 /// Prints every screened-out sample and writes them to `bad_samples.txt`.
 fn report_bad(split: &str, ds: &PatchDataset, output: &Path) -> Result<()> {
     if ds.bad.is_empty() {
@@ -92,6 +169,9 @@ fn report_bad(split: &str, ds: &PatchDataset, output: &Path) -> Result<()> {
 fn run(cli: &Cli) -> Result<()> {
     let cfg = TrainConfig::read(&cli.config)?;
     let device = cfg.backend.device().map_err(anyhow::Error::msg)?;
+    if let Some(split) = &cli.evaluate {
+        return evaluate(&cfg, split, &device);
+    }
     std::fs::create_dir_all(&cfg.output).with_context(|| cfg.output.display().to_string())?;
     let config_text = std::fs::read_to_string(&cli.config)?;
     write_atomic(&cfg.output.join("train.toml"), &config_text).map_err(anyhow::Error::msg)?;
@@ -178,7 +258,7 @@ fn run(cli: &Cli) -> Result<()> {
         let mut line = format!("epoch {epoch}: train loss {:.5}", report.train_loss);
         if let Some(v) = &report.validation {
             let (best, best_value) = v.best_level();
-            let names = ["y", "z1", "z2", "z3", "z4"];
+            let names = LEVEL_NAMES;
             line.push_str(&format!(
                 ", val relMSE {:.5e} (best input level {} {:.5e}, ratio {:.3})",
                 v.output,

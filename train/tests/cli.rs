@@ -101,6 +101,36 @@ fn trains_reports_bad_data_and_resumes() {
     let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "{csv}");
 
+    // `--evaluate val` scores the final weights on whole images of the split.
+    let eval = Command::new(env!("CARGO_BIN_EXE_train"))
+        .arg("--config")
+        .arg(&config)
+        .args(["--evaluate", "val"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&eval.stdout);
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    assert!(stdout.contains("1 images of 24x24"), "{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("eval_val.json")).unwrap()).unwrap();
+    let output = report["relmse_output"].as_f64().unwrap();
+    let best = report["best_level_relmse"].as_f64().unwrap();
+    assert!(output.is_finite() && output > 0.0, "{report}");
+    assert!((report["ratio_to_best_level"].as_f64().unwrap() - output / best).abs() < 1e-12);
+    // An unknown split has no usable samples: a clear error, not a panic.
+    let none = Command::new(env!("CARGO_BIN_EXE_train"))
+        .arg("--config")
+        .arg(&config)
+        .args(["--evaluate", "nosuchsplit"])
+        .output()
+        .unwrap();
+    assert!(!none.status.success());
+    assert!(String::from_utf8_lossy(&none.stderr).contains("no usable samples"));
+
     // Unknown keys are rejected with the file name.
     std::fs::write(&config, "dataset = \"x\"\npreset = \"tiny\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = 1\nseed = 3\noutput = \"o\"\nlearning_rate = 1\n").unwrap();
     let bad = run(false);
