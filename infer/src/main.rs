@@ -8,13 +8,14 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle, Image};
+use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use infer::preview::{write_side_by_side, write_weight_map, Panel};
 use infer::{reconstruct_tiled, ErrorReport, TrainedModel};
 use model::backend::Backend;
-use model::features::{pack, planar_reference};
+use model::features::{interleaved, pack, planar_reference};
+use model::training::write_atomic;
 
 /// Reconstruct a multi-level SPPM render with a trained combiner network.
 ///
@@ -61,15 +62,8 @@ struct Cli {
     #[arg(long, default_value_t = 0, help_heading = "Rendering (--scene)")]
     threads: usize,
     /// `--scene`: override a `<default name=… value=…>` of the scene, e.g. `-D res=128`.
-    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define, help_heading = "Rendering (--scene)")]
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = renderer::xml::parse_define, help_heading = "Rendering (--scene)")]
     define: Vec<(String, String)>,
-}
-
-fn parse_define(s: &str) -> Result<(String, String), String> {
-    match s.split_once('=') {
-        Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v.to_string())),
-        _ => Err(format!("expected NAME=VALUE, got '{s}'")),
-    }
 }
 
 fn main() -> ExitCode {
@@ -106,50 +100,44 @@ fn run(cli: &Cli) -> Result<()> {
         cli.backend
     );
 
-    let (bundle, output) = match (&cli.input, &cli.scene) {
-        (Some(input), _) => {
-            let bundle = read_bundle(input)?;
-            let output = cli
-                .output
-                .clone()
-                .expect("clap requires --output with --input");
-            (bundle, output)
-        }
+    let output = match (&cli.output, &cli.scene) {
+        (Some(output), _) => output.clone(),
         (None, Some(scene)) => {
             let name = scene
                 .parent()
                 .and_then(|p| p.file_name())
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "scene".into());
-            let output = cli
-                .output
-                .clone()
-                .unwrap_or_else(|| PathBuf::from("out").join(name).join("ours.exr"));
+            PathBuf::from("out").join(name).join("ours.exr")
+        }
+        (None, None) => bail!("give --output out.exr"),
+    };
+    // Read the reference before any rendering so a bad file fails fast.
+    let reference_image = match &cli.reference {
+        Some(path) => Some((path, read_rgb_exr_image(path)?)),
+        None => None,
+    };
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+
+    let (bundle, source) = match (&cli.input, &cli.scene) {
+        (Some(input), _) => (read_bundle(input)?, input),
+        (None, Some(scene)) => {
             let bundle = render_bundle(cli, scene)?;
-            if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {}", dir.display()))?;
-            }
             let bundle_path = sibling(&output, "_bundle.exr");
             write_bundle(&bundle_path, &bundle)?;
             eprintln!("wrote {} (the multi-level bundle)", bundle_path.display());
-            (bundle, output)
+            (bundle, scene)
         }
         (None, None) => bail!("give --input bundle.exr or --scene scene.xml"),
     };
-    let source = cli
-        .input
-        .as_ref()
-        .or(cli.scene.as_ref())
-        .expect("one of them is set");
     let packed = pack(&bundle).with_context(|| format!("bundle {}", source.display()))?;
-    let reference = match &cli.reference {
-        Some(path) => {
-            let image = read_rgb_exr_image(path)?;
-            let planar = planar_reference(&image, packed.width, packed.height)
-                .with_context(|| format!("reference {}", path.display()))?;
-            Some(planar)
-        }
+    let reference = match reference_image {
+        Some((path, image)) => Some(
+            planar_reference(&image, packed.width, packed.height)
+                .with_context(|| format!("reference {}", path.display()))?,
+        ),
         None => None,
     };
 
@@ -171,12 +159,9 @@ fn run(cli: &Cli) -> Result<()> {
         packed.width, packed.height, cli.tile
     );
 
-    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
     write_rgb_exr_image(
         &output,
-        &interleave(&result.image, packed.width, packed.height),
+        &interleaved(&result.image, packed.width, packed.height, 3),
     )?;
     let mut written = vec![output.clone()];
     if cli.png {
@@ -211,10 +196,7 @@ fn run(cli: &Cli) -> Result<()> {
         let report = ErrorReport::new(&packed, &result.image, r);
         print!("{}", report.to_text());
         let json = sibling(&output, "_report.json");
-        let text = serde_json::to_string_pretty(&report)?;
-        let tmp = sibling(&output, "_report.json.tmp");
-        std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-        std::fs::rename(&tmp, &json).with_context(|| format!("writing {}", json.display()))?;
+        write_atomic(&json, &serde_json::to_string_pretty(&report)?).map_err(anyhow::Error::msg)?;
         written.push(json);
     }
     println!("wrote:");
@@ -222,18 +204,6 @@ fn run(cli: &Cli) -> Result<()> {
         println!("  {}", p.display());
     }
     Ok(())
-}
-
-/// Planar RGB → an interleaved RGB [`Image`].
-fn interleave(planes: &[f32], width: usize, height: usize) -> Image {
-    let pixels = width * height;
-    let mut image = Image::new(width, height, 3);
-    for p in 0..pixels {
-        for c in 0..3 {
-            image.data[p * 3 + c] = planes[c * pixels + p];
-        }
-    }
-    image
 }
 
 /// Renders `scene` with multi-level SPPM for `--passes` passes and returns the bundle.

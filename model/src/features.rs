@@ -187,3 +187,15 @@ pub fn planar_reference(
     push_planes(&mut out, reference, |v| v);
     Ok(out)
 }
+
+/// Planar channels (`plane[c][y·w + x]`) → an interleaved bundle [`Image`]: the inverse of the
+/// planar layout used for packing.
+pub fn interleaved(planes: &[f32], w: usize, h: usize, channels: usize) -> Image {
+    let mut img = Image::new(w, h, channels);
+    for c in 0..channels {
+        for p in 0..w * h {
+            img.data[p * channels + c] = planes[c * w * h + p];
+        }
+    }
+    img
+}

@@ -10,7 +10,7 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 use crate::data::Sample;
-use crate::features::{pack, planar_reference};
+use crate::features::{interleaved, pack, planar_reference};
 
 /// Approximately standard-normal noise (sum of four uniforms, rescaled).
 fn gaussian(rng: &mut Pcg64Mcg) -> f32 {
@@ -52,17 +52,6 @@ fn box_blur(src: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     out
 }
 
-/// Interleaves planar channels into a bundle image.
-fn interleave(planes: &[f32], w: usize, h: usize, channels: usize) -> Image {
-    let mut img = Image::new(w, h, channels);
-    for c in 0..channels {
-        for p in 0..w * h {
-            img.data[p * channels + c] = planes[c * w * h + p];
-        }
-    }
-    img
-}
-
 /// A synthetic bundle and its planar RGB truth; `noise` is ỹ's noise standard deviation.
 pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, Image) {
     let mut rng = Pcg64Mcg::seed_from_u64(seed);
@@ -84,11 +73,11 @@ pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, I
         .iter()
         .map(|&v| (v + noise * gaussian(&mut rng)).max(0.0))
         .collect();
-    let mut levels = vec![interleave(&y_level, w, h, 3)];
+    let mut levels = vec![interleaved(&y_level, w, h, 3)];
     let mut variance = vec![0.0f32; 5 * pixels];
     variance[..pixels].fill(noise * noise);
     for r in 1..=4 {
-        levels.push(interleave(&box_blur(&noisy_b, w, h, r), w, h, 3));
+        levels.push(interleaved(&box_blur(&noisy_b, w, h, r), w, h, 3));
         let n = ((2 * r + 1) * (2 * r + 1)) as f32;
         variance[r * pixels..(r + 1) * pixels].fill(noise * noise / n);
     }
@@ -114,13 +103,13 @@ pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, I
             height: h as u32,
         },
         levels,
-        variance: interleave(&variance, w, h, 5),
+        variance: interleaved(&variance, w, h, 5),
         albedo,
         normal,
         depth,
         radius: None,
     };
-    (bundle, interleave(&t, w, h, 3))
+    (bundle, interleaved(&t, w, h, 3))
 }
 
 /// A packed synthetic sample (see [`synthetic_bundle`]).

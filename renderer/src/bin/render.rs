@@ -45,7 +45,7 @@ struct Cli {
     #[arg(long, default_value_t = 0)]
     threads: usize,
     /// Override a `<default name=… value=…>` of the scene file: `-D spp=64` (repeatable).
-    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = renderer::xml::parse_define)]
     define: Vec<(String, String)>,
     /// Turn unsupported plugins/attributes into warnings instead of errors.
     #[arg(long)]
@@ -76,13 +76,6 @@ struct Cli {
     /// SPPM: cap on the initial radius in world units (default: 1/50 of the scene's diagonal).
     #[arg(long, help_heading = "SPPM")]
     max_radius: Option<f32>,
-}
-
-fn parse_define(s: &str) -> Result<(String, String), String> {
-    match s.split_once('=') {
-        Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v.to_string())),
-        _ => Err(format!("expected NAME=VALUE, got '{s}'")),
-    }
 }
 
 fn main() -> ExitCode {

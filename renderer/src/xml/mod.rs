@@ -143,6 +143,14 @@ impl Diagnostics {
     }
 }
 
+/// Parses one `-D NAME=VALUE` command-line override of a scene `<default>` (for [`load_scene`]).
+pub fn parse_define(s: &str) -> Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v.to_string())),
+        _ => Err(format!("expected NAME=VALUE, got '{s}'")),
+    }
+}
+
 /// Loads a Mitsuba 3 XML scene.
 ///
 /// `defaults` are `name=value` parameters from the command line (`-D`); they override the
