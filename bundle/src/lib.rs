@@ -42,20 +42,22 @@ const XYZ: [&str; 3] = ["X", "Y", "Z"];
 #[derive(Debug, thiserror::Error)]
 pub enum BundleError {
     /// The file could not be created, renamed or opened.
-    #[error("{path}: {source}")]
+    // The cause is part of the message, not a `source`: error chains printed with `{:#}`
+    // would otherwise repeat it.
+    #[error("{path}: {error}")]
     Io {
         /// The file concerned.
         path: PathBuf,
         /// The underlying I/O error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The EXR library rejected the file (truncated, corrupt, not an EXR).
-    #[error("{path}: invalid or truncated EXR: {source}")]
+    #[error("{path}: invalid or truncated EXR: {error}")]
     Exr {
         /// The file concerned.
         path: PathBuf,
         /// The underlying EXR error.
-        source: exr::error::Error,
+        error: exr::error::Error,
     },
     /// A required channel is absent from the file.
     #[error("{path}: missing channel `{channel}`")]
@@ -273,11 +275,11 @@ fn write_atomic(
         return Err(match source {
             exr::error::Error::Io(source) => BundleError::Io {
                 path: path.to_owned(),
-                source,
+                error: source,
             },
             source => BundleError::Exr {
                 path: path.to_owned(),
-                source,
+                error: source,
             },
         });
     }
@@ -285,7 +287,7 @@ fn write_atomic(
         let _ = std::fs::remove_file(&tmp);
         BundleError::Io {
             path: path.to_owned(),
-            source,
+            error: source,
         }
     })
 }
@@ -360,7 +362,7 @@ impl Decoded {
     fn read(path: &Path) -> Result<Self, BundleError> {
         let file = std::fs::File::open(path).map_err(|source| BundleError::Io {
             path: path.to_owned(),
-            source,
+            error: source,
         })?;
         let image = exr::prelude::read()
             .no_deep_data()
@@ -372,7 +374,7 @@ impl Decoded {
             .from_unbuffered(file)
             .map_err(|source| BundleError::Exr {
                 path: path.to_owned(),
-                source,
+                error: source,
             })?;
         let layer = image.layer_data;
         let mut planes = HashMap::new();
