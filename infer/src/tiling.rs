@@ -10,8 +10,8 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 use model::combine::{combine, level_weight_shares};
-use model::features::{PackedImage, COLOUR_CHANNELS};
-use model::model::{INPUT_CHANNELS, LEVELS};
+use model::features::PackedImage;
+use model::model::LEVELS;
 
 use crate::TrainedModel;
 
@@ -24,7 +24,8 @@ pub struct Reconstruction {
     pub height: usize,
     /// ŷ: three planes R, G, B.
     pub image: Vec<f32>,
-    /// Share of the total weight on each correlated level z̃1..z̃4 (four planes, summing to 1).
+    /// Share of the total weight on each correlated level z̃1..z̃4 (four planes, summing to 1;
+    /// zero on levels a model combining a subset of levels does not read).
     pub shares: Vec<f32>,
 }
 
@@ -83,7 +84,8 @@ fn crop_planes(
 }
 
 /// Reconstructs the whole image tile by tile on `device`, calling `on_tile(done, total)` after
-/// each tile. Memory is bounded by the tile size, not by the image size.
+/// each tile. Memory is bounded by the tile size, not by the image size. `packed` holds all
+/// five levels; the model reads the ones its config names.
 pub fn reconstruct_tiled(
     model: &TrainedModel,
     packed: &PackedImage,
@@ -91,7 +93,18 @@ pub fn reconstruct_tiled(
     device: &Device,
     mut on_tile: impl FnMut(usize, usize),
 ) -> Reconstruction {
+    let chosen = &model.config.levels;
+    let selected;
+    let packed = if *chosen == model::model::all_levels() {
+        packed
+    } else {
+        selected = packed.select_levels(chosen);
+        &selected
+    };
     let (width, height) = (packed.width, packed.height);
+    let feature_channels = packed.features.len() / (width * height).max(1);
+    let colour_channels = packed.levels.len() / (width * height).max(1);
+    let pairs = chosen.len() - 1;
     let pixels = width * height;
     let halo = model.config.receptive_radius();
     let window = model.config.window;
@@ -101,18 +114,19 @@ pub fn reconstruct_tiled(
     for (done, t) in tiles.iter().enumerate() {
         let [rx0, ry0, rx1, ry1] = t.region;
         let (rw, rh) = (rx1 - rx0, ry1 - ry0);
-        let features = crop_planes(&packed.features, INPUT_CHANNELS, width, height, t.region);
-        let levels = crop_planes(&packed.levels, COLOUR_CHANNELS, width, height, t.region);
+        let features = crop_planes(&packed.features, feature_channels, width, height, t.region);
+        let levels = crop_planes(&packed.levels, colour_channels, width, height, t.region);
         let features = Tensor::<4>::from_data(
-            TensorData::new(features, [1, INPUT_CHANNELS, rh, rw]),
+            TensorData::new(features, [1, feature_channels, rh, rw]),
             device,
         );
         let levels = Tensor::<4>::from_data(
-            TensorData::new(levels, [1, COLOUR_CHANNELS, rh, rw]),
+            TensorData::new(levels, [1, colour_channels, rh, rw]),
             device,
         );
         let weights = model.network.weights(features);
-        let combined = combine(levels, weights.clone(), window);
+        // Clamped at zero like `model::training::reconstruct` (what the loss saw in training).
+        let combined = combine(levels, weights.clone(), window).clamp_min(0.0);
         let tile_shares = level_weight_shares(weights, window);
         let combined = combined
             .into_data()
@@ -123,17 +137,19 @@ pub fn reconstruct_tiled(
             .try_to_vec::<f32>()
             .expect("f32 weight shares");
         let [ix0, iy0, ix1, iy1] = t.interior;
-        let paste = |dst: &mut [f32], src: &[f32], planes: usize| {
+        // Source plane p goes to destination plane to(p).
+        let paste = |dst: &mut [f32], src: &[f32], planes: usize, to: &dyn Fn(usize) -> usize| {
             for p in 0..planes {
                 for y in iy0..iy1 {
                     let s = p * rw * rh + (y - ry0) * rw + (ix0 - rx0);
-                    let d = p * pixels + y * width + ix0;
+                    let d = to(p) * pixels + y * width + ix0;
                     dst[d..d + (ix1 - ix0)].copy_from_slice(&src[s..s + (ix1 - ix0)]);
                 }
             }
         };
-        paste(&mut image, &combined, 3);
-        paste(&mut shares, &tile_shares, LEVELS - 1);
+        paste(&mut image, &combined, 3, &|p| p);
+        // Share plane j of the model belongs to its correlated level chosen[j + 1] (z̃1 = 1).
+        paste(&mut shares, &tile_shares, pairs, &|j| chosen[j + 1] - 1);
         on_tile(done + 1, tiles.len());
     }
     Reconstruction {

@@ -12,11 +12,6 @@ use burn::tensor::module::unfold4d;
 use burn::tensor::ops::{PadMode, UnfoldOptions};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::model::LEVELS;
-
-/// Number of correlated estimates z̃1..z̃4 (m − 1).
-const PAIRS: usize = LEVELS - 1;
-
 /// 1 where window entry k of pixel p lies inside the `height`×`width` image, else 0; shape
 /// `[1, 1, 1, window², height·width]`, entries ordered like `unfold4d` (row-major offsets).
 pub fn inside_mask(height: usize, width: usize, window: usize, device: &Device) -> Tensor<5> {
@@ -44,64 +39,68 @@ pub fn inside_mask(height: usize, width: usize, window: usize, device: &Device) 
     Tensor::from_data(TensorData::new(mask, [1, 1, 1, area, pixels]), device)
 }
 
-/// Positive weights masked to the image: `weights` `[B, 4·|Ω|, H, W]` → `[B, 4, 1, |Ω|, H·W]`.
-fn masked_weights(weights: Tensor<4>, window: usize) -> Tensor<5> {
+/// Positive weights of `pairs` correlated levels masked to the image: `weights`
+/// `[B, pairs·|Ω|, H, W]` → `[B, pairs, 1, |Ω|, H·W]`.
+fn masked_weights(weights: Tensor<4>, window: usize, pairs: usize) -> Tensor<5> {
     let [batch, channels, height, width] = weights.dims();
     let area = window * window;
     assert_eq!(
         channels,
-        PAIRS * area,
+        pairs * area,
         "weights need (m-1)*window^2 = {} channels, got {channels}",
-        PAIRS * area
+        pairs * area
     );
     let mask = inside_mask(height, width, window, &weights.device());
-    weights.reshape([batch, PAIRS, 1, area, height * width]) * mask
+    weights.reshape([batch, pairs, 1, area, height * width]) * mask
 }
 
-/// Combines the five levels with per-pixel window weights (paper Eq. 6).
+/// Combines m levels with per-pixel window weights (paper Eq. 6).
 ///
-/// `levels`: raw linear colours `[B, 15, H, W]` ordered ỹ, z̃1..z̃4 (RGB each);
-/// `weights`: positive weights `[B, 4·window², H, W]`, pair-major then window row-major;
+/// `levels`: raw linear colours `[B, 3·m, H, W]` ordered ỹ then the correlated levels (RGB
+/// each; m = 5 for ỹ, z̃1..z̃4, m = 2 for a dual network);
+/// `weights`: positive weights `[B, (m−1)·window², H, W]`, pair-major then window row-major;
 /// returns ŷ `[B, 3, H, W]`.
 pub fn combine(levels: Tensor<4>, weights: Tensor<4>, window: usize) -> Tensor<4> {
     let [batch, channels, height, width] = levels.dims();
-    assert_eq!(
-        channels,
-        3 * LEVELS,
-        "levels need 15 channels, got {channels}"
+    assert!(
+        channels >= 6 && channels % 3 == 0,
+        "levels need 3·m channels with m ≥ 2, got {channels}"
     );
+    let pairs = channels / 3 - 1;
     assert_eq!(window % 2, 1, "window must be odd");
     let r = window / 2;
     let area = window * window;
     let pixels = height * width;
 
     let y = levels.clone().narrow(1, 0, 3);
-    let z = levels.narrow(1, 3, 3 * PAIRS);
-    let differences = y.repeat_dim(1, PAIRS) - z.clone();
+    let z = levels.narrow(1, 3, 3 * pairs);
+    let differences = y.repeat_dim(1, pairs) - z.clone();
     let padded = differences.pad([(r, r), (r, r)], PadMode::Constant(0.0));
     let gathered = unfold4d(
         padded,
         [window, window],
         UnfoldOptions::new([1, 1], [0, 0], [1, 1]),
     )
-    .reshape([batch, PAIRS, 3, area, pixels]);
+    .reshape([batch, pairs, 3, area, pixels]);
 
-    let w = masked_weights(weights, window);
+    let w = masked_weights(weights, window, pairs);
     let weight_sums = w.clone().sum_dim(3); // [B, 4, 1, 1, HW]
     let window_term = (gathered * w).sum_dim(3); // [B, 4, 3, 1, HW]
-    let centre_term = weight_sums.clone() * z.reshape([batch, PAIRS, 3, 1, pixels]);
+    let centre_term = weight_sums.clone() * z.reshape([batch, pairs, 3, 1, pixels]);
     let numerator = (window_term + centre_term).sum_dim(1); // [B, 1, 3, 1, HW]
     let normaliser = weight_sums.sum_dim(1); // [B, 1, 1, 1, HW]
     (numerator / normaliser).reshape([batch, 3, height, width])
 }
 
-/// Share of the total weight each pair j carries at each pixel, `[B, 4, H, W]` (sums to 1):
-/// channel 0 is the sharpest correlated level z̃1, channel 3 the smoothest z̃4 (paper Fig. 6).
+/// Share of the total weight each pair j carries at each pixel, `[B, m−1, H, W]` (sums to 1):
+/// for the full network channel 0 is the sharpest correlated level z̃1, channel 3 the smoothest
+/// z̃4 (paper Fig. 6).
 pub fn level_weight_shares(weights: Tensor<4>, window: usize) -> Tensor<4> {
-    let [batch, _, height, width] = weights.dims();
-    let sums = masked_weights(weights, window).sum_dim(3); // [B, 4, 1, 1, HW]
+    let [batch, channels, height, width] = weights.dims();
+    let pairs = channels / (window * window);
+    let sums = masked_weights(weights, window, pairs).sum_dim(3); // [B, m−1, 1, 1, HW]
     let total = sums.clone().sum_dim(1);
-    (sums / total).reshape([batch, PAIRS, height, width])
+    (sums / total).reshape([batch, pairs, height, width])
 }
 
 #[cfg(test)]

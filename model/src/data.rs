@@ -5,6 +5,10 @@
 //! `cache_images` packed images are held at once. An epoch visits the images in a shuffled
 //! order, in groups of `cache_images`; the patches of one group are shuffled together, so each
 //! image is loaded once per epoch while batches still mix several images.
+//!
+//! A dataset may feed a network that combines only some levels (paper Table 1's Dual variant):
+//! batches then carry only those levels' features and colours as network and combination
+//! input, and always all five colour planes so validation reports every input level.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -14,8 +18,10 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::Deserialize;
 
-use crate::features::{pack, planar_reference, PackedImage, COLOUR_CHANNELS};
-use crate::model::INPUT_CHANNELS;
+use crate::features::{
+    colour_channels, feature_channels, pack, planar_reference, PackedImage, COLOUR_CHANNELS,
+};
+use crate::model::all_levels;
 
 /// One entry of a dataset's `manifest.json` (paths relative to the manifest's directory).
 #[derive(Clone, Debug, Deserialize)]
@@ -132,10 +138,16 @@ pub struct HostBatch {
     pub len: usize,
     /// Patch side.
     pub size: usize,
-    /// `[B, 27, P, P]`.
+    /// Network input channels per patch (27 with every level).
+    pub feature_channels: usize,
+    /// `[B, feature_channels, P, P]`: the features of the chosen levels and the G-buffer.
     pub features: Vec<f32>,
-    /// `[B, 15, P, P]`.
+    /// `[B, 15, P, P]`: raw colours of all five levels (for per-level metrics).
     pub levels: Vec<f32>,
+    /// Colour planes per patch the combination reads (3·m).
+    pub combined_channels: usize,
+    /// `[B, 3·m, P, P]`: raw colours of the chosen levels, ỹ first (the combination's input).
+    pub combined: Vec<f32>,
     /// `[B, 3, P, P]`.
     pub reference: Vec<f32>,
 }
@@ -143,9 +155,9 @@ pub struct HostBatch {
 /// A batch as tensors on a device.
 #[derive(Clone, Debug)]
 pub struct Batch {
-    /// Network input `[B, 27, P, P]`.
+    /// Network input `[B, feature_channels, P, P]`.
     pub features: Tensor<4>,
-    /// Raw colours `[B, 15, P, P]`.
+    /// Raw colours of the combined levels `[B, 3·m, P, P]`.
     pub levels: Tensor<4>,
     /// Reference `[B, 3, P, P]`.
     pub reference: Tensor<4>,
@@ -159,8 +171,8 @@ impl HostBatch {
             Tensor::<4>::from_data(TensorData::new(data.clone(), [b, channels, p, p]), device)
         };
         Batch {
-            features: t(&self.features, INPUT_CHANNELS),
-            levels: t(&self.levels, COLOUR_CHANNELS),
+            features: t(&self.features, self.feature_channels),
+            levels: t(&self.combined, self.combined_channels),
             reference: t(&self.reference, 3),
         }
     }
@@ -189,6 +201,9 @@ pub struct PatchDataset {
     pub patch: usize,
     /// Patch stride.
     pub stride: usize,
+    /// Levels batches feed to the network and the combination (indices into ỹ, z̃1..z̃4; all
+    /// five unless set with [`PatchDataset::with_levels`]).
+    pub levels: Vec<usize>,
     cache_images: usize,
     cache: Vec<(usize, Arc<Sample>)>,
 }
@@ -261,9 +276,16 @@ impl PatchDataset {
             bad,
             patch,
             stride,
+            levels: all_levels(),
             cache_images: cache_images.max(1),
             cache: Vec::new(),
         }
+    }
+
+    /// The same dataset feeding only `levels` (a model's [`crate::ModelConfig::levels`]).
+    pub fn with_levels(mut self, levels: Vec<usize>) -> Self {
+        self.levels = levels;
+        self
     }
 
     /// Patches of image `index` without flips, in raster order.
@@ -338,52 +360,53 @@ impl PatchDataset {
     /// Cuts the patches of `refs` into a host batch.
     pub fn batch(&mut self, refs: &[PatchRef]) -> Result<HostBatch, BadSample> {
         let p = self.patch;
+        let features = feature_channels(&self.levels);
+        let combined = colour_channels(&self.levels);
+        let all_colours: Vec<usize> = (0..COLOUR_CHANNELS).collect();
+        let n = refs.len() * p * p;
         let mut batch = HostBatch {
             len: refs.len(),
             size: p,
-            features: Vec::with_capacity(refs.len() * INPUT_CHANNELS * p * p),
-            levels: Vec::with_capacity(refs.len() * COLOUR_CHANNELS * p * p),
-            reference: Vec::with_capacity(refs.len() * 3 * p * p),
+            feature_channels: features.len(),
+            features: Vec::with_capacity(features.len() * n),
+            levels: Vec::with_capacity(COLOUR_CHANNELS * n),
+            combined_channels: combined.len(),
+            combined: Vec::with_capacity(combined.len() * n),
+            reference: Vec::with_capacity(3 * n),
         };
         for r in refs {
             let sample = self.sample(r.image)?;
-            let (w, h) = (sample.packed.width, sample.packed.height);
+            let packed = &sample.packed;
+            let (w, h) = (packed.width, packed.height);
+            crop(&packed.features, &features, w, h, r, p, &mut batch.features);
+            crop(&packed.levels, &all_colours, w, h, r, p, &mut batch.levels);
+            crop(&packed.levels, &combined, w, h, r, p, &mut batch.combined);
             crop(
-                &sample.packed.features,
-                INPUT_CHANNELS,
+                &sample.reference,
+                &[0, 1, 2],
                 w,
                 h,
                 r,
                 p,
-                &mut batch.features,
+                &mut batch.reference,
             );
-            crop(
-                &sample.packed.levels,
-                COLOUR_CHANNELS,
-                w,
-                h,
-                r,
-                p,
-                &mut batch.levels,
-            );
-            crop(&sample.reference, 3, w, h, r, p, &mut batch.reference);
         }
         Ok(batch)
     }
 }
 
-/// Appends the `p`×`p` window of `r` from planar `channels`×`h`×`w` data, flipped as `r` says
-/// (the same flip for every channel).
+/// Appends the `p`×`p` window of `r` of the planes `channels` (in that order) of planar
+/// `h`×`w` data, flipped as `r` says (the same flip for every channel).
 fn crop(
     src: &[f32],
-    channels: usize,
+    channels: &[usize],
     w: usize,
     h: usize,
     r: &PatchRef,
     p: usize,
     out: &mut Vec<f32>,
 ) {
-    for c in 0..channels {
+    for &c in channels {
         let plane = &src[c * w * h..(c + 1) * w * h];
         for row in 0..p {
             let sy = r.y + if r.flip_y { p - 1 - row } else { row };
@@ -408,6 +431,7 @@ fn shuffle<T>(items: &mut [T], rng: &mut Pcg64Mcg) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::INPUT_CHANNELS;
 
     fn ramp_sample(w: usize, h: usize) -> Sample {
         let pixels = w * h;
@@ -454,6 +478,36 @@ mod tests {
             let off = (c * 1000) as f32;
             assert_eq!(b.features[c * 4], off + 17.0);
         }
+    }
+
+    #[test]
+    fn dual_batches_carry_their_levels_and_all_colours() {
+        let ds = PatchDataset::from_samples(vec![ramp_sample(3, 2)], 2, 1);
+        let mut ds = ds.with_levels(vec![0, 3]);
+        let r = PatchRef {
+            image: 0,
+            x: 1,
+            y: 0,
+            flip_x: false,
+            flip_y: false,
+        };
+        let b = ds.batch(&[r]).unwrap();
+        // Window pixels (0,1),(0,2),(1,1),(1,2) = indices 1, 2, 4, 5 of each plane.
+        let planes = |cs: &[usize]| -> Vec<f32> {
+            cs.iter()
+                .flat_map(|&c| [1, 2, 4, 5].map(|i| (c * 1000 + i) as f32))
+                .collect()
+        };
+        // Dual(ỹ, z̃3): colours 0..3 and 9..12, variances 15 and 18, G-buffer 20..27.
+        let features = [0, 1, 2, 9, 10, 11, 15, 18, 20, 21, 22, 23, 24, 25, 26];
+        assert_eq!(b.feature_channels, 15);
+        assert_eq!(b.features, planes(&features));
+        assert_eq!(b.combined_channels, 6);
+        assert_eq!(b.combined, planes(&[0, 1, 2, 9, 10, 11]));
+        assert_eq!(b.levels, planes(&(0..15).collect::<Vec<_>>()));
+        let dev = b.to_device(&Device::flex());
+        assert_eq!(dev.features.dims(), [1, 15, 2, 2]);
+        assert_eq!(dev.levels.dims(), [1, 6, 2, 2]);
     }
 
     #[test]

@@ -5,10 +5,14 @@
 //! The log transform tames the HDR range for the network only; the combination itself uses the
 //! raw linear colours. Depth is normalised per whole image, before any tiling, so tiles of an
 //! image see the same values as the whole image.
+//!
+//! A network combining only some levels (the Dual(ỹ, z̃j) variant of paper Table 1) reads the
+//! colour and variance planes of its levels plus the G-buffer, in the same order:
+//! [`feature_channels`] and [`PackedImage::select_levels`] pick them out of the full packing.
 
 use bundle::{Bundle, Image};
 
-use crate::model::{INPUT_CHANNELS, LEVELS};
+use crate::model::{GBUFFER_CHANNELS, INPUT_CHANNELS, LEVELS};
 
 /// Number of raw colour planes: five RGB estimates.
 pub const COLOUR_CHANNELS: usize = 3 * LEVELS;
@@ -36,6 +40,40 @@ impl PackedImage {
     pub fn level(&self, level: usize) -> &[f32] {
         &self.levels[3 * level * self.pixels()..3 * (level + 1) * self.pixels()]
     }
+
+    /// The network input of a model combining `levels` (indices into ỹ, z̃1..z̃4, as checked by
+    /// [`crate::model::validate_levels`]): the feature planes of [`feature_channels`] and the raw
+    /// colours of [`colour_channels`], in that order.
+    pub fn select_levels(&self, levels: &[usize]) -> PackedImage {
+        let pixels = self.pixels();
+        let gather = |data: &[f32], planes: Vec<usize>| -> Vec<f32> {
+            planes
+                .into_iter()
+                .flat_map(|c| data[c * pixels..(c + 1) * pixels].iter().copied())
+                .collect()
+        };
+        PackedImage {
+            width: self.width,
+            height: self.height,
+            features: gather(&self.features, feature_channels(levels)),
+            levels: gather(&self.levels, colour_channels(levels)),
+        }
+    }
+}
+
+/// Planes of the full feature packing that a network combining `levels` reads: the log colours
+/// of its levels (RGB each), their log variances, then the seven G-buffer planes.
+pub fn feature_channels(levels: &[usize]) -> Vec<usize> {
+    let colours = levels.iter().flat_map(|&l| 3 * l..3 * l + 3);
+    let variances = levels.iter().map(|&l| COLOUR_CHANNELS + l);
+    let gbuffer = COLOUR_CHANNELS + LEVELS..COLOUR_CHANNELS + LEVELS + GBUFFER_CHANNELS;
+    colours.chain(variances).chain(gbuffer).collect()
+}
+
+/// Planes of the raw colours ([`PackedImage::levels`]) of `levels`, RGB each: the combination's
+/// input, ỹ first.
+pub fn colour_channels(levels: &[usize]) -> Vec<usize> {
+    levels.iter().flat_map(|&l| 3 * l..3 * l + 3).collect()
 }
 
 /// Why a bundle cannot be packed; the caller adds the file name.
@@ -198,4 +236,49 @@ pub fn interleaved(planes: &[f32], w: usize, h: usize, channels: usize) -> Image
         }
     }
     img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{all_levels, input_channels};
+
+    /// A 2×1 packed image whose plane `c` holds `100·c + pixel`, so a value names its plane.
+    fn labelled() -> PackedImage {
+        let plane = |c: usize| [100.0 * c as f32, 100.0 * c as f32 + 1.0];
+        PackedImage {
+            width: 2,
+            height: 1,
+            features: (0..INPUT_CHANNELS).flat_map(plane).collect(),
+            levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
+        }
+    }
+
+    #[test]
+    fn all_levels_select_the_full_packing_unchanged() {
+        assert_eq!(feature_channels(&all_levels()), (0..27).collect::<Vec<_>>());
+        assert_eq!(colour_channels(&all_levels()), (0..15).collect::<Vec<_>>());
+        let p = labelled();
+        assert_eq!(p.select_levels(&all_levels()), p);
+    }
+
+    #[test]
+    fn dual_selection_picks_its_colours_variances_and_the_gbuffer() {
+        // Dual(ỹ, z̃2): colours of ỹ (planes 0..3) and z̃2 (6..9), variances of ỹ (15) and z̃2
+        // (17), then albedo, normal, depth (20..27).
+        let want = vec![0, 1, 2, 6, 7, 8, 15, 17, 20, 21, 22, 23, 24, 25, 26];
+        assert_eq!(feature_channels(&[0, 2]), want);
+        assert_eq!(want.len(), input_channels(2));
+        assert_eq!(colour_channels(&[0, 2]), vec![0, 1, 2, 6, 7, 8]);
+        let s = labelled().select_levels(&[0, 2]);
+        let expect = |planes: &[usize]| -> Vec<f32> {
+            planes
+                .iter()
+                .flat_map(|&c| [100.0 * c as f32, 100.0 * c as f32 + 1.0])
+                .collect()
+        };
+        assert_eq!(s.features, expect(&want));
+        assert_eq!(s.levels, expect(&[0, 1, 2, 6, 7, 8]));
+        assert_eq!((s.width, s.height), (2, 1));
+    }
 }

@@ -9,11 +9,27 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-/// Number of network input channels: 5×3 colours + 5 variances + 7 G-buffer (paper §4.3).
+/// Number of network input channels with every level: 5×3 colours + 5 variances + 7 G-buffer
+/// (paper §4.3).
 pub const INPUT_CHANNELS: usize = 27;
 
-/// Number of estimates combined: ỹ and z̃1..z̃4 (m = 5 in the paper).
+/// Number of estimates in a bundle: ỹ and z̃1..z̃4 (m = 5 in the paper).
 pub const LEVELS: usize = 5;
+
+/// G-buffer input channels: albedo (3), shading normal (3), depth (1).
+pub const GBUFFER_CHANNELS: usize = 7;
+
+/// Network input channels when `levels` estimates are combined: RGB + variance per level, plus
+/// the G-buffer.
+pub fn input_channels(levels: usize) -> usize {
+    4 * levels + GBUFFER_CHANNELS
+}
+
+/// Every level of a bundle, ỹ, z̃1..z̃4: the paper's multi-level network (and the default of
+/// `model.json` files written before level subsets existed).
+pub fn all_levels() -> Vec<usize> {
+    (0..LEVELS).collect()
+}
 
 /// Named network sizes; `paper` is exactly the published network.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -55,6 +71,10 @@ pub struct ModelConfig {
     pub window: usize,
     /// Positive-weight transform.
     pub weighting: Weighting,
+    /// Estimates combined, as indices into ỹ, z̃1..z̃4: ỹ (0) first, then increasing correlated
+    /// levels. All five by default; `[0, j]` is the paper's Dual(ỹ, z̃j) of Table 1.
+    #[serde(default = "all_levels")]
+    pub levels: Vec<usize>,
 }
 
 impl ModelConfig {
@@ -73,7 +93,21 @@ impl ModelConfig {
             kernel,
             window,
             weighting: Weighting::Relu,
+            levels: all_levels(),
         }
+    }
+
+    /// The same architecture combining only `levels` (indices into ỹ, z̃1..z̃4); the input
+    /// channels follow. Call [`ModelConfig::validate`] to check the choice.
+    pub fn with_levels(mut self, levels: Vec<usize>) -> Self {
+        self.in_channels = input_channels(levels.len());
+        self.levels = levels;
+        self
+    }
+
+    /// Number of correlated estimates combined with ỹ (m − 1; 4 for the full network).
+    pub fn pairs(&self) -> usize {
+        self.levels.len().saturating_sub(1)
     }
 
     /// Number of window entries |Ω|.
@@ -83,7 +117,7 @@ impl ModelConfig {
 
     /// Output channels of the last layer: (m − 1)·|Ω| weights per pixel.
     pub fn out_channels(&self) -> usize {
-        (LEVELS - 1) * self.window_area()
+        self.pairs() * self.window_area()
     }
 
     /// Pixels of context one output pixel depends on (convolutions or window, whichever is
@@ -101,9 +135,12 @@ impl ModelConfig {
         if self.window.is_multiple_of(2) || self.window == 0 {
             return Err(format!("window must be odd, got {}", self.window));
         }
-        if self.in_channels != INPUT_CHANNELS {
+        validate_levels(&self.levels)?;
+        let expected = input_channels(self.levels.len());
+        if self.in_channels != expected {
             return Err(format!(
-                "in_channels must be {INPUT_CHANNELS}, got {}",
+                "in_channels must be {expected} for {} levels, got {}",
+                self.levels.len(),
                 self.in_channels
             ));
         }
@@ -138,6 +175,27 @@ impl ModelConfig {
             weighting: self.weighting,
         }
     }
+}
+
+/// Checks a level choice: ỹ (0) first, at least one correlated level, indices increasing and
+/// below [`LEVELS`] (Eq. 6 pairs ỹ with each correlated estimate).
+pub fn validate_levels(levels: &[usize]) -> Result<(), String> {
+    if levels.first() != Some(&0) {
+        return Err(format!(
+            "levels must start with 0 (the independent estimate y), got {levels:?}"
+        ));
+    }
+    if levels.len() < 2 {
+        return Err(format!(
+            "levels need y and at least one correlated level z1..z4, got {levels:?}"
+        ));
+    }
+    if levels.windows(2).any(|w| w[0] >= w[1]) || levels.iter().any(|&l| l >= LEVELS) {
+        return Err(format!(
+            "levels must be increasing indices below {LEVELS} (0 = y, 1..4 = z1..z4), got {levels:?}"
+        ));
+    }
+    Ok(())
 }
 
 /// Uniform f32 in [0, 1) from the top 24 bits of a PCG draw.

@@ -94,14 +94,19 @@ pub fn adam() -> ModuleOptimizer {
     AdamConfig::new().with_epsilon(1e-8).init()
 }
 
-/// Forward pass of network + combination: `[B, 3, P, P]` reconstruction of a batch.
+/// Forward pass of network + combination: `[B, 3, P, P]` reconstruction of a batch, clamped
+/// at zero.
+///
+/// Eq. 6 is a control-variate form (ỹ_i + z̃_c − z̃_i) and goes negative next to bright spots
+/// that the smooth levels spread out; the loss (SPEC §4, Eq. 8) sees ŷ clamped ≥ 0, so the
+/// clamped image is what the network was trained to produce — and radiance is never negative.
 pub fn reconstruct(
     model: &Network,
     config: &ModelConfig,
     features: Tensor<4>,
     levels: Tensor<4>,
 ) -> Tensor<4> {
-    combine(levels, model.weights(features), config.window)
+    combine(levels, model.weights(features), config.window).clamp_min(0.0)
 }
 
 /// One optimisation step; returns the updated model and the batch loss.
@@ -121,7 +126,8 @@ pub fn train_step(
 }
 
 /// Validates `model` (a validation copy on a plain device) on non-overlapping patches of
-/// `dataset`, pooling squared relative errors over all pixels.
+/// `dataset`, pooling squared relative errors over all pixels. The dataset is set to feed the
+/// levels of `config`; the input-level errors cover all five levels whatever the model combines.
 pub fn validate(
     model: &Network,
     config: &ModelConfig,
@@ -132,6 +138,7 @@ pub fn validate(
     let mut output = 0.0f64;
     let mut levels = [0.0f64; LEVELS];
     let mut count = 0usize;
+    dataset.levels = config.levels.clone();
     let refs: Vec<_> = (0..dataset.images.len())
         .flat_map(|i| dataset.image_patches(i, dataset.patch))
         .collect();
@@ -259,7 +266,8 @@ impl Trainer {
         self.device.clone().inner()
     }
 
-    /// Trains one epoch and validates; `on_batch` is called after every batch.
+    /// Trains one epoch and validates; `on_batch` is called after every batch. Both datasets are
+    /// set to feed the levels the model combines.
     pub fn run_epoch(
         &mut self,
         train: &mut PatchDataset,
@@ -268,6 +276,7 @@ impl Trainer {
     ) -> Result<EpochReport, BadSample> {
         let start = Instant::now();
         let epoch = self.epochs_done;
+        train.levels = self.config.levels.clone();
         let plan = train.epoch_plan(self.settings.seed, epoch);
         let total = plan.len();
         let (mut loss_sum, mut batches, mut done) = (0.0, 0usize, 0usize);
@@ -379,5 +388,91 @@ impl Trainer {
         save_safetensors(&valid, &dir.join("model.safetensors"))?;
         let json = serde_json::to_string_pretty(&self.config).expect("config serialises");
         write_atomic(&dir.join("model.json"), &json)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::PackedImage;
+    use crate::model::Preset;
+    use crate::synthetic::synthetic_sample;
+    use burn::tensor::TensorData;
+
+    /// Reconstructs a whole packed image with a model of `config` (initial weights).
+    fn run(config: &ModelConfig, packed: &PackedImage) -> Vec<f32> {
+        let device = Device::flex();
+        let net = config.init(3, &device);
+        let s = packed.select_levels(&config.levels);
+        let (w, h) = (s.width, s.height);
+        let f = Tensor::<4>::from_data(
+            TensorData::new(s.features.clone(), [1, config.in_channels, h, w]),
+            &device,
+        );
+        let l = Tensor::<4>::from_data(
+            TensorData::new(s.levels.clone(), [1, s.levels.len() / (w * h), h, w]),
+            &device,
+        );
+        reconstruct(&net, config, f, l)
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap()
+    }
+
+    #[test]
+    fn dual_model_reproduces_identical_levels() {
+        // Consistency of Eq. 6 for m = 2: when ỹ and the chosen z̃ are the same image, every
+        // term ỹ_i + z̃_c − z̃_i equals ỹ_c, so the output is ỹ whatever the (random) weights.
+        let mut packed = synthetic_sample(9, 7, 0.2, 5).packed;
+        let pixels = packed.pixels();
+        let y = packed.level(0).to_vec();
+        packed.levels[3 * 2 * pixels..3 * 3 * pixels].copy_from_slice(&y);
+        let config = ModelConfig::preset(Preset::Tiny).with_levels(vec![0, 2]);
+        config.validate().unwrap();
+        assert_eq!(config.in_channels, 15);
+        assert_eq!(config.out_channels(), 25);
+        let out = run(&config, &packed);
+        for (i, (o, e)) in out.iter().zip(&y).enumerate() {
+            assert!((o - e).abs() <= 1e-4 * e.abs().max(1.0), "{i}: {o} vs {e}");
+        }
+        // With a different z̃2 the output moves away from ỹ: the test can fail.
+        let fresh = synthetic_sample(9, 7, 0.2, 5).packed;
+        let moved = run(&config, &fresh);
+        assert!(moved
+            .iter()
+            .zip(fresh.level(0))
+            .any(|(o, e)| (o - e).abs() > 1e-3));
+    }
+
+    #[test]
+    fn model_json_without_levels_loads_as_all_five() {
+        let old = r#"{"preset": "small", "in_channels": 27, "hidden_layers": 5, "filters": 32,
+            "kernel": 5, "window": 11, "weighting": "relu"}"#;
+        let config: ModelConfig = serde_json::from_str(old).unwrap();
+        assert_eq!(config, ModelConfig::preset(Preset::Small));
+        assert_eq!(config.levels, vec![0, 1, 2, 3, 4]);
+        config.validate().unwrap();
+        let dual = ModelConfig::preset(Preset::Small).with_levels(vec![0, 3]);
+        let text = serde_json::to_string(&dual).unwrap();
+        assert_eq!(serde_json::from_str::<ModelConfig>(&text).unwrap(), dual);
+    }
+
+    #[test]
+    fn bad_level_choices_are_rejected() {
+        for levels in [
+            vec![],
+            vec![0],
+            vec![1, 2],
+            vec![0, 2, 2],
+            vec![0, 3, 1],
+            vec![0, 5],
+        ] {
+            let c = ModelConfig::preset(Preset::Tiny).with_levels(levels.clone());
+            assert!(c.validate().is_err(), "{levels:?}");
+        }
+        let mut c = ModelConfig::preset(Preset::Tiny).with_levels(vec![0, 1, 4]);
+        c.validate().unwrap();
+        c.in_channels = 27;
+        assert!(c.validate().is_err());
     }
 }

@@ -42,6 +42,10 @@ pub struct TrainConfig {
     /// Weight transform: `relu` (paper) or `softmax`.
     #[serde(default)]
     pub weighting: Option<Weighting>,
+    /// Estimates the network combines, as indices into ỹ, z̃1..z̃4 (0 = ỹ first, increasing):
+    /// all five by default (the paper's network); `[0, j]` trains Dual(ỹ, z̃j) of paper Table 1.
+    #[serde(default)]
+    pub levels: Option<Vec<usize>>,
     /// Patch side in pixels.
     pub patch: usize,
     /// Patch stride in pixels.
@@ -89,7 +93,10 @@ impl TrainConfig {
         if let Some(w) = self.weighting {
             c.weighting = w;
         }
-        c
+        match &self.levels {
+            Some(levels) => c.with_levels(levels.clone()),
+            None => c,
+        }
     }
 
     /// The optimisation settings.
@@ -100,5 +107,44 @@ impl TrainConfig {
             lr: self.lr,
             seed: self.seed,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BASE: &str = "dataset = \"d\"\npreset = \"tiny\"\npatch = 8\nstride = 8\nbatch = 2\n\
+                        epochs = 1\nseed = 1\noutput = \"o\"\n";
+
+    #[test]
+    fn levels_key_chooses_the_combined_levels() {
+        let all: TrainConfig = toml::from_str(BASE).unwrap();
+        assert_eq!(all.model_config().levels, vec![0, 1, 2, 3, 4]);
+        assert_eq!(all.model_config().in_channels, 27);
+        let dual: TrainConfig = toml::from_str(&format!("{BASE}levels = [0, 2]\n")).unwrap();
+        let c = dual.model_config();
+        assert_eq!(c.levels, vec![0, 2]);
+        assert_eq!(c.in_channels, 15);
+        c.validate().unwrap();
+        let bad: TrainConfig = toml::from_str(&format!("{BASE}levels = [2]\n")).unwrap();
+        assert!(bad.model_config().validate().is_err());
+        assert!(toml::from_str::<TrainConfig>(&format!("{BASE}level = [0, 2]\n")).is_err());
+    }
+
+    #[test]
+    fn shipped_dual_config_matches_small_except_levels_and_output() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let small = TrainConfig::read(&root.join("configs/train/small.toml")).unwrap();
+        let dual = TrainConfig::read(&root.join("configs/train/small-dual.toml")).unwrap();
+        assert_eq!(dual.levels, Some(vec![0, 2]));
+        assert_eq!(small.levels, None);
+        assert_eq!(
+            (dual.preset, dual.patch, dual.stride, dual.cache_images),
+            (small.preset, small.patch, small.stride, small.cache_images)
+        );
+        assert_eq!(dual.settings(), small.settings());
+        assert_eq!(dual.dataset, small.dataset);
+        assert_ne!(dual.output, small.output);
     }
 }

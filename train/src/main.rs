@@ -78,6 +78,15 @@ fn csv_row(r: &EpochReport) -> String {
 /// Names of the input levels, in `Validation::levels` order.
 const LEVEL_NAMES: [&str; 5] = ["y", "z1", "z2", "z3", "z4"];
 
+/// The names of the levels a model combines, e.g. `y+z2`.
+fn level_list(levels: &[usize]) -> String {
+    levels
+        .iter()
+        .map(|&l| LEVEL_NAMES[l])
+        .collect::<Vec<_>>()
+        .join("+")
+}
+
 /// `--evaluate SPLIT`: relMSE of the trained output and of every input level over whole images
 /// of `split`, pooled over all pixels; printed and written to `<output>/eval_<split>.json`.
 fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Result<()> {
@@ -86,6 +95,9 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
         .with_context(|| format!("{} (train first)", model_json.display()))?;
     let model_config: model::ModelConfig =
         serde_json::from_str(&text).with_context(|| model_json.display().to_string())?;
+    model_config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", model_json.display()))?;
     let net = load_burnpack(&model_config, &cfg.output.join("model.bpk"), device)
         .map_err(anyhow::Error::msg)?;
     // Screen with a 1-pixel patch, then evaluate each image as one patch of the smallest image
@@ -112,9 +124,10 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
-        "split `{split}`: {} images of {side}x{side} ({} bad)",
+        "split `{split}`: {} images of {side}x{side} ({} bad); model levels {}",
         ds.images.len(),
-        ds.bad.len()
+        ds.bad.len(),
+        level_list(&model_config.levels)
     )?;
     writeln!(out, "relMSE output       {:.5e}", v.output)?;
     for (name, value) in LEVEL_NAMES.iter().zip(v.levels) {
@@ -131,6 +144,11 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
         "images": ds.images.len(),
         "bad": ds.bad.len(),
         "image_side": side,
+        "model_levels": model_config
+            .levels
+            .iter()
+            .map(|&l| LEVEL_NAMES[l])
+            .collect::<Vec<_>>(),
         "relmse_output": v.output,
         "relmse_levels": LEVEL_NAMES
             .iter()
@@ -221,9 +239,18 @@ fn run(cli: &Cli) -> Result<()> {
     } else {
         Trainer::new(cfg.model_config(), settings, &device)
     };
+    if trainer.config.levels != cfg.model_config().levels {
+        bail!(
+            "{}: levels {:?} differ from the checkpoint's {:?}",
+            cli.config.display(),
+            cfg.model_config().levels,
+            trainer.config.levels
+        );
+    }
     eprintln!(
-        "model: {:?}, {} parameters",
+        "model: {:?}, levels {}, {} parameters",
         trainer.config.preset,
+        level_list(&trainer.config.levels),
         trainer.model.num_params()
     );
 

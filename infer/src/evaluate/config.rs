@@ -42,6 +42,19 @@ pub struct EvalConfig {
     /// Scenes of a dataset split.
     #[serde(default)]
     pub dataset: Option<DatasetSource>,
+    /// The dual-vs-multi ablation (paper Table 1), run when present.
+    #[serde(default)]
+    pub ablation: Option<AblationConfig>,
+}
+
+/// `[ablation]`: networks combining fewer levels (e.g. Dual(ỹ, z̃2), trained with
+/// `levels = [0, 2]`), each reconstructing the very bundles `model` reconstructs, at every
+/// checkpoint; their relMSE is reported next to the main model's (paper Table 1).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct AblationConfig {
+    /// Model directories of the variants (`model.json` names the levels each combines).
+    pub dual_models: Vec<PathBuf>,
 }
 
 /// One explicit scene.
@@ -137,6 +150,11 @@ impl EvalConfig {
         }
         if self.max_depth == Some(0) {
             bail!("max_depth must be positive");
+        }
+        if let Some(a) = &self.ablation {
+            if a.dual_models.is_empty() {
+                bail!("[ablation] dual_models must name at least one model directory");
+            }
         }
         Ok(())
     }
@@ -242,5 +260,20 @@ mod tests {
         let zero = base.replace("[4, 2, 4]", "[0, 2]");
         let c: EvalConfig = toml::from_str(&zero).unwrap();
         assert!(c.validate().is_err());
+        assert!(c.ablation.is_none());
+        let with = format!("{base}[ablation]\ndual_models = [\"runs/d\"]\n");
+        let c: EvalConfig = toml::from_str(&with).unwrap();
+        c.validate().unwrap();
+        assert_eq!(
+            c.ablation.unwrap().dual_models,
+            vec![PathBuf::from("runs/d")]
+        );
+        let empty = format!("{base}[ablation]\ndual_models = []\n");
+        assert!(toml::from_str::<EvalConfig>(&empty)
+            .unwrap()
+            .validate()
+            .is_err());
+        let typo = format!("{base}[ablation]\ndual_model = \"runs/d\"\n");
+        assert!(toml::from_str::<EvalConfig>(&typo).is_err());
     }
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
+use super::ablation::Ablation;
 use super::images::base64;
 use super::{read_output_file, EvalResults};
 use crate::report::LEVEL_NAMES;
@@ -158,10 +159,10 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
     );
     let _ = writeln!(
         h,
-        "<div class=\"note\"><p><b>Method.</b> {}</p><p><b>Not included.</b> {}</p></div>",
-        escape(&results.method),
-        escape(&results.ablation_dual_vs_multi)
+        "<div class=\"note\"><p><b>Method.</b> {}</p></div>",
+        escape(&results.method)
     );
+    ablation_section(&mut h, &results.ablation_dual_vs_multi);
 
     for r in &results.scenes {
         let name = escape(&r.name);
@@ -263,6 +264,56 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
     Ok(h)
 }
 
+/// The dual-vs-multi table (paper Table 1), scenes as rows, models as columns.
+fn ablation_section(h: &mut String, a: &Ablation) {
+    let _ = writeln!(
+        h,
+        "<h2 id=\"ablation\">Dual vs multi ablation (paper Table 1) at {} passes</h2>",
+        a.passes
+    );
+    let Some(multi) = &a.multi else {
+        let _ = writeln!(h, "<p class=\"note\">{}</p>", escape(&a.note));
+        return;
+    };
+    h.push_str("<table><tr><th class=\"l\">scene</th>");
+    for m in a.variants.iter().chain(std::iter::once(multi)) {
+        let _ = write!(
+            h,
+            "<th>{}<br><code>{}</code></th>",
+            escape(&m.label),
+            escape(&m.dir.display().to_string())
+        );
+    }
+    h.push_str("</tr>\n");
+    for r in &a.rows {
+        let _ = write!(h, "<tr><td class=\"l\">{}</td>", escape(&r.scene));
+        let best = r.variants.iter().copied().fold(r.multi, f64::min);
+        for v in r.variants.iter().chain(std::iter::once(&r.multi)) {
+            let class = if *v == best { " class=\"win\"" } else { "" };
+            let _ = write!(h, "<td{class}>{}</td>", sci(*v));
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("<tr><th class=\"l\">geometric mean / multi</th>");
+    for g in &a.geomean_ratio_to_multi {
+        let _ = write!(
+            h,
+            "<th>{}</th>",
+            g.map_or_else(|| "–".into(), |v| format!("{v:.3}"))
+        );
+    }
+    h.push_str("<th>1</th></tr>\n<tr><th class=\"l\">scenes where multi is better</th>");
+    for n in &a.multi_better {
+        let _ = write!(h, "<th>{n} of {}</th>", a.rows.len());
+    }
+    h.push_str("<th></th></tr>\n</table>\n");
+    let _ = writeln!(
+        h,
+        "<p>relMSE; the lowest per scene in bold green. {}</p>",
+        escape(&a.note)
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -276,5 +327,48 @@ mod tests {
         assert_eq!(percent(Some(0.123)), "+12.3 %");
         assert_eq!(percent(None), "–");
         assert_eq!(sci(f64::NAN), "–");
+    }
+
+    #[test]
+    fn ablation_table_lists_every_model_and_scene() {
+        use super::super::ablation::{not_run, AblationModel, AblationRow};
+        use model::{ModelConfig, Preset};
+        let mut h = String::new();
+        ablation_section(&mut h, &not_run(16));
+        assert!(h.contains("Not run"));
+        let m = |levels: Vec<usize>, dir: &str| {
+            AblationModel::new(
+                dir.into(),
+                &ModelConfig::preset(Preset::Small).with_levels(levels),
+            )
+        };
+        let a = Ablation {
+            note: "n".into(),
+            passes: 16,
+            multi: Some(m(vec![0, 1, 2, 3, 4], "runs/multi")),
+            variants: vec![m(vec![0, 2], "runs/dual")],
+            rows: vec![AblationRow {
+                scene: "s<1>".into(),
+                multi: 0.25,
+                variants: vec![0.5],
+                best: "x".into(),
+            }],
+            geomean_ratio_to_multi: vec![Some(2.0)],
+            multi_better: vec![1],
+        };
+        let mut h = String::new();
+        ablation_section(&mut h, &a);
+        for want in [
+            "Dual (y, z2)",
+            "Multi (y, z1, ..., z4)",
+            "runs/dual",
+            "s&lt;1&gt;",
+            "<td>5.000e-1</td>",
+            "<td class=\"win\">2.500e-1</td>",
+            "<th>2.000</th>",
+            "1 of 1",
+        ] {
+            assert!(h.contains(want), "missing {want} in {h}");
+        }
     }
 }

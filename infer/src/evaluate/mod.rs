@@ -2,6 +2,7 @@
 //! scenes, at equal wall time (inference counted), at equal passes, and per pass (overhead);
 //! writes results.json, convergence plots, comparison images and one self-contained HTML page.
 
+pub mod ablation;
 pub mod compare;
 pub mod config;
 pub mod html;
@@ -17,18 +18,13 @@ use burn::tensor::Device;
 use model::ModelConfig;
 use serde::Serialize;
 
+use self::ablation::{Ablation, AblationModel};
 use self::compare::{geometric_mean, median};
 use self::config::{EvalConfig, EvalScene};
 use self::images::{error_panel, error_scale, relative_error_map, row_png, srgb_panel};
 use self::runs::RunSettings;
 use self::scene::{evaluate_scene, SceneEval};
 use crate::TrainedModel;
-
-/// Why the dual-vs-multi ablation (paper Table 1) is absent from the results.
-pub const ABLATION_NOTE: &str = "The dual-vs-multi ablation (paper Table 1: a network combining \
-ỹ with one z̃ level against one combining all four, trained with the same preset) is not run: \
-it needs a second network variant (two-level input and window weights) that the model crate \
-does not provide yet.";
 
 /// How the comparison is made, stored in results.json and shown on the page.
 pub const METHOD_NOTE: &str = "Equal time: ours is charged render seconds (multi-level SPPM up \
@@ -99,8 +95,8 @@ pub struct EvalResults {
     pub scenes: Vec<SceneResult>,
     /// Aggregates.
     pub summary: Summary,
-    /// The ablation that is not run, and why.
-    pub ablation_dual_vs_multi: String,
+    /// The dual-vs-multi ablation (paper Table 1), or why it was not run.
+    pub ablation_dual_vs_multi: Ablation,
 }
 
 /// Runs the evaluation described by `config`, writing everything into `config.output`.
@@ -111,6 +107,15 @@ pub fn run(config: &EvalConfig) -> Result<EvalResults> {
     let device = backend.device().map_err(anyhow::Error::msg)?;
     let model = TrainedModel::open(&config.model, &device)
         .with_context(|| format!("loading model {}", config.model.display()))?;
+    let variants = config
+        .ablation
+        .iter()
+        .flat_map(|a| &a.dual_models)
+        .map(|dir| {
+            TrainedModel::open(dir, &device)
+                .with_context(|| format!("loading ablation model {}", dir.display()))
+        })
+        .collect::<Result<Vec<_>>>()?;
     std::fs::create_dir_all(&config.output)
         .with_context(|| format!("creating {}", config.output.display()))?;
     let passes = config.pass_counts();
@@ -124,7 +129,7 @@ pub fn run(config: &EvalConfig) -> Result<EvalResults> {
             max_depth: config.max_depth,
             scene_name: s.name.clone(),
         };
-        let r = evaluate_one(config, s, &settings, &passes, &model, &device);
+        let r = evaluate_one(config, s, &settings, &passes, &model, &variants, &device);
         match &r.error {
             Some(e) => eprintln!("  FAILED: {e}"),
             None => {
@@ -137,19 +142,40 @@ pub fn run(config: &EvalConfig) -> Result<EvalResults> {
                         c.standard_equal_time.relmse,
                         c.ratio_equal_time
                     );
+                    for (v, e) in variants.iter().zip(&c.variant_relmse) {
+                        eprintln!(
+                            "  ablation {}: {e:.3e} (ours / it = {:.3})",
+                            ablation::label(&v.config.levels),
+                            c.ours_relmse / e
+                        );
+                    }
                 }
             }
         }
         results.push(r);
     }
-    let summary = summarise(&results, *passes.last().expect("validated non-empty"));
+    let last_passes = *passes.last().expect("validated non-empty");
+    let summary = summarise(&results, last_passes);
+    let ablation = if variants.is_empty() {
+        ablation::not_run(last_passes)
+    } else {
+        ablation::build(
+            &results,
+            last_passes,
+            AblationModel::new(config.model.clone(), &model.config),
+            variants
+                .iter()
+                .map(|v| AblationModel::new(v.dir.clone(), &v.config))
+                .collect(),
+        )
+    };
     let out = EvalResults {
         config: config.clone(),
         model: model.config.clone(),
         method: METHOD_NOTE.into(),
         scenes: results,
         summary,
-        ablation_dual_vs_multi: ABLATION_NOTE.into(),
+        ablation_dual_vs_multi: ablation,
     };
     let json = serde_json::to_string_pretty(&out)?;
     images::write_atomic(&config.output.join("results.json"), json.as_bytes())?;
@@ -177,6 +203,7 @@ fn evaluate_one(
     settings: &RunSettings,
     passes: &[u32],
     model: &TrainedModel,
+    variants: &[TrainedModel],
     device: &Device,
 ) -> SceneResult {
     let mut r = SceneResult {
@@ -192,7 +219,8 @@ fn evaluate_one(
         error_scale: None,
     };
     let outcome = (|| -> Result<()> {
-        let (eval, imgs) = evaluate_scene(s, settings, passes, model, config.tile, device)?;
+        let (eval, imgs) =
+            evaluate_scene(s, settings, passes, model, variants, config.tile, device)?;
         let stem = file_stem(&s.name);
         let plot = format!("{stem}_convergence.png");
         plot::write_convergence_plot(

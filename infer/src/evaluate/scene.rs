@@ -38,6 +38,10 @@ pub struct Checkpoint {
     pub level_relmse: Vec<f64>,
     /// Name of the best input level.
     pub best_level: String,
+    /// relMSE of each ablation variant (`[ablation] dual_models`, in that order) on the same
+    /// bundle; their inference time is not charged to ours.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variant_relmse: Vec<f64>,
     /// Standard SPPM's relMSE at `total_seconds` (log-log interpolation of its curve).
     pub standard_equal_time: Interpolated,
     /// ours / standard at equal time (< 1: ours is better).
@@ -77,12 +81,14 @@ pub struct SceneImages {
     pub levels: Vec<Vec<f32>>,
 }
 
-/// Evaluates one scene.
+/// Evaluates one scene; `variants` (the ablation's models) reconstruct the same bundles as
+/// `model`.
 pub fn evaluate_scene(
     scene: &EvalScene,
     settings: &RunSettings,
     passes: &[u32],
     model: &TrainedModel,
+    variants: &[TrainedModel],
     tile: usize,
     device: &Device,
 ) -> Result<(SceneEval, SceneImages)> {
@@ -106,6 +112,13 @@ pub fn evaluate_scene(
         let rec = reconstruct_tiled(model, &packed, tile, device, |_, _| {});
         let inference_seconds = t.elapsed().as_secs_f64() + tb.assembly_seconds;
         let report = ErrorReport::new(&packed, &rec.image, &reference);
+        let variant_relmse = variants
+            .iter()
+            .map(|v| {
+                let image = reconstruct_tiled(v, &packed, tile, device, |_, _| {}).image;
+                relmse_planar(&image, &reference)
+            })
+            .collect();
         checkpoints.push(Checkpoint {
             passes: tb.bundle.meta.passes,
             render_seconds: tb.render_seconds,
@@ -114,6 +127,7 @@ pub fn evaluate_scene(
             ours_relmse: report.output,
             level_relmse: report.levels.clone(),
             best_level: report.best_level.clone(),
+            variant_relmse,
             standard_equal_time: Interpolated {
                 relmse: f64::NAN,
                 extrapolated: true,
