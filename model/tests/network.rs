@@ -87,6 +87,46 @@ fn paper_preset_has_about_2_4_million_parameters() {
     assert!(b.iter().all(|&v| v == 0.0));
 }
 
+/// Eq. 6 goes negative next to a spike that only the correlated levels hold (ỹ ≡ 0, z̃ = a
+/// spike): ŷ_c = Σ w_i (0 + z̃_c − z̃_i) / Σ w_i < 0 around it for any positive weights. The
+/// reconstruction is that combination clamped at zero — what the loss trains on (SPEC §4).
+#[test]
+fn reconstruction_is_the_combination_clamped_at_zero() {
+    let device = Device::flex();
+    let config = ModelConfig::preset(Preset::Tiny);
+    let net = config.init(7, &device);
+    let (w, h) = (9, 8);
+    let s = synthetic_sample(w, h, 0.3, 5);
+    let mut levels = vec![0.0f32; 15 * w * h];
+    for level in 1..5 {
+        for c in 0..3 {
+            levels[((level * 3 + c) * h + 4) * w + 4] = 1000.0;
+        }
+    }
+    let f = || {
+        Tensor::<4>::from_data(
+            TensorData::new(s.packed.features.clone(), [1, 27, h, w]),
+            &device,
+        )
+    };
+    let l = || Tensor::<4>::from_data(TensorData::new(levels.clone(), [1, 15, h, w]), &device);
+    let raw = model::combine(l(), net.weights(f()), config.window)
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    let out = reconstruct(&net, &config, f(), l())
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    assert!(
+        raw.iter().filter(|&&v| v < -1.0).count() > 10,
+        "the spike must drive Eq. 6 negative around it"
+    );
+    for (r, o) in raw.iter().zip(&out) {
+        assert_eq!(*o, r.max(0.0));
+    }
+}
+
 #[test]
 fn save_then_load_gives_identical_outputs() {
     let device = Device::flex();
