@@ -133,18 +133,27 @@ mod tests {
     }
 
     #[test]
-    fn shipped_dual_config_matches_small_except_levels_and_output() {
+    fn shipped_dual_configs_match_small_except_levels_and_output() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let small = TrainConfig::read(&root.join("configs/train/small.toml")).unwrap();
-        let dual = TrainConfig::read(&root.join("configs/train/small-dual.toml")).unwrap();
-        assert_eq!(dual.levels, Some(vec![0, 2]));
         assert_eq!(small.levels, None);
-        assert_eq!(
-            (dual.preset, dual.patch, dual.stride, dual.cache_images),
-            (small.preset, small.patch, small.stride, small.cache_images)
-        );
-        assert_eq!(dual.settings(), small.settings());
-        assert_eq!(dual.dataset, small.dataset);
-        assert_ne!(dual.output, small.output);
+        for (file, j) in [
+            ("small-dual-z1", 1),
+            ("small-dual", 2),
+            ("small-dual-z3", 3),
+            ("small-dual-z4", 4),
+        ] {
+            let path = root.join(format!("configs/train/{file}.toml"));
+            let dual = TrainConfig::read(&path).unwrap();
+            assert_eq!(dual.levels, Some(vec![0, j]), "{file}");
+            assert_eq!(
+                (dual.preset, dual.patch, dual.stride, dual.cache_images),
+                (small.preset, small.patch, small.stride, small.cache_images)
+            );
+            assert_eq!(dual.settings(), small.settings());
+            assert_eq!((dual.backend, &dual.dataset), (small.backend, &small.dataset));
+            assert_eq!(dual.weighting, small.weighting);
+            assert_eq!(dual.output, Path::new("runs").join(file));
+        }
     }
 }

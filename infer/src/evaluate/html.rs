@@ -268,7 +268,7 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
 fn ablation_section(h: &mut String, a: &Ablation) {
     let _ = writeln!(
         h,
-        "<h2 id=\"ablation\">Dual vs multi ablation (paper Table 1) at {} passes</h2>",
+        "<h2 id=\"dual-vs-multi\">Dual vs multi ablation (paper Table 1) at {} passes</h2>",
         a.passes
     );
     let Some(multi) = &a.multi else {
