@@ -151,7 +151,10 @@ mod tests {
                 (small.preset, small.patch, small.stride, small.cache_images)
             );
             assert_eq!(dual.settings(), small.settings());
-            assert_eq!((dual.backend, &dual.dataset), (small.backend, &small.dataset));
+            assert_eq!(
+                (dual.backend, &dual.dataset),
+                (small.backend, &small.dataset)
+            );
             assert_eq!(dual.weighting, small.weighting);
             assert_eq!(dual.output, Path::new("runs").join(file));
         }
