@@ -5,7 +5,7 @@
 
 use crate::math::Ray;
 use crate::shapes::{Disk, Shape, Sphere};
-use glam::{UVec2, Vec3A};
+use glam::{UVec2, Vec2, Vec3A};
 use obvhs::aabb::Aabb;
 use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::node::CwBvhNode;
@@ -23,6 +23,8 @@ pub struct PrimitiveHit {
     pub prim: u32,
     /// Distance along the ray.
     pub t: f32,
+    /// Barycentric coordinates (b1, b2) of a triangle hit (zero for analytic shapes).
+    pub bary: Vec2,
 }
 
 /// A ray-tracing acceleration structure over the scene's primitives.
@@ -123,10 +125,11 @@ impl CwBvhAccel {
         self.geoms.len()
     }
 
+    /// Distance to leaf primitive `i` (+∞ on a miss) and, for triangles, the barycentrics.
     #[inline(always)]
-    fn intersect_prim(&self, ray: &BvhRay, i: usize) -> f32 {
+    fn intersect_prim(&self, ray: &BvhRay, i: usize) -> (f32, Vec2) {
         match &self.geoms[i] {
-            PrimGeom::Triangle { p0, e1, e2 } => crate::shapes::mesh::intersect_triangle(
+            PrimGeom::Triangle { p0, e1, e2 } => crate::shapes::mesh::intersect_triangle_bary(
                 ray.origin,
                 ray.direction,
                 ray.tmin,
@@ -135,10 +138,14 @@ impl CwBvhAccel {
                 *e1,
                 *e2,
             ),
-            PrimGeom::Sphere(s) => s.intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
-            PrimGeom::Disk(d) => {
-                self.disks[*d as usize].intersect(ray.origin, ray.direction, ray.tmin, ray.tmax)
-            }
+            PrimGeom::Sphere(s) => (
+                s.intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
+                Vec2::ZERO,
+            ),
+            PrimGeom::Disk(d) => (
+                self.disks[*d as usize].intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
+                Vec2::ZERO,
+            ),
         }
     }
 }
@@ -189,15 +196,17 @@ impl Accel for CwBvhAccel {
         let mut state = self.bvh.new_traversal(r.direction);
         let mut node;
         let mut closest = u32::MAX;
+        let mut bary = Vec2::ZERO;
         obvhs::traverse!(
             self.bvh,
             node,
             state,
             Self::intersect_node(node, &r, state.oct_inv4),
             {
-                let t = self.intersect_prim(&r, state.primitive_id as usize);
+                let (t, b) = self.intersect_prim(&r, state.primitive_id as usize);
                 if t < r.tmax {
                     closest = state.primitive_id;
+                    bary = b;
                     r.tmax = t;
                 }
             }
@@ -210,6 +219,7 @@ impl Accel for CwBvhAccel {
             shape,
             prim,
             t: r.tmax,
+            bary,
         })
     }
 
@@ -228,7 +238,7 @@ impl Accel for CwBvhAccel {
                 state,
                 Self::intersect_node(node, &r, state.oct_inv4),
                 {
-                    if self.intersect_prim(&r, state.primitive_id as usize) < r.tmax {
+                    if self.intersect_prim(&r, state.primitive_id as usize).0 < r.tmax {
                         hit = true;
                         break 'traversal;
                     }

@@ -341,7 +341,7 @@ impl Scene {
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
         let hit = self.accel.intersect(ray)?;
         let shape = &self.shapes[hit.shape as usize];
-        let g = shape.hit_geometry(hit.prim, ray, hit.t);
+        let g = shape.hit_geometry(hit.prim, ray, hit.t, hit.bary);
         let info = &self.shape_info[hit.shape as usize];
         Some(SurfaceInteraction {
             p: g.p,

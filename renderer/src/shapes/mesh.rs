@@ -16,6 +16,9 @@ pub struct Mesh {
     area_distribution: Distribution1D,
     /// Total area.
     area: f32,
+    /// Unit geometric normal of each triangle (winding order), precomputed for shading and
+    /// light sampling.
+    face_normals: Vec<Vec3>,
 }
 
 /// Distance along `ray` to triangle (p0, p1, p2), or +∞ when missed (Möller–Trumbore, both sides).
@@ -29,6 +32,21 @@ pub fn intersect_triangle(
     e1: Vec3A,
     e2: Vec3A,
 ) -> f32 {
+    intersect_triangle_bary(o, d, tmin, tmax, p0, e1, e2).0
+}
+
+/// [`intersect_triangle`] that also returns the hit's barycentric coordinates (b1, b2) (the
+/// same values [`Mesh::hit_geometry`] would recompute; meaningless on a miss).
+#[inline(always)]
+pub fn intersect_triangle_bary(
+    o: Vec3A,
+    d: Vec3A,
+    tmin: f32,
+    tmax: f32,
+    p0: Vec3A,
+    e1: Vec3A,
+    e2: Vec3A,
+) -> (f32, Vec2) {
     // Every quantity is computed before one combined test: with incoherent rays the early
     // outs of the textbook form mispredict more often than they save arithmetic.
     let pvec = d.cross(e2);
@@ -46,11 +64,7 @@ pub fn intersect_triangle(
         & (u + v <= 1.0)
         & (t > tmin)
         & (t < tmax);
-    if hit {
-        t
-    } else {
-        f32::INFINITY
-    }
+    (if hit { t } else { f32::INFINITY }, Vec2::new(u, v))
 }
 
 /// Barycentric coordinates (b1, b2) of the hit of `ray` with a triangle.
@@ -62,7 +76,14 @@ fn barycentrics(ray: &Ray, p0: Vec3, p1: Vec3, p2: Vec3) -> Vec2 {
     let tvec = ray.o - p0;
     let u = tvec.dot(pvec) * inv;
     let v = ray.d.dot(tvec.cross(e1)) * inv;
-    Vec2::new(u.clamp(0.0, 1.0), v.clamp(0.0, 1.0 - u.clamp(0.0, 1.0)))
+    clamp_barycentrics(Vec2::new(u, v))
+}
+
+/// Barycentrics (b1, b2) clamped into the triangle (rounding can put a hit just outside).
+#[inline]
+fn clamp_barycentrics(b: Vec2) -> Vec2 {
+    let u = b.x.clamp(0.0, 1.0);
+    Vec2::new(u, b.y.clamp(0.0, 1.0 - u))
 }
 
 impl Mesh {
@@ -75,10 +96,17 @@ impl Mesh {
             })
             .collect();
         let area = areas.iter().map(|&a| a as f64).sum::<f64>() as f32;
+        let face_normals = (0..data.indices.len())
+            .map(|i| {
+                let [p0, p1, p2] = Self::corners(data, i as u32);
+                (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Z)
+            })
+            .collect();
         Mesh {
             data: data.clone(),
             area_distribution: Distribution1D::new(&areas),
             area,
+            face_normals,
         }
     }
 
@@ -116,13 +144,20 @@ impl Mesh {
 
     /// Shading data at the hit of `ray` with triangle `tri` (distance `t`).
     pub fn hit_geometry(&self, tri: u32, ray: &Ray, t: f32) -> HitGeometry {
+        let [p0, p1, p2] = self.triangle(tri);
+        self.hit_geometry_bary(tri, ray, t, barycentrics(ray, p0, p1, p2))
+    }
+
+    /// [`Self::hit_geometry`] with the barycentrics `b` the intersection test already found.
+    #[inline]
+    pub fn hit_geometry_bary(&self, tri: u32, ray: &Ray, t: f32, b: Vec2) -> HitGeometry {
+        let b = clamp_barycentrics(b);
         let [i0, i1, i2] = self.data.indices[tri as usize];
         let [p0, p1, p2] = self.triangle(tri);
-        let b = barycentrics(ray, p0, p1, p2);
         let b0 = 1.0 - b.x - b.y;
         let p = ray.at(t);
         let (e1, e2) = (p1 - p0, p2 - p0);
-        let ng = e1.cross(e2).normalize_or(Vec3::Z);
+        let ng = self.face_normals[tri as usize];
         let ns = match &self.data.normals {
             Some(n) => {
                 (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng)
@@ -160,7 +195,7 @@ impl Mesh {
         let b = square_to_uniform_triangle(u);
         let b0 = 1.0 - b.x - b.y;
         let p = p0 * b0 + p1 * b.x + p2 * b.y;
-        let ng = (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Z);
+        let ng = self.face_normals[tri];
         // Mitsuba reports the interpolated vertex normal when the mesh has normals.
         let n = match &self.data.normals {
             Some(n) => {

@@ -100,11 +100,13 @@ impl Shape {
         }
     }
 
-    /// Local geometry at the hit of `ray` with primitive `prim` at distance `t`.
+    /// Local geometry at the hit of `ray` with primitive `prim` at distance `t`; `bary` are a
+    /// triangle hit's barycentrics as the intersection test found them (analytic shapes ignore
+    /// them).
     #[inline]
-    pub fn hit_geometry(&self, prim: u32, ray: &Ray, t: f32) -> HitGeometry {
+    pub fn hit_geometry(&self, prim: u32, ray: &Ray, t: f32, bary: Vec2) -> HitGeometry {
         match self {
-            Shape::Mesh(m) => m.hit_geometry(prim, ray, t),
+            Shape::Mesh(m) => m.hit_geometry_bary(prim, ray, t, bary),
             Shape::Sphere(s) => s.hit_geometry(ray, t),
             Shape::Disk(d) => d.hit_geometry(ray, t),
         }
