@@ -40,6 +40,9 @@ struct Cli {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Measure only this mode (`sppm` or `sppm-ml`; for profiling one mode). Default: both.
+    #[arg(long)]
+    only: Option<String>,
 }
 
 /// One measured run of `passes` passes.
@@ -104,8 +107,26 @@ fn run() -> Result<()> {
             // ABBA order: alternate which mode goes first.
             let order = if round % 2 == 0 { [0, 1] } else { [1, 0] };
             for m in order {
+                if cli.only.as_deref().is_some_and(|o| o != modes[m].name()) {
+                    continue;
+                }
                 samples[m].push(measure(&scene, &cli, modes[m], threads)?);
             }
+        }
+        if cli.only.is_some() {
+            for (m, v) in samples.iter().enumerate().filter(|(_, v)| !v.is_empty()) {
+                let s = median(v);
+                println!(
+                    "threads {threads} {:8}: {:.4} s/pass steady, {:.4} CPU s/pass, photon {:.4}, \
+                     gather {:.4}",
+                    modes[m].name(),
+                    s.steady_per_pass,
+                    s.cpu_per_pass,
+                    s.photon_per_pass,
+                    s.gather_per_pass
+                );
+            }
+            continue;
         }
         let med = [median(&samples[0]), median(&samples[1])];
         for (m, s) in med.iter().enumerate() {

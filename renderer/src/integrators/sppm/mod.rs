@@ -154,6 +154,8 @@ pub struct RenderSummary {
     pub seconds: f64,
     /// Seconds spent tracing photons and building the grid.
     pub photon_seconds: f64,
+    /// Of `photon_seconds`, the seconds spent building the photon grid.
+    pub grid_seconds: f64,
     /// Seconds spent on eye subpaths, gathering and accumulation.
     pub gather_seconds: f64,
     /// Photons emitted.
@@ -347,9 +349,27 @@ fn make_bundle(
     }
 }
 
-/// Cell size of this pass's photon grid from the radii the pixels will query: the mean
-/// initialised radius, but at least a quarter of the largest (bounds the cells a query visits);
-/// the cap before any pixel has a radius.
+/// Grid cell edge over the mean current radius of the largest level, per mode. A query costs a
+/// hash probe per cell it overlaps plus a distance test per photon in those cells; cells of
+/// about 1.5 r₅ balance the two for `sppm-ml` (its dominant query is B's at r₅; A's at
+/// r₁ = r₅/4 then mostly touches one cell) and cells of about 3 r for `sppm` (whose single query
+/// at r ≈ r₅/2.8 holds few photons, so probes dominate). Tuned on the default scene (CPU time
+/// per steady pass, factors 0.7–4 tried; docs/performance.md); the factor only changes speed
+/// and the order in which a query visits photons, never which photons it finds.
+fn cell_factor(mode: SppmMode) -> f32 {
+    match mode {
+        SppmMode::MultiLevel => 1.5,
+        SppmMode::Single => 3.0,
+    }
+}
+
+/// Grid cell edge in the first pass (no radii yet) over the radius cap: the k-NN searches of
+/// that pass start at one cell and double, and the typical k-NN distance is well below the cap.
+const FIRST_PASS_CELL_FRACTION: f32 = 0.5;
+
+/// Cell size of this pass's photon grid from the radii the pixels will query:
+/// [`cell_factor`] × the mean initialised radius, but at least a quarter of the largest (bounds
+/// the cells a query visits); a fraction of the cap before any pixel has a radius.
 fn grid_cell_size(states: &[PixelState], mode: SppmMode, max_radius: f32) -> f32 {
     let (mut sum, mut count, mut max) = (0.0f64, 0u64, 0.0f32);
     for s in states.iter().filter(|s| s.r2 > 0.0) {
@@ -359,9 +379,9 @@ fn grid_cell_size(states: &[PixelState], mode: SppmMode, max_radius: f32) -> f32
         max = max.max(r);
     }
     if count == 0 {
-        return max_radius;
+        return FIRST_PASS_CELL_FRACTION * max_radius;
     }
-    ((sum / count as f64) as f32).max(0.25 * max)
+    (cell_factor(mode) * (sum / count as f64) as f32).max(0.25 * max)
 }
 
 /// Runs SPPM on `scene` and calls `on_checkpoint` with a bundle at every checkpoint of `stop`
@@ -407,22 +427,27 @@ pub fn render_sppm(
     with_threads(settings.threads, move || -> Result<RenderSummary> {
         let start = Instant::now();
         let mut states = vec![PixelState::default(); pixel_count];
+        // Photon buffers and grid, reused across passes (no page faults on fresh memory).
+        let mut chunks: Vec<Vec<photon_map::Photon>> = Vec::new();
+        let mut grid = PhotonGrid::default();
         let mut summary = RenderSummary::default();
         let mut next_checkpoint = 0;
         let mut pass = 0u32;
         loop {
             pass += 1;
             let t0 = Instant::now();
-            let photons = photon_trace::trace_photons(
+            photon_trace::trace_photons(
                 scene,
                 settings.seed,
                 pass as u64,
                 settings.photons_per_pass,
                 settings.max_depth,
+                &mut chunks,
             );
-            let stored = photons.len() as u64;
+            let stored = chunks.iter().map(|c| c.len() as u64).sum();
+            let t_traced = Instant::now();
             let cell = grid_cell_size(&states, settings.mode, max_radius);
-            let grid = PhotonGrid::build(photons, cell);
+            grid.rebuild(&chunks, cell);
             let t1 = Instant::now();
             let ctx = PassContext {
                 scene,
@@ -437,10 +462,10 @@ pub fn render_sppm(
                 .with_min_len(64)
                 .map(|(i, s)| render_pixel(&ctx, i, s))
                 .sum();
-            drop(grid);
             let t2 = Instant::now();
             summary.passes = pass;
             summary.photon_seconds += (t1 - t0).as_secs_f64();
+            summary.grid_seconds += (t1 - t_traced).as_secs_f64();
             summary.gather_seconds += (t2 - t1).as_secs_f64();
             summary.photons_emitted += settings.photons_per_pass;
             summary.photons_stored += stored;

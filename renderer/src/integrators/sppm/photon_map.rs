@@ -1,12 +1,19 @@
 //! The photon map of one SPPM pass: stored photons and a hashed uniform grid over them with a
 //! fixed-radius query (gathering) and a capped k-nearest-neighbour distance query (initial radii).
 //!
-//! The grid is built by a counting sort of the photons by hash bucket, so its layout (and hence
-//! the order in which a query visits photons) depends only on the photon list, never on thread
-//! scheduling: gathers sum photons in a fixed order and are bit-reproducible.
+//! Layout: the photons are sorted by the Morton code of their grid cell (ties: input order), so
+//! every non-empty cell is one contiguous run and nearby cells lie nearby in memory; an
+//! open-addressing hash table maps a cell's code to its run. Positions are also kept in a
+//! separate dense array, which is all a query reads for photons outside the radius.
+//!
+//! Determinism: the sort key (cell code, input index) is unique, so the sorted order depends
+//! only on the photon list, never on thread scheduling; a query visits cells in z-y-x order and
+//! the photons of a cell in input order, so gathers sum photons in a fixed order. The build runs
+//! in parallel (bounds, keys, sort, reordering) on the current rayon pool.
 
 use crate::spectrum::Rgb;
-use glam::{IVec3, Vec3};
+use glam::{UVec3, Vec3};
+use rayon::prelude::*;
 
 /// A photon deposited on a non-delta surface.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -21,72 +28,198 @@ pub struct Photon {
     pub flux: Rgb,
 }
 
-/// A uniform grid hashed into `2^k` buckets; each bucket is a contiguous slice of photons.
-#[derive(Debug, Clone)]
+/// Cells per axis are capped at 2¹⁶ (Morton codes of 48 bits; the cell size grows if the photon
+/// bounds would need more), which also keeps grid coordinates exact enough for cell culling.
+const MAX_CELLS_PER_AXIS: u32 = 1 << 16;
+
+/// Slack, in cell units, of the sphere–cell overlap test: a cell is skipped only when it is
+/// farther than the radius plus this from the query point (float rounding of grid coordinates
+/// is far below it with at most 2¹⁶ cells per axis).
+const CULL_SLACK: f32 = 1.0e-2;
+
+/// One non-empty cell in the hash table: its Morton code and its run of sorted photons.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct CellRun {
+    /// Morton code of the cell ([`EMPTY`] marks a free slot).
+    code: u64,
+    /// First photon of the cell in the sorted arrays.
+    start: u32,
+    /// One past the last photon of the cell.
+    end: u32,
+}
+
+/// Code of a free hash-table slot (no cell has it: codes use 48 bits).
+const EMPTY: u64 = u64::MAX;
+
+/// Spreads the low 16 bits of `v` to every third bit (bit i → bit 3i).
+#[inline]
+fn spread3(v: u32) -> u64 {
+    let mut x = (v & 0xffff) as u64;
+    x = (x | (x << 16)) & 0x0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x0c30_c30c_30c3;
+    x = (x | (x << 2)) & 0x2492_4924_9249;
+    x
+}
+
+/// Morton (z-order) code of a cell.
+#[inline]
+fn morton(c: UVec3) -> u64 {
+    spread3(c.x) | (spread3(c.y) << 1) | (spread3(c.z) << 2)
+}
+
+/// Hash-table slot of a Morton code (Fibonacci hashing; `shift` = 64 − log2(table size)).
+#[inline]
+fn slot(code: u64, shift: u32) -> usize {
+    (code.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> shift) as usize
+}
+
+/// Floor of a float as i64, without a libm call (`f32::floor` is one on baseline x86-64).
+#[inline]
+fn floor_i64(x: f32) -> i64 {
+    let t = x as i64; // truncates towards zero, saturates, NaN → 0
+    t - ((x < t as f32) as i64)
+}
+
+/// A uniform grid over the photons of one pass, hashed by cell; reusable across passes
+/// ([`PhotonGrid::rebuild`] keeps the allocations).
+#[derive(Debug, Clone, Default)]
 pub struct PhotonGrid {
-    /// Photons sorted by bucket (stable: ascending input index within a bucket).
+    /// Photons sorted by (cell code, input index).
     photons: Vec<Photon>,
-    /// `bucket_start[b]..bucket_start[b+1]` are the photons of bucket `b`.
-    bucket_start: Vec<u32>,
+    /// `photons[i].position`, densely packed for the distance test.
+    positions: Vec<Vec3>,
+    /// Open-addressing table of the non-empty cells (power-of-two length).
+    table: Vec<CellRun>,
+    /// `64 − log2(table.len())`.
+    shift: u32,
+    /// Scratch: (cell code, input index) per photon, sorted.
+    keys: Vec<(u64, u32)>,
     /// Grid origin (minimum corner of the photon bounds).
     origin: Vec3,
     /// Edge length of a cell.
     cell_size: f32,
-    /// `bucket count - 1` (bucket count is a power of two).
-    mask: u64,
+    /// `1 / cell_size`.
+    inv_cell: f32,
+    /// Cells per axis (every photon's cell lies in `0..dims`).
+    dims: UVec3,
 }
 
 impl PhotonGrid {
     /// Builds the grid with cells of edge `cell_size` (> 0; typically ≈ the query radius).
     pub fn build(photons: Vec<Photon>, cell_size: f32) -> Self {
-        let cell_size = if cell_size.is_finite() && cell_size > 0.0 {
+        let mut grid = PhotonGrid::default();
+        grid.rebuild(&[photons], cell_size);
+        grid
+    }
+
+    /// Rebuilds the grid over the concatenation of `chunks` (input order = chunk order, then
+    /// order within a chunk), reusing this grid's allocations.
+    pub fn rebuild(&mut self, chunks: &[Vec<Photon>], cell_size: f32) {
+        let mut offsets = Vec::with_capacity(chunks.len() + 1);
+        let mut total = 0usize;
+        for c in chunks {
+            offsets.push(total);
+            total += c.len();
+        }
+        offsets.push(total);
+        assert!(total < u32::MAX as usize, "too many photons in one pass");
+        // Bounds of the finite positions (min/max are exact: any reduction order gives the
+        // same result).
+        let (lo, hi) = chunks
+            .par_iter()
+            .map(|c| {
+                c.iter()
+                    .filter(|p| p.position.is_finite())
+                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                        (lo.min(p.position), hi.max(p.position))
+                    })
+            })
+            .reduce(
+                || (Vec3::INFINITY, Vec3::NEG_INFINITY),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
+        let (origin, extent) = if lo.is_finite() && hi.is_finite() {
+            (lo, hi - lo)
+        } else {
+            (Vec3::ZERO, Vec3::ZERO)
+        };
+        let mut cell = if cell_size.is_finite() && cell_size > 0.0 {
             cell_size
         } else {
             1.0
         };
-        let origin = photons
-            .iter()
-            .fold(Vec3::splat(f32::INFINITY), |m, p| m.min(p.position));
-        let origin = if origin.is_finite() {
-            origin
-        } else {
-            Vec3::ZERO
+        // At most MAX_CELLS_PER_AXIS cells per axis (with a margin for rounding).
+        cell = cell.max(extent.max_element() / (MAX_CELLS_PER_AXIS - 2) as f32);
+        self.origin = origin;
+        self.cell_size = cell;
+        self.inv_cell = 1.0 / cell;
+        let max_cell = MAX_CELLS_PER_AXIS - 1;
+        self.dims = ((extent / cell).as_uvec3() + UVec3::ONE).min(UVec3::splat(max_cell + 1));
+
+        // (cell code, input index) of every photon, then one parallel sort: the key is unique,
+        // so the result does not depend on the sort's scheduling.
+        let (origin, dims) = (self.origin, self.dims);
+        let photon_at = |g: usize| -> &Photon {
+            let c = offsets.partition_point(|&o| o <= g) - 1;
+            &chunks[c][g - offsets[c]]
         };
-        let buckets = (photons.len().max(1) * 2).next_power_of_two();
-        let mut grid = PhotonGrid {
-            photons: Vec::new(),
-            bucket_start: vec![0; buckets + 1],
-            origin,
-            cell_size,
-            mask: buckets as u64 - 1,
-        };
-        // Counting sort by bucket: count, prefix sum, scatter in input order (stable).
-        let keys: Vec<usize> = photons
-            .iter()
-            .map(|p| grid.bucket(grid.cell_of(p.position)))
-            .collect();
-        for &k in &keys {
-            grid.bucket_start[k + 1] += 1;
-        }
-        for b in 0..buckets {
-            grid.bucket_start[b + 1] += grid.bucket_start[b];
-        }
-        let mut next: Vec<u32> = grid.bucket_start[..buckets].to_vec();
-        let mut sorted = vec![
-            Photon {
-                position: Vec3::ZERO,
-                wi: Vec3::ZERO,
-                normal: Vec3::ZERO,
-                flux: Rgb::ZERO
+        (0..total)
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|g| {
+                // Divided, not multiplied by the inverse: the cell of a photon on a boundary
+                // stays what it was with the hash-bucket grid (same gather order, same bits).
+                let cell = ((photon_at(g).position - origin) / cell)
+                    .as_uvec3()
+                    .min(dims - UVec3::ONE);
+                (morton(cell), g as u32)
+            })
+            .collect_into_vec(&mut self.keys);
+        self.keys.par_sort_unstable();
+        self.keys
+            .par_iter()
+            .with_min_len(4096)
+            .map(|&(_, g)| *photon_at(g as usize))
+            .collect_into_vec(&mut self.photons);
+        self.photons
+            .par_iter()
+            .with_min_len(4096)
+            .map(|p| p.position)
+            .collect_into_vec(&mut self.positions);
+
+        // Runs of equal codes → hash table (load factor ≤ 1/2).
+        let cells = 1 + self.keys.windows(2).filter(|w| w[0].0 != w[1].0).count();
+        let size = (2 * cells).next_power_of_two().max(2);
+        self.shift = 64 - size.trailing_zeros();
+        self.table.clear();
+        self.table.resize(
+            size,
+            CellRun {
+                code: EMPTY,
+                start: 0,
+                end: 0,
+            },
+        );
+        let mask = size - 1;
+        let mut start = 0usize;
+        while start < total {
+            let code = self.keys[start].0;
+            let mut end = start + 1;
+            while end < total && self.keys[end].0 == code {
+                end += 1;
+            }
+            let mut s = slot(code, self.shift);
+            while self.table[s].code != EMPTY {
+                s = (s + 1) & mask;
+            }
+            self.table[s] = CellRun {
+                code,
+                start: start as u32,
+                end: end as u32,
             };
-            photons.len()
-        ];
-        for (p, &k) in photons.into_iter().zip(&keys) {
-            sorted[next[k] as usize] = p;
-            next[k] += 1;
+            start = end;
         }
-        grid.photons = sorted;
-        grid
     }
 
     /// Number of stored photons.
@@ -104,48 +237,73 @@ impl PhotonGrid {
         self.cell_size
     }
 
-    /// Integer cell coordinates of a point.
+    /// The run of photons of the cell with Morton code `code` (empty if the cell is).
     #[inline]
-    fn cell_of(&self, p: Vec3) -> IVec3 {
-        let c = ((p - self.origin) / self.cell_size).floor();
-        // Clamp so far-away query points cannot overflow the integer conversion.
-        c.clamp(Vec3::splat(-1.0e9), Vec3::splat(1.0e9)).as_ivec3()
-    }
-
-    /// Hash bucket of a cell (Teschner et al. 2003 spatial hash).
-    #[inline]
-    fn bucket(&self, c: IVec3) -> usize {
-        let h = (c.x as u32 as u64).wrapping_mul(73_856_093)
-            ^ (c.y as u32 as u64).wrapping_mul(19_349_663)
-            ^ (c.z as u32 as u64).wrapping_mul(83_492_791);
-        (h & self.mask) as usize
+    fn run(&self, code: u64) -> std::ops::Range<usize> {
+        let mask = self.table.len() - 1;
+        let mut s = slot(code, self.shift);
+        loop {
+            let e = self.table[s];
+            if e.code == code {
+                return e.start as usize..e.end as usize;
+            }
+            if e.code == EMPTY {
+                return 0..0;
+            }
+            s = (s + 1) & mask;
+        }
     }
 
     /// Calls `f(photon, squared distance)` for every photon within `radius` of `p`, in a fixed
-    /// order (cells in x-y-z order, photons in bucket order).
+    /// order (cells in z-y-x order, photons of a cell in input order).
     #[inline]
     pub fn for_each_within(&self, p: Vec3, radius: f32, mut f: impl FnMut(&Photon, f32)) {
         if self.photons.is_empty() || radius.is_nan() || radius <= 0.0 {
             return;
         }
         let r2 = radius * radius;
-        let lo = self.cell_of(p - Vec3::splat(radius));
-        let hi = self.cell_of(p + Vec3::splat(radius));
+        // Query point and radius in cell units.
+        let q = (p - self.origin) * self.inv_cell;
+        let rc = radius * self.inv_cell;
+        // The box and the sphere test are widened by CULL_SLACK cells: photon cells come from a
+        // division, the query's from a multiplication, which may round differently.
+        let ext = rc + CULL_SLACK;
+        let reach = ext * ext;
+        let max = self.dims.as_i64vec3() - glam::I64Vec3::ONE;
+        let lo = glam::I64Vec3::new(
+            floor_i64(q.x - ext),
+            floor_i64(q.y - ext),
+            floor_i64(q.z - ext),
+        )
+        .max(glam::I64Vec3::ZERO);
+        let hi = glam::I64Vec3::new(
+            floor_i64(q.x + ext),
+            floor_i64(q.y + ext),
+            floor_i64(q.z + ext),
+        )
+        .min(max);
+        // Squared distance, in cell units, from q to cell `c` along one axis.
+        let gap = |q: f32, c: i64| -> f32 {
+            let d = (c as f32 - q).max(q - (c + 1) as f32).max(0.0);
+            d * d
+        };
         for z in lo.z..=hi.z {
+            let dz = gap(q.z, z);
             for y in lo.y..=hi.y {
+                let dzy = dz + gap(q.y, y);
+                if dzy > reach {
+                    continue;
+                }
                 for x in lo.x..=hi.x {
-                    let cell = IVec3::new(x, y, z);
-                    let b = self.bucket(cell);
-                    let range = self.bucket_start[b] as usize..self.bucket_start[b + 1] as usize;
-                    for photon in &self.photons[range] {
-                        // Buckets are shared by colliding cells: visit each photon only from
-                        // its own cell, or it would be counted twice.
-                        if self.cell_of(photon.position) != cell {
-                            continue;
-                        }
-                        let d2 = photon.position.distance_squared(p);
+                    // Skip cells the sphere cannot reach (the corners of the box).
+                    if dzy + gap(q.x, x) > reach {
+                        continue;
+                    }
+                    let code = morton(UVec3::new(x as u32, y as u32, z as u32));
+                    for i in self.run(code) {
+                        let d2 = self.positions[i].distance_squared(p);
                         if d2 <= r2 {
-                            f(photon, d2);
+                            f(&self.photons[i], d2);
                         }
                     }
                 }
@@ -168,14 +326,25 @@ impl PhotonGrid {
         // pixel initialised late (its first visible point in a later pass, when the cells have
         // shrunk to the typical radius) would otherwise scan the cap's whole volume of small
         // cells — the dominant cost of a pass with many photons.
-        let mut d2s: Vec<f32> = Vec::new();
+        // `best` holds the k smallest squared distances seen, ascending.
+        let mut best: Vec<f32> = Vec::with_capacity(k + 1);
         let mut r = self.cell_size.min(max_radius);
         loop {
-            d2s.clear();
-            self.for_each_within(p, r, |_, d2| d2s.push(d2));
-            if d2s.len() >= k {
-                let (_, kth, _) = d2s.select_nth_unstable_by(k - 1, f32::total_cmp);
-                return Some(kth.sqrt());
+            best.clear();
+            let mut count = 0usize;
+            self.for_each_within(p, r, |_, d2| {
+                count += 1;
+                if best.len() == k {
+                    if d2 >= best[k - 1] {
+                        return;
+                    }
+                    best.pop();
+                }
+                let at = best.partition_point(|&b| b <= d2);
+                best.insert(at, d2);
+            });
+            if count >= k {
+                return Some(best[k - 1].sqrt());
             }
             if r >= max_radius {
                 return None;
@@ -282,10 +451,86 @@ mod tests {
         let a = PhotonGrid::build(photons.clone(), 0.1);
         let b = PhotonGrid::build(photons, 0.1);
         assert_eq!(a.photons, b.photons);
-        assert_eq!(a.bucket_start, b.bucket_start);
+        assert_eq!(a.table, b.table);
         let empty = PhotonGrid::build(Vec::new(), 0.1);
         assert!(empty.is_empty());
         assert_eq!(empty.kth_nearest_distance(Vec3::ZERO, 20, 1.0), None);
         empty.for_each_within(Vec3::ZERO, 1.0, |_, _| panic!("no photons"));
+    }
+
+    /// Ids of the photons a query visits, in visiting order.
+    fn visit(grid: &PhotonGrid, p: Vec3, r: f32) -> Vec<u32> {
+        let mut ids = Vec::new();
+        grid.for_each_within(p, r, |ph, _| ids.push(ph.flux.x as u32));
+        ids
+    }
+
+    #[test]
+    fn query_order_is_cell_z_y_x_then_input_order() {
+        // The gather sums photons in visiting order, so this order is part of the output's
+        // bit-exact definition: cells in z, y, x order, photons of a cell in input order.
+        let photons = random_photons(3000, 7);
+        let mut rng = rng_for(8, 0, 0);
+        for cell_size in [0.02, 0.1, 0.4] {
+            let grid = PhotonGrid::build(photons.clone(), cell_size);
+            let cell = |q: Vec3| ((q - grid.origin) / grid.cell_size).as_uvec3();
+            for _ in 0..40 {
+                let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0;
+                let r = 0.05 + 0.25 * rng.next_f32();
+                let mut want: Vec<(u32, u32, u32, u32)> = photons
+                    .iter()
+                    .filter(|ph| ph.position.distance_squared(p) <= r * r)
+                    .map(|ph| {
+                        let c = cell(ph.position);
+                        (c.z, c.y, c.x, ph.flux.x as u32)
+                    })
+                    .collect();
+                want.sort_unstable();
+                let want: Vec<u32> = want.into_iter().map(|w| w.3).collect();
+                assert_eq!(visit(&grid, p, r), want, "cell {cell_size} p {p} r {r}");
+            }
+        }
+    }
+
+    #[test]
+    fn rebuild_from_chunks_equals_build_and_reuses_nothing_stale() {
+        let photons = random_photons(2500, 9);
+        let fresh = PhotonGrid::build(photons.clone(), 0.05);
+        // A grid first built over other (more) photons with another cell size, then rebuilt
+        // from uneven chunks of the same list.
+        let mut reused = PhotonGrid::build(random_photons(4000, 10), 0.3);
+        let chunks: Vec<Vec<Photon>> = vec![
+            photons[..1].to_vec(),
+            Vec::new(),
+            photons[1..1700].to_vec(),
+            photons[1700..].to_vec(),
+        ];
+        reused.rebuild(&chunks, 0.05);
+        assert_eq!(reused.photons, fresh.photons);
+        assert_eq!(reused.positions, fresh.positions);
+        assert_eq!(reused.table, fresh.table);
+        let mut rng = rng_for(11, 0, 0);
+        for _ in 0..20 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 1.5;
+            assert_eq!(visit(&reused, p, 0.2), visit(&fresh, p, 0.2));
+        }
+    }
+
+    #[test]
+    fn degenerate_photons_and_queries_do_not_panic() {
+        // All photons at one point (zero extent), a non-finite one, huge and tiny queries.
+        let mut photons = random_photons(50, 12);
+        for ph in &mut photons {
+            ph.position = Vec3::splat(0.5);
+        }
+        photons[3].position = Vec3::new(f32::NAN, 0.0, f32::INFINITY);
+        let grid = PhotonGrid::build(photons, 1.0e-6);
+        assert_eq!(visit(&grid, Vec3::splat(0.5), 1.0e-3).len(), 49);
+        assert!(visit(&grid, Vec3::splat(1.0e30), 1.0e30).len() >= 49);
+        assert!(visit(&grid, Vec3::splat(-1.0e30), 1.0).is_empty());
+        assert_eq!(
+            grid.kth_nearest_distance(Vec3::splat(0.5), 20, 0.1),
+            Some(0.0)
+        );
     }
 }

@@ -12,9 +12,10 @@ use rayon::prelude::*;
 
 use super::photon_map::Photon;
 
-/// Photons traced per parallel work item; the deposits of a chunk stay in photon order and
-/// chunks are concatenated in order, so the photon list does not depend on the thread count.
-const CHUNK: u64 = 4096;
+/// Photons traced per parallel work item (small enough that 2+ threads stay balanced); the
+/// deposits of a chunk stay in photon order and chunks are read in order, so the photon list
+/// does not depend on the thread count.
+const CHUNK: u64 = 1024;
 
 /// Bounce from which Russian roulette may end a photon path.
 const RR_START: u32 = 3;
@@ -78,25 +79,26 @@ pub fn trace_photon(
     }
 }
 
-/// Traces `count` photons of pass `pass` in parallel (current rayon pool) and returns all
-/// deposits in photon-index order.
+/// Traces `count` photons of pass `pass` in parallel (current rayon pool) into `chunks`:
+/// chunk `c` receives the deposits of photons `c·CHUNK..(c+1)·CHUNK` in photon order, so the
+/// concatenation of the chunks is the deposit list in photon-index order whatever the thread
+/// count. The chunks' allocations are reused from the previous pass.
 pub fn trace_photons(
     scene: &Scene,
     seed: u64,
     pass: u64,
     count: u64,
     max_depth: u32,
-) -> Vec<Photon> {
-    let chunks = count.div_ceil(CHUNK);
-    let per_chunk: Vec<Vec<Photon>> = (0..chunks)
-        .into_par_iter()
-        .map(|c| {
-            let mut out = Vec::new();
-            for index in c * CHUNK..((c + 1) * CHUNK).min(count) {
-                trace_photon(scene, seed, pass, index, max_depth, &mut out);
-            }
-            out
-        })
-        .collect();
-    per_chunk.concat()
+    chunks: &mut Vec<Vec<Photon>>,
+) {
+    let n = count.div_ceil(CHUNK) as usize;
+    chunks.truncate(n);
+    chunks.resize_with(n, Vec::new);
+    chunks.par_iter_mut().enumerate().for_each(|(c, out)| {
+        out.clear();
+        let c = c as u64;
+        for index in c * CHUNK..((c + 1) * CHUNK).min(count) {
+            trace_photon(scene, seed, pass, index, max_depth, out);
+        }
+    });
 }
