@@ -6,9 +6,10 @@
 use crate::bsdf::{Bsdf, TransportMode};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
-use std::f32::consts::PI;
+use glam::{Vec2, Vec3};
+use std::f32::consts::{FRAC_1_PI, PI};
 
-use super::photon_map::PhotonGrid;
+use super::photon_map::{Photon, PhotonGrid};
 use super::visible_point::VisiblePoint;
 
 /// Minimum cosine between a photon's surface normal and the visible point's geometric normal.
@@ -24,6 +25,26 @@ fn transmits(bsdf: &Bsdf) -> bool {
         Bsdf::RoughDielectric(_) => true,
         Bsdf::TwoSided { front, back } => transmits(front) || transmits(back),
         _ => false,
+    }
+}
+
+/// The visible point's BSDF when it is Lambertian on the viewer's side: a photon arriving from
+/// direction `wi` (shading frame) contributes `f` when `side · wi.z > 0` and nothing otherwise,
+/// so the gather can sum fluxes and apply `f` once. `None` for any other BSDF.
+fn lambertian(bsdf: &Bsdf, wo: Vec3, uv: Vec2) -> Option<(Rgb, f32)> {
+    // Mirrors `Diffuse::eval` (ρ/π on the upper hemisphere, both directions above the surface)
+    // and `Bsdf::TwoSided` (the back model with both directions flipped).
+    let diffuse = |b: &Bsdf| match b {
+        Bsdf::Diffuse(d) => Some(d.reflectance.eval(uv) * FRAC_1_PI),
+        _ => None,
+    };
+    match bsdf {
+        Bsdf::Diffuse(_) if wo.z > 0.0 => Some((diffuse(bsdf)?, 1.0)),
+        Bsdf::Diffuse(_) => Some((Rgb::ZERO, 1.0)),
+        Bsdf::TwoSided { front, .. } if wo.z > 0.0 => Some((diffuse(front)?, 1.0)),
+        Bsdf::TwoSided { back, .. } if wo.z < 0.0 => Some((diffuse(back)?, -1.0)),
+        Bsdf::TwoSided { .. } => Some((Rgb::ZERO, 1.0)),
+        _ => None,
     }
 }
 
@@ -45,31 +66,53 @@ pub fn gather(
     let allow_other_side = transmits(bsdf);
     let viewer_side = vp.wo_world.dot(vp.ng) > 0.0;
     let r2: [f32; 8] = std::array::from_fn(|l| radii.get(l).map_or(0.0, |r| r * r));
+    let levels = radii.len();
+    // Photons that pass the surface tests; they add `weight` to every level covering them.
     let mut sums = [Rgb::ZERO; 8];
-    grid.for_each_within(vp.p, r_max, |photon, d2| {
-        if photon.normal.dot(vp.ng) < NORMAL_AGREEMENT_COS {
-            return;
-        }
-        if !allow_other_side && (photon.wi.dot(vp.ng) > 0.0) != viewer_side {
-            return;
-        }
-        let wi = vp.frame.to_local(photon.wi);
-        let f = bsdf.eval(vp.wo, wi, vp.uv, TransportMode::Radiance);
-        if f == Rgb::ZERO {
-            return;
-        }
-        let contribution = f * photon.flux;
+    let mut add = |d2: f32, weight: Rgb| {
         // Radii ascend: the covering levels are a suffix of the list.
-        for (sum, r2) in sums.iter_mut().zip(&r2).take(radii.len()).rev() {
+        for (sum, r2) in sums.iter_mut().zip(&r2).take(levels).rev() {
             if d2 > *r2 {
                 break;
             }
-            *sum += contribution;
+            *sum += weight;
         }
-    });
+    };
+    let same_surface = |photon: &Photon| {
+        photon.normal.dot(vp.ng) >= NORMAL_AGREEMENT_COS
+            && (allow_other_side || (photon.wi.dot(vp.ng) > 0.0) == viewer_side)
+    };
+    // The common case, a Lambertian surface: f is one constant on one hemisphere, so sum the
+    // fluxes and multiply by f at the end (no BSDF evaluation per photon).
+    let factor = match lambertian(bsdf, vp.wo, vp.uv) {
+        Some((f, side)) => {
+            if f != Rgb::ZERO {
+                let n = vp.frame.n;
+                grid.for_each_within(vp.p, r_max, |photon, d2| {
+                    if same_surface(photon) && side * photon.wi.dot(n) > 0.0 {
+                        add(d2, photon.flux);
+                    }
+                });
+            }
+            f
+        }
+        None => {
+            grid.for_each_within(vp.p, r_max, |photon, d2| {
+                if !same_surface(photon) {
+                    return;
+                }
+                let wi = vp.frame.to_local(photon.wi);
+                let f = bsdf.eval(vp.wo, wi, vp.uv, TransportMode::Radiance);
+                if f != Rgb::ZERO {
+                    add(d2, f * photon.flux);
+                }
+            });
+            Rgb::ONE
+        }
+    };
     for ((o, sum), r2) in out.iter_mut().zip(&sums).zip(&r2) {
         if *r2 > 0.0 {
-            *o += vp.beta * *sum / (n_photons as f32 * PI * r2);
+            *o += vp.beta * (factor * *sum) / (n_photons as f32 * PI * r2);
         }
     }
 }

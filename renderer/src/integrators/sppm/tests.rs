@@ -2,7 +2,7 @@
 //! variance calibration, light leaks through thin walls, thread-count determinism.
 
 use super::*;
-use crate::bsdf::{Bsdf, Diffuse};
+use crate::bsdf::{Bsdf, Diffuse, TransportMode};
 use crate::description::{
     CameraDesc, EmitterDesc, FovAxis, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
 };
@@ -397,4 +397,113 @@ fn checkpoints_and_time_limit() {
     assert!(render_sppm(&scene, &bad, &stop, |_| Ok(()), |_| {}).is_err());
     let none = StopCondition::default();
     assert!(render_sppm(&scene, &s, &none, |_| Ok(()), |_| {}).is_err());
+}
+
+/// `gather` against a brute-force sum over all photons of β·f(wo, wp)·Φp/(N·π·r²) with the
+/// same surface tests, for BSDFs on the Lambertian fast path (diffuse; two-sided seen from the
+/// back; diffuse seen from below, which gathers nothing) and on the general path (rough
+/// plastic, with BSDF evaluation per photon).
+#[test]
+fn gather_matches_brute_force_sum() {
+    use crate::bsdf::{MicrofacetKind, RoughPlastic, Roughness};
+    use crate::frame::Frame;
+    use crate::sampling::{rng_for, UniformSource};
+    use gather::{gather, NORMAL_AGREEMENT_COS};
+    use photon_map::Photon;
+    use visible_point::VisiblePoint;
+
+    let bsdfs = vec![
+        diffuse(0.6),
+        Bsdf::TwoSided {
+            front: Box::new(diffuse(0.3)),
+            back: Box::new(diffuse(0.8)),
+        },
+        Bsdf::RoughPlastic(RoughPlastic {
+            roughness: Roughness {
+                kind: MicrofacetKind::Beckmann,
+                alpha_u: 0.3,
+                alpha_v: 0.3,
+            },
+            eta: 1.5,
+            diffuse_reflectance: Texture::Constant(Rgb::new(0.2, 0.5, 0.7)),
+            specular_reflectance: Texture::Constant(Rgb::ONE),
+            nonlinear: false,
+        }),
+    ];
+    let scene = scene(
+        camera(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, 40.0, 4),
+        bsdfs,
+        vec![quad("q", Vec3::ZERO, Vec3::X, Vec3::Y, 0, None)],
+        vec![EmitterDesc::Point {
+            position: Vec3::new(0.0, 0.0, -1.0),
+            intensity: Rgb::ONE,
+        }],
+    );
+    // Photons on and near the plane z = 0 around the origin, arriving from both sides, most on
+    // surfaces with the plane's normal, some on tilted ones.
+    let mut rng = rng_for(21, 0, 0);
+    let ng = Vec3::new(0.0, 0.0, -1.0);
+    let photons: Vec<Photon> = (0..4000)
+        .map(|i| {
+            let u = rng.next_2d();
+            let w = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - Vec3::ONE)
+                .normalize();
+            Photon {
+                position: Vec3::new(u.x - 0.5, u.y - 0.5, 0.01 * rng.next_f32()),
+                wi: w,
+                normal: if i % 5 == 0 { Vec3::X } else { ng },
+                flux: Rgb::new(1.0 + rng.next_f32(), 0.5, rng.next_f32()),
+            }
+        })
+        .collect();
+    let grid = photon_map::PhotonGrid::build(photons.clone(), 0.07);
+    let radii = nested_radii(0.3);
+    let n_photons = 10_000u64;
+    let mut lambertian_nonzero = 0;
+    for (material, wo_world) in [
+        (0u32, Vec3::new(0.3, 0.1, -1.0).normalize()),
+        (0, Vec3::new(0.3, 0.1, 1.0).normalize()),
+        (1, Vec3::new(-0.2, 0.4, 1.0).normalize()),
+        (1, Vec3::new(-0.2, 0.4, -1.0).normalize()),
+        (2, Vec3::new(0.5, -0.2, -1.0).normalize()),
+    ] {
+        let frame = Frame::from_normal(ng);
+        let vp = VisiblePoint {
+            p: Vec3::new(0.02, -0.03, 0.0),
+            ng,
+            frame,
+            wo_world,
+            wo: frame.to_local(wo_world),
+            uv: glam::Vec2::new(0.3, 0.6),
+            material,
+            beta: Rgb::new(0.9, 0.8, 0.7),
+        };
+        let bsdf = &scene.bsdfs[material as usize];
+        let mut got = [Rgb::ZERO; 4];
+        gather(&scene, &grid, &vp, &radii[1..], n_photons, &mut got);
+        for (l, r) in radii[1..].iter().enumerate() {
+            let mut sum = Rgb::ZERO;
+            for ph in &photons {
+                if ph.position.distance_squared(vp.p) > r * r
+                    || ph.normal.dot(ng) < NORMAL_AGREEMENT_COS
+                    || (ph.wi.dot(ng) > 0.0) != (wo_world.dot(ng) > 0.0)
+                {
+                    continue;
+                }
+                let f = bsdf.eval(vp.wo, frame.to_local(ph.wi), vp.uv, TransportMode::Radiance);
+                sum += f * ph.flux;
+            }
+            let want = vp.beta * sum / (n_photons as f32 * std::f32::consts::PI * r * r);
+            let err = (got[l] - want).abs().max_element();
+            assert!(
+                err <= 1e-5 * want.max_element().max(1e-3),
+                "material {material} wo {wo_world} level {l}: {:?} vs {want:?}",
+                got[l]
+            );
+            if material < 2 && want.max_element() > 0.0 {
+                lambertian_nonzero += 1;
+            }
+        }
+    }
+    assert!(lambertian_nonzero >= 8, "fast path must be exercised");
 }
