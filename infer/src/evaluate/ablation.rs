@@ -62,6 +62,10 @@ pub struct AblationRow {
     pub variants: Vec<f64>,
     /// Label of the model with the lowest relMSE on this scene.
     pub best: String,
+    /// relMSE of the best single input level on the same bundle (for context).
+    pub best_input: f64,
+    /// Name of that level.
+    pub best_input_level: String,
 }
 
 /// The ablation as written to results.json and shown on the page.
@@ -139,6 +143,8 @@ pub fn build(
             multi: c.ours_relmse,
             variants: c.variant_relmse.clone(),
             best: best.0,
+            best_input: c.level_relmse.iter().copied().fold(f64::INFINITY, f64::min),
+            best_input_level: c.best_level.clone(),
         });
     }
     let geomean_ratio_to_multi = (0..variants.len())
@@ -181,7 +187,7 @@ mod tests {
             inference_seconds: 0.1,
             total_seconds: 1.1,
             ours_relmse: ours,
-            level_relmse: vec![1.0; 5],
+            level_relmse: vec![1.0, 0.5, 2.0, 3.0, 4.0],
             best_level: "z1".into(),
             variant_relmse: variants,
             standard_equal_time: Interpolated {
@@ -249,6 +255,10 @@ mod tests {
         assert_eq!(a.rows[0].variants, vec![0.4]);
         assert_eq!(a.rows[0].best, "Multi (y, z1, ..., z4)");
         assert_eq!(a.rows[1].best, "Dual (y, z2)");
+        assert_eq!(
+            (a.rows[1].best_input, a.rows[1].best_input_level.as_str()),
+            (0.5, "z1")
+        );
         assert_eq!(a.multi_better, vec![1]);
         let g = a.geomean_ratio_to_multi[0].unwrap();
         assert!((g - 1.0).abs() < 1e-12, "{g}");

@@ -284,7 +284,7 @@ fn ablation_section(h: &mut String, a: &Ablation) {
             escape(&m.dir.display().to_string())
         );
     }
-    h.push_str("</tr>\n");
+    h.push_str("<th>best input level</th></tr>\n");
     for r in &a.rows {
         let _ = write!(h, "<tr><td class=\"l\">{}</td>", escape(&r.scene));
         let best = r.variants.iter().copied().fold(r.multi, f64::min);
@@ -292,7 +292,12 @@ fn ablation_section(h: &mut String, a: &Ablation) {
             let class = if *v == best { " class=\"win\"" } else { "" };
             let _ = write!(h, "<td{class}>{}</td>", sci(*v));
         }
-        h.push_str("</tr>\n");
+        let _ = writeln!(
+            h,
+            "<td>{} ({})</td></tr>",
+            sci(r.best_input),
+            escape(&r.best_input_level)
+        );
     }
     h.push_str("<tr><th class=\"l\">geometric mean / multi</th>");
     for g in &a.geomean_ratio_to_multi {
@@ -302,11 +307,11 @@ fn ablation_section(h: &mut String, a: &Ablation) {
             g.map_or_else(|| "–".into(), |v| format!("{v:.3}"))
         );
     }
-    h.push_str("<th>1</th></tr>\n<tr><th class=\"l\">scenes where multi is better</th>");
+    h.push_str("<th>1</th><th></th></tr>\n<tr><th class=\"l\">scenes where multi is better</th>");
     for n in &a.multi_better {
         let _ = write!(h, "<th>{n} of {}</th>", a.rows.len());
     }
-    h.push_str("<th></th></tr>\n</table>\n");
+    h.push_str("<th></th><th></th></tr>\n</table>\n");
     let _ = writeln!(
         h,
         "<p>relMSE; the lowest per scene in bold green. {}</p>",
@@ -352,6 +357,8 @@ mod tests {
                 multi: 0.25,
                 variants: vec![0.5],
                 best: "x".into(),
+                best_input: 0.125,
+                best_input_level: "z3".into(),
             }],
             geomean_ratio_to_multi: vec![Some(2.0)],
             multi_better: vec![1],
@@ -366,6 +373,7 @@ mod tests {
             "<td>5.000e-1</td>",
             "<td class=\"win\">2.500e-1</td>",
             "<th>2.000</th>",
+            "<td>1.250e-1 (z3)</td>",
             "1 of 1",
         ] {
             assert!(h.contains(want), "missing {want} in {h}");
