@@ -15,23 +15,36 @@ use burn::tensor::{Device, Tensor, TensorData};
 /// 1 where window entry k of pixel p lies inside the `height`×`width` image, else 0; shape
 /// `[1, 1, 1, window², height·width]`, entries ordered like `unfold4d` (row-major offsets).
 pub fn inside_mask(height: usize, width: usize, window: usize, device: &Device) -> Tensor<5> {
-    let r = (window / 2) as isize;
+    let r = window / 2;
+    block_mask(height, width, window, [r; 4], device)
+}
+
+/// The window mask of a `height`×`width` block of pixels cut out of a larger image: 1 where
+/// window entry k of pixel p lies on an image pixel, else 0; shape `[1, 1, 1, window²,
+/// height·width]`. `margins` `[top, bottom, left, right]` is how many of the window's reach
+/// `r = window / 2` on each side lies outside the image (r at an image border, 0 where the image
+/// continues for at least r pixels).
+pub fn block_mask(
+    height: usize,
+    width: usize,
+    window: usize,
+    margins: [usize; 4],
+    device: &Device,
+) -> Tensor<5> {
+    let r = window / 2;
+    let [top, bottom, left, right] = margins;
+    // Entry (ki, kj) of pixel (py, px) reads padded position (py + ki, px + kj); the image
+    // covers padded rows [top, height + 2r − bottom) and columns [left, width + 2r − right).
+    let (rows, cols) = (top..height + 2 * r - bottom, left..width + 2 * r - right);
     let area = window * window;
     let pixels = height * width;
     let mut mask = vec![0.0f32; area * pixels];
     for ki in 0..window {
         for kj in 0..window {
             let row = &mut mask[(ki * window + kj) * pixels..][..pixels];
-            for py in 0..height {
-                let sy = py as isize + ki as isize - r;
-                if sy < 0 || sy >= height as isize {
-                    continue;
-                }
-                for px in 0..width {
-                    let sx = px as isize + kj as isize - r;
-                    if sx >= 0 && sx < width as isize {
-                        row[py * width + px] = 1.0;
-                    }
+            for py in (0..height).filter(|py| rows.contains(&(py + ki))) {
+                for px in (0..width).filter(|px| cols.contains(&(px + kj))) {
+                    row[py * width + px] = 1.0;
                 }
             }
         }
@@ -40,8 +53,13 @@ pub fn inside_mask(height: usize, width: usize, window: usize, device: &Device) 
 }
 
 /// Positive weights of `pairs` correlated levels masked to the image: `weights`
-/// `[B, pairs·|Ω|, H, W]` → `[B, pairs, 1, |Ω|, H·W]`.
-fn masked_weights(weights: Tensor<4>, window: usize, pairs: usize) -> Tensor<5> {
+/// `[B, pairs·|Ω|, H, W]` → `[B, pairs, 1, |Ω|, H·W]` (`margins` as in [`block_mask`]).
+fn masked_weights(
+    weights: Tensor<4>,
+    window: usize,
+    pairs: usize,
+    margins: [usize; 4],
+) -> Tensor<5> {
     let [batch, channels, height, width] = weights.dims();
     let area = window * window;
     assert_eq!(
@@ -50,7 +68,7 @@ fn masked_weights(weights: Tensor<4>, window: usize, pairs: usize) -> Tensor<5> 
         "weights need (m-1)*window^2 = {} channels, got {channels}",
         pairs * area
     );
-    let mask = inside_mask(height, width, window, &weights.device());
+    let mask = block_mask(height, width, window, margins, &weights.device());
     weights.reshape([batch, pairs, 1, area, height * width]) * mask
 }
 
@@ -61,7 +79,22 @@ fn masked_weights(weights: Tensor<4>, window: usize, pairs: usize) -> Tensor<5> 
 /// `weights`: positive weights `[B, (m−1)·window², H, W]`, pair-major then window row-major;
 /// returns ŷ `[B, 3, H, W]`.
 pub fn combine(levels: Tensor<4>, weights: Tensor<4>, window: usize) -> Tensor<4> {
-    let [batch, channels, height, width] = levels.dims();
+    combine_block(levels, weights, window, [window / 2; 4])
+}
+
+/// [`combine`] for a block of pixels cut out of a larger image (tiled inference): `weights`
+/// `[B, (m−1)·window², h, w]` are those of the block's pixels, `levels` cover the block grown
+/// by the window reach r = window / 2 except `margins` `[top, bottom, left, right]` — the
+/// part of the reach outside the image on each side (r at an image border, 0 inside). Returns
+/// ŷ `[B, 3, h, w]`, equal to the whole-image [`combine`] at those pixels.
+pub fn combine_block(
+    levels: Tensor<4>,
+    weights: Tensor<4>,
+    window: usize,
+    margins: [usize; 4],
+) -> Tensor<4> {
+    let [batch, channels, _, _] = levels.dims();
+    let [_, _, height, width] = weights.dims();
     assert!(
         channels >= 6 && channels % 3 == 0,
         "levels need 3·m channels with m ≥ 2, got {channels}"
@@ -69,21 +102,37 @@ pub fn combine(levels: Tensor<4>, weights: Tensor<4>, window: usize) -> Tensor<4
     let pairs = channels / 3 - 1;
     assert_eq!(window % 2, 1, "window must be odd");
     let r = window / 2;
+    let [top, bottom, left, right] = margins;
+    assert!(
+        margins.iter().all(|&m| m <= r),
+        "margins exceed the window reach"
+    );
+    assert_eq!(
+        levels.dims()[2..],
+        [height + 2 * r - top - bottom, width + 2 * r - left - right],
+        "levels must cover the weights' pixels grown by the window reach less the margins"
+    );
     let area = window * window;
     let pixels = height * width;
 
     let y = levels.clone().narrow(1, 0, 3);
     let z = levels.narrow(1, 3, 3 * pairs);
     let differences = y.repeat_dim(1, pairs) - z.clone();
-    let padded = differences.pad([(r, r), (r, r)], PadMode::Constant(0.0));
+    let padded = differences.pad([(top, bottom), (left, right)], PadMode::Constant(0.0));
     let gathered = unfold4d(
         padded,
         [window, window],
         UnfoldOptions::new([1, 1], [0, 0], [1, 1]),
     )
     .reshape([batch, pairs, 3, area, pixels]);
+    // z̃ at the block's own pixels (the window centres).
+    let z = if margins == [r; 4] {
+        z
+    } else {
+        z.narrow(2, r - top, height).narrow(3, r - left, width)
+    };
 
-    let w = masked_weights(weights, window, pairs);
+    let w = masked_weights(weights, window, pairs, margins);
     let weight_sums = w.clone().sum_dim(3); // [B, 4, 1, 1, HW]
     let window_term = (gathered * w).sum_dim(3); // [B, 4, 3, 1, HW]
     let centre_term = weight_sums.clone() * z.reshape([batch, pairs, 3, 1, pixels]);
@@ -96,9 +145,19 @@ pub fn combine(levels: Tensor<4>, weights: Tensor<4>, window: usize) -> Tensor<4
 /// for the full network channel 0 is the sharpest correlated level z̃1, channel 3 the smoothest
 /// z̃4 (paper Fig. 6).
 pub fn level_weight_shares(weights: Tensor<4>, window: usize) -> Tensor<4> {
+    level_weight_shares_block(weights, window, [window / 2; 4])
+}
+
+/// [`level_weight_shares`] for a block of pixels cut out of a larger image, `margins` as in
+/// [`combine_block`].
+pub fn level_weight_shares_block(
+    weights: Tensor<4>,
+    window: usize,
+    margins: [usize; 4],
+) -> Tensor<4> {
     let [batch, channels, height, width] = weights.dims();
     let pairs = channels / (window * window);
-    let sums = masked_weights(weights, window, pairs).sum_dim(3); // [B, m−1, 1, 1, HW]
+    let sums = masked_weights(weights, window, pairs, margins).sum_dim(3); // [B, m−1, 1, 1, HW]
     let total = sums.clone().sum_dim(1);
     (sums / total).reshape([batch, pairs, height, width])
 }
@@ -239,6 +298,48 @@ mod tests {
             window,
         ));
         for (g, e) in got.iter().zip(&expected) {
+            assert!((g - e).abs() < 1e-5, "{g} vs {e}");
+        }
+    }
+
+    #[test]
+    fn a_block_combines_like_the_whole_image() {
+        // 9×8 image, window 5 (reach 2); the block rows 1..5, columns 3..8: its reach is
+        // clipped by one row at the top, by two columns at the right border, not elsewhere.
+        let (h, w, window) = (9, 8, 5);
+        let hw = h * w;
+        let levels = noise(15 * hw, 11, 0.0, 2.0);
+        let weights = noise(4 * 25 * hw, 12, 0.01, 1.0);
+        let whole = values(combine(
+            tensor4(levels.clone(), [1, 15, h, w]),
+            tensor4(weights.clone(), [1, 100, h, w]),
+            window,
+        ));
+        let (y0, y1, x0, x1) = (1, 5, 3, 8);
+        let (ly0, ly1, lx0, lx1) = (0, 7, 1, 8); // grown by 2, clipped
+        let crop = |data: &[f32], planes: usize, r: (usize, usize, usize, usize)| -> Vec<f32> {
+            let mut out = Vec::new();
+            for p in 0..planes {
+                for y in r.0..r.1 {
+                    out.extend_from_slice(&data[p * hw + y * w + r.2..p * hw + y * w + r.3]);
+                }
+            }
+            out
+        };
+        let block = values(combine_block(
+            tensor4(
+                crop(&levels, 15, (ly0, ly1, lx0, lx1)),
+                [1, 15, ly1 - ly0, lx1 - lx0],
+            ),
+            tensor4(
+                crop(&weights, 100, (y0, y1, x0, x1)),
+                [1, 100, y1 - y0, x1 - x0],
+            ),
+            window,
+            [1, 0, 0, 2],
+        ));
+        let expected = crop(&whole, 3, (y0, y1, x0, x1));
+        for (g, e) in block.iter().zip(&expected) {
             assert!((g - e).abs() < 1e-5, "{g} vs {e}");
         }
     }
