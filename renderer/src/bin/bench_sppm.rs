@@ -54,6 +54,8 @@ struct Sample {
     cpu_per_pass: f64,
     /// Photon tracing + grid build seconds per pass (all passes).
     photon_per_pass: f64,
+    /// Of which the grid build.
+    grid_per_pass: f64,
     /// Eye subpaths + gather + accumulation seconds per pass (all passes).
     gather_per_pass: f64,
     /// Photons emitted per second of the photon phase.
@@ -117,12 +119,13 @@ fn run() -> Result<()> {
             for (m, v) in samples.iter().enumerate().filter(|(_, v)| !v.is_empty()) {
                 let s = median(v);
                 println!(
-                    "threads {threads} {:8}: {:.4} s/pass steady, {:.4} CPU s/pass, photon {:.4}, \
-                     gather {:.4}",
+                    "threads {threads} {:8}: {:.4} s/pass steady, {:.4} CPU s/pass, photon {:.4} \
+                     (grid {:.4}), gather {:.4}",
                     modes[m].name(),
                     s.steady_per_pass,
                     s.cpu_per_pass,
                     s.photon_per_pass,
+                    s.grid_per_pass,
                     s.gather_per_pass
                 );
             }
@@ -132,12 +135,13 @@ fn run() -> Result<()> {
         for (m, s) in med.iter().enumerate() {
             println!(
                 "threads {threads} {:8}: {:.4} s/pass steady (wall), {:.4} CPU s/pass; \
-                 photon phase {:.4} s/pass = {:.3} M photons/s; gather phase {:.4} s/pass = \
-                 {:.3} M visible points/s",
+                 photon phase {:.4} s/pass (grid build {:.4}) = {:.3} M photons/s; gather phase \
+                 {:.4} s/pass = {:.3} M visible points/s",
                 modes[m].name(),
                 s.steady_per_pass,
                 s.cpu_per_pass,
                 s.photon_per_pass,
+                s.grid_per_pass,
                 s.photons_per_s / 1e6,
                 s.gather_per_pass,
                 s.visible_points_per_s / 1e6
@@ -156,11 +160,14 @@ fn run() -> Result<()> {
     if let (Some((t1, a)), Some((t2, b))) = (results.first(), results.get(1)) {
         for (m, mode) in modes.iter().enumerate() {
             println!(
-                "scaling {t1} -> {t2} threads, {}: whole pass {:.2}x, photon phase {:.2}x, \
-                 gather phase {:.2}x",
+                "scaling {t1} -> {t2} threads, {}: whole pass {:.2}x, photon phase {:.2}x \
+                 (tracing {:.2}x, grid build {:.2}x), gather phase {:.2}x",
                 mode.name(),
                 a[m].steady_per_pass / b[m].steady_per_pass,
                 a[m].photon_per_pass / b[m].photon_per_pass,
+                (a[m].photon_per_pass - a[m].grid_per_pass)
+                    / (b[m].photon_per_pass - b[m].grid_per_pass),
+                a[m].grid_per_pass / b[m].grid_per_pass,
                 a[m].gather_per_pass / b[m].gather_per_pass,
             );
         }
@@ -206,6 +213,7 @@ fn measure(scene: &Scene, cli: &Cli, mode: SppmMode, threads: usize) -> Result<S
         steady_per_pass: (after_last - after_first) / (n - 1.0),
         cpu_per_pass: cpu / n,
         photon_per_pass: summary.photon_seconds / n,
+        grid_per_pass: summary.grid_seconds / n,
         gather_per_pass: summary.gather_seconds / n,
         photons_per_s: summary.photons_emitted as f64 / summary.photon_seconds.max(1e-12),
         visible_points_per_s: summary.visible_points as f64 / summary.gather_seconds.max(1e-12),

@@ -81,6 +81,39 @@ fn floor_i64(x: f32) -> i64 {
     t - ((x < t as f32) as i64)
 }
 
+/// Bits per radix-sort digit.
+const RADIX_BITS: u32 = 11;
+
+/// Sorts `keys` by their first element, stably (least-significant digit first), looking only at
+/// its low `bits` bits (the others must be zero). `scratch` is reused as the second buffer.
+fn radix_sort_by_code(keys: &mut Vec<(u64, u64)>, scratch: &mut Vec<(u64, u64)>, bits: u32) {
+    let digits = 1usize << RADIX_BITS;
+    let mask = (digits - 1) as u64;
+    let mut count = vec![0usize; digits];
+    let mut shift = 0;
+    while shift < bits {
+        count.iter_mut().for_each(|c| *c = 0);
+        for k in keys.iter() {
+            count[((k.0 >> shift) & mask) as usize] += 1;
+        }
+        let mut sum = 0;
+        for c in count.iter_mut() {
+            let n = *c;
+            *c = sum;
+            sum += n;
+        }
+        scratch.clear();
+        scratch.resize(keys.len(), (0, 0));
+        for k in keys.iter() {
+            let d = ((k.0 >> shift) & mask) as usize;
+            scratch[count[d]] = *k;
+            count[d] += 1;
+        }
+        std::mem::swap(keys, scratch);
+        shift += RADIX_BITS;
+    }
+}
+
 /// A uniform grid over the photons of one pass, hashed by cell; reusable across passes
 /// ([`PhotonGrid::rebuild`] keeps the allocations).
 #[derive(Debug, Clone, Default)]
@@ -93,8 +126,10 @@ pub struct PhotonGrid {
     table: Vec<CellRun>,
     /// `64 − log2(table.len())`.
     shift: u32,
-    /// Scratch: (cell code, input index) per photon, sorted.
-    keys: Vec<(u64, u32)>,
+    /// Scratch: (cell code, chunk << 32 | index in chunk) per photon, sorted.
+    keys: Vec<(u64, u64)>,
+    /// Scratch buffer of the radix sort.
+    scratch: Vec<(u64, u64)>,
     /// Grid origin (minimum corner of the photon bounds).
     origin: Vec3,
     /// Edge length of a cell.
@@ -116,13 +151,7 @@ impl PhotonGrid {
     /// Rebuilds the grid over the concatenation of `chunks` (input order = chunk order, then
     /// order within a chunk), reusing this grid's allocations.
     pub fn rebuild(&mut self, chunks: &[Vec<Photon>], cell_size: f32) {
-        let mut offsets = Vec::with_capacity(chunks.len() + 1);
-        let mut total = 0usize;
-        for c in chunks {
-            offsets.push(total);
-            total += c.len();
-        }
-        offsets.push(total);
+        let total: usize = chunks.iter().map(Vec::len).sum();
         assert!(total < u32::MAX as usize, "too many photons in one pass");
         // Bounds of the finite positions (min/max are exact: any reduction order gives the
         // same result).
@@ -157,37 +186,45 @@ impl PhotonGrid {
         let max_cell = MAX_CELLS_PER_AXIS - 1;
         self.dims = ((extent / cell).as_uvec3() + UVec3::ONE).min(UVec3::splat(max_cell + 1));
 
-        // (cell code, input index) of every photon, then one parallel sort: the key is unique,
-        // so the result does not depend on the sort's scheduling.
+        // (cell code, location) of every photon, location = chunk << 32 | index in the chunk, so
+        // ordering by the pair is ordering by (cell code, input index). Each chunk fills its own
+        // slice of the key array in parallel.
         let (origin, dims) = (self.origin, self.dims);
-        let photon_at = |g: usize| -> &Photon {
-            let c = offsets.partition_point(|&o| o <= g) - 1;
-            &chunks[c][g - offsets[c]]
-        };
-        (0..total)
+        self.keys.clear();
+        self.keys.resize(total, (0, 0));
+        let mut slices = Vec::with_capacity(chunks.len());
+        let mut rest = &mut self.keys[..];
+        for c in chunks {
+            let (head, tail) = rest.split_at_mut(c.len());
+            slices.push(head);
+            rest = tail;
+        }
+        slices
             .into_par_iter()
-            .with_min_len(4096)
-            .map(|g| {
-                // Divided, not multiplied by the inverse: the cell of a photon on a boundary
-                // stays what it was with the hash-bucket grid (same gather order, same bits).
-                let cell = ((photon_at(g).position - origin) / cell)
-                    .as_uvec3()
-                    .min(dims - UVec3::ONE);
-                (morton(cell), g as u32)
-            })
-            .collect_into_vec(&mut self.keys);
-        self.keys.par_sort_unstable();
+            .zip(chunks.par_iter())
+            .enumerate()
+            .for_each(|(c, (keys, photons))| {
+                for (o, (key, p)) in keys.iter_mut().zip(photons).enumerate() {
+                    // Divided, not multiplied by the inverse: the cell of a photon on a boundary
+                    // stays what it was with the hash-bucket grid (same gather order, bits).
+                    let cell = ((p.position - origin) / cell)
+                        .as_uvec3()
+                        .min(dims - UVec3::ONE);
+                    *key = (morton(cell), (c as u64) << 32 | o as u64);
+                }
+            });
+        // Stable LSD radix sort by cell code: the keys are in input order, so the result is
+        // sorted by (code, input index). Only the bits the codes can use are sorted.
+        let axis_bits = 32 - (dims.max_element() - 1).leading_zeros();
+        radix_sort_by_code(&mut self.keys, &mut self.scratch, 3 * axis_bits);
         self.keys
             .par_iter()
             .with_min_len(4096)
-            .map(|&(_, g)| *photon_at(g as usize))
-            .collect_into_vec(&mut self.photons);
-        self.photons
-            .par_iter()
-            .with_min_len(4096)
-            .map(|p| p.position)
-            .collect_into_vec(&mut self.positions);
-
+            .map(|&(_, loc)| {
+                let p = chunks[(loc >> 32) as usize][loc as u32 as usize];
+                (p, p.position)
+            })
+            .unzip_into_vecs(&mut self.photons, &mut self.positions);
         // Runs of equal codes → hash table (load factor ≤ 1/2).
         let cells = 1 + self.keys.windows(2).filter(|w| w[0].0 != w[1].0).count();
         let size = (2 * cells).next_power_of_two().max(2);
@@ -513,6 +550,30 @@ mod tests {
         for _ in 0..20 {
             let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 1.5;
             assert_eq!(visit(&reused, p, 0.2), visit(&fresh, p, 0.2));
+        }
+    }
+
+    #[test]
+    fn radix_sort_is_a_stable_sort_by_code() {
+        let mut rng = rng_for(13, 0, 0);
+        for bits in [0, 5, 11, 12, 30, 48] {
+            let mask = if bits == 0 {
+                0
+            } else {
+                u64::MAX >> (64 - bits)
+            };
+            // Few distinct codes per length so that ties (stability) matter.
+            let mut keys: Vec<(u64, u64)> = (0..3000u64)
+                .map(|i| {
+                    let r = (rng.next_f32() * 97.0) as u64;
+                    ((r.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 7) & mask, i)
+                })
+                .collect();
+            let mut want = keys.clone();
+            want.sort_by_key(|k| k.0); // stable
+            let mut scratch = Vec::new();
+            radix_sort_by_code(&mut keys, &mut scratch, bits);
+            assert_eq!(keys, want, "bits {bits}");
         }
     }
 
