@@ -363,25 +363,16 @@ impl PhotonGrid {
         // pixel initialised late (its first visible point in a later pass, when the cells have
         // shrunk to the typical radius) would otherwise scan the cap's whole volume of small
         // cells — the dominant cost of a pass with many photons.
-        // `best` holds the k smallest squared distances seen, ascending.
-        let mut best: Vec<f32> = Vec::with_capacity(k + 1);
+        // All squared distances within the current radius, then one selection (cheaper than
+        // keeping a sorted top-k while scanning); the k-th value does not depend on the method.
+        let mut d2s: Vec<f32> = Vec::with_capacity(4 * k);
         let mut r = self.cell_size.min(max_radius);
         loop {
-            best.clear();
-            let mut count = 0usize;
-            self.for_each_within(p, r, |_, d2| {
-                count += 1;
-                if best.len() == k {
-                    if d2 >= best[k - 1] {
-                        return;
-                    }
-                    best.pop();
-                }
-                let at = best.partition_point(|&b| b <= d2);
-                best.insert(at, d2);
-            });
-            if count >= k {
-                return Some(best[k - 1].sqrt());
+            d2s.clear();
+            self.for_each_within(p, r, |_, d2| d2s.push(d2));
+            if d2s.len() >= k {
+                let (_, kth, _) = d2s.select_nth_unstable_by(k - 1, f32::total_cmp);
+                return Some(kth.sqrt());
             }
             if r >= max_radius {
                 return None;
