@@ -45,8 +45,9 @@ struct Cli {
     /// Tensor backend.
     #[arg(long, default_value = "flex", value_parser = Backend::parse)]
     backend: Backend,
-    /// Tile side in pixels (a halo covering the receptive field is added); 0 = whole image.
-    #[arg(long, default_value_t = 128)]
+    /// Tile side in pixels (a halo covering the receptive field is added; the last layer and
+    /// the combination run in bands of rows, so memory stays near 1 GB); 0 = whole image.
+    #[arg(long, default_value_t = 512)]
     tile: usize,
 
     /// `--scene`: SPPM passes to render.

@@ -26,8 +26,8 @@ struct Cli {
     /// Image side in pixels (square synthetic bundle).
     #[arg(long, default_value_t = 512)]
     size: usize,
-    /// Tile side (0 = whole image).
-    #[arg(long, default_value_t = 128)]
+    /// Tile side (0 = whole image); `infer`'s default.
+    #[arg(long, default_value_t = 512)]
     tile: usize,
     /// Timed repetitions after one warm-up; the median is reported.
     #[arg(long, default_value_t = 2)]
