@@ -228,8 +228,13 @@ fn evaluates_explicit_and_dataset_scenes() {
             );
             assert!(std_eq > 0.0);
             finite(&c["ratio_equal_time"], "ratio");
-            // The standard run carries on past ours' total time: the point is interpolated.
-            assert_eq!(c["standard_equal_time"]["extrapolated"], false);
+            // The standard run carries on past ours' total time, so a point is never
+            // extrapolated beyond its end; it may be before its start, and only there, when
+            // ours finished before standard SPPM's first pass did (timing on a loaded machine).
+            let first_standard = finite(&eval["standard"][0]["seconds"], "standard seconds");
+            if c["standard_equal_time"]["extrapolated"] == true {
+                assert!(total < first_standard, "{total} s: extrapolated past the end");
+            }
             finite(&c["standard_equal_passes"], "standard at equal passes");
             finite(&c["overhead"], "overhead");
         }
