@@ -233,7 +233,10 @@ fn evaluates_explicit_and_dataset_scenes() {
             // ours finished before standard SPPM's first pass did (timing on a loaded machine).
             let first_standard = finite(&eval["standard"][0]["seconds"], "standard seconds");
             if c["standard_equal_time"]["extrapolated"] == true {
-                assert!(total < first_standard, "{total} s: extrapolated past the end");
+                assert!(
+                    total < first_standard,
+                    "{total} s: extrapolated past the end"
+                );
             }
             finite(&c["standard_equal_passes"], "standard at equal passes");
             finite(&c["overhead"], "overhead");
