@@ -77,8 +77,10 @@ fn slot(code: u64, shift: u32) -> usize {
 /// Floor of a float as i64, without a libm call (`f32::floor` is one on baseline x86-64).
 #[inline]
 fn floor_i64(x: f32) -> i64 {
-    let t = x as i64; // truncates towards zero, saturates, NaN → 0
-    t - ((x < t as f32) as i64)
+    // The cast truncates towards zero, saturates, NaN → 0; below i64::MIN it has saturated
+    // already and `t - 1` would overflow, hence the saturating subtraction.
+    let t = x as i64;
+    t.saturating_sub((x < t as f32) as i64)
 }
 
 /// Bits per radix-sort digit.
