@@ -15,10 +15,13 @@ use datagen::scene::{write_scene_files, Family};
 use renderer::bsdf::Bsdf;
 use renderer::description::{EmitterDesc, FovAxis, SceneDescription};
 use std::collections::{BTreeMap, BTreeSet, HashSet};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 fn preset_path(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../configs/datagen/{name}.toml"))
+    PathBuf::from(
+        std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
+    )
+    .join(format!("../configs/datagen/{name}.toml"))
 }
 
 fn preset(name: &str) -> Config {

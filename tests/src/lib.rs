@@ -24,9 +24,14 @@ pub fn workspace_bin(name: &str) -> PathBuf {
 }
 
 /// The workspace root (the parent of this crate's directory).
+///
+/// Read at run time first: a target dir shared between checkouts (the CI cache) can hold a
+/// binary compiled in another checkout, whose compile-time path would point there.
 pub fn workspace_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("crate inside the workspace")
-        .to_owned()
+    PathBuf::from(
+        std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
+    )
+    .parent()
+    .expect("crate inside the workspace")
+    .to_owned()
 }

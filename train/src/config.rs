@@ -134,7 +134,11 @@ mod tests {
 
     #[test]
     fn shipped_dual_configs_match_small_except_levels_and_output() {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let root = PathBuf::from(
+            std::env::var_os("CARGO_MANIFEST_DIR")
+                .unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
+        )
+        .join("..");
         let small = TrainConfig::read(&root.join("configs/train/small.toml")).unwrap();
         assert_eq!(small.levels, None);
         for (file, j) in [

@@ -8,7 +8,10 @@ use std::path::{Path, PathBuf};
 
 /// The tiny preset shrunk further for tests: 16×16, the given passes and seeds.
 pub fn test_config(width: u32, passes: &[u32], seeds: u32, reference_passes: u32) -> Config {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/datagen/tiny.toml");
+    let root = PathBuf::from(
+        std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
+    )
+    .join("../configs/datagen/tiny.toml");
     let mut c = Config::load(&root).expect("tiny config parses");
     c.width = width;
     c.height = width;

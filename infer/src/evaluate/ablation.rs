@@ -203,21 +203,13 @@ mod tests {
 
     fn scene(name: &str, checkpoints: Vec<Checkpoint>) -> SceneResult {
         SceneResult {
-            name: name.into(),
-            xml: PathBuf::from("s.xml"),
-            reference: PathBuf::from("r.exr"),
             eval: Some(SceneEval {
                 width: 1,
                 height: 1,
                 checkpoints,
                 standard: Vec::new(),
             }),
-            error: None,
-            plot: None,
-            comparison: None,
-            inputs: None,
-            comparison_standard: None,
-            error_scale: None,
+            ..SceneResult::new(name.into(), PathBuf::from("s.xml"), PathBuf::from("r.exr"))
         }
     }
 

@@ -61,6 +61,24 @@ pub struct SceneResult {
     pub error_scale: Option<f32>,
 }
 
+impl SceneResult {
+    /// A scene not evaluated yet: its paths, no measurements, no error, no pictures.
+    pub fn new(name: String, xml: PathBuf, reference: PathBuf) -> Self {
+        Self {
+            name,
+            xml,
+            reference,
+            eval: None,
+            error: None,
+            plot: None,
+            comparison: None,
+            inputs: None,
+            comparison_standard: None,
+            error_scale: None,
+        }
+    }
+}
+
 /// Aggregates over the scenes at the largest pass count.
 #[derive(Clone, Debug, Serialize)]
 pub struct Summary {
@@ -206,18 +224,7 @@ fn evaluate_one(
     variants: &[TrainedModel],
     device: &Device,
 ) -> SceneResult {
-    let mut r = SceneResult {
-        name: s.name.clone(),
-        xml: s.xml.clone(),
-        reference: s.reference.clone(),
-        eval: None,
-        error: None,
-        plot: None,
-        comparison: None,
-        inputs: None,
-        comparison_standard: None,
-        error_scale: None,
-    };
+    let mut r = SceneResult::new(s.name.clone(), s.xml.clone(), s.reference.clone());
     let outcome = (|| -> Result<()> {
         let (eval, imgs) =
             evaluate_scene(s, settings, passes, model, variants, config.tile, device)?;

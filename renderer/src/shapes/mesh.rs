@@ -21,22 +21,9 @@ pub struct Mesh {
     face_normals: Vec<Vec3>,
 }
 
-/// Distance along `ray` to triangle (p0, p1, p2), or +∞ when missed (Möller–Trumbore, both sides).
-#[inline(always)]
-pub fn intersect_triangle(
-    o: Vec3A,
-    d: Vec3A,
-    tmin: f32,
-    tmax: f32,
-    p0: Vec3A,
-    e1: Vec3A,
-    e2: Vec3A,
-) -> f32 {
-    intersect_triangle_bary(o, d, tmin, tmax, p0, e1, e2).0
-}
-
-/// [`intersect_triangle`] that also returns the hit's barycentric coordinates (b1, b2) (the
-/// same values [`Mesh::hit_geometry`] would recompute; meaningless on a miss).
+/// Distance along a ray to triangle (p0, p0 + e1, p0 + e2), or +∞ when missed (Möller–Trumbore,
+/// both sides), with the hit's barycentric coordinates (b1, b2) (the same values
+/// [`Mesh::hit_geometry`] would recompute; meaningless on a miss).
 #[inline(always)]
 pub fn intersect_triangle_bary(
     o: Vec3A,
@@ -225,10 +212,10 @@ mod tests {
         let (p0, p1, p2) = (Vec3A::ZERO, Vec3A::X, Vec3A::Y);
         let (e1, e2) = (p1 - p0, p2 - p0);
         let o = Vec3A::new(0.25, 0.25, 2.0);
-        let t = intersect_triangle(o, -Vec3A::Z, 0.0, f32::INFINITY, p0, e1, e2);
+        let t = intersect_triangle_bary(o, -Vec3A::Z, 0.0, f32::INFINITY, p0, e1, e2).0;
         assert!((t - 2.0).abs() < 1e-6);
         // From behind works too (two-sided intersection).
-        let t = intersect_triangle(
+        let t = intersect_triangle_bary(
             Vec3A::new(0.25, 0.25, -1.0),
             Vec3A::Z,
             0.0,
@@ -236,10 +223,11 @@ mod tests {
             p0,
             e1,
             e2,
-        );
+        )
+        .0;
         assert!((t - 1.0).abs() < 1e-6);
         // Outside the hypotenuse.
-        let t = intersect_triangle(
+        let t = intersect_triangle_bary(
             Vec3A::new(0.6, 0.6, 2.0),
             -Vec3A::Z,
             0.0,
@@ -247,10 +235,11 @@ mod tests {
             p0,
             e1,
             e2,
-        );
+        )
+        .0;
         assert!(t.is_infinite());
         // Beyond tmax.
-        let t = intersect_triangle(o, -Vec3A::Z, 0.0, 1.5, p0, e1, e2);
+        let t = intersect_triangle_bary(o, -Vec3A::Z, 0.0, 1.5, p0, e1, e2).0;
         assert!(t.is_infinite());
     }
 
