@@ -184,19 +184,25 @@ pub struct Plastic {
     pub nonlinear: bool,
 }
 
-/// `roughplastic`: diffuse base under a rough dielectric coating.
+/// `roughplastic`: diffuse base under a rough dielectric coating. Built by
+/// [`RoughPlastic::new`], which precomputes the coating's tables; the coating parameters are
+/// therefore read-only.
 #[derive(Debug, Clone)]
 pub struct RoughPlastic {
     /// `distribution`, `alpha` (defaults: beckmann, 0.1; isotropic).
-    pub roughness: Roughness,
+    roughness: Roughness,
     /// Relative index of refraction of the coating (default 1.49 / 1.000277).
-    pub eta: f32,
+    eta: f32,
     /// `diffuse_reflectance` (default 0.5).
     pub diffuse_reflectance: Texture,
     /// `specular_reflectance` multiplier (default 1).
     pub specular_reflectance: Texture,
     /// `nonlinear` (default false).
     pub nonlinear: bool,
+    /// The coating's transmittance table and internal reflectance for (`roughness`, `eta`),
+    /// computed when the BSDF is built so that no render pays for them (shared between equal
+    /// coatings).
+    coating: std::sync::Arc<roughplastic::CoatingTables>,
 }
 
 /// A surface scattering model: Mitsuba 3's BSDF plugins.

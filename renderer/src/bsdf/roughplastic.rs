@@ -10,10 +10,11 @@ use super::fresnel::{fresnel_dielectric, reflect_about, refract_about};
 use super::microfacet::MicrofacetDistribution;
 use super::plastic::{internal_scattering, specular_sampling_weight};
 use super::warp::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
-use super::{BsdfSample, RoughPlastic};
+use super::{BsdfSample, RoughPlastic, Roughness};
 use crate::spectrum::Rgb;
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
-use std::cell::RefCell;
+use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 use std::sync::{Arc, Mutex};
 
@@ -42,14 +43,25 @@ impl CoatingTables {
         a + (b - a) * t
     }
 
+    /// Computes the tables: each μ entry on its own rayon task (the entries are independent and
+    /// each sums in a fixed order, so the result does not depend on the thread count).
     fn compute(distr: &MicrofacetDistribution, eta: f32) -> Self {
+        let entries: Vec<(f32, f32)> = (0..TABLE_RES)
+            .into_par_iter()
+            .map(|j| {
+                let mu = (j as f32 / (TABLE_RES - 1) as f32).max(1e-6);
+                let wi = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                (
+                    coating_transmittance(distr, wi, eta),
+                    coating_reflectance(distr, wi, 1.0 / eta) * wi.z,
+                )
+            })
+            .collect();
         let mut external_transmittance = [0.0; TABLE_RES];
         let mut internal_sum = 0.0f32;
-        for (j, t) in external_transmittance.iter_mut().enumerate() {
-            let mu = (j as f32 / (TABLE_RES - 1) as f32).max(1e-6);
-            let wi = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
-            *t = coating_transmittance(distr, wi, eta);
-            internal_sum += coating_reflectance(distr, wi, 1.0 / eta) * wi.z;
+        for (t, (transmittance, reflectance)) in external_transmittance.iter_mut().zip(entries) {
+            *t = transmittance;
+            internal_sum += reflectance;
         }
         let internal_reflectance = internal_sum / TABLE_RES as f32 * 2.0;
         Self {
@@ -58,49 +70,38 @@ impl CoatingTables {
         }
     }
 
-    /// The (cached) tables of a rough plastic.
-    pub(super) fn get(bsdf: &RoughPlastic) -> Arc<CoatingTables> {
+    /// The tables of a coating, shared between equal coatings (a scene often repeats one
+    /// material; each distinct coating costs ~10⁶ microfacet samples).
+    fn shared(distr: &MicrofacetDistribution, eta: f32) -> Arc<CoatingTables> {
         type Cache = Vec<((u8, u32, u32), Arc<CoatingTables>)>;
         static SHARED: Mutex<Cache> = Mutex::new(Vec::new());
-        thread_local! {
-            static LOCAL: RefCell<Cache> = const { RefCell::new(Vec::new()) };
+        let key = (distr.kind as u8, distr.alpha_u.to_bits(), eta.to_bits());
+        if let Some((_, t)) = SHARED
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+            .find(|(k, _)| *k == key)
+        {
+            return t.clone();
         }
-        let distr = coating_distribution(bsdf);
-        let key = (
-            distr.kind as u8,
-            distr.alpha_u.to_bits(),
-            bsdf.eta.to_bits(),
-        );
-        if let Some(t) = LOCAL.with(|l| {
-            l.borrow()
-                .iter()
-                .find(|(k, _)| *k == key)
-                .map(|(_, t)| t.clone())
-        }) {
-            return t;
+        // Computed outside the lock: two threads may both compute the same tables (identical
+        // results); the first stored wins.
+        let computed = Arc::new(CoatingTables::compute(distr, eta));
+        let mut shared = SHARED.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, t)) = shared.iter().find(|(k, _)| *k == key) {
+            return t.clone();
         }
-        let tables = {
-            let mut shared = SHARED.lock().unwrap_or_else(|e| e.into_inner());
-            match shared.iter().find(|(k, _)| *k == key) {
-                Some((_, t)) => t.clone(),
-                None => {
-                    let t = Arc::new(CoatingTables::compute(&distr, bsdf.eta));
-                    shared.push((key, t.clone()));
-                    t
-                }
-            }
-        };
-        LOCAL.with(|l| l.borrow_mut().push((key, tables.clone())));
-        tables
+        shared.push((key, computed.clone()));
+        computed
     }
 }
 
-fn coating_distribution(bsdf: &RoughPlastic) -> MicrofacetDistribution {
-    let a = bsdf.roughness.alpha_u;
-    MicrofacetDistribution::new(&super::Roughness {
-        kind: bsdf.roughness.kind,
-        alpha_u: a,
-        alpha_v: a,
+/// The coating's distribution: isotropic with `alpha_u`, as Mitsuba's rough plastic.
+fn isotropic_distribution(r: &Roughness) -> MicrofacetDistribution {
+    MicrofacetDistribution::new(&Roughness {
+        kind: r.kind,
+        alpha_u: r.alpha_u,
+        alpha_v: r.alpha_u,
     })
 }
 
@@ -178,6 +179,36 @@ fn coating_reflectance(distr: &MicrofacetDistribution, wi: Vec3, eta: f32) -> f3
 }
 
 impl RoughPlastic {
+    /// The BSDF with its coating tables (see the module note); `roughness` is isotropic
+    /// (`alpha_u` is used), `eta` is the coating's relative index of refraction.
+    pub fn new(
+        roughness: Roughness,
+        eta: f32,
+        diffuse_reflectance: Texture,
+        specular_reflectance: Texture,
+        nonlinear: bool,
+    ) -> Self {
+        let distr = isotropic_distribution(&roughness);
+        Self {
+            coating: CoatingTables::shared(&distr, eta),
+            roughness,
+            eta,
+            diffuse_reflectance,
+            specular_reflectance,
+            nonlinear,
+        }
+    }
+
+    /// `distribution` and `alpha` as given.
+    pub fn roughness(&self) -> &Roughness {
+        &self.roughness
+    }
+
+    /// Relative index of refraction of the coating.
+    pub fn eta(&self) -> f32 {
+        self.eta
+    }
+
     fn prob_specular(&self, t_o: f32) -> f32 {
         let ssw = specular_sampling_weight(&self.diffuse_reflectance, &self.specular_reflectance);
         let ps = (1.0 - t_o) * ssw;
@@ -193,19 +224,18 @@ impl RoughPlastic {
         if wo.z <= 0.0 {
             return None;
         }
-        let tables = CoatingTables::get(self);
-        let p_spec = self.prob_specular(tables.transmittance(wo.z));
+        let p_spec = self.prob_specular(self.coating.transmittance(wo.z));
         let wi = if u_lobe < p_spec {
-            let (m, _) = coating_distribution(self).sample(wo, u);
+            let (m, _) = isotropic_distribution(&self.roughness).sample(wo, u);
             reflect_about(wo, m)
         } else {
             square_to_cosine_hemisphere(u)
         };
-        let pdf = self.pdf_with(&tables, wo, wi);
+        let pdf = self.pdf(wo, wi);
         if pdf.is_nan() || pdf <= 0.0 {
             return None;
         }
-        let f = self.eval_with(&tables, wo, wi, uv);
+        let f = self.eval(wo, wi, uv);
         Some(BsdfSample {
             wi,
             weight: f * (wi.z / pdf),
@@ -219,14 +249,7 @@ impl RoughPlastic {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Rgb::ZERO;
         }
-        self.eval_with(&CoatingTables::get(self), wo, wi, uv)
-    }
-
-    fn eval_with(&self, tables: &CoatingTables, wo: Vec3, wi: Vec3, uv: Vec2) -> Rgb {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return Rgb::ZERO;
-        }
-        let distr = coating_distribution(self);
+        let distr = isotropic_distribution(&self.roughness);
         let h = (wo + wi).normalize();
         let d = distr.eval(h);
         let f = fresnel_dielectric(wo.dot(h), self.eta).r;
@@ -234,10 +257,10 @@ impl RoughPlastic {
         let specular = self.specular_reflectance.eval(uv) * (f * d * g / (4.0 * wo.z * wi.z));
         let rho = internal_scattering(
             self.diffuse_reflectance.eval(uv),
-            tables.internal_reflectance,
+            self.coating.internal_reflectance,
             self.nonlinear,
         );
-        let t = tables.transmittance(wo.z) * tables.transmittance(wi.z);
+        let t = self.coating.transmittance(wo.z) * self.coating.transmittance(wi.z);
         specular + rho * (FRAC_1_PI * t / (self.eta * self.eta))
     }
 
@@ -245,15 +268,8 @@ impl RoughPlastic {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
-        self.pdf_with(&CoatingTables::get(self), wo, wi)
-    }
-
-    fn pdf_with(&self, tables: &CoatingTables, wo: Vec3, wi: Vec3) -> f32 {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return 0.0;
-        }
-        let p_spec = self.prob_specular(tables.transmittance(wo.z));
-        let distr = coating_distribution(self);
+        let p_spec = self.prob_specular(self.coating.transmittance(wo.z));
+        let distr = isotropic_distribution(&self.roughness);
         let h = (wo + wi).normalize();
         let spec = distr.eval(h) * distr.smith_g1(wo, h) / (4.0 * wo.z);
         p_spec * spec + (1.0 - p_spec) * square_to_cosine_hemisphere_pdf(wi)
@@ -279,18 +295,19 @@ mod tests {
 
     #[test]
     fn coating_tables_are_physical() {
-        let rp = RoughPlastic {
-            roughness: super::super::Roughness {
-                kind: MicrofacetKind::Ggx,
-                alpha_u: 0.3,
-                alpha_v: 0.3,
-            },
-            eta: 1.5,
-            diffuse_reflectance: crate::texture::Texture::Constant(Rgb::splat(0.5)),
-            specular_reflectance: crate::texture::Texture::Constant(Rgb::ONE),
-            nonlinear: false,
+        let roughness = super::super::Roughness {
+            kind: MicrofacetKind::Ggx,
+            alpha_u: 0.3,
+            alpha_v: 0.3,
         };
-        let t = CoatingTables::get(&rp);
+        let constant = |v| crate::texture::Texture::Constant(Rgb::splat(v));
+        let rp = RoughPlastic::new(roughness, 1.5, constant(0.5), constant(1.0), false);
+        // The tables are computed when built; the same coating shares them.
+        let again = RoughPlastic::new(roughness, 1.5, constant(0.2), constant(1.0), true);
+        assert!(Arc::ptr_eq(&rp.coating, &again.coating));
+        let other = RoughPlastic::new(roughness, 1.4, constant(0.5), constant(1.0), false);
+        assert!(!Arc::ptr_eq(&rp.coating, &other.coating));
+        let t = &rp.coating;
         // Near normal incidence the rough coating transmits about 1 − 0.04.
         assert!(
             (t.transmittance(1.0) - 0.96).abs() < 0.01,
@@ -305,7 +322,5 @@ mod tests {
         // 1/1.5) but must lie in (0, 1).
         let ri = t.internal_reflectance;
         assert!(ri > 0.4 && ri < 0.8, "{ri}");
-        // Cached: same Arc the second time.
-        assert!(Arc::ptr_eq(&t, &CoatingTables::get(&rp)));
     }
 }

@@ -75,13 +75,7 @@ fn plastic(eta: f32, d: Texture, nonlinear: bool) -> Bsdf {
 }
 
 fn rough_plastic(r: Roughness, eta: f32, d: Texture, nonlinear: bool) -> Bsdf {
-    Bsdf::RoughPlastic(RoughPlastic {
-        roughness: r,
-        eta,
-        diffuse_reflectance: d,
-        specular_reflectance: constant(1.0),
-        nonlinear,
-    })
+    Bsdf::RoughPlastic(RoughPlastic::new(r, eta, d, constant(1.0), nonlinear))
 }
 
 fn dielectric(eta: f32) -> Bsdf {

@@ -87,13 +87,13 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
             nonlinear: p.bool_or("nonlinear", false)?,
         }),
-        "roughplastic" => Bsdf::RoughPlastic(RoughPlastic {
-            roughness: roughness(b, &mut p, false)?,
-            eta: relative_ior(&mut p, "polypropylene")?,
-            diffuse_reflectance: p.texture_or(b, "diffuse_reflectance", refl, 0.5)?,
-            specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
-            nonlinear: p.bool_or("nonlinear", false)?,
-        }),
+        "roughplastic" => Bsdf::RoughPlastic(RoughPlastic::new(
+            roughness(b, &mut p, false)?,
+            relative_ior(&mut p, "polypropylene")?,
+            p.texture_or(b, "diffuse_reflectance", refl, 0.5)?,
+            p.texture_or(b, "specular_reflectance", refl, 1.0)?,
+            p.bool_or("nonlinear", false)?,
+        )),
         "twosided" => {
             let nested = p.objects(&["bsdf", "ref"]);
             let mut sides = Vec::with_capacity(2);

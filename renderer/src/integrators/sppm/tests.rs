@@ -418,17 +418,17 @@ fn gather_matches_brute_force_sum() {
             front: Box::new(diffuse(0.3)),
             back: Box::new(diffuse(0.8)),
         },
-        Bsdf::RoughPlastic(RoughPlastic {
-            roughness: Roughness {
+        Bsdf::RoughPlastic(RoughPlastic::new(
+            Roughness {
                 kind: MicrofacetKind::Beckmann,
                 alpha_u: 0.3,
                 alpha_v: 0.3,
             },
-            eta: 1.5,
-            diffuse_reflectance: Texture::Constant(Rgb::new(0.2, 0.5, 0.7)),
-            specular_reflectance: Texture::Constant(Rgb::ONE),
-            nonlinear: false,
-        }),
+            1.5,
+            Texture::Constant(Rgb::new(0.2, 0.5, 0.7)),
+            Texture::Constant(Rgb::ONE),
+            false,
+        )),
     ];
     let scene = scene(
         camera(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO, 40.0, 4),
