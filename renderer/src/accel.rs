@@ -61,11 +61,18 @@ pub struct CwBvhAccel {
 impl CwBvhAccel {
     /// Builds the BVH over every primitive of `shapes`.
     pub fn build(shapes: &[Shape]) -> Self {
+        Self::build_subset(shapes, |_| true)
+    }
+
+    /// Builds the BVH over the primitives of the shapes `keep` accepts (by index); hits report
+    /// indices into `shapes`, and a primitive's distance and barycentrics are computed exactly as
+    /// in a BVH over all shapes.
+    pub fn build_subset(shapes: &[Shape], keep: impl Fn(usize) -> bool) -> Self {
         let mut bounds = Vec::new();
         let mut geoms = Vec::new();
         let mut ids = Vec::new();
         let mut disks = Vec::new();
-        for (si, shape) in shapes.iter().enumerate() {
+        for (si, shape) in shapes.iter().enumerate().filter(|(i, _)| keep(*i)) {
             for prim in 0..shape.primitive_count() as u32 {
                 let (min, max) = shape.primitive_bounds(prim);
                 bounds.push(Aabb::new(min, max));

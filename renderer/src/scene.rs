@@ -2,7 +2,7 @@
 //! power-proportional selection, the camera, and the queries integrators make (closest hit,
 //! occlusion, emitted radiance, light sampling for NEE and photon emission).
 
-use crate::accel::{Accel, CwBvhAccel};
+use crate::accel::{Accel, CwBvhAccel, PrimitiveHit};
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription};
@@ -17,6 +17,17 @@ use crate::shapes::Shape;
 use crate::spectrum::Rgb;
 use anyhow::{bail, Result};
 use glam::{Vec2, Vec3};
+
+/// What [`Scene::intersect_emitter`] finds along a ray.
+#[derive(Debug, Clone, Copy)]
+pub enum EmitterHit {
+    /// The closest hit is an emitting surface.
+    Emitter(SurfaceInteraction),
+    /// Nothing is hit and the scene has an environment light.
+    Escaped,
+    /// A non-emitting surface comes first, or nothing is hit and there is no environment.
+    Blocked,
+}
 
 /// Everything known about a ray's closest hit.
 #[derive(Debug, Clone, Copy)]
@@ -100,6 +111,8 @@ pub struct Scene {
     environment_radiance: Rgb,
     /// Ray-tracing acceleration structure.
     accel: CwBvhAccel,
+    /// The same over emitting shapes only, for rays that only look for emitted light.
+    emitter_accel: CwBvhAccel,
     /// Bounding box (min, max) of all shapes.
     bounds: (Vec3, Vec3),
     /// Bounding sphere of all shapes (and the camera), for infinite lights.
@@ -269,6 +282,7 @@ impl Scene {
         }
 
         let accel = CwBvhAccel::build(&shapes);
+        let emitter_accel = CwBvhAccel::build_subset(&shapes, |i| shape_info[i].light.is_some());
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
         for s in &shapes {
@@ -303,6 +317,7 @@ impl Scene {
             environment_lights,
             environment_radiance,
             accel,
+            emitter_accel,
             bounds: (lo, hi),
             sphere,
             integrator: desc.integrator.clone(),
@@ -340,10 +355,42 @@ impl Scene {
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
         let hit = self.accel.intersect(ray)?;
+        Some(self.interaction(ray, &hit))
+    }
+
+    /// What a ray that only looks for emitted light finds — the BSDF-sampling half of a
+    /// light-sampling MIS pair at a vertex where the path ends. The answer is the one
+    /// [`Self::intersect`] implies, but cheaper: the closest hit is searched among emitting
+    /// shapes only (usually a handful of primitives), and the rest of the scene is asked only
+    /// whether it blocks the ray before that hit (or, with an environment light, at all).
+    #[inline]
+    pub fn intersect_emitter(&self, ray: &Ray) -> EmitterHit {
+        if let Some(hit) = self.emitter_accel.intersect(ray) {
+            // Strictly before the emitter: the occlusion test computes the emitter's own
+            // distance exactly as the emitter BVH did, so the emitter does not block itself.
+            let before = Ray {
+                tmax: hit.t,
+                ..*ray
+            };
+            if self.accel.occluded(&before) {
+                EmitterHit::Blocked
+            } else {
+                EmitterHit::Emitter(self.interaction(ray, &hit))
+            }
+        } else if self.has_environment() && !self.accel.occluded(ray) {
+            EmitterHit::Escaped
+        } else {
+            EmitterHit::Blocked
+        }
+    }
+
+    /// The surface interaction of an accelerator hit along `ray`.
+    #[inline]
+    fn interaction(&self, ray: &Ray, hit: &PrimitiveHit) -> SurfaceInteraction {
         let shape = &self.shapes[hit.shape as usize];
         let g = shape.hit_geometry(hit.prim, ray, hit.t, hit.bary);
         let info = &self.shape_info[hit.shape as usize];
-        Some(SurfaceInteraction {
+        SurfaceInteraction {
             p: g.p,
             t: hit.t,
             ng: g.ng,
@@ -354,7 +401,7 @@ impl Scene {
             prim: hit.prim,
             material: info.material,
             light: info.light,
-        })
+        }
     }
 
     /// Whether anything blocks `ray` within its `[tmin, tmax]`.
@@ -581,6 +628,69 @@ mod tests {
             }
         }
         acc / n as f64
+    }
+
+    /// A non-emitting sphere (occluder) of radius `radius` at `center`.
+    fn ball(center: Vec3, radius: f32) -> ShapeDesc {
+        ShapeDesc {
+            emission: None,
+            name: "occluder".into(),
+            ..ball_light(center, radius)
+        }
+    }
+
+    #[test]
+    fn emitter_probe_answers_as_the_closest_hit_does() {
+        for environment in [false, true] {
+            let emitters = if environment {
+                vec![EmitterDesc::Constant {
+                    radiance: Rgb::splat(0.5),
+                }]
+            } else {
+                vec![]
+            };
+            let scene = Scene::build(&desc(
+                vec![
+                    ceiling_light(),
+                    ball_light(Vec3::new(1.5, 0.0, 0.0), 0.4),
+                    ball(Vec3::new(0.0, 0.5, 0.0), 0.3),
+                    ball(Vec3::new(-1.0, -0.5, 0.5), 0.6),
+                ],
+                emitters,
+            ))
+            .unwrap();
+            let mut rng = rng_for(3, 0, 0);
+            let mut seen = [0u32; 3];
+            for _ in 0..20_000 {
+                let o = Vec3::new(
+                    4.0 * rng.next_f32() - 2.0,
+                    2.0 * rng.next_f32() - 1.0,
+                    2.0 * rng.next_f32() - 1.0,
+                );
+                let ray = Ray::new(o, square_to_uniform_sphere(rng.next_2d()));
+                match (scene.intersect_emitter(&ray), scene.intersect(&ray)) {
+                    (EmitterHit::Emitter(e), Some(h)) => {
+                        assert!(h.light.is_some(), "{ray:?}: emitter behind {h:?}");
+                        assert_eq!((e.shape, e.prim, e.t, e.p), (h.shape, h.prim, h.t, h.p));
+                        assert_eq!(scene.emitted(&e, e.wo), scene.emitted(&h, h.wo));
+                        seen[0] += 1;
+                    }
+                    (EmitterHit::Escaped, None) => {
+                        assert!(environment);
+                        seen[1] += 1;
+                    }
+                    (EmitterHit::Blocked, Some(h)) => {
+                        assert!(h.light.is_none(), "{ray:?}: missed emitter {h:?}");
+                        seen[2] += 1;
+                    }
+                    (EmitterHit::Blocked, None) => assert!(!environment),
+                    (probe, hit) => panic!("{ray:?}: probe {probe:?} but closest hit {hit:?}"),
+                }
+            }
+            // Every outcome occurs (escapes only with the environment).
+            assert!(seen[0] > 1000 && seen[2] > 1000, "{seen:?}");
+            assert_eq!(seen[1] > 1000, environment, "{seen:?}");
+        }
     }
 
     #[test]

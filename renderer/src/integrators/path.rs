@@ -7,7 +7,7 @@ use crate::bsdf::TransportMode;
 use crate::film::{render_pixels, Film};
 use crate::math::Ray;
 use crate::sampling::{power_heuristic, rng_for, Pcg32, UniformSource};
-use crate::scene::Scene;
+use crate::scene::{EmitterHit, Scene, SurfaceInteraction};
 use crate::spectrum::Rgb;
 use glam::UVec2;
 use indicatif::ProgressBar;
@@ -50,30 +50,46 @@ impl PathTracer {
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
         loop {
+            // Emission found by BSDF sampling (or seen from the camera), MIS-weighted against
+            // light sampling from the previous vertex.
+            let environment = |ray: &Ray| {
+                let w = if prev_delta {
+                    1.0
+                } else {
+                    power_heuristic(prev_pdf, scene.pdf_li_environment(ray.d))
+                };
+                throughput * scene.environment(ray.d) * w
+            };
+            let emission = |si: &SurfaceInteraction| {
+                let le = scene.emitted(si, si.wo);
+                if le == Rgb::ZERO {
+                    return Rgb::ZERO;
+                }
+                let w = if prev_delta {
+                    1.0
+                } else {
+                    power_heuristic(prev_pdf, scene.pdf_li_surface(prev_p, si))
+                };
+                throughput * le * w
+            };
+            if depth + 1 >= max_depth {
+                // The last vertex: only its emission counts, so the ray looks for emitters
+                // only (the same answer as a closest hit, for less work).
+                result += match scene.intersect_emitter(&ray) {
+                    EmitterHit::Emitter(si) => emission(&si),
+                    EmitterHit::Escaped => environment(&ray),
+                    EmitterHit::Blocked => Rgb::ZERO,
+                };
+                break;
+            }
             let Some(si) = scene.intersect(&ray) else {
                 if scene.has_environment() {
-                    let w = if prev_delta {
-                        1.0
-                    } else {
-                        power_heuristic(prev_pdf, scene.pdf_li_environment(ray.d))
-                    };
-                    result += throughput * scene.environment(ray.d) * w;
+                    result += environment(&ray);
                 }
                 break;
             };
             if si.light.is_some() {
-                let le = scene.emitted(&si, si.wo);
-                if le != Rgb::ZERO {
-                    let w = if prev_delta {
-                        1.0
-                    } else {
-                        power_heuristic(prev_pdf, scene.pdf_li_surface(prev_p, &si))
-                    };
-                    result += throughput * le * w;
-                }
-            }
-            if depth + 1 >= max_depth {
-                break;
+                result += emission(&si);
             }
             let bsdf = scene.bsdf(&si);
             let wo = si.to_local(si.wo);

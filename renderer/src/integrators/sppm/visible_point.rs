@@ -10,7 +10,7 @@ use crate::bsdf::{Bsdf, Lobe, TransportMode};
 use crate::frame::Frame;
 use crate::math::Ray;
 use crate::sampling::{power_heuristic, Pcg32, UniformSource};
-use crate::scene::{Scene, SurfaceInteraction};
+use crate::scene::{EmitterHit, Scene, SurfaceInteraction};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 
@@ -159,15 +159,17 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
             let u = rng.next_2d();
             if let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance) {
                 let probe = si.spawn_ray(si.to_world(bs.wi));
-                let probe_hit = scene.intersect(&probe);
                 let probe_last = LastScatter {
                     p: si.p,
                     pdf: bs.pdf,
                     delta: bs.delta,
                 };
-                out.direct += beta
-                    * bs.weight
-                    * emission_along(scene, &probe, probe_hit.as_ref(), &probe_last);
+                let found = match scene.intersect_emitter(&probe) {
+                    EmitterHit::Emitter(e) => emission_along(scene, &probe, Some(&e), &probe_last),
+                    EmitterHit::Escaped => emission_along(scene, &probe, None, &probe_last),
+                    EmitterHit::Blocked => Rgb::ZERO,
+                };
+                out.direct += beta * bs.weight * found;
             }
             out.vp = Some(VisiblePoint {
                 p: si.p,
