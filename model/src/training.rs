@@ -24,10 +24,32 @@ pub struct TrainSettings {
     pub batch: usize,
     /// Epochs to run in total.
     pub epochs: usize,
-    /// Adam learning rate.
+    /// Adam learning rate (the first step's, with a decay).
     pub lr: f64,
+    /// Learning rate of the last step of a cosine decay from `lr` over all steps of `epochs`;
+    /// `None`: constant `lr`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lr_end: Option<f64>,
     /// Seed of the initial weights and of the patch order.
     pub seed: u64,
+}
+
+impl TrainSettings {
+    /// The learning rate of step `step` (0-based) of a run of `total_steps`: `lr`, or the cosine
+    /// decay from `lr` (first step) to `lr_end` (last step).
+    pub fn lr_at(&self, step: usize, total_steps: usize) -> f64 {
+        match self.lr_end {
+            None => self.lr,
+            Some(end) => {
+                let progress = if total_steps > 1 {
+                    step.min(total_steps - 1) as f64 / (total_steps - 1) as f64
+                } else {
+                    0.0
+                };
+                end + 0.5 * (self.lr - end) * (1.0 + (std::f64::consts::PI * progress).cos())
+            }
+        }
+    }
 }
 
 /// Validation result: relMSE of the output and of every input level on the same pixels.
@@ -261,6 +283,27 @@ impl Trainer {
         }
     }
 
+    /// A fresh run (new optimizer, epoch 0) that starts from the weights in `weights` (a
+    /// `model.bpk` of the same architecture) instead of random ones: fine-tuning.
+    pub fn from_weights(
+        config: ModelConfig,
+        settings: TrainSettings,
+        weights: &Path,
+        device: &Device,
+    ) -> Result<Self, String> {
+        let device = device.clone().autodiff();
+        let model = load_burnpack(&config, weights, &device)?;
+        Ok(Self {
+            model,
+            optim: adam(),
+            config,
+            settings,
+            epochs_done: 0,
+            history: Vec::new(),
+            device,
+        })
+    }
+
     /// The plain (non-autodiff) device used for validation.
     pub fn plain_device(&self) -> Device {
         self.device.clone().inner()
@@ -279,17 +322,18 @@ impl Trainer {
         train.levels = self.config.levels.clone();
         let plan = train.epoch_plan(self.settings.seed, epoch);
         let total = plan.len();
+        let batch_size = self.settings.batch.max(1);
+        // Every epoch has the same number of steps (the plan's length does not change).
+        let steps_per_epoch = total.div_ceil(batch_size);
+        let total_steps = steps_per_epoch * self.settings.epochs;
         let (mut loss_sum, mut batches, mut done) = (0.0, 0usize, 0usize);
-        for chunk in plan.chunks(self.settings.batch.max(1)) {
+        for chunk in plan.chunks(batch_size) {
             let batch = train.batch(chunk)?.to_device(&self.device);
             let model = self.model.clone();
-            let (model, loss) = train_step(
-                model,
-                &mut self.optim,
-                &self.config,
-                batch,
-                self.settings.lr,
-            );
+            let lr = self
+                .settings
+                .lr_at(epoch * steps_per_epoch + batches, total_steps);
+            let (model, loss) = train_step(model, &mut self.optim, &self.config, batch, lr);
             self.model = model;
             loss_sum += loss;
             batches += 1;
@@ -343,8 +387,9 @@ impl Trainer {
         write_atomic(&dir.join("state.json"), &json)
     }
 
-    /// Restores a run from a checkpoint directory; `settings` may raise the epoch count but must
-    /// otherwise match the checkpoint's.
+    /// Restores a run from a checkpoint directory; `settings` may raise the epoch count (not
+    /// with a decaying learning rate, whose schedule spans the epochs) but must otherwise match
+    /// the checkpoint's.
     pub fn resume(dir: &Path, settings: TrainSettings, device: &Device) -> Result<Self, String> {
         let state_path = dir.join("state.json");
         let text = std::fs::read_to_string(&state_path)
@@ -352,7 +397,11 @@ impl Trainer {
         let state: CheckpointState =
             serde_json::from_str(&text).map_err(|e| format!("{}: {e}", state_path.display()))?;
         let same = |a: &TrainSettings, b: &TrainSettings| {
-            a.batch == b.batch && a.lr == b.lr && a.seed == b.seed
+            a.batch == b.batch
+                && a.lr == b.lr
+                && a.seed == b.seed
+                && a.lr_end == b.lr_end
+                && (a.lr_end.is_none() || a.epochs == b.epochs)
         };
         if !same(&state.settings, &settings) {
             return Err(format!(

@@ -159,10 +159,12 @@ fn tiny_sets() -> (PatchDataset, PatchDataset) {
 fn resume_continues_exactly() {
     let device = Device::flex();
     let config = ModelConfig::preset(Preset::Tiny);
+    // With a decaying learning rate: the resumed run must continue the schedule, not restart it.
     let settings = TrainSettings {
         batch: 4,
         epochs: 2,
         lr: 1e-3,
+        lr_end: Some(1e-4),
         seed: 5,
     };
     let (mut train, _) = tiny_sets();
@@ -177,6 +179,12 @@ fn resume_continues_exactly() {
     first.run_epoch(&mut train, None, &mut none).unwrap();
     first.save_checkpoint(&dir).unwrap();
     drop(first);
+    // A decay spans the run's epochs: resuming with another epoch count is refused.
+    let longer = TrainSettings {
+        epochs: 3,
+        ..settings.clone()
+    };
+    assert!(Trainer::resume(&dir, longer, &device).is_err());
     let mut resumed = Trainer::resume(&dir, settings, &device).unwrap();
     assert_eq!(resumed.epochs_done, 1);
     resumed.run_epoch(&mut train, None, &mut none).unwrap();
@@ -197,6 +205,31 @@ fn resume_continues_exactly() {
         straight.history[1].train_loss,
         resumed.history[1].train_loss
     );
+}
+
+#[test]
+fn cosine_decay_runs_from_lr_to_lr_end() {
+    let constant = TrainSettings {
+        batch: 4,
+        epochs: 2,
+        lr: 1e-3,
+        lr_end: None,
+        seed: 1,
+    };
+    assert_eq!(constant.lr_at(0, 10), 1e-3);
+    assert_eq!(constant.lr_at(9, 10), 1e-3);
+    let decay = TrainSettings {
+        lr_end: Some(1e-5),
+        ..constant
+    };
+    assert_eq!(decay.lr_at(0, 11), 1e-3);
+    assert!((decay.lr_at(10, 11) - 1e-5).abs() < 1e-15);
+    // Halfway: the mean of the two.
+    assert!((decay.lr_at(5, 11) - 0.5 * (1e-3 + 1e-5)).abs() < 1e-15);
+    let lrs: Vec<f64> = (0..11).map(|s| decay.lr_at(s, 11)).collect();
+    assert!(lrs.windows(2).all(|w| w[1] < w[0]), "{lrs:?}");
+    // A one-step run uses `lr`.
+    assert_eq!(decay.lr_at(0, 1), 1e-3);
 }
 
 #[test]
@@ -255,6 +288,7 @@ fn training_beats_the_best_input_level() {
         batch: 4,
         epochs: 6,
         lr: 3e-3,
+        lr_end: None,
         seed: 1,
     };
     let (mut train, mut val) = tiny_sets();

@@ -54,9 +54,18 @@ pub struct TrainConfig {
     pub batch: usize,
     /// Total epochs.
     pub epochs: usize,
-    /// Adam learning rate.
+    /// Adam learning rate (of the first step when `lr_end` is set).
     #[serde(default = "default_lr")]
     pub lr: f64,
+    /// Learning rate of the last step: the rate decays from `lr` to `lr_end` along a cosine over
+    /// all steps of `epochs`. Absent: constant `lr`.
+    #[serde(default)]
+    pub lr_end: Option<f64>,
+    /// Start from the weights of this trained model directory (`model.json` + `model.bpk`, e.g.
+    /// an earlier run's output or `models/default`) instead of random ones, with a fresh
+    /// optimizer: fine-tuning. The architecture must match this config's. Ignored by `--resume`.
+    #[serde(default)]
+    pub init: Option<PathBuf>,
     /// Seed of the weights and the patch order.
     pub seed: u64,
     /// Images held in memory at once.
@@ -80,6 +89,9 @@ impl TrainConfig {
         }
         if !(cfg.lr > 0.0 && cfg.lr.is_finite()) {
             bail!("{}: lr must be a positive number", path.display());
+        }
+        if cfg.lr_end.is_some_and(|e| !(e > 0.0 && e.is_finite())) {
+            bail!("{}: lr_end must be a positive number", path.display());
         }
         cfg.model_config()
             .validate()
@@ -105,6 +117,7 @@ impl TrainConfig {
             batch: self.batch,
             epochs: self.epochs,
             lr: self.lr,
+            lr_end: self.lr_end,
             seed: self.seed,
         }
     }

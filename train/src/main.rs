@@ -13,6 +13,7 @@ use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use model::data::PatchDataset;
 use model::training::{load_burnpack, validate, write_atomic, EpochReport, Trainer};
+use model::ModelConfig;
 
 use config::TrainConfig;
 
@@ -235,6 +236,25 @@ fn run(cli: &Cli) -> Result<()> {
     let mut trainer = if cli.resume {
         let t = Trainer::resume(&checkpoint, settings, &device).map_err(anyhow::Error::msg)?;
         eprintln!("resuming after epoch {}", t.epochs_done);
+        t
+    } else if let Some(init) = &cfg.init {
+        let json_path = init.join("model.json");
+        let text = std::fs::read_to_string(&json_path)
+            .with_context(|| format!("init: {}", json_path.display()))?;
+        let architecture: ModelConfig = serde_json::from_str(&text)
+            .with_context(|| format!("init: {}", json_path.display()))?;
+        if architecture != cfg.model_config() {
+            bail!(
+                "{}: init model {} has architecture {:?}, the config asks for {:?}",
+                cli.config.display(),
+                init.display(),
+                architecture,
+                cfg.model_config()
+            );
+        }
+        let t = Trainer::from_weights(architecture, settings, &init.join("model.bpk"), &device)
+            .map_err(|e| anyhow::anyhow!("init: {e}"))?;
+        eprintln!("starting from the weights of {}", init.display());
         t
     } else {
         Trainer::new(cfg.model_config(), settings, &device)

@@ -101,6 +101,46 @@ fn trains_reports_bad_data_and_resumes() {
     let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "{csv}");
 
+    // Fine-tuning: `init` starts a new run (own output, epoch 1) from those weights, here with
+    // a decaying learning rate; an architecture mismatch is a clear error.
+    let tuned = dir.join("tuned");
+    let tune_config = dir.join("tune.toml");
+    let write_tune = |preset: &str| {
+        std::fs::write(
+            &tune_config,
+            format!(
+                "dataset = {:?}\npreset = \"{preset}\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = 1\nseed = 3\nlr = 1e-3\nlr_end = 1e-5\ninit = {:?}\noutput = {:?}\n",
+                data, out, tuned
+            ),
+        )
+        .unwrap();
+    };
+    write_tune("tiny");
+    let tune = Command::new(env!("CARGO_BIN_EXE_train"))
+        .arg("--config")
+        .arg(&tune_config)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&tune.stderr);
+    assert!(tune.status.success(), "{stderr}");
+    assert!(stderr.contains("starting from the weights of"), "{stderr}");
+    let csv = std::fs::read_to_string(tuned.join("metrics.csv")).unwrap();
+    assert!(csv.lines().nth(1).unwrap().starts_with("1,"), "{csv}");
+    assert_ne!(
+        std::fs::read(tuned.join("model.bpk")).unwrap(),
+        std::fs::read(out.join("model.bpk")).unwrap(),
+        "fine-tuning changed nothing"
+    );
+    write_tune("small");
+    let mismatch = Command::new(env!("CARGO_BIN_EXE_train"))
+        .arg("--config")
+        .arg(&tune_config)
+        .output()
+        .unwrap();
+    assert!(!mismatch.status.success());
+    let stderr = String::from_utf8_lossy(&mismatch.stderr);
+    assert!(stderr.contains("architecture"), "{stderr}");
+
     // `--evaluate val` scores the final weights on whole images of the split.
     let eval = Command::new(env!("CARGO_BIN_EXE_train"))
         .arg("--config")
