@@ -385,7 +385,7 @@ impl Scene {
     }
 
     /// The surface interaction of an accelerator hit along `ray`.
-    #[inline]
+    #[inline(always)]
     fn interaction(&self, ray: &Ray, hit: &PrimitiveHit) -> SurfaceInteraction {
         let shape = &self.shapes[hit.shape as usize];
         let g = shape.hit_geometry(hit.prim, ray, hit.t, hit.bary);
