@@ -9,6 +9,7 @@ pub mod features;
 pub mod loss;
 pub mod metrics;
 pub mod model;
+pub mod model_dir;
 pub mod synthetic;
 pub mod training;
 

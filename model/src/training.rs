@@ -15,6 +15,7 @@ use crate::data::{BadSample, Batch, PatchDataset};
 use crate::loss::relative_log_l1;
 use crate::metrics::relmse_sum_planar;
 use crate::model::{ModelConfig, Network, LEVELS};
+use crate::model_dir::TrainedModel;
 
 /// Optimisation settings (the parts of the train TOML the loop needs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -272,6 +273,33 @@ impl Trainer {
     pub fn new(config: ModelConfig, settings: TrainSettings, device: &Device) -> Self {
         let device = device.clone().autodiff();
         let model = config.init(settings.seed, &device);
+        Self::fresh(model, config, settings, device)
+    }
+
+    /// A fresh run (new optimizer, epoch 0) that starts from the weights of the trained model
+    /// directory `dir` instead of random ones: fine-tuning. The directory's architecture must
+    /// equal `config`.
+    pub fn from_weights(
+        config: ModelConfig,
+        settings: TrainSettings,
+        dir: &Path,
+        device: &Device,
+    ) -> Result<Self, String> {
+        let device = device.clone().autodiff();
+        let trained = TrainedModel::open(dir, &device).map_err(|e| e.to_string())?;
+        if trained.config != config {
+            return Err(format!(
+                "{}: architecture {:?} differs from the config's {:?}",
+                dir.display(),
+                trained.config,
+                config
+            ));
+        }
+        Ok(Self::fresh(trained.network, config, settings, device))
+    }
+
+    /// Epoch 0 of a run on the autodiff `device` from `model`, with a new optimizer.
+    fn fresh(model: Network, config: ModelConfig, settings: TrainSettings, device: Device) -> Self {
         Self {
             model,
             optim: adam(),
@@ -281,27 +309,6 @@ impl Trainer {
             history: Vec::new(),
             device,
         }
-    }
-
-    /// A fresh run (new optimizer, epoch 0) that starts from the weights in `weights` (a
-    /// `model.bpk` of the same architecture) instead of random ones: fine-tuning.
-    pub fn from_weights(
-        config: ModelConfig,
-        settings: TrainSettings,
-        weights: &Path,
-        device: &Device,
-    ) -> Result<Self, String> {
-        let device = device.clone().autodiff();
-        let model = load_burnpack(&config, weights, &device)?;
-        Ok(Self {
-            model,
-            optim: adam(),
-            config,
-            settings,
-            epochs_done: 0,
-            history: Vec::new(),
-            device,
-        })
     }
 
     /// The plain (non-autodiff) device used for validation.

@@ -13,7 +13,6 @@ use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use model::data::PatchDataset;
 use model::training::{load_burnpack, validate, write_atomic, EpochReport, Trainer};
-use model::ModelConfig;
 
 use config::TrainConfig;
 
@@ -238,22 +237,8 @@ fn run(cli: &Cli) -> Result<()> {
         eprintln!("resuming after epoch {}", t.epochs_done);
         t
     } else if let Some(init) = &cfg.init {
-        let json_path = init.join("model.json");
-        let text = std::fs::read_to_string(&json_path)
-            .with_context(|| format!("init: {}", json_path.display()))?;
-        let architecture: ModelConfig = serde_json::from_str(&text)
-            .with_context(|| format!("init: {}", json_path.display()))?;
-        if architecture != cfg.model_config() {
-            bail!(
-                "{}: init model {} has architecture {:?}, the config asks for {:?}",
-                cli.config.display(),
-                init.display(),
-                architecture,
-                cfg.model_config()
-            );
-        }
-        let t = Trainer::from_weights(architecture, settings, &init.join("model.bpk"), &device)
-            .map_err(|e| anyhow::anyhow!("init: {e}"))?;
+        let t = Trainer::from_weights(cfg.model_config(), settings, init, &device)
+            .map_err(|e| anyhow::anyhow!("{}: init: {e}", cli.config.display()))?;
         eprintln!("starting from the weights of {}", init.display());
         t
     } else {

@@ -199,16 +199,6 @@ impl RoughPlastic {
         }
     }
 
-    /// `distribution` and `alpha` as given.
-    pub fn roughness(&self) -> &Roughness {
-        &self.roughness
-    }
-
-    /// Relative index of refraction of the coating.
-    pub fn eta(&self) -> f32 {
-        self.eta
-    }
-
     fn prob_specular(&self, t_o: f32) -> f32 {
         let ssw = specular_sampling_weight(&self.diffuse_reflectance, &self.specular_reflectance);
         let ps = (1.0 - t_o) * ssw;
