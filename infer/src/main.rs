@@ -22,7 +22,7 @@ use model::training::write_atomic;
 /// Either `--input bundle.exr` (written by `render --integrator sppm-ml` or `datagen`) or
 /// `--scene scene.xml` (renders the bundle first).
 #[derive(Debug, Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Cli {
     /// Trained model directory (`model.json` + `model.bpk`, as written by `train`).
     #[arg(long, default_value = "models/default")]

@@ -18,7 +18,7 @@ use config::TrainConfig;
 
 /// Train the multi-level SPPM combiner network.
 #[derive(Parser, Debug)]
-#[command(version, about)]
+#[command(version)]
 struct Cli {
     /// Training configuration (TOML).
     #[arg(long)]

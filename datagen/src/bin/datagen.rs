@@ -17,7 +17,7 @@ use std::path::PathBuf;
 
 /// Dataset generation for multi-level SPPM post-reconstruction.
 #[derive(Debug, Parser)]
-#[command(name = "datagen", version, about)]
+#[command(name = "datagen", version)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -18,7 +18,7 @@ use serde_json::{json, Value};
 
 /// Benchmark tiled inference of a network preset against the PyTorch peer.
 #[derive(Debug, Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Cli {
     /// Network preset: paper, small or tiny.
     #[arg(long, default_value = "paper")]

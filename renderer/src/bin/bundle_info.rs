@@ -9,7 +9,7 @@ use clap::Parser;
 
 /// Inspect a multi-level SPPM sample bundle (docs/formats.md).
 #[derive(Parser, Debug)]
-#[command(version, about)]
+#[command(version)]
 struct Args {
     /// Bundle EXR written by `render --integrator sppm-ml|sppm`.
     bundle: PathBuf,

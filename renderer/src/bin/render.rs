@@ -25,7 +25,7 @@ enum IntegratorKind {
 
 /// Render a Mitsuba 3 XML scene.
 #[derive(Debug, Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Cli {
     /// The scene file (Mitsuba 3 XML).
     scene: PathBuf,

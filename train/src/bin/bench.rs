@@ -17,7 +17,7 @@ use serde_json::{json, Value};
 
 /// Time Burn against the PyTorch peer on the combiner network.
 #[derive(Parser, Debug)]
-#[command(version, about)]
+#[command(version)]
 struct Cli {
     /// Network preset.
     #[arg(long, value_enum, default_value = "paper")]

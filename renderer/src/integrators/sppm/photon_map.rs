@@ -3,8 +3,9 @@
 //!
 //! Layout: the photons are sorted by the Morton code of their grid cell (ties: input order), so
 //! every non-empty cell is one contiguous run and nearby cells lie nearby in memory; an
-//! open-addressing hash table maps a cell's code to its run. Positions are also kept in a
-//! separate dense array, which is all a query reads for photons outside the radius.
+//! open-addressing hash table maps a cell's code to its run. Positions are also kept as three
+//! dense coordinate arrays, which is all a query reads for photons outside the radius: it tests
+//! [`LANES`] photons at a time (the arrays are padded so a group may run past a cell's end).
 //!
 //! Determinism: the sort key (cell code, input index) is unique, so the sorted order depends
 //! only on the photon list, never on thread scheduling; a query visits cells in z-y-x order and
@@ -116,14 +117,68 @@ fn radix_sort_by_code(keys: &mut Vec<(u64, u64)>, scratch: &mut Vec<(u64, u64)>,
     }
 }
 
+/// Photons tested together by a query's distance test (one SSE register of `f32`).
+const LANES: usize = 4;
+
+/// Photon positions as separate coordinate arrays (structure of arrays), so that the distance
+/// test of [`LANES`] consecutive photons compiles to vector instructions.
+#[derive(Debug, Clone, Default, PartialEq)]
+struct Positions {
+    /// x coordinates.
+    x: Vec<f32>,
+    /// y coordinates.
+    y: Vec<f32>,
+    /// z coordinates.
+    z: Vec<f32>,
+}
+
+impl Positions {
+    /// Refills the arrays from `photons` and pads them past the end.
+    fn fill(&mut self, photons: &[Photon]) {
+        // Padding = +∞: its squared distance is +∞ (or NaN), never within a radius.
+        let pad = std::iter::repeat_n(f32::INFINITY, LANES - 1);
+        for (axis, out) in [&mut self.x, &mut self.y, &mut self.z]
+            .into_iter()
+            .enumerate()
+        {
+            out.clear();
+            out.extend(photons.iter().map(|p| p.position[axis]));
+            out.extend(pad.clone());
+        }
+    }
+
+    /// Squared distances from `p` of the photons `i..i + LANES` (computed as glam's
+    /// `Vec3::distance_squared`, so the values are bit for bit the same) and the bitmask of
+    /// those within `r2`.
+    #[inline(always)]
+    fn within(&self, i: usize, p: Vec3, r2: f32) -> ([f32; LANES], u32) {
+        let (x, y, z) = (
+            &self.x[i..i + LANES],
+            &self.y[i..i + LANES],
+            &self.z[i..i + LANES],
+        );
+        let mut d2 = [0.0f32; LANES];
+        for k in 0..LANES {
+            let (dx, dy, dz) = (x[k] - p.x, y[k] - p.y, z[k] - p.z);
+            d2[k] = dx * dx + dy * dy + dz * dz;
+        }
+        let mut mask = 0u32;
+        for (k, d) in d2.iter().enumerate() {
+            mask |= u32::from(*d <= r2) << k;
+        }
+        (d2, mask)
+    }
+}
+
 /// A uniform grid over the photons of one pass, hashed by cell; reusable across passes
 /// ([`PhotonGrid::rebuild`] keeps the allocations).
 #[derive(Debug, Clone, Default)]
 pub struct PhotonGrid {
     /// Photons sorted by (cell code, input index).
     photons: Vec<Photon>,
-    /// `photons[i].position`, densely packed for the distance test.
-    positions: Vec<Vec3>,
+    /// `photons[i].position`, as dense coordinate arrays for the distance test, each padded
+    /// with [`LANES`] − 1 infinite coordinates past the last photon.
+    positions: Positions,
     /// Open-addressing table of the non-empty cells (power-of-two length).
     table: Vec<CellRun>,
     /// `64 − log2(table.len())`.
@@ -222,11 +277,9 @@ impl PhotonGrid {
         self.keys
             .par_iter()
             .with_min_len(4096)
-            .map(|&(_, loc)| {
-                let p = chunks[(loc >> 32) as usize][loc as u32 as usize];
-                (p, p.position)
-            })
-            .unzip_into_vecs(&mut self.photons, &mut self.positions);
+            .map(|&(_, loc)| chunks[(loc >> 32) as usize][loc as u32 as usize])
+            .collect_into_vec(&mut self.photons);
+        self.positions.fill(&self.photons);
         // Runs of equal codes → hash table (load factor ≤ 1/2).
         let cells = 1 + self.keys.windows(2).filter(|w| w[0].0 != w[1].0).count();
         let size = (2 * cells).next_power_of_two().max(2);
@@ -339,11 +392,22 @@ impl PhotonGrid {
                         continue;
                     }
                     let code = morton(UVec3::new(x as u32, y as u32, z as u32));
-                    for i in self.run(code) {
-                        let d2 = self.positions[i].distance_squared(p);
-                        if d2 <= r2 {
-                            f(&self.photons[i], d2);
+                    let run = self.run(code);
+                    // Groups of LANES photons; the last one may reach past the run (into the
+                    // next cell or the padding), and those lanes are masked off.
+                    let mut i = run.start;
+                    while i < run.end {
+                        let (d2, mut mask) = self.positions.within(i, p, r2);
+                        let valid = run.end - i;
+                        if valid < LANES {
+                            mask &= (1 << valid) - 1;
                         }
+                        while mask != 0 {
+                            let k = mask.trailing_zeros() as usize;
+                            f(&self.photons[i + k], d2[k]);
+                            mask &= mask - 1;
+                        }
+                        i += LANES;
                     }
                 }
             }
