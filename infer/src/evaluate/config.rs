@@ -82,6 +82,10 @@ pub struct DatasetSource {
     /// Evaluate only the first N scenes of the split (in manifest order).
     #[serde(default)]
     pub limit: Option<usize>,
+    /// Directory inside the dataset holding `<scene id>.exr` references that replace the
+    /// manifest's (e.g. the averaged runs of `scripts/average_references.py`).
+    #[serde(default)]
+    pub references: Option<PathBuf>,
 }
 
 fn default_tile() -> usize {
@@ -190,9 +194,12 @@ impl EvalConfig {
                 .into_iter()
                 .filter(|s| s.split == d.split)
                 .map(|s| EvalScene {
+                    reference: match &d.references {
+                        Some(dir) => d.dir.join(dir).join(format!("{}.exr", s.id)),
+                        None => d.dir.join(s.reference),
+                    },
                     name: s.id,
                     xml: d.dir.join(s.xml),
-                    reference: d.dir.join(s.reference),
                 })
                 .collect();
             if chosen.is_empty() {
@@ -275,5 +282,59 @@ mod tests {
             .is_err());
         let typo = format!("{base}[ablation]\ndual_model = \"runs/d\"\n");
         assert!(toml::from_str::<EvalConfig>(&typo).is_err());
+    }
+
+    #[test]
+    fn dataset_split_resolves_with_manifest_or_replacement_references() {
+        let dir = std::env::temp_dir().join(format!("eval-config-refs-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        for p in ["scenes/a", "scenes/b", "references", "avg"] {
+            std::fs::create_dir_all(dir.join(p)).unwrap();
+        }
+        for f in [
+            "scenes/a/scene.xml",
+            "scenes/b/scene.xml",
+            "references/a.exr",
+            "references/b.exr",
+            "avg/b.exr",
+        ] {
+            std::fs::write(dir.join(f), "x").unwrap();
+        }
+        let scene = |id: &str, split: &str| {
+            format!(
+                "{{\"id\": \"{id}\", \"split\": \"{split}\", \"xml\": \"scenes/{id}/scene.xml\", \
+                 \"reference\": \"references/{id}.exr\", \"family\": \"room\"}}"
+            )
+        };
+        std::fs::write(
+            dir.join("manifest.json"),
+            format!(
+                "{{\"name\": \"t\", \"scenes\": [{}, {}]}}",
+                scene("a", "train"),
+                scene("b", "test")
+            ),
+        )
+        .unwrap();
+        let config = |extra: &str| -> EvalConfig {
+            toml::from_str(&format!(
+                "model = \"m\"\noutput = \"o\"\nphotons_per_pass = 10\npasses = [2]\nseed = 1\n\
+                 [dataset]\ndir = \"{}\"\n{extra}",
+                dir.display()
+            ))
+            .unwrap()
+        };
+        let from_manifest = config("").resolve_scenes().unwrap();
+        assert_eq!(from_manifest.len(), 1, "only the test split");
+        assert_eq!(from_manifest[0].name, "b");
+        assert_eq!(from_manifest[0].reference, dir.join("references/b.exr"));
+        let replaced = config("references = \"avg\"\n").resolve_scenes().unwrap();
+        assert_eq!(replaced[0].reference, dir.join("avg").join("b.exr"));
+        // A replacement directory without the scene's file is an error naming it.
+        let err = config("split = \"train\"\nreferences = \"avg\"\n")
+            .resolve_scenes()
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("a.exr") && err.contains("does not exist"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
