@@ -334,7 +334,10 @@ mod tests {
             .resolve_scenes()
             .unwrap_err()
             .to_string();
-        assert!(err.contains("a.exr") && err.contains("does not exist"), "{err}");
+        assert!(
+            err.contains("a.exr") && err.contains("does not exist"),
+            "{err}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
