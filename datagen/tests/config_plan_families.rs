@@ -37,6 +37,24 @@ fn per_family(config: &Config) -> BTreeMap<Family, usize> {
 }
 
 #[test]
+fn every_shipped_config_loads() {
+    let dir = preset_path("tiny").parent().unwrap().to_path_buf();
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
+            count += 1;
+        }
+    }
+    assert!(
+        count >= 3,
+        "found only {count} configs in {}",
+        dir.display()
+    );
+}
+
+#[test]
 fn presets_parse_with_intended_sizes() {
     let tiny = preset("tiny");
     assert_eq!((tiny.width, tiny.height), (32, 32));

@@ -146,6 +146,28 @@ mod tests {
     }
 
     #[test]
+    fn every_shipped_config_loads() {
+        let dir = PathBuf::from(
+            std::env::var_os("CARGO_MANIFEST_DIR")
+                .unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
+        )
+        .join("../configs/train");
+        let mut count = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                TrainConfig::read(&path).unwrap_or_else(|e| panic!("{e:#}"));
+                count += 1;
+            }
+        }
+        assert!(
+            count >= 5,
+            "found only {count} configs in {}",
+            dir.display()
+        );
+    }
+
+    #[test]
     fn shipped_dual_configs_match_small_except_levels_and_output() {
         let root = PathBuf::from(
             std::env::var_os("CARGO_MANIFEST_DIR")

@@ -285,6 +285,28 @@ mod tests {
     }
 
     #[test]
+    fn every_shipped_config_loads() {
+        let dir = PathBuf::from(
+            std::env::var_os("CARGO_MANIFEST_DIR")
+                .unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
+        )
+        .join("../configs/eval");
+        let mut count = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                EvalConfig::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+                count += 1;
+            }
+        }
+        assert!(
+            count >= 4,
+            "found only {count} configs in {}",
+            dir.display()
+        );
+    }
+
+    #[test]
     fn dataset_split_resolves_with_manifest_or_replacement_references() {
         let dir = std::env::temp_dir().join(format!("eval-config-refs-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
