@@ -2,6 +2,7 @@
 //! families written as Mitsuba 3 XML + PLY, kill-safe sharded rendering of references and input
 //! bundles, the dataset manifest, dataset checks and contact sheets. See `docs/datagen.md`.
 
+pub mod average;
 pub mod check;
 pub mod config;
 pub mod contact_sheet;

@@ -1,7 +1,8 @@
 //! End-to-end tests of the `datagen` binary with the real multi-level SPPM renderer on a tiny
 //! dataset: three concurrent shard processes write exactly the files of one process; a
 //! process killed with SIGKILL mid-run and then resumed ends with exactly the same dataset and
-//! `check` passes; `check` names a truncated bundle and a bundle holding a NaN.
+//! `check` passes; `check` names a truncated bundle and a bundle holding a NaN;
+//! `average-references` averages real runs (thread-count independent), rejects bad requests.
 
 mod common;
 
@@ -149,4 +150,68 @@ fn shards_kill_resume_and_check() {
         "{stdout}"
     );
     std::fs::remove_dir_all(&work).unwrap();
+}
+
+#[test]
+fn average_references_with_the_real_renderer() {
+    let dir = fresh_dir("cli-average");
+    let config = write_config(&dir);
+    let data = dir.join("data");
+    ok(render(&config, &data, &[]).output().unwrap());
+    let manifest = Manifest::load(&data).unwrap();
+    let split = serde_json::to_value(manifest.scenes[0].split).unwrap();
+    let split = split.as_str().unwrap();
+    let average = |extra: &[&str]| {
+        let mut args = vec!["average-references", data.to_str().unwrap(), "--quiet"];
+        if !extra.contains(&"--split") {
+            args.extend(["--split", split]);
+        }
+        args.extend_from_slice(extra);
+        datagen(&args).output().unwrap()
+    };
+    let out = ok(average(&["--runs", "3", "--out", "avg", "--threads", "1"]));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let noise: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(data.join("avg/noise.json")).unwrap()).unwrap();
+    for scene in manifest
+        .scenes
+        .iter()
+        .filter(|s| serde_json::to_value(s.split).unwrap().as_str() == Some(split))
+    {
+        assert!(stdout.contains(&scene.id), "{stdout}");
+        let mean = bundle::read_rgb_exr_image(&data.join(format!("avg/{}.exr", scene.id))).unwrap();
+        assert_eq!((mean.width, mean.height), (16, 16));
+        assert!(mean.data.iter().all(|x| x.is_finite() && *x >= 0.0));
+        // Independent SPPM runs differ, so the measured noise is positive; the mean of 3 carries
+        // a third of it.
+        let one = noise["scenes"][&scene.id]["relmse_one_run"]
+            .as_f64()
+            .unwrap();
+        let of_mean = noise["scenes"][&scene.id]["relmse_mean"].as_f64().unwrap();
+        assert!(one > 0.0 && one.is_finite(), "{one}");
+        assert!((of_mean * 3.0 - one).abs() <= 1e-12 * one);
+    }
+    // Thread count does not change the result: a second directory averaged with 2 threads
+    // from fresh runs is byte-identical.
+    let runs_before = snapshot(&data.join("reference-runs"));
+    std::fs::remove_dir_all(data.join("reference-runs")).unwrap();
+    ok(average(&["--runs", "3", "--out", "avg2", "--threads", "2"]));
+    assert_same(&runs_before, &snapshot(&data.join("reference-runs")));
+    assert_same(&snapshot(&data.join("avg")), &snapshot(&data.join("avg2")));
+    // Bad requests: a clear message and a non-zero exit, the dataset's references untouched.
+    let references = snapshot(&data.join("references"));
+    for (extra, needle) in [
+        (&["--out", "references"][..], "references"),
+        (&["--runs", "1"][..], "at least 2"),
+        (&["--split", "nope"][..], "nope"),
+    ] {
+        let out = average(extra);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(needle),
+            "{extra:?}: {stderr}"
+        );
+    }
+    assert_same(&references, &snapshot(&data.join("references")));
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -5,8 +5,8 @@
 mod common;
 
 use anyhow::Result;
-use bundle::{read_bundle, write_bundle, Bundle, BundleMeta, Image};
-use common::{assert_same, fresh_dir, snapshot, test_config};
+use bundle::{read_bundle, write_bundle, Bundle, Image};
+use common::{assert_same, fresh_dir, snapshot, stand_in_bundle, test_config};
 use datagen::check::check_dataset;
 use datagen::jobs::{render_dataset, RenderOptions, RunSpec, SampleRenderer};
 use datagen::manifest::Manifest;
@@ -66,24 +66,9 @@ impl SampleRenderer for StandIn {
         let (w, h) = size(xml);
         for &p in &spec.passes {
             on_pass(p);
-            on_bundle(Bundle {
-                meta: BundleMeta {
-                    scene: spec.scene_id.clone(),
-                    seed: spec.seed,
-                    passes: p,
-                    photons_per_pass: spec.photons_per_pass,
-                    seconds: 1.5,
-                    integrator: "sppm-ml".into(),
-                    width: w as u32,
-                    height: h as u32,
-                },
-                levels: (0..5).map(|l| image(spec, w, h, 3, p, l + 1)).collect(),
-                variance: image(spec, w, h, 5, p, 10),
-                albedo: image(spec, w, h, 3, p, 11),
-                normal: image(spec, w, h, 3, p, 12),
-                depth: image(spec, w, h, 1, p, 13),
-                radius: Some(image(spec, w, h, 5, p, 14)),
-            })?;
+            on_bundle(stand_in_bundle(spec, p, (w, h), true, |channels, salt| {
+                image(spec, w, h, channels, p, salt)
+            }))?;
         }
         Ok(())
     }

@@ -3,17 +3,19 @@
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
+use datagen::average::{average_references, AverageOptions};
 use datagen::check::check_dataset;
 use datagen::config::Config;
 use datagen::contact_sheet::{write_contact_sheet, SheetLayout};
 use datagen::families::{generate, scene_list};
 use datagen::jobs::{render_dataset, RenderOptions};
 use datagen::manifest::{assemble_manifest, Manifest};
-use datagen::plan::{Plan, Shard};
+use datagen::plan::{Plan, Shard, Split};
 use datagen::scene::write_scene_files;
 use datagen::sppm_backend::SppmBackend;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Dataset generation for multi-level SPPM post-reconstruction.
 #[derive(Debug, Parser)]
@@ -70,6 +72,28 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Average more runs of a dataset's reference settings (other seeds) into less noisy
+    /// references for evaluation: writes DIR/OUT/<scene id>.exr and DIR/OUT/noise.json.
+    AverageReferences {
+        /// Dataset directory (with manifest.json).
+        dir: PathBuf,
+        /// Split whose scenes are averaged: train, val or test.
+        #[arg(long, default_value = "test", value_parser = parse_split)]
+        split: Split,
+        /// Runs per scene, the dataset's own reference included (extra runs are kept in
+        /// DIR/reference-runs and reused).
+        #[arg(long, default_value_t = 8)]
+        runs: usize,
+        /// Output directory inside the dataset.
+        #[arg(long, default_value = "references-avg8")]
+        out: PathBuf,
+        /// Worker threads per render (0 = all cores; output does not depend on it).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Write a PNG grid of a dataset's reference images.
     ContactSheet {
         /// Dataset directory.
@@ -84,6 +108,16 @@ enum Command {
         #[arg(long, default_value_t = 160)]
         tile: usize,
     },
+}
+
+/// `train`, `val` or `test`.
+fn parse_split(text: &str) -> Result<Split, String> {
+    match text {
+        "train" => Ok(Split::Train),
+        "val" => Ok(Split::Val),
+        "test" => Ok(Split::Test),
+        _ => Err(format!("unknown split `{text}` (train, val or test)")),
+    }
 }
 
 fn main() {
@@ -193,6 +227,67 @@ fn run(cli: Cli) -> Result<i32> {
                 );
                 Ok(1)
             }
+        }
+        Command::AverageReferences {
+            dir,
+            split,
+            runs,
+            out,
+            threads,
+            quiet,
+        } => {
+            // One bar over every extra run's passes (reused runs count as done); every scene of
+            // a dataset has the same reference passes.
+            let manifest = Manifest::load(&dir)?;
+            let per_run = manifest
+                .scenes
+                .first()
+                .map_or(0, |s| u64::from(s.reference_passes));
+            let scenes = manifest.scenes.iter().filter(|s| s.split == split).count();
+            let bar = ProgressBar::with_draw_target(
+                Some(per_run * (scenes * runs.saturating_sub(1)) as u64),
+                if quiet {
+                    ProgressDrawTarget::hidden()
+                } else {
+                    ProgressDrawTarget::stderr()
+                },
+            );
+            bar.set_style(
+                ProgressStyle::with_template("average {bar:40} {pos}/{len} passes ETA {eta}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            let runs_done = AtomicU64::new(0);
+            let options = AverageOptions {
+                split,
+                runs,
+                out: out.clone(),
+                threads,
+            };
+            let report = average_references(
+                &dir,
+                &SppmBackend,
+                &options,
+                |id, run, rendered| {
+                    let done = runs_done.fetch_add(1, Ordering::Relaxed) + 1;
+                    bar.set_position(per_run * done);
+                    bar.println(format!(
+                        "{id}: run {run} {}",
+                        if rendered { "rendered" } else { "reused" }
+                    ));
+                },
+                &mut |pass| {
+                    bar.set_position(per_run * runs_done.load(Ordering::Relaxed) + u64::from(pass));
+                },
+            )?;
+            bar.finish_and_clear();
+            for (id, n) in &report.scenes {
+                println!(
+                    "{id}: noise of one run {:.3e} relMSE, of the mean of {} {:.3e}",
+                    n.relmse_one_run, n.runs, n.relmse_mean
+                );
+            }
+            println!("wrote {}", dir.join(&out).display());
+            Ok(0)
         }
         Command::ContactSheet {
             dir,

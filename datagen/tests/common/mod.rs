@@ -2,7 +2,9 @@
 
 #![allow(dead_code)]
 
+use bundle::{Bundle, BundleMeta, Image};
 use datagen::config::Config;
+use datagen::jobs::RunSpec;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -55,5 +57,34 @@ pub fn assert_same(a: &BTreeMap<String, Vec<u8>>, b: &BTreeMap<String, Vec<u8>>)
     assert_eq!(ka, kb, "different file sets");
     for (k, v) in a {
         assert!(v == &b[k], "{k} differs");
+    }
+}
+
+/// A stand-in renderer's bundle of `spec` at `passes`: every layer is `image(channels, salt)`
+/// (salts: levels 1–5, variance 10, albedo 11, normal 12, depth 13, radius 14).
+pub fn stand_in_bundle(
+    spec: &RunSpec,
+    passes: u32,
+    (width, height): (usize, usize),
+    with_radius: bool,
+    image: impl Fn(usize, usize) -> Image,
+) -> Bundle {
+    Bundle {
+        meta: BundleMeta {
+            scene: spec.scene_id.clone(),
+            seed: spec.seed,
+            passes,
+            photons_per_pass: spec.photons_per_pass,
+            seconds: 1.5,
+            integrator: "sppm-ml".into(),
+            width: width as u32,
+            height: height as u32,
+        },
+        levels: (0..5).map(|l| image(3, l + 1)).collect(),
+        variance: image(5, 10),
+        albedo: image(3, 11),
+        normal: image(3, 12),
+        depth: image(1, 13),
+        radius: with_radius.then(|| image(5, 14)),
     }
 }

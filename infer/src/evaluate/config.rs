@@ -83,7 +83,7 @@ pub struct DatasetSource {
     #[serde(default)]
     pub limit: Option<usize>,
     /// Directory inside the dataset holding `<scene id>.exr` references that replace the
-    /// manifest's (e.g. the averaged runs of `scripts/average_references.py`).
+    /// manifest's (e.g. the averaged runs of `datagen average-references`).
     #[serde(default)]
     pub references: Option<PathBuf>,
 }

@@ -1,0 +1,223 @@
+//! Averaged references (`datagen average-references`): more runs of a dataset's reference
+//! settings with other seeds, their per-pixel mean, and the noise a single run carries.
+//!
+//! A dataset's reference is one long SPPM run, so it is noisy itself; relMSE against it adds
+//! that noise to every method alike and pulls every ratio towards 1 (docs/evaluation.md). The
+//! mean of N runs keeps 1/N of it, and the spread between the runs measures it.
+
+use crate::fsutil::write_atomic;
+use crate::jobs::{RunSpec, SampleRenderer};
+use crate::manifest::{to_json, Manifest, SceneEntry};
+use crate::plan::Split;
+use anyhow::{bail, Context, Result};
+use bundle::{read_rgb_exr_image, write_rgb_exr_image, Image};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Component, Path, PathBuf};
+
+/// Directory inside the dataset holding the extra runs. It is shared by every average, so a
+/// later call with more runs reuses the runs already rendered.
+pub const RUNS_DIR: &str = "reference-runs";
+
+/// Name of the noise report written next to the averaged references.
+pub const NOISE_FILE: &str = "noise.json";
+
+/// Seed of extra run `run` (1, 2, …) of a scene: steps of a prime from the reference's own seed
+/// (run 0), wrapped to 32 bits like every render seed of the dataset.
+pub fn run_seed(reference_seed: u64, run: usize) -> u64 {
+    (reference_seed + 7919 * run as u64) % (1 << 32)
+}
+
+/// What to average.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AverageOptions {
+    /// Scenes of this split.
+    pub split: Split,
+    /// Runs per scene, the dataset's own reference included (≥ 2).
+    pub runs: usize,
+    /// Output directory inside the dataset, e.g. `references-avg8`.
+    pub out: PathBuf,
+    /// Worker threads per render (0 = all cores; results do not depend on it).
+    pub threads: usize,
+}
+
+/// The noise of one scene's references, relative to the noise-free limit of the same
+/// estimator: the SPEC §4 relMSE summand Σ s²/(ref² + 0.01) / (3·pixels), with s² the unbiased
+/// per-sample variance across the runs. Variance only: the estimator's bias is not in it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneNoise {
+    /// Runs averaged.
+    pub runs: usize,
+    /// relMSE one run carries.
+    pub relmse_one_run: f64,
+    /// relMSE the mean carries (one run's ÷ runs).
+    pub relmse_mean: f64,
+    /// Seeds of the runs, the dataset's reference first.
+    pub seeds: Vec<u64>,
+}
+
+/// Contents of `<out>/noise.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NoiseReport {
+    /// Split averaged.
+    pub split: Split,
+    /// Passes of every run.
+    pub reference_passes: u32,
+    /// Photons per pass of every run.
+    pub reference_photons: u64,
+    /// Per scene id.
+    pub scenes: BTreeMap<String, SceneNoise>,
+}
+
+/// Where extra run `seed` of `scene` lives (relative to the dataset root): the settings are in
+/// the name, so runs of another reference configuration are never mixed in.
+fn run_path(scene: &SceneEntry, seed: u64) -> PathBuf {
+    Path::new(RUNS_DIR).join(format!(
+        "{}_p{}_n{}_s{seed}.exr",
+        scene.id, scene.reference_passes, scene.reference_photons
+    ))
+}
+
+/// Checks that `out` names a new directory inside the dataset, not the dataset's own
+/// references or runs (which the averages must never overwrite).
+fn check_out(out: &Path) -> Result<()> {
+    let plain =
+        !out.as_os_str().is_empty() && out.components().all(|c| matches!(c, Component::Normal(_)));
+    if !plain {
+        bail!(
+            "--out {}: give a directory name inside the dataset (no `..`, not absolute)",
+            out.display()
+        );
+    }
+    if out == Path::new("references") || out == Path::new(RUNS_DIR) {
+        bail!(
+            "--out {}: that directory belongs to the dataset; choose another name",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Reads an RGB image and checks its size.
+fn read_checked(path: &Path, width: u32, height: u32) -> Result<Image> {
+    let img = read_rgb_exr_image(path).with_context(|| format!("reading {}", path.display()))?;
+    if (img.width, img.height) != (width as usize, height as usize) {
+        bail!(
+            "{}: {}x{}, the dataset is {width}x{height}",
+            path.display(),
+            img.width,
+            img.height
+        );
+    }
+    Ok(img)
+}
+
+/// Per-sample mean of `images` (all the same shape) and the noise one of them carries.
+pub fn mean_and_noise(images: &[Image]) -> (Image, f64) {
+    let first = &images[0];
+    let n = images.len() as f64;
+    let mut mean = Image::new(first.width, first.height, first.channels);
+    let mut var = vec![0.0f64; first.data.len()];
+    for (i, (m, v)) in mean.data.iter_mut().zip(&mut var).enumerate() {
+        let mu = images.iter().map(|img| f64::from(img.data[i])).sum::<f64>() / n;
+        *v = images
+            .iter()
+            .map(|img| (f64::from(img.data[i]) - mu).powi(2))
+            .sum::<f64>()
+            / (n - 1.0);
+        *m = mu as f32;
+    }
+    // SPEC §4 relMSE weight of a pixel: 1 / ((mean over RGB of the reference)² + 0.01).
+    let c = first.channels;
+    let mut sum = 0.0;
+    for (px, v) in mean.data.chunks(c).zip(var.chunks(c)) {
+        let grey = px.iter().map(|&x| f64::from(x)).sum::<f64>() / c as f64;
+        sum += v.iter().sum::<f64>() / (grey * grey + 0.01);
+    }
+    (mean, sum / var.len() as f64)
+}
+
+/// Averages the references of every scene of `options.split`: renders the missing extra runs
+/// (kept in [`RUNS_DIR`]), writes `<out>/<scene id>.exr` (the mean) and `<out>/noise.json`,
+/// all atomically. `on_run(scene id, run, rendered)` reports each extra run (rendered now or
+/// reused); `on_pass` the passes of a run being rendered.
+pub fn average_references(
+    root: &Path,
+    renderer: &dyn SampleRenderer,
+    options: &AverageOptions,
+    mut on_run: impl FnMut(&str, usize, bool),
+    on_pass: &mut (dyn FnMut(u32) + Send),
+) -> Result<NoiseReport> {
+    if options.runs < 2 {
+        bail!("--runs must be at least 2 (the spread between runs is the noise estimate)");
+    }
+    check_out(&options.out)?;
+    let manifest = Manifest::load(root)?;
+    let scenes: Vec<&SceneEntry> = manifest
+        .scenes
+        .iter()
+        .filter(|s| s.split == options.split)
+        .collect();
+    let Some(first) = scenes.first() else {
+        bail!(
+            "{}: no scene in split {:?}",
+            root.join("manifest.json").display(),
+            options.split
+        );
+    };
+    let out_dir = root.join(&options.out);
+    std::fs::create_dir_all(root.join(RUNS_DIR))
+        .with_context(|| format!("creating {}", root.join(RUNS_DIR).display()))?;
+    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let mut report = NoiseReport {
+        split: options.split,
+        reference_passes: first.reference_passes,
+        reference_photons: first.reference_photons,
+        scenes: BTreeMap::new(),
+    };
+    for scene in scenes {
+        let mut seeds = vec![scene.reference_seed];
+        let mut images = vec![read_checked(
+            &root.join(&scene.reference),
+            manifest.width,
+            manifest.height,
+        )?];
+        for run in 1..options.runs {
+            let seed = run_seed(scene.reference_seed, run);
+            let path = root.join(run_path(scene, seed));
+            let rendered = !path.exists();
+            if rendered {
+                let spec = RunSpec {
+                    scene_id: scene.id.clone(),
+                    seed,
+                    photons_per_pass: scene.reference_photons,
+                    passes: vec![scene.reference_passes],
+                    max_depth: manifest.config.render.max_depth,
+                    threads: options.threads,
+                };
+                let image = renderer.reference(&root.join(&scene.xml), &spec, on_pass)?;
+                write_rgb_exr_image(&path, &image)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
+            images.push(read_checked(&path, manifest.width, manifest.height)?);
+            seeds.push(seed);
+            on_run(&scene.id, run, rendered);
+        }
+        let (mean, one_run) = mean_and_noise(&images);
+        let path = out_dir.join(format!("{}.exr", scene.id));
+        write_rgb_exr_image(&path, &mean).with_context(|| format!("writing {}", path.display()))?;
+        report.scenes.insert(
+            scene.id.clone(),
+            SceneNoise {
+                runs: options.runs,
+                relmse_one_run: one_run,
+                relmse_mean: one_run / options.runs as f64,
+                seeds,
+            },
+        );
+    }
+    let path = out_dir.join(NOISE_FILE);
+    write_atomic(&path, &to_json(&report))
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(report)
+}

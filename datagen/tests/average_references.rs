@@ -1,0 +1,193 @@
+//! `average_references` with a stand-in renderer whose runs are constant images: the mean and
+//! the noise estimate equal hand-computed values, extra runs are reused (and only the missing
+//! ones rendered when more runs are asked for), and bad requests are errors.
+
+mod common;
+
+use anyhow::Result;
+use bundle::{read_rgb_exr_image, Bundle, Image};
+use common::{fresh_dir, stand_in_bundle, test_config};
+use datagen::average::{average_references, run_seed, AverageOptions, NoiseReport, NOISE_FILE};
+use datagen::jobs::{render_dataset, RenderOptions, RunSpec, SampleRenderer};
+use datagen::manifest::Manifest;
+use datagen::plan::Shard;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+const SIDE: usize = 8;
+
+/// The value of every sample of a run with this seed.
+fn level(seed: u64) -> f32 {
+    0.25 + (seed % 7) as f32 * 0.5
+}
+
+/// Every run is a constant image; counts reference runs.
+#[derive(Default)]
+struct Constant {
+    references: AtomicUsize,
+}
+
+fn constant(seed: u64, channels: usize) -> Image {
+    let mut img = Image::new(SIDE, SIDE, channels);
+    img.data.fill(level(seed));
+    img
+}
+
+impl SampleRenderer for Constant {
+    fn reference(
+        &self,
+        _: &Path,
+        spec: &RunSpec,
+        _: &mut (dyn FnMut(u32) + Send),
+    ) -> Result<Image> {
+        self.references.fetch_add(1, Ordering::SeqCst);
+        Ok(constant(spec.seed, 3))
+    }
+
+    fn inputs(
+        &self,
+        _: &Path,
+        spec: &RunSpec,
+        on_bundle: &mut (dyn FnMut(Bundle) -> Result<()> + Send),
+        _: &mut (dyn FnMut(u32) + Send),
+    ) -> Result<()> {
+        for &p in &spec.passes {
+            on_bundle(stand_in_bundle(
+                spec,
+                p,
+                (SIDE, SIDE),
+                false,
+                |channels, _| constant(spec.seed, channels),
+            ))?;
+        }
+        Ok(())
+    }
+}
+
+fn dataset(name: &str) -> (PathBuf, Manifest) {
+    let dir = fresh_dir(name);
+    let config = test_config(SIDE as u32, &[2], 1, 4);
+    let options = RenderOptions {
+        shard: Shard::ALL,
+        threads: 1,
+        progress: false,
+    };
+    render_dataset(&config, &dir, options, &Constant::default()).unwrap();
+    let manifest = Manifest::load(&dir).unwrap();
+    (dir, manifest)
+}
+
+fn options(manifest: &Manifest, runs: usize) -> AverageOptions {
+    AverageOptions {
+        split: manifest.scenes[0].split,
+        runs,
+        out: PathBuf::from("avg"),
+        threads: 1,
+    }
+}
+
+fn average(dir: &Path, manifest: &Manifest, runs: usize, renderer: &Constant) -> NoiseReport {
+    average_references(
+        dir,
+        renderer,
+        &options(manifest, runs),
+        |_, _, _| {},
+        &mut |_| {},
+    )
+    .unwrap()
+}
+
+#[test]
+fn mean_and_noise_match_hand_computed_values_and_runs_are_reused() {
+    let (dir, manifest) = dataset("avg-values");
+    let scene = &manifest.scenes[0];
+    let in_split = manifest
+        .scenes
+        .iter()
+        .filter(|s| s.split == scene.split)
+        .count();
+    let renderer = Constant::default();
+    let report = average(&dir, &manifest, 3, &renderer);
+    assert_eq!(renderer.references.load(Ordering::SeqCst), 2 * in_split);
+    assert_eq!(report.scenes.len(), in_split);
+
+    // By hand: the runs are constants v0 (the dataset's reference), v1, v2.
+    let seeds: Vec<u64> = (0..3)
+        .map(|r| {
+            if r == 0 {
+                scene.reference_seed
+            } else {
+                run_seed(scene.reference_seed, r)
+            }
+        })
+        .collect();
+    let v: Vec<f64> = seeds.iter().map(|&s| f64::from(level(s))).collect();
+    let mean = v.iter().sum::<f64>() / 3.0;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 2.0;
+    let noise = var / (mean * mean + 0.01);
+    let got = &report.scenes[&scene.id];
+    assert_eq!(got.seeds, seeds);
+    assert!(
+        (got.relmse_one_run - noise).abs() <= 1e-6 * noise.max(1e-12),
+        "{} vs {noise}",
+        got.relmse_one_run
+    );
+    assert!((got.relmse_mean - noise / 3.0).abs() <= 1e-6 * noise.max(1e-12));
+    let img = read_rgb_exr_image(&dir.join("avg").join(format!("{}.exr", scene.id))).unwrap();
+    assert_eq!((img.width, img.height), (SIDE, SIDE));
+    assert!(img.data.iter().all(|&x| x == mean as f32));
+    let written: NoiseReport =
+        serde_json::from_slice(&std::fs::read(dir.join("avg").join(NOISE_FILE)).unwrap()).unwrap();
+    assert_eq!(written, report);
+
+    // The same request renders nothing; one more run renders only that run per scene.
+    let again = average(&dir, &manifest, 3, &renderer);
+    assert_eq!(renderer.references.load(Ordering::SeqCst), 2 * in_split);
+    assert_eq!(again, report);
+    average(&dir, &manifest, 4, &renderer);
+    assert_eq!(renderer.references.load(Ordering::SeqCst), 3 * in_split);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_requests_are_errors() {
+    let (dir, manifest) = dataset("avg-errors");
+    let renderer = Constant::default();
+    let run = |o: AverageOptions| {
+        average_references(&dir, &renderer, &o, |_, _, _| {}, &mut |_| {})
+            .unwrap_err()
+            .to_string()
+    };
+    assert!(run(options(&manifest, 1)).contains("at least 2"));
+    for out in ["references", "reference-runs", "../elsewhere", "/tmp/x"] {
+        let err = run(AverageOptions {
+            out: PathBuf::from(out),
+            ..options(&manifest, 2)
+        });
+        assert!(err.contains(out), "{out}: {err}");
+    }
+    // The dataset's own references are untouched by any of this.
+    let reference = std::fs::read(dir.join(&manifest.scenes[0].reference)).unwrap();
+    assert_eq!(
+        read_rgb_exr_image(&dir.join(&manifest.scenes[0].reference))
+            .unwrap()
+            .data[0],
+        level(manifest.scenes[0].reference_seed)
+    );
+    assert!(!reference.is_empty());
+    assert_eq!(renderer.references.load(Ordering::SeqCst), 0);
+    // A dataset directory without a manifest is named.
+    let empty = fresh_dir("avg-empty");
+    let err = average_references(
+        &empty,
+        &renderer,
+        &options(&manifest, 2),
+        |_, _, _| {},
+        &mut |_| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("manifest.json"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&empty);
+}
