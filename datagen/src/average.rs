@@ -100,7 +100,8 @@ fn check_out(out: &Path) -> Result<()> {
 
 /// Reads an RGB image and checks its size.
 fn read_checked(path: &Path, width: u32, height: u32) -> Result<Image> {
-    let img = read_rgb_exr_image(path).with_context(|| format!("reading {}", path.display()))?;
+    // The bundle crate's errors name the file already.
+    let img = read_rgb_exr_image(path)?;
     if (img.width, img.height) != (width as usize, height as usize) {
         bail!(
             "{}: {}x{}, the dataset is {width}x{height}",
@@ -137,12 +138,13 @@ pub fn mean_and_noise(images: &[Image]) -> (Image, f64) {
     (mean, sum / var.len() as f64)
 }
 
-/// Averages the references of every scene of `options.split`: renders the missing extra runs
-/// (kept in [`RUNS_DIR`]), writes `<out>/<scene id>.exr` (the mean) and `<out>/noise.json`,
+/// Averages the references of every scene of `options.split` of the dataset at `root` (whose
+/// manifest is `manifest`): renders the missing extra runs (kept in [`RUNS_DIR`]), writes `<out>/<scene id>.exr` (the mean) and `<out>/noise.json`,
 /// all atomically. `on_run(scene id, run, rendered)` reports each extra run (rendered now or
 /// reused); `on_pass` the passes of a run being rendered.
 pub fn average_references(
     root: &Path,
+    manifest: &Manifest,
     renderer: &dyn SampleRenderer,
     options: &AverageOptions,
     mut on_run: impl FnMut(&str, usize, bool),
@@ -152,7 +154,6 @@ pub fn average_references(
         bail!("--runs must be at least 2 (the spread between runs is the noise estimate)");
     }
     check_out(&options.out)?;
-    let manifest = Manifest::load(root)?;
     let scenes: Vec<&SceneEntry> = manifest
         .scenes
         .iter()

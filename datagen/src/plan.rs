@@ -20,6 +20,28 @@ pub enum Split {
     Test,
 }
 
+impl Split {
+    /// The name used in configs, manifests and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Val => "val",
+            Split::Test => "test",
+        }
+    }
+}
+
+impl std::str::FromStr for Split {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        [Split::Train, Split::Val, Split::Test]
+            .into_iter()
+            .find(|s| s.name() == text)
+            .ok_or_else(|| format!("unknown split `{text}` (train, val or test)"))
+    }
+}
+
 /// One planned scene.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScenePlan {
@@ -277,4 +299,22 @@ fn assign_splits(config: &Config, list: &[(String, Family)]) -> Vec<Split> {
         }
     }
     splits
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Split;
+
+    #[test]
+    fn split_names_match_the_manifest_spelling_and_parse_back() {
+        for split in [Split::Train, Split::Val, Split::Test] {
+            let json = serde_json::to_value(split).unwrap();
+            assert_eq!(json.as_str(), Some(split.name()));
+            assert_eq!(split.name().parse::<Split>(), Ok(split));
+        }
+        assert!("validation"
+            .parse::<Split>()
+            .unwrap_err()
+            .contains("validation"));
+    }
 }

@@ -89,6 +89,7 @@ fn options(manifest: &Manifest, runs: usize) -> AverageOptions {
 fn average(dir: &Path, manifest: &Manifest, runs: usize, renderer: &Constant) -> NoiseReport {
     average_references(
         dir,
+        manifest,
         renderer,
         &options(manifest, runs),
         |_, _, _| {},
@@ -154,7 +155,7 @@ fn bad_requests_are_errors() {
     let (dir, manifest) = dataset("avg-errors");
     let renderer = Constant::default();
     let run = |o: AverageOptions| {
-        average_references(&dir, &renderer, &o, |_, _, _| {}, &mut |_| {})
+        average_references(&dir, &manifest, &renderer, &o, |_, _, _| {}, &mut |_| {})
             .unwrap_err()
             .to_string()
     };
@@ -176,17 +177,9 @@ fn bad_requests_are_errors() {
     );
     assert!(!reference.is_empty());
     assert_eq!(renderer.references.load(Ordering::SeqCst), 0);
-    // A dataset directory without a manifest is named.
+    // A dataset directory without a manifest is named (the manifest is read before averaging).
     let empty = fresh_dir("avg-empty");
-    let err = average_references(
-        &empty,
-        &renderer,
-        &options(&manifest, 2),
-        |_, _, _| {},
-        &mut |_| {},
-    )
-    .unwrap_err()
-    .to_string();
+    let err = Manifest::load(&empty).unwrap_err().to_string();
     assert!(err.contains("manifest.json"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&empty);

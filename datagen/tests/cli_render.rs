@@ -159,8 +159,7 @@ fn average_references_with_the_real_renderer() {
     let data = dir.join("data");
     ok(render(&config, &data, &[]).output().unwrap());
     let manifest = Manifest::load(&data).unwrap();
-    let split = serde_json::to_value(manifest.scenes[0].split).unwrap();
-    let split = split.as_str().unwrap();
+    let split = manifest.scenes[0].split.name();
     let average = |extra: &[&str]| {
         let mut args = vec!["average-references", data.to_str().unwrap(), "--quiet"];
         if !extra.contains(&"--split") {
@@ -173,11 +172,7 @@ fn average_references_with_the_real_renderer() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let noise: serde_json::Value =
         serde_json::from_slice(&std::fs::read(data.join("avg/noise.json")).unwrap()).unwrap();
-    for scene in manifest
-        .scenes
-        .iter()
-        .filter(|s| serde_json::to_value(s.split).unwrap().as_str() == Some(split))
-    {
+    for scene in manifest.scenes.iter().filter(|s| s.split.name() == split) {
         assert!(stdout.contains(&scene.id), "{stdout}");
         let mean = bundle::read_rgb_exr_image(&data.join(format!("avg/{}.exr", scene.id))).unwrap();
         assert_eq!((mean.width, mean.height), (16, 16));

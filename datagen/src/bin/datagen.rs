@@ -78,7 +78,7 @@ enum Command {
         /// Dataset directory (with manifest.json).
         dir: PathBuf,
         /// Split whose scenes are averaged: train, val or test.
-        #[arg(long, default_value = "test", value_parser = parse_split)]
+        #[arg(long, default_value = "test")]
         split: Split,
         /// Runs per scene, the dataset's own reference included (extra runs are kept in
         /// DIR/reference-runs and reused).
@@ -108,16 +108,6 @@ enum Command {
         #[arg(long, default_value_t = 160)]
         tile: usize,
     },
-}
-
-/// `train`, `val` or `test`.
-fn parse_split(text: &str) -> Result<Split, String> {
-    match text {
-        "train" => Ok(Split::Train),
-        "val" => Ok(Split::Val),
-        "test" => Ok(Split::Test),
-        _ => Err(format!("unknown split `{text}` (train, val or test)")),
-    }
 }
 
 fn main() {
@@ -265,6 +255,7 @@ fn run(cli: Cli) -> Result<i32> {
             };
             let report = average_references(
                 &dir,
+                &manifest,
                 &SppmBackend,
                 &options,
                 |id, run, rendered| {
