@@ -46,6 +46,8 @@ pub struct AverageOptions {
 /// per-sample variance across the runs. Variance only: the estimator's bias is not in it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneNoise {
+    /// Split the scene belongs to.
+    pub split: Split,
     /// Runs averaged.
     pub runs: usize,
     /// relMSE one run carries.
@@ -56,17 +58,72 @@ pub struct SceneNoise {
     pub seeds: Vec<u64>,
 }
 
-/// Contents of `<out>/noise.json`.
+/// Contents of `<out>/noise.json`: every scene averaged into `<out>` so far, of any split
+/// (one call averages one split; later calls for other splits add their scenes).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct NoiseReport {
-    /// Split averaged.
-    pub split: Split,
     /// Passes of every run.
     pub reference_passes: u32,
     /// Photons per pass of every run.
     pub reference_photons: u64,
     /// Per scene id.
     pub scenes: BTreeMap<String, SceneNoise>,
+}
+
+/// `noise.json` as the first version wrote it: one split for the whole file.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NoiseReportV1 {
+    split: Split,
+    reference_passes: u32,
+    reference_photons: u64,
+    scenes: BTreeMap<String, SceneNoiseV1>,
+}
+
+/// A scene of [`NoiseReportV1`].
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneNoiseV1 {
+    runs: usize,
+    relmse_one_run: f64,
+    relmse_mean: f64,
+    seeds: Vec<u64>,
+}
+
+impl NoiseReport {
+    /// Reads a report (either version); `None` when `path` does not exist.
+    pub fn read(path: &Path) -> Result<Option<Self>> {
+        let bytes = match std::fs::read(path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        };
+        if let Ok(v1) = serde_json::from_slice::<NoiseReportV1>(&bytes) {
+            let scenes = v1
+                .scenes
+                .into_iter()
+                .map(|(id, s)| {
+                    let noise = SceneNoise {
+                        split: v1.split,
+                        runs: s.runs,
+                        relmse_one_run: s.relmse_one_run,
+                        relmse_mean: s.relmse_mean,
+                        seeds: s.seeds,
+                    };
+                    (id, noise)
+                })
+                .collect();
+            return Ok(Some(NoiseReport {
+                reference_passes: v1.reference_passes,
+                reference_photons: v1.reference_photons,
+                scenes,
+            }));
+        }
+        serde_json::from_slice(&bytes)
+            .map(Some)
+            .with_context(|| format!("{}: not a noise report", path.display()))
+    }
 }
 
 /// Where extra run `seed` of `scene` lives (relative to the dataset root): the settings are in
@@ -170,11 +227,30 @@ pub fn average_references(
     std::fs::create_dir_all(root.join(RUNS_DIR))
         .with_context(|| format!("creating {}", root.join(RUNS_DIR).display()))?;
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    let mut report = NoiseReport {
-        split: options.split,
-        reference_passes: first.reference_passes,
-        reference_photons: first.reference_photons,
-        scenes: BTreeMap::new(),
+    // Scenes averaged into `out` by earlier calls (other splits) stay in the report; mixing
+    // runs of other reference settings into one directory is refused.
+    let noise_path = out_dir.join(NOISE_FILE);
+    let mut report = match NoiseReport::read(&noise_path)? {
+        Some(r)
+            if (r.reference_passes, r.reference_photons)
+                != (first.reference_passes, first.reference_photons) =>
+        {
+            bail!(
+                "{}: holds references of {} passes x {} photons, this dataset's are {} x {}; \
+                 choose another --out",
+                noise_path.display(),
+                r.reference_passes,
+                r.reference_photons,
+                first.reference_passes,
+                first.reference_photons
+            )
+        }
+        Some(r) => r,
+        None => NoiseReport {
+            reference_passes: first.reference_passes,
+            reference_photons: first.reference_photons,
+            scenes: BTreeMap::new(),
+        },
     };
     for scene in scenes {
         let mut seeds = vec![scene.reference_seed];
@@ -210,6 +286,7 @@ pub fn average_references(
         report.scenes.insert(
             scene.id.clone(),
             SceneNoise {
+                split: scene.split,
                 runs: options.runs,
                 relmse_one_run: one_run,
                 relmse_mean: one_run / options.runs as f64,
@@ -217,8 +294,7 @@ pub fn average_references(
             },
         );
     }
-    let path = out_dir.join(NOISE_FILE);
-    write_atomic(&path, &to_json(&report))
-        .with_context(|| format!("writing {}", path.display()))?;
+    write_atomic(&noise_path, &to_json(&report))
+        .with_context(|| format!("writing {}", noise_path.display()))?;
     Ok(report)
 }

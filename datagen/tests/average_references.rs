@@ -184,3 +184,78 @@ fn bad_requests_are_errors() {
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&empty);
 }
+
+#[test]
+fn splits_share_one_directory_and_its_noise_report() {
+    let (dir, manifest) = dataset("avg-splits");
+    let renderer = Constant::default();
+    let mut splits: Vec<_> = manifest.scenes.iter().map(|s| s.split).collect();
+    splits.sort_by_key(|s| s.name());
+    splits.dedup();
+    assert!(splits.len() >= 2, "the test dataset should have two splits");
+    let run = |split| {
+        let o = AverageOptions {
+            split,
+            ..options(&manifest, 2)
+        };
+        average_references(&dir, &manifest, &renderer, &o, |_, _, _| {}, &mut |_| {}).unwrap()
+    };
+    run(splits[0]);
+    let both = run(splits[1]);
+    // The second call keeps the first split's scenes: every scene of both splits is listed once,
+    // with its own split.
+    let want: Vec<_> = manifest
+        .scenes
+        .iter()
+        .filter(|s| s.split == splits[0] || s.split == splits[1])
+        .map(|s| (s.id.clone(), s.split))
+        .collect();
+    let got: Vec<_> = both
+        .scenes
+        .iter()
+        .map(|(id, n)| (id.clone(), n.split))
+        .collect();
+    let mut want = want;
+    want.sort_by(|a, b| a.0.cmp(&b.0));
+    assert_eq!(got, want);
+    let path = dir.join("avg").join(NOISE_FILE);
+    assert_eq!(NoiseReport::read(&path).unwrap(), Some(both.clone()));
+
+    // A report of the first version (one split for the file) is read and kept.
+    let (id, scene) = both.scenes.iter().next().unwrap();
+    let v1 = serde_json::json!({
+        "split": scene.split,
+        "reference_passes": both.reference_passes,
+        "reference_photons": both.reference_photons,
+        "scenes": { id: {
+            "runs": scene.runs,
+            "relmse_one_run": scene.relmse_one_run,
+            "relmse_mean": scene.relmse_mean,
+            "seeds": scene.seeds,
+        }},
+    });
+    std::fs::write(&path, serde_json::to_vec(&v1).unwrap()).unwrap();
+    let read = NoiseReport::read(&path).unwrap().unwrap();
+    assert_eq!(read.scenes.len(), 1);
+    assert_eq!(read.scenes[id], *scene);
+
+    // References of other settings in the same directory are refused, naming the file.
+    let mut other = both.clone();
+    other.reference_passes += 1;
+    std::fs::write(&path, serde_json::to_vec(&other).unwrap()).unwrap();
+    let o = options(&manifest, 2);
+    let err = average_references(&dir, &manifest, &renderer, &o, |_, _, _| {}, &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("noise.json") && err.contains("passes"),
+        "{err}"
+    );
+    // A file that is not a report at all is an error too, not silently replaced.
+    std::fs::write(&path, b"{\"nope\": 1}").unwrap();
+    let err = average_references(&dir, &manifest, &renderer, &o, |_, _, _| {}, &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("not a noise report"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -211,19 +211,25 @@ pub struct PatchDataset {
 impl PatchDataset {
     /// Opens the `split` of the dataset in `root`, loading each image once to screen out bad
     /// data (NaN/Inf, missing reference, mismatched sizes or channels, smaller than a patch).
+    /// `references`: a directory inside `root` whose `<scene id>.exr` replaces the manifest's
+    /// reference of every sample (e.g. the averaged runs of `datagen average-references`).
     pub fn open(
         root: &Path,
         split: &str,
         patch: usize,
         stride: usize,
         cache_images: usize,
+        references: Option<&Path>,
     ) -> Result<Self, String> {
         let manifest = Manifest::read(root)?;
         let mut images = Vec::new();
         let mut bad = Vec::new();
         for entry in manifest.samples.iter().filter(|s| s.split == split) {
             let bundle = root.join(&entry.bundle);
-            let reference = root.join(&entry.reference);
+            let reference = match references {
+                Some(dir) => root.join(dir).join(format!("{}.exr", entry.scene)),
+                None => root.join(&entry.reference),
+            };
             match load_sample(&bundle, &reference) {
                 Ok(sample) => {
                     let (width, height) = (sample.packed.width, sample.packed.height);

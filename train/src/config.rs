@@ -31,6 +31,11 @@ pub struct TrainConfig {
     pub backend: Backend,
     /// Dataset directory holding `manifest.json`.
     pub dataset: PathBuf,
+    /// Directory inside the dataset whose `<scene id>.exr` replaces every sample's reference
+    /// (training, validation and `--evaluate`), e.g. the averaged runs written by
+    /// `datagen average-references` (`references-avg8`). Absent: the manifest's references.
+    #[serde(default)]
+    pub references: Option<PathBuf>,
     /// Split trained on.
     #[serde(default = "default_split_train")]
     pub train_split: String,

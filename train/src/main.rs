@@ -102,8 +102,15 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
         .map_err(anyhow::Error::msg)?;
     // Screen with a 1-pixel patch, then evaluate each image as one patch of the smallest image
     // side (whole images when a split has one size, as datagen writes them).
-    let mut ds = PatchDataset::open(&cfg.dataset, split, 1, 1, cfg.cache_images)
-        .map_err(anyhow::Error::msg)?;
+    let mut ds = PatchDataset::open(
+        &cfg.dataset,
+        split,
+        1,
+        1,
+        cfg.cache_images,
+        cfg.references.as_deref(),
+    )
+    .map_err(anyhow::Error::msg)?;
     report_bad(split, &ds, &cfg.output)?;
     let side = ds
         .images
@@ -200,6 +207,7 @@ fn run(cli: &Cli) -> Result<()> {
         cfg.patch,
         cfg.stride,
         cfg.cache_images,
+        cfg.references.as_deref(),
     )
     .map_err(anyhow::Error::msg)?;
     report_bad(&cfg.train_split, &train, &cfg.output)?;
@@ -216,6 +224,7 @@ fn run(cli: &Cli) -> Result<()> {
         cfg.patch,
         cfg.patch,
         cfg.cache_images,
+        cfg.references.as_deref(),
     )
     .map_err(anyhow::Error::msg)?;
     report_bad(&cfg.val_split, &val, &cfg.output)?;

@@ -12,6 +12,16 @@ fn temp_dir(name: &str) -> PathBuf {
     dir
 }
 
+/// Runs `train --config <config> <args…>`.
+fn train(config: &Path, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_train"))
+        .arg("--config")
+        .arg(config)
+        .args(args)
+        .output()
+        .unwrap()
+}
+
 /// Writes a dataset: 2 good train samples, 1 good val sample, and three bad train samples
 /// (NaN in a level, missing reference, reference of the wrong size).
 fn write_dataset(root: &Path) {
@@ -63,14 +73,7 @@ fn trains_reports_bad_data_and_resumes() {
         .unwrap();
     };
     write_config(1);
-    let run = |resume: bool| {
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_train"));
-        cmd.arg("--config").arg(&config);
-        if resume {
-            cmd.arg("--resume");
-        }
-        cmd.output().unwrap()
-    };
+    let run = |resume: bool| train(&config, if resume { &["--resume"] } else { &[] });
     let first = run(false);
     let stderr = String::from_utf8_lossy(&first.stderr);
     assert!(first.status.success(), "{stderr}");
@@ -116,11 +119,7 @@ fn trains_reports_bad_data_and_resumes() {
         .unwrap();
     };
     write_tune("tiny");
-    let tune = Command::new(env!("CARGO_BIN_EXE_train"))
-        .arg("--config")
-        .arg(&tune_config)
-        .output()
-        .unwrap();
+    let tune = train(&tune_config, &[]);
     let stderr = String::from_utf8_lossy(&tune.stderr);
     assert!(tune.status.success(), "{stderr}");
     assert!(stderr.contains("starting from the weights of"), "{stderr}");
@@ -132,22 +131,13 @@ fn trains_reports_bad_data_and_resumes() {
         "fine-tuning changed nothing"
     );
     write_tune("small");
-    let mismatch = Command::new(env!("CARGO_BIN_EXE_train"))
-        .arg("--config")
-        .arg(&tune_config)
-        .output()
-        .unwrap();
+    let mismatch = train(&tune_config, &[]);
     assert!(!mismatch.status.success());
     let stderr = String::from_utf8_lossy(&mismatch.stderr);
     assert!(stderr.contains("architecture"), "{stderr}");
 
     // `--evaluate val` scores the final weights on whole images of the split.
-    let eval = Command::new(env!("CARGO_BIN_EXE_train"))
-        .arg("--config")
-        .arg(&config)
-        .args(["--evaluate", "val"])
-        .output()
-        .unwrap();
+    let eval = train(&config, &["--evaluate", "val"]);
     let stdout = String::from_utf8_lossy(&eval.stdout);
     assert!(
         eval.status.success(),
@@ -162,12 +152,7 @@ fn trains_reports_bad_data_and_resumes() {
     assert!(output.is_finite() && output > 0.0, "{report}");
     assert!((report["ratio_to_best_level"].as_f64().unwrap() - output / best).abs() < 1e-12);
     // An unknown split has no usable samples: a clear error, not a panic.
-    let none = Command::new(env!("CARGO_BIN_EXE_train"))
-        .arg("--config")
-        .arg(&config)
-        .args(["--evaluate", "nosuchsplit"])
-        .output()
-        .unwrap();
+    let none = train(&config, &["--evaluate", "nosuchsplit"]);
     assert!(!none.status.success());
     assert!(String::from_utf8_lossy(&none.stderr).contains("no usable samples"));
 
@@ -176,4 +161,58 @@ fn trains_reports_bad_data_and_resumes() {
     let bad = run(false);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("learning_rate"));
+}
+
+#[test]
+fn references_key_replaces_the_manifest_references() {
+    let dir = temp_dir("refs");
+    let data = dir.join("data");
+    std::fs::create_dir_all(data.join("avg")).unwrap();
+    write_dataset(&data);
+    // The replacement reference of `val0` is its own level z2: that input level's error against
+    // it is exactly zero, the others' are not.
+    let b = bundle::read_bundle(&data.join("val0.exr")).unwrap();
+    bundle::write_rgb_exr_image(&data.join("avg/val0.exr"), &b.levels[2]).unwrap();
+    for name in ["good0", "good1"] {
+        std::fs::copy(
+            data.join(format!("{name}_ref.exr")),
+            data.join(format!("avg/{name}.exr")),
+        )
+        .unwrap();
+    }
+    let out = dir.join("out");
+    let config = dir.join("refs.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "dataset = {:?}\nreferences = \"avg\"\npreset = \"tiny\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = 1\nseed = 3\noutput = {:?}\n",
+            data, out
+        ),
+    )
+    .unwrap();
+    let trained = train(&config, &[]);
+    let stderr = String::from_utf8_lossy(&trained.stderr);
+    assert!(trained.status.success(), "{stderr}");
+    // The bad samples of the manifest have no file in `avg`: named with the replacement's path.
+    for name in ["nan.exr", "avg/noref.exr", "avg/badsize.exr"] {
+        assert!(stderr.contains(name), "bad file {name} not named: {stderr}");
+    }
+    let eval = train(&config, &["--evaluate", "val"]);
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("eval_val.json")).unwrap()).unwrap();
+    assert_eq!(
+        report["relmse_levels"]["z2"].as_f64(),
+        Some(0.0),
+        "{report}"
+    );
+    assert!(
+        report["relmse_levels"]["z4"].as_f64().unwrap() > 0.0,
+        "{report}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
