@@ -193,6 +193,17 @@ fn report_bad(split: &str, ds: &PatchDataset, output: &Path) -> Result<()> {
 
 fn run(cli: &Cli) -> Result<()> {
     let cfg = TrainConfig::read(&cli.config)?;
+    // A misspelt `references` directory would otherwise only show as every sample screened out.
+    if let Some(dir) = &cfg.references {
+        let path = cfg.dataset.join(dir);
+        if !path.is_dir() {
+            bail!(
+                "{}: references directory {} does not exist",
+                cli.config.display(),
+                path.display()
+            );
+        }
+    }
     let device = cfg.backend.device().map_err(anyhow::Error::msg)?;
     if let Some(split) = &cli.evaluate {
         return evaluate(&cfg, split, &device);

@@ -214,5 +214,16 @@ fn references_key_replaces_the_manifest_references() {
         report["relmse_levels"]["z4"].as_f64().unwrap() > 0.0,
         "{report}"
     );
+
+    // A references directory that does not exist is named before anything is trained.
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(&config, text.replace("\"avg\"", "\"avgg\"")).unwrap();
+    let missing = train(&config, &[]);
+    assert!(!missing.status.success());
+    let stderr = String::from_utf8_lossy(&missing.stderr);
+    assert!(
+        stderr.contains("avgg") && stderr.contains("does not exist"),
+        "{stderr}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
