@@ -485,6 +485,12 @@ pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
     })
 }
 
+/// The reference of scene `scene_id` in a directory of references: `<dir>/<scene id>.exr`, the
+/// layout of a dataset's `references/` and of the averaged references that may replace them.
+pub fn scene_reference_path(dir: &Path, scene_id: &str) -> PathBuf {
+    dir.join(format!("{scene_id}.exr"))
+}
+
 /// Writes a plain RGB float32 EXR (channels `R`, `G`, `B`), atomically (temp file + rename).
 pub fn write_rgb_exr_image(path: &Path, img: &Image) -> Result<(), BundleError> {
     img.check_shape(path, "RGB", img.width, img.height, 3)?;

@@ -10,7 +10,7 @@ use crate::jobs::{RunSpec, SampleRenderer};
 use crate::manifest::{to_json, Manifest, SceneEntry};
 use crate::plan::Split;
 use anyhow::{bail, Context, Result};
-use bundle::{read_rgb_exr_image, write_rgb_exr_image, Image};
+use bundle::{read_rgb_exr_image, scene_reference_path, write_rgb_exr_image, Image};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Component, Path, PathBuf};
@@ -155,10 +155,8 @@ fn check_out(out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Reads an RGB image and checks its size.
-fn read_checked(path: &Path, width: u32, height: u32) -> Result<Image> {
-    // The bundle crate's errors name the file already.
-    let img = read_rgb_exr_image(path)?;
+/// `img` (read from or written to `path`) if it has the dataset's size.
+fn check_size(img: Image, path: &Path, width: u32, height: u32) -> Result<Image> {
     if (img.width, img.height) != (width as usize, height as usize) {
         bail!(
             "{}: {}x{}, the dataset is {width}x{height}",
@@ -168,6 +166,12 @@ fn read_checked(path: &Path, width: u32, height: u32) -> Result<Image> {
         );
     }
     Ok(img)
+}
+
+/// Reads an RGB image and checks its size.
+fn read_checked(path: &Path, width: u32, height: u32) -> Result<Image> {
+    // The bundle crate's errors name the file already.
+    check_size(read_rgb_exr_image(path)?, path, width, height)
 }
 
 /// Per-sample mean of `images` (all the same shape) and the noise one of them carries.
@@ -263,7 +267,7 @@ pub fn average_references(
             let seed = run_seed(scene.reference_seed, run);
             let path = root.join(run_path(scene, seed));
             let rendered = !path.exists();
-            if rendered {
+            let image = if rendered {
                 let spec = RunSpec {
                     scene_id: scene.id.clone(),
                     seed,
@@ -273,15 +277,20 @@ pub fn average_references(
                     threads: options.threads,
                 };
                 let image = renderer.reference(&root.join(&scene.xml), &spec, on_pass)?;
+                // The run is averaged as rendered (EXR float32 keeps it exactly), not read back.
+                let image = check_size(image, &path, manifest.width, manifest.height)?;
                 write_rgb_exr_image(&path, &image)
                     .with_context(|| format!("writing {}", path.display()))?;
-            }
-            images.push(read_checked(&path, manifest.width, manifest.height)?);
+                image
+            } else {
+                read_checked(&path, manifest.width, manifest.height)?
+            };
+            images.push(image);
             seeds.push(seed);
             on_run(&scene.id, run, rendered);
         }
         let (mean, one_run) = mean_and_noise(&images);
-        let path = out_dir.join(format!("{}.exr", scene.id));
+        let path = scene_reference_path(&out_dir, &scene.id);
         write_rgb_exr_image(&path, &mean).with_context(|| format!("writing {}", path.display()))?;
         report.scenes.insert(
             scene.id.clone(),

@@ -227,7 +227,7 @@ impl PatchDataset {
         for entry in manifest.samples.iter().filter(|s| s.split == split) {
             let bundle = root.join(&entry.bundle);
             let reference = match references {
-                Some(dir) => root.join(dir).join(format!("{}.exr", entry.scene)),
+                Some(dir) => bundle::scene_reference_path(&root.join(dir), &entry.scene),
                 None => root.join(&entry.reference),
             };
             match load_sample(&bundle, &reference) {

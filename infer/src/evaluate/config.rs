@@ -195,7 +195,7 @@ impl EvalConfig {
                 .filter(|s| s.split == d.split)
                 .map(|s| EvalScene {
                     reference: match &d.references {
-                        Some(dir) => d.dir.join(dir).join(format!("{}.exr", s.id)),
+                        Some(dir) => bundle::scene_reference_path(&d.dir.join(dir), &s.id),
                         None => d.dir.join(s.reference),
                     },
                     name: s.id,
