@@ -2,7 +2,7 @@
 //! power-proportional selection, the camera, and the queries integrators make (closest hit,
 //! occlusion, emitted radiance, light sampling for NEE and photon emission).
 
-use crate::accel::{Accel, CwBvhAccel, PrimitiveHit};
+use crate::accel::{Accel, Bvh4Accel, PrimitiveHit};
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription};
@@ -110,9 +110,9 @@ pub struct Scene {
     /// Sum of the environment lights' radiance.
     environment_radiance: Rgb,
     /// Ray-tracing acceleration structure.
-    accel: CwBvhAccel,
+    accel: Bvh4Accel,
     /// The same over emitting shapes only, for rays that only look for emitted light.
-    emitter_accel: CwBvhAccel,
+    emitter_accel: Bvh4Accel,
     /// Bounding box (min, max) of all shapes.
     bounds: (Vec3, Vec3),
     /// Bounding sphere of all shapes (and the camera), for infinite lights.
@@ -281,8 +281,8 @@ impl Scene {
             lights.push(light);
         }
 
-        let accel = CwBvhAccel::build(&shapes);
-        let emitter_accel = CwBvhAccel::build_subset(&shapes, |i| shape_info[i].light.is_some());
+        let accel = Bvh4Accel::build(&shapes)?;
+        let emitter_accel = Bvh4Accel::build_subset(&shapes, |i| shape_info[i].light.is_some())?;
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
         for s in &shapes {

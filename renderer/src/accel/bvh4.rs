@@ -1,0 +1,261 @@
+//! A 4-wide BVH with full-precision child boxes, collapsed from obvhs's BVH2 (which does the
+//! building: PLOC, reinsertion, SAH leaf collapse), and its SSE2 traversal. Four children are
+//! tested against one ray in a single pass of 4-lane arithmetic over boxes stored
+//! structure-of-arrays; unlike obvhs's CWBVH, nothing is decompressed per node, which is where
+//! a CPU spends its time on the small scenes this toolkit renders.
+
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::Bvh2;
+
+/// Marks a child slot as a leaf: the low bits hold `first << LEAF_COUNT_BITS | count`.
+const LEAF: u32 = 1 << 31;
+/// Bits of a leaf's primitive count.
+const LEAF_COUNT_BITS: u32 = 4;
+/// A child slot with nothing in it (its box is empty, so it is never entered).
+const EMPTY: u32 = u32::MAX;
+/// Traversal stack entries (a closest-hit traversal holds at most 3 per level + 1).
+pub const STACK_SIZE: usize = 256;
+/// Primitives a leaf slot can address (exclusive bound).
+pub const MAX_PRIMITIVES: usize = 1 << (31 - LEAF_COUNT_BITS);
+
+/// One node: the boxes of up to four children, one lane per child.
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(16))]
+pub struct Node4 {
+    /// `bounds[2 * axis]` = the children's minima along `axis`, `bounds[2 * axis + 1]` maxima.
+    pub bounds: [[f32; 4]; 6],
+    /// Per child: a node index, a leaf (`LEAF` | first << 4 | count) or `EMPTY`.
+    pub child: [u32; 4],
+}
+
+impl Node4 {
+    /// A node whose four slots are empty (boxes inverted: no ray enters them).
+    fn empty() -> Self {
+        let mut bounds = [[0.0; 4]; 6];
+        for axis in 0..3 {
+            bounds[2 * axis] = [f32::INFINITY; 4];
+            bounds[2 * axis + 1] = [f32::NEG_INFINITY; 4];
+        }
+        Node4 {
+            bounds,
+            child: [EMPTY; 4],
+        }
+    }
+
+    /// Stores `aabb` and `child` in slot `slot`.
+    fn set(&mut self, slot: usize, aabb: &Aabb, child: u32) {
+        for axis in 0..3 {
+            self.bounds[2 * axis][slot] = aabb.min[axis];
+            self.bounds[2 * axis + 1][slot] = aabb.max[axis];
+        }
+        self.child[slot] = child;
+    }
+}
+
+/// A child reference as traversal sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Child {
+    /// An inner node (index into the node array).
+    Node(u32),
+    /// A leaf: primitives `first..first + count` in leaf order.
+    Leaf { first: u32, count: u32 },
+}
+
+/// Decodes a child slot (not `EMPTY`).
+#[inline(always)]
+pub fn decode(c: u32) -> Child {
+    if c & LEAF == 0 {
+        Child::Node(c)
+    } else {
+        Child::Leaf {
+            first: (c & !LEAF) >> LEAF_COUNT_BITS,
+            count: c & ((1 << LEAF_COUNT_BITS) - 1),
+        }
+    }
+}
+
+/// Collapses `bvh2` into 4-wide nodes (root at index 0). Each BVH2 node keeps its two
+/// children and repeatedly opens the largest-area inner child among them until four are
+/// gathered (the standard SAH-greedy collapse). Leaves keep the BVH2's primitive ranges
+/// (at most 15 primitives each, below [`MAX_PRIMITIVES`]: the caller checks). Returns the
+/// nodes and the depth in nodes.
+pub fn collapse(bvh2: &Bvh2) -> (Vec<Node4>, usize) {
+    let mut nodes = Vec::with_capacity(bvh2.nodes.len() / 2 + 1);
+    nodes.push(Node4::empty());
+    let root = &bvh2.nodes[0];
+    if root.prim_count > 0 {
+        nodes[0].set(0, &root.aabb, leaf(root.first_index, root.prim_count));
+        return (nodes, 1);
+    }
+    let depth = fill(bvh2, 0, 0, &mut nodes);
+    (nodes, depth)
+}
+
+/// Encodes a leaf slot.
+fn leaf(first: u32, count: u32) -> u32 {
+    debug_assert!(count < (1 << LEAF_COUNT_BITS) && (first as usize) < MAX_PRIMITIVES);
+    LEAF | (first << LEAF_COUNT_BITS) | count
+}
+
+/// Fills `nodes[out]` with the (up to four) descendants of the BVH2 inner node `n2`; returns
+/// the depth of the subtree in nodes.
+fn fill(bvh2: &Bvh2, n2: usize, out: usize, nodes: &mut Vec<Node4>) -> usize {
+    let first = bvh2.nodes[n2].first_index as usize;
+    let mut kids = vec![first, first + 1];
+    while kids.len() < 4 {
+        let open = kids
+            .iter()
+            .enumerate()
+            .filter(|(_, &k)| bvh2.nodes[k].prim_count == 0)
+            .max_by(|a, b| {
+                let (ha, hb) = (
+                    bvh2.nodes[*a.1].aabb.half_area(),
+                    bvh2.nodes[*b.1].aabb.half_area(),
+                );
+                ha.total_cmp(&hb)
+            })
+            .map(|(i, _)| i);
+        let Some(i) = open else { break };
+        let k = bvh2.nodes[kids[i]].first_index as usize;
+        kids[i] = k;
+        kids.insert(i + 1, k + 1);
+    }
+    let mut depth = 1;
+    for (slot, &k) in kids.iter().enumerate() {
+        let node = &bvh2.nodes[k];
+        if node.prim_count > 0 {
+            nodes[out].set(slot, &node.aabb, leaf(node.first_index, node.prim_count));
+        } else {
+            let index = nodes.len();
+            nodes.push(Node4::empty());
+            nodes[out].set(slot, &node.aabb, index as u32);
+            depth = depth.max(1 + fill(bvh2, k, index, nodes));
+        }
+    }
+    depth
+}
+
+/// The per-ray constants of the box test, splatted into SSE registers.
+#[cfg(target_arch = "x86_64")]
+pub mod simd {
+    use super::Node4;
+    use std::arch::x86_64::*;
+
+    /// A ray prepared for 4-wide box tests: origin, inverse direction and the near/far plane
+    /// rows of each axis chosen by the direction's sign.
+    #[derive(Clone, Copy)]
+    pub struct BoxRay {
+        o: [__m128; 3],
+        inv: [__m128; 3],
+        near: [usize; 3],
+        tmin: __m128,
+    }
+
+    impl BoxRay {
+        /// Prepares `origin`, `inv_direction` (finite) and `tmin`.
+        #[inline(always)]
+        pub fn new(origin: glam::Vec3A, inv_direction: glam::Vec3A, tmin: f32) -> Self {
+            // SAFETY: SSE2 is part of the x86_64 baseline.
+            unsafe {
+                BoxRay {
+                    o: [
+                        _mm_set1_ps(origin.x),
+                        _mm_set1_ps(origin.y),
+                        _mm_set1_ps(origin.z),
+                    ],
+                    inv: [
+                        _mm_set1_ps(inv_direction.x),
+                        _mm_set1_ps(inv_direction.y),
+                        _mm_set1_ps(inv_direction.z),
+                    ],
+                    near: [
+                        usize::from(inv_direction.x < 0.0),
+                        usize::from(inv_direction.y < 0.0),
+                        usize::from(inv_direction.z < 0.0),
+                    ],
+                    tmin: _mm_set1_ps(tmin),
+                }
+            }
+        }
+
+        /// Entry distances of the four children and the mask of those the ray enters
+        /// before `tmax`.
+        #[inline(always)]
+        pub fn test(&self, node: &Node4, tmax: f32) -> ([f32; 4], u32) {
+            // SAFETY: SSE2 arithmetic on registers; loads from the 16-byte aligned rows of `node`.
+            unsafe {
+                let b = &node.bounds;
+                let mut tnear = self.tmin;
+                let mut tfar = _mm_set1_ps(tmax);
+                for axis in 0..3 {
+                    let n = self.near[axis];
+                    let lo = _mm_load_ps(b[2 * axis + n].as_ptr());
+                    let hi = _mm_load_ps(b[2 * axis + 1 - n].as_ptr());
+                    let t0 = _mm_mul_ps(_mm_sub_ps(lo, self.o[axis]), self.inv[axis]);
+                    let t1 = _mm_mul_ps(_mm_sub_ps(hi, self.o[axis]), self.inv[axis]);
+                    tnear = _mm_max_ps(tnear, t0);
+                    tfar = _mm_min_ps(tfar, t1);
+                }
+                let mask = _mm_movemask_ps(_mm_cmple_ps(tnear, tfar)) as u32;
+                let mut out = [0.0f32; 4];
+                _mm_storeu_ps(out.as_mut_ptr(), tnear);
+                (out, mask)
+            }
+        }
+    }
+}
+
+/// Portable version of [`simd`] for other architectures.
+#[cfg(not(target_arch = "x86_64"))]
+pub mod simd {
+    use super::Node4;
+
+    /// A ray prepared for 4-wide box tests.
+    #[derive(Clone, Copy)]
+    pub struct BoxRay {
+        o: [f32; 3],
+        inv: [f32; 3],
+        near: [usize; 3],
+        tmin: f32,
+    }
+
+    impl BoxRay {
+        /// Prepares `origin`, `inv_direction` (finite) and `tmin`.
+        #[inline(always)]
+        pub fn new(origin: glam::Vec3A, inv_direction: glam::Vec3A, tmin: f32) -> Self {
+            BoxRay {
+                o: origin.to_array(),
+                inv: inv_direction.to_array(),
+                near: [
+                    usize::from(inv_direction.x < 0.0),
+                    usize::from(inv_direction.y < 0.0),
+                    usize::from(inv_direction.z < 0.0),
+                ],
+                tmin,
+            }
+        }
+
+        /// Entry distances of the four children and the mask of those the ray enters
+        /// before `tmax`.
+        #[inline(always)]
+        pub fn test(&self, node: &Node4, tmax: f32) -> ([f32; 4], u32) {
+            let b = &node.bounds;
+            let mut out = [0.0f32; 4];
+            let mut mask = 0;
+            for (lane, t) in out.iter_mut().enumerate() {
+                let mut tnear = self.tmin;
+                let mut tfar = tmax;
+                for axis in 0..3 {
+                    let n = self.near[axis];
+                    let t0 = (b[2 * axis + n][lane] - self.o[axis]) * self.inv[axis];
+                    let t1 = (b[2 * axis + 1 - n][lane] - self.o[axis]) * self.inv[axis];
+                    tnear = if t0 > tnear { t0 } else { tnear };
+                    tfar = if t1 < tfar { t1 } else { tfar };
+                }
+                *t = tnear;
+                mask |= u32::from(tnear <= tfar) << lane;
+            }
+            (out, mask)
+        }
+    }
+}
