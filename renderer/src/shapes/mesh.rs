@@ -35,25 +35,33 @@ pub fn intersect_triangle_bary(
     e2: Vec3A,
 ) -> (f32, Vec2) {
     // Every quantity is computed before one combined test: with incoherent rays the early
-    // outs of the textbook form mispredict more often than they save arithmetic.
+    // outs of the textbook form mispredict more often than they save arithmetic. The tests are
+    // made on the numerators against |det|, so only a hit pays for the division.
     let pvec = d.cross(e2);
     let det = e1.dot(pvec);
-    let inv = 1.0 / det;
     let tvec = o - p0;
-    let u = tvec.dot(pvec) * inv;
     let qvec = tvec.cross(e1);
-    let v = d.dot(qvec) * inv;
-    let t = e2.dot(qvec) * inv;
+    let sign = det.signum();
+    let adet = det.abs();
+    let u = tvec.dot(pvec) * sign;
+    let v = d.dot(qvec) * sign;
+    let t = e2.dot(qvec) * sign;
     // Non-short-circuit `&`: a single branch. A NaN (degenerate triangle) fails every test.
-    let hit = (det.abs() >= 1e-12)
-        & (0.0..=1.0).contains(&u)
-        & (v >= 0.0)
-        & (u + v <= 1.0)
-        & (t > tmin)
-        & (t < tmax);
-    (if hit { t } else { f32::INFINITY }, Vec2::new(u, v))
+    let hit = (adet >= 1e-12) & (u >= 0.0) & (v >= 0.0) & (u + v <= adet) & (t > tmin * adet);
+    if !hit {
+        return (f32::INFINITY, Vec2::ZERO);
+    }
+    let inv = 1.0 / adet;
+    let (t, u, v) = (t * inv, u * inv, v * inv);
+    (
+        if t > tmin && t < tmax {
+            t
+        } else {
+            f32::INFINITY
+        },
+        Vec2::new(u, v),
+    )
 }
-
 /// Barycentric coordinates (b1, b2) of the hit of `ray` with a triangle.
 #[inline]
 fn barycentrics(ray: &Ray, p0: Vec3, p1: Vec3, p2: Vec3) -> Vec2 {
