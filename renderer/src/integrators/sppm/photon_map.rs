@@ -119,6 +119,8 @@ fn radix_sort_by_code(keys: &mut Vec<(u64, u64)>, scratch: &mut Vec<(u64, u64)>,
 
 /// Photons tested together by a query's distance test (one SSE register of `f32`).
 const LANES: usize = 4;
+// The SSE form of `Positions::within` is written for exactly 4 lanes.
+const _: () = assert!(LANES == 4);
 
 /// Photon positions as separate coordinate arrays (structure of arrays), so that the distance
 /// test of [`LANES`] consecutive photons compiles to vector instructions.
@@ -152,6 +154,39 @@ impl Positions {
     /// those within `r2`.
     #[inline(always)]
     fn within(&self, i: usize, p: Vec3, r2: f32) -> ([f32; LANES], u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            let (x, y, z) = (
+                &self.x[i..i + LANES],
+                &self.y[i..i + LANES],
+                &self.z[i..i + LANES],
+            );
+            // SAFETY: SSE2 is part of the x86_64 baseline; each load reads the LANES = 4
+            // floats of a slice just bounds-checked to that length.
+            unsafe {
+                let dx = _mm_sub_ps(_mm_loadu_ps(x.as_ptr()), _mm_set1_ps(p.x));
+                let dy = _mm_sub_ps(_mm_loadu_ps(y.as_ptr()), _mm_set1_ps(p.y));
+                let dz = _mm_sub_ps(_mm_loadu_ps(z.as_ptr()), _mm_set1_ps(p.z));
+                // (dx² + dy²) + dz², the scalar order below.
+                let d2 = _mm_add_ps(
+                    _mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)),
+                    _mm_mul_ps(dz, dz),
+                );
+                let mask = _mm_movemask_ps(_mm_cmple_ps(d2, _mm_set1_ps(r2))) as u32;
+                let mut out = [0.0f32; LANES];
+                _mm_storeu_ps(out.as_mut_ptr(), d2);
+                (out, mask)
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        self.within_scalar(i, p, r2)
+    }
+
+    /// [`Positions::within`] without SIMD (other architectures, and the test of the SSE form).
+    #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+    #[inline(always)]
+    fn within_scalar(&self, i: usize, p: Vec3, r2: f32) -> ([f32; LANES], u32) {
         let (x, y, z) = (
             &self.x[i..i + LANES],
             &self.y[i..i + LANES],
@@ -557,6 +592,24 @@ mod tests {
         let mut ids = Vec::new();
         grid.for_each_within(p, r, |ph, _| ids.push(ph.flux.x as u32));
         ids
+    }
+
+    #[test]
+    fn simd_distance_test_equals_scalar() {
+        // Bit-identical squared distances and masks, padding lanes (+∞) included.
+        let photons = random_photons(203, 21);
+        let grid = PhotonGrid::build(photons, 0.1);
+        let mut rng = rng_for(22, 0, 0);
+        for _ in 0..50 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0;
+            let r2 = rng.next_f32() * 0.5;
+            for i in 0..grid.photons.len() {
+                let (a, ma) = grid.positions.within(i, p, r2);
+                let (b, mb) = grid.positions.within_scalar(i, p, r2);
+                assert_eq!(ma, mb);
+                assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits));
+            }
+        }
     }
 
     #[test]
