@@ -1,7 +1,7 @@
 //! `diffuse`: Lambertian reflection with cosine-weighted sampling.
 
-use super::warp::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
 use super::{BsdfSample, Diffuse};
+use crate::sampling::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -12,7 +12,7 @@ impl Diffuse {
             return None;
         }
         let wi = square_to_cosine_hemisphere(u);
-        let pdf = square_to_cosine_hemisphere_pdf(wi);
+        let pdf = cosine_hemisphere_pdf(wi);
         if pdf <= 0.0 {
             return None;
         }
@@ -37,6 +37,6 @@ impl Diffuse {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
-        square_to_cosine_hemisphere_pdf(wi)
+        cosine_hemisphere_pdf(wi)
     }
 }

@@ -1,8 +1,8 @@
 //! Microfacet distributions (Beckmann and GGX, anisotropic) with Smith shadowing and
 //! visible-normal sampling — Mitsuba 3's `MicrofacetDistribution` with `sample_visible = true`.
 
-use super::warp::square_to_uniform_disk_concentric;
 use super::{MicrofacetKind, Roughness};
+use crate::sampling::square_to_uniform_disk_concentric;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 

@@ -28,7 +28,6 @@ mod roughconductor;
 mod roughdielectric;
 mod roughplastic;
 mod thindielectric;
-pub mod warp;
 
 #[cfg(test)]
 mod mitsuba_reference;

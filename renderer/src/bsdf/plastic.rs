@@ -3,8 +3,8 @@
 //! and amplified by the internal reflections at the coating).
 
 use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance, reflect};
-use super::warp::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
 use super::{BsdfSample, Plastic};
+use crate::sampling::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -69,7 +69,7 @@ impl Plastic {
         } else {
             let p_diff = 1.0 - p_spec;
             let wi = square_to_cosine_hemisphere(u);
-            let pdf = p_diff * square_to_cosine_hemisphere_pdf(wi);
+            let pdf = p_diff * cosine_hemisphere_pdf(wi);
             if pdf.is_nan() || pdf <= 0.0 {
                 return None;
             }
@@ -99,6 +99,6 @@ impl Plastic {
             return 0.0;
         }
         let f_o = fresnel_dielectric(wo.z, self.eta).r;
-        (1.0 - self.prob_specular(f_o)) * square_to_cosine_hemisphere_pdf(wi)
+        (1.0 - self.prob_specular(f_o)) * cosine_hemisphere_pdf(wi)
     }
 }

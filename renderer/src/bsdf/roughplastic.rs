@@ -9,8 +9,8 @@
 use super::fresnel::{fresnel_dielectric, reflect_about, refract_about};
 use super::microfacet::MicrofacetDistribution;
 use super::plastic::{internal_scattering, specular_sampling_weight};
-use super::warp::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
 use super::{BsdfSample, RoughPlastic, Roughness};
+use crate::sampling::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -262,7 +262,7 @@ impl RoughPlastic {
         let distr = isotropic_distribution(&self.roughness);
         let h = (wo + wi).normalize();
         let spec = distr.eval(h) * distr.smith_g1(wo, h) / (4.0 * wo.z);
-        p_spec * spec + (1.0 - p_spec) * square_to_cosine_hemisphere_pdf(wi)
+        p_spec * spec + (1.0 - p_spec) * cosine_hemisphere_pdf(wi)
     }
 }
 
