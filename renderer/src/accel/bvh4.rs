@@ -74,32 +74,136 @@ pub fn decode(c: u32) -> Child {
     }
 }
 
-/// Collapses `bvh2` into 4-wide nodes (root at index 0). Each BVH2 node keeps its two
+/// The primitives as the BVH2 builder sees them: one entry per primitive, except that a large
+/// set of primitives with bit-identical boxes becomes one entry (obvhs's PLOC merges one pair
+/// per sweep when thousands of merge costs tie, which made a mesh of 200 000 copies of one
+/// triangle take hours to build); its primitives are put back at the leaf that holds its box.
+/// Small sets (the two triangles of an axis-aligned quad share a box) stay separate entries:
+/// grouped, they would make leaves larger than the SAH chose.
+pub struct BuildEntries {
+    /// The box of each entry.
+    pub boxes: Vec<Aabb>,
+    /// Entry `e` holds `items[start[e]..start[e + 1]]` (input primitive indices, ascending).
+    start: Vec<u32>,
+    /// Primitive indices by entry.
+    items: Vec<u32>,
+}
+
+/// Primitives sharing one box beyond which they are built as one entry.
+const GROUP_ABOVE: usize = 16;
+
+impl BuildEntries {
+    /// Entries for `bounds`, grouping sets of more than [`GROUP_ABOVE`] identical boxes.
+    pub fn new(bounds: &[Aabb]) -> Self {
+        let key =
+            |b: &Aabb| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z].map(f32::to_bits);
+        let mut sets: std::collections::HashMap<[u32; 6], Vec<u32>> =
+            std::collections::HashMap::with_capacity(bounds.len());
+        for (i, b) in bounds.iter().enumerate() {
+            sets.entry(key(b)).or_default().push(i as u32);
+        }
+        let mut entries = BuildEntries {
+            boxes: Vec::with_capacity(bounds.len()),
+            start: Vec::with_capacity(bounds.len() + 1),
+            items: Vec::with_capacity(bounds.len()),
+        };
+        entries.start.push(0);
+        // In input order (a set at its first member), so the build does not depend on hashing.
+        for (i, b) in bounds.iter().enumerate() {
+            let members = &sets[&key(b)];
+            if members.len() <= GROUP_ABOVE {
+                entries.items.push(i as u32);
+            } else if members[0] == i as u32 {
+                entries.items.extend_from_slice(members);
+            } else {
+                continue;
+            }
+            entries.boxes.push(*b);
+            entries.start.push(entries.items.len() as u32);
+        }
+        entries
+    }
+
+    /// The input primitives of entry `e`.
+    fn members(&self, e: u32) -> &[u32] {
+        &self.items[self.start[e as usize] as usize..self.start[e as usize + 1] as usize]
+    }
+}
+
+/// A collapsed hierarchy.
+pub struct Collapsed {
+    /// Nodes, root at index 0.
+    pub nodes: Vec<Node4>,
+    /// Input primitive index of each leaf-order position.
+    pub order: Vec<u32>,
+    /// Depth in nodes.
+    pub depth: usize,
+}
+
+/// Collapses `bvh2` (built over `entries.boxes`, see [`BuildEntries`]) into 4-wide nodes. Each BVH2 node keeps its two
 /// children and repeatedly opens the largest-area inner child among them until four are
-/// gathered (the standard SAH-greedy collapse). Leaves keep the BVH2's primitive ranges
-/// (at most 15 primitives each, below [`MAX_PRIMITIVES`]: the caller checks). Returns the
-/// nodes and the depth in nodes.
-pub fn collapse(bvh2: &Bvh2) -> (Vec<Node4>, usize) {
-    let mut nodes = Vec::with_capacity(bvh2.nodes.len() / 2 + 1);
-    nodes.push(Node4::empty());
+/// gathered (the standard SAH-greedy collapse). A BVH2 leaf becomes a leaf of its entries'
+/// primitives, or — when they are more than a leaf holds (duplicates) — a 4-ary subtree of
+/// leaves under the same box. The caller checks the primitive count against [`MAX_PRIMITIVES`].
+pub fn collapse(bvh2: &Bvh2, entries: &BuildEntries) -> Collapsed {
+    let mut c = Collapsed {
+        nodes: Vec::with_capacity(bvh2.nodes.len() / 2 + 1),
+        order: Vec::with_capacity(entries.items.len()),
+        depth: 1,
+    };
+    c.nodes.push(Node4::empty());
     let root = &bvh2.nodes[0];
     if root.prim_count > 0 {
-        nodes[0].set(0, &root.aabb, leaf(root.first_index, root.prim_count));
-        return (nodes, 1);
+        let (code, d) = leaf_of(bvh2, entries, 0, &mut c);
+        c.nodes[0].set(0, &root.aabb, code);
+        c.depth = 1 + d;
+    } else {
+        c.depth = fill(bvh2, entries, 0, 0, &mut c);
     }
-    let depth = fill(bvh2, 0, 0, &mut nodes);
-    (nodes, depth)
+    c
 }
+
+/// Most primitives in one leaf slot.
+const MAX_LEAF: usize = (1 << LEAF_COUNT_BITS) - 1;
 
 /// Encodes a leaf slot.
 fn leaf(first: u32, count: u32) -> u32 {
-    debug_assert!(count < (1 << LEAF_COUNT_BITS) && (first as usize) < MAX_PRIMITIVES);
+    debug_assert!(count as usize <= MAX_LEAF && (first as usize) < MAX_PRIMITIVES);
     LEAF | (first << LEAF_COUNT_BITS) | count
+}
+
+/// The child slot for the BVH2 leaf `n2` and the depth in nodes it adds below its parent.
+fn leaf_of(bvh2: &Bvh2, entries: &BuildEntries, n2: usize, c: &mut Collapsed) -> (u32, usize) {
+    let node = &bvh2.nodes[n2];
+    let first = node.first_index as usize;
+    let prims: Vec<u32> = bvh2.primitive_indices[first..first + node.prim_count as usize]
+        .iter()
+        .flat_map(|&g| entries.members(g).iter().copied())
+        .collect();
+    emit(&prims, &node.aabb, c)
+}
+
+/// A leaf of `prims`, or a subtree of leaves all bounded by `aabb` when they do not fit one.
+fn emit(prims: &[u32], aabb: &Aabb, c: &mut Collapsed) -> (u32, usize) {
+    if prims.len() <= MAX_LEAF {
+        let first = c.order.len() as u32;
+        c.order.extend_from_slice(prims);
+        return (leaf(first, prims.len() as u32), 0);
+    }
+    let index = c.nodes.len();
+    c.nodes.push(Node4::empty());
+    let mut depth = 0;
+    for (slot, part) in prims.chunks(prims.len().div_ceil(4)).enumerate() {
+        let (code, d) = emit(part, aabb, c);
+        c.nodes[index].set(slot, aabb, code);
+        depth = depth.max(d);
+    }
+    (index as u32, 1 + depth)
 }
 
 /// Fills `nodes[out]` with the (up to four) descendants of the BVH2 inner node `n2`; returns
 /// the depth of the subtree in nodes.
-fn fill(bvh2: &Bvh2, n2: usize, out: usize, nodes: &mut Vec<Node4>) -> usize {
+fn fill(bvh2: &Bvh2, entries: &BuildEntries, n2: usize, out: usize, c: &mut Collapsed) -> usize {
     let first = bvh2.nodes[n2].first_index as usize;
     let mut kids = vec![first, first + 1];
     while kids.len() < 4 {
@@ -124,12 +228,14 @@ fn fill(bvh2: &Bvh2, n2: usize, out: usize, nodes: &mut Vec<Node4>) -> usize {
     for (slot, &k) in kids.iter().enumerate() {
         let node = &bvh2.nodes[k];
         if node.prim_count > 0 {
-            nodes[out].set(slot, &node.aabb, leaf(node.first_index, node.prim_count));
+            let (code, d) = leaf_of(bvh2, entries, k, c);
+            c.nodes[out].set(slot, &node.aabb, code);
+            depth = depth.max(1 + d);
         } else {
-            let index = nodes.len();
-            nodes.push(Node4::empty());
-            nodes[out].set(slot, &node.aabb, index as u32);
-            depth = depth.max(1 + fill(bvh2, k, index, nodes));
+            let index = c.nodes.len();
+            c.nodes.push(Node4::empty());
+            c.nodes[out].set(slot, &node.aabb, index as u32);
+            depth = depth.max(1 + fill(bvh2, entries, k, index, c));
         }
     }
     depth
