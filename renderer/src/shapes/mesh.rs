@@ -19,7 +19,17 @@ pub struct Mesh {
     /// Unit geometric normal of each triangle (winding order), precomputed for shading and
     /// light sampling.
     face_normals: Vec<Vec3>,
+    /// Vertex normals to interpolate, or `None` when the mesh has none or when every vertex
+    /// normal equals its triangle's face normal within [`FLAT_TOLERANCE`] (flat-shaded exports
+    /// carry such normals): the shading normal is then the face normal, without the
+    /// interpolation and normalisation per hit and per light sample.
+    smooth: bool,
 }
+
+/// Largest per-component difference between a vertex normal and its face normal for which a
+/// mesh counts as flat-shaded (the interpolated normal then differs from the face normal by
+/// less than single-precision noise on a unit vector's normalisation).
+const FLAT_TOLERANCE: f32 = 1e-6;
 
 /// Distance along a ray to triangle (p0, p0 + e1, p0 + e2), or +∞ when missed (Möller–Trumbore,
 /// both sides), with the hit's barycentric coordinates (b1, b2) (the same values
@@ -96,13 +106,26 @@ impl Mesh {
                 let [p0, p1, p2] = Self::corners(data, i as u32);
                 (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Z)
             })
-            .collect();
+            .collect::<Vec<Vec3>>();
+        let smooth = data.normals.as_ref().is_some_and(|n| {
+            data.indices.iter().zip(&face_normals).any(|(tri, ng)| {
+                tri.iter()
+                    .any(|&v| (n[v as usize] - *ng).abs().max_element() > FLAT_TOLERANCE)
+            })
+        });
         Mesh {
             data: data.clone(),
             area_distribution: Distribution1D::new(&areas),
             area,
             face_normals,
+            smooth,
         }
+    }
+
+    /// The vertex normals to interpolate (`None`: use the face normal, see `smooth`).
+    #[inline]
+    fn vertex_normals(&self) -> Option<&[Vec3]> {
+        self.data.normals.as_deref().filter(|_| self.smooth)
     }
 
     #[inline]
@@ -153,7 +176,7 @@ impl Mesh {
         let p = ray.at(t);
         let (e1, e2) = (p1 - p0, p2 - p0);
         let ng = self.face_normals[tri as usize];
-        let ns = match &self.data.normals {
+        let ns = match self.vertex_normals() {
             Some(n) => {
                 (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng)
             }
@@ -192,7 +215,7 @@ impl Mesh {
         let p = p0 * b0 + p1 * b.x + p2 * b.y;
         let ng = self.face_normals[tri];
         // Mitsuba reports the interpolated vertex normal when the mesh has normals.
-        let n = match &self.data.normals {
+        let n = match self.vertex_normals() {
             Some(n) => {
                 (n[i0 as usize] * b0 + n[i1 as usize] * b.x + n[i2 as usize] * b.y).normalize_or(ng)
             }
@@ -267,5 +290,34 @@ mod tests {
         assert!((g.ng - Vec3::Z).length() < 1e-6);
         assert!(g.ns.y > 0.0 && (g.ns.length() - 1.0).abs() < 1e-5);
         assert!((g.dpdu - Vec3::X).length() < 1e-5);
+    }
+
+    #[test]
+    fn flat_shaded_normals_are_the_face_normal() {
+        // A quad whose vertex normals equal the face normal (up to 1e-7): flat, the shading
+        // normal is the face normal bit for bit, at hits and at area samples. Tilting one
+        // vertex normal makes the mesh smooth again.
+        let quad = |tilt: f32| TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+            normals: Some(vec![
+                Vec3::Z,
+                Vec3::new(1e-7, 0.0, 1.0),
+                Vec3::new(tilt, 0.0, 1.0).normalize(),
+                Vec3::Z,
+            ]),
+            uvs: None,
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+        };
+        let flat = Mesh::new(&quad(0.0));
+        assert!(!flat.smooth);
+        let ray = Ray::new(Vec3::new(0.7, 0.2, 1.0), -Vec3::Z);
+        let g = flat.hit_geometry(0, &ray, 1.0);
+        assert_eq!(g.ns, g.ng);
+        let s = flat.sample_area(0.1, Vec2::new(0.3, 0.6));
+        assert_eq!(s.n, Vec3::Z);
+        let smooth = Mesh::new(&quad(0.3));
+        assert!(smooth.smooth);
+        let g = smooth.hit_geometry(0, &ray, 1.0);
+        assert!(g.ns.x > 0.01, "interpolated normal {}", g.ns);
     }
 }
