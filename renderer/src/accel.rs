@@ -44,22 +44,32 @@ pub trait Accel: Send + Sync {
 enum PrimGeom {
     /// A triangle as its first vertex and two edges.
     Triangle { p0: Vec3A, e1: Vec3A, e2: Vec3A },
-    /// An analytic sphere.
-    Sphere(Sphere),
-    /// An analytic disk (index into [`Bvh4Accel::disks`], which are large).
+    /// An analytic sphere (index into [`Analytic::spheres`]: kept out of line so that a
+    /// primitive is one 64-byte triangle, not a ~100-byte sphere).
+    Sphere(u32),
+    /// An analytic disk (index into [`Analytic::disks`], which are large).
     Disk(u32),
 }
 
+/// The analytic shapes [`PrimGeom`] refers to by index.
+#[derive(Debug, Clone, Default)]
+struct Analytic {
+    /// Spheres.
+    spheres: Vec<Sphere>,
+    /// Disks.
+    disks: Vec<Disk>,
+}
+
 /// Primitives of the shapes `keep` accepts: their boxes, geometry, (shape, primitive) ids and
-/// the disks the geometry refers to, in scene order.
-type Gathered = (Vec<Aabb>, Vec<PrimGeom>, Vec<(u32, u32)>, Vec<Disk>);
+/// the analytic shapes the geometry refers to, in scene order.
+type Gathered = (Vec<Aabb>, Vec<PrimGeom>, Vec<(u32, u32)>, Analytic);
 
 /// Collects the primitives of the shapes `keep` accepts (see [`Gathered`]).
 fn gather(shapes: &[Shape], keep: impl Fn(usize) -> bool) -> Gathered {
     let mut bounds = Vec::new();
     let mut geoms = Vec::new();
     let mut ids = Vec::new();
-    let mut disks = Vec::new();
+    let mut analytic = Analytic::default();
     for (si, shape) in shapes.iter().enumerate().filter(|(i, _)| keep(*i)) {
         for prim in 0..shape.primitive_count() as u32 {
             let (min, max) = shape.primitive_bounds(prim);
@@ -75,20 +85,23 @@ fn gather(shapes: &[Shape], keep: impl Fn(usize) -> bool) -> Gathered {
                         e2: Vec3A::from(c) - p0,
                     }
                 }
-                Shape::Sphere(s) => PrimGeom::Sphere(*s),
+                Shape::Sphere(s) => {
+                    analytic.spheres.push(*s);
+                    PrimGeom::Sphere(analytic.spheres.len() as u32 - 1)
+                }
                 Shape::Disk(d) => {
-                    disks.push(*d);
-                    PrimGeom::Disk(disks.len() as u32 - 1)
+                    analytic.disks.push(*d);
+                    PrimGeom::Disk(analytic.disks.len() as u32 - 1)
                 }
             });
         }
     }
-    (bounds, geoms, ids, disks)
+    (bounds, geoms, ids, analytic)
 }
 
 /// Distance along `ray` to `geom` (+∞ on a miss) and, for triangles, the barycentrics.
 #[inline(always)]
-fn intersect_geom(geom: &PrimGeom, disks: &[Disk], ray: &BvhRay) -> (f32, Vec2) {
+fn intersect_geom(geom: &PrimGeom, analytic: &Analytic, ray: &BvhRay) -> (f32, Vec2) {
     match geom {
         PrimGeom::Triangle { p0, e1, e2 } => crate::shapes::mesh::intersect_triangle_bary(
             ray.origin,
@@ -100,11 +113,11 @@ fn intersect_geom(geom: &PrimGeom, disks: &[Disk], ray: &BvhRay) -> (f32, Vec2) 
             *e2,
         ),
         PrimGeom::Sphere(s) => (
-            s.intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
+            analytic.spheres[*s as usize].intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
             Vec2::ZERO,
         ),
         PrimGeom::Disk(d) => (
-            disks[*d as usize].intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
+            analytic.disks[*d as usize].intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
             Vec2::ZERO,
         ),
     }
@@ -118,8 +131,8 @@ pub struct Bvh4Accel {
     geoms: Vec<PrimGeom>,
     /// (shape, primitive) of each entry of `geoms`.
     ids: Vec<(u32, u32)>,
-    /// Disks referenced by [`PrimGeom::Disk`].
-    disks: Vec<Disk>,
+    /// Spheres and disks referenced by [`PrimGeom`].
+    analytic: Analytic,
 }
 
 impl Bvh4Accel {
@@ -132,13 +145,13 @@ impl Bvh4Accel {
     /// indices into `shapes`, and a primitive's distance and barycentrics are computed exactly as
     /// in a BVH over all shapes.
     pub fn build_subset(shapes: &[Shape], keep: impl Fn(usize) -> bool) -> Result<Self> {
-        let (bounds, geoms, ids, disks) = gather(shapes, keep);
+        let (bounds, geoms, ids, analytic) = gather(shapes, keep);
         if bounds.is_empty() {
             return Ok(Bvh4Accel {
                 nodes: Vec::new(),
                 geoms,
                 ids,
-                disks,
+                analytic,
             });
         }
         if bounds.len() >= bvh4::MAX_PRIMITIVES {
@@ -180,7 +193,7 @@ impl Bvh4Accel {
             nodes,
             geoms,
             ids,
-            disks,
+            analytic,
         })
     }
 
@@ -192,7 +205,7 @@ impl Bvh4Accel {
     /// Distance to leaf primitive `i` (+∞ on a miss) and, for triangles, the barycentrics.
     #[inline(always)]
     fn intersect_prim(&self, ray: &BvhRay, i: usize) -> (f32, Vec2) {
-        intersect_geom(&self.geoms[i], &self.disks, ray)
+        intersect_geom(&self.geoms[i], &self.analytic, ray)
     }
 }
 
@@ -427,7 +440,7 @@ mod tests {
         for n in [1, 3, 40, 3000] {
             let shapes = random_scene(n, &mut rng);
             let accel = Bvh4Accel::build(&shapes).unwrap();
-            let (_, geoms, ids, disks) = gather(&shapes, |_| true);
+            let (_, geoms, ids, analytic) = gather(&shapes, |_| true);
             for k in 0..4000 {
                 let o = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0
                     - Vec3::ONE)
@@ -448,7 +461,7 @@ mod tests {
                 for (i, g) in geoms.iter().enumerate() {
                     let t = intersect_geom(
                         g,
-                        &disks,
+                        &analytic,
                         &BvhRay {
                             tmax: best.0.min(br.tmax),
                             ..br
@@ -469,7 +482,7 @@ mod tests {
                         if (h.shape, h.prim) != (s, p) {
                             let other =
                                 geoms[ids.iter().position(|&x| x == (h.shape, h.prim)).unwrap()];
-                            assert_eq!(intersect_geom(&other, &disks, &br).0, h.t);
+                            assert_eq!(intersect_geom(&other, &analytic, &br).0, h.t);
                         }
                     }
                 }
@@ -505,14 +518,14 @@ mod tests {
         // Before the grouping this build took minutes (quadratic in the copies).
         let accel = Bvh4Accel::build(&shapes).unwrap();
         assert_eq!(accel.primitive_count(), 300 + 3 + copies as usize);
-        let (_, geoms, _, disks) = gather(&shapes, |_| true);
+        let (_, geoms, _, analytic) = gather(&shapes, |_| true);
         for k in 0..200 {
             let o = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 2.0);
             let ray = Ray::new(o, Vec3::new(0.1 * rng.next_f32(), 0.0, -1.0).normalize());
             let br = to_bvh_ray(&ray);
             let best = geoms
                 .iter()
-                .map(|g| intersect_geom(g, &disks, &br).0)
+                .map(|g| intersect_geom(g, &analytic, &br).0)
                 .fold(f32::INFINITY, f32::min);
             let hit = accel.intersect(&ray).map_or(f32::INFINITY, |h| h.t);
             assert_eq!(hit, best, "ray {k}");
