@@ -97,10 +97,23 @@ impl BuildEntries {
     pub fn new(bounds: &[Aabb]) -> Self {
         let key =
             |b: &Aabb| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z].map(f32::to_bits);
-        let mut sets: std::collections::HashMap<[u32; 6], Vec<u32>> =
+        // Count first; only the (rare) large sets collect their members, so a mesh of distinct
+        // boxes costs one small map entry per primitive and no allocation per set.
+        let mut count: std::collections::HashMap<[u32; 6], u32> =
             std::collections::HashMap::with_capacity(bounds.len());
+        for b in bounds {
+            *count.entry(key(b)).or_default() += 1;
+        }
+        let mut large: std::collections::HashMap<[u32; 6], Vec<u32>> = count
+            .iter()
+            .filter(|(_, &n)| n as usize > GROUP_ABOVE)
+            .map(|(k, &n)| (*k, Vec::with_capacity(n as usize)))
+            .collect();
+        drop(count);
         for (i, b) in bounds.iter().enumerate() {
-            sets.entry(key(b)).or_default().push(i as u32);
+            if let Some(members) = large.get_mut(&key(b)) {
+                members.push(i as u32);
+            }
         }
         let mut entries = BuildEntries {
             boxes: Vec::with_capacity(bounds.len()),
@@ -110,13 +123,10 @@ impl BuildEntries {
         entries.start.push(0);
         // In input order (a set at its first member), so the build does not depend on hashing.
         for (i, b) in bounds.iter().enumerate() {
-            let members = &sets[&key(b)];
-            if members.len() <= GROUP_ABOVE {
-                entries.items.push(i as u32);
-            } else if members[0] == i as u32 {
-                entries.items.extend_from_slice(members);
-            } else {
-                continue;
+            match large.get(&key(b)) {
+                None => entries.items.push(i as u32),
+                Some(members) if members[0] == i as u32 => entries.items.extend_from_slice(members),
+                Some(_) => continue,
             }
             entries.boxes.push(*b);
             entries.start.push(entries.items.len() as u32);
