@@ -13,7 +13,6 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use obvhs::ray::Ray as BvhRay;
 use obvhs::BvhBuildParams;
-use std::mem::MaybeUninit;
 use std::time::Duration;
 
 mod bvh4;
@@ -178,6 +177,7 @@ impl Bvh4Accel {
             nodes,
             order,
             depth,
+            ..
         } = bvh4::collapse(&bvh2, &entries);
         // Closest-hit traversal pops one entry and pushes at most four per level.
         if 3 * depth + 1 > bvh4::STACK_SIZE {
@@ -221,16 +221,10 @@ impl Accel for Bvh4Accel {
         }
         let mut r = to_bvh_ray(ray);
         let box_ray = bvh4::simd::BoxRay::new(r.origin, r.inv_direction, r.tmin);
-        // Uninitialised: zeroing 2 KiB per ray cost more than the traversal of a small scene.
-        let mut stack = [const { MaybeUninit::<(u32, f32)>::uninit() }; bvh4::STACK_SIZE];
-        stack[0].write((0, 0.0));
-        let mut top = 1;
+        let mut stack = bvh4::TraversalStack::new((0u32, 0.0f32));
         let mut closest = u32::MAX;
         let mut bary = Vec2::ZERO;
-        while top > 0 {
-            top -= 1;
-            // SAFETY: entries below `top` were written.
-            let (node, tnear) = unsafe { stack[top].assume_init() };
+        while let Some((node, tnear)) = stack.pop() {
             if tnear >= r.tmax {
                 continue;
             }
@@ -266,8 +260,7 @@ impl Accel for Bvh4Accel {
                 }
             }
             for &entry in &pending[..n] {
-                stack[top].write(entry);
-                top += 1;
+                stack.push(entry);
             }
         }
         if closest == u32::MAX {
@@ -288,13 +281,9 @@ impl Accel for Bvh4Accel {
         }
         let r = to_bvh_ray(ray);
         let box_ray = bvh4::simd::BoxRay::new(r.origin, r.inv_direction, r.tmin);
-        let mut stack = [const { MaybeUninit::<u32>::uninit() }; bvh4::STACK_SIZE];
-        stack[0].write(0);
-        let mut top = 1;
-        while top > 0 {
-            top -= 1;
-            // SAFETY: entries below `top` were written.
-            let node = &self.nodes[unsafe { stack[top].assume_init() } as usize];
+        let mut stack = bvh4::TraversalStack::new(0u32);
+        while let Some(node) = stack.pop() {
+            let node = &self.nodes[node as usize];
             let (_, mut mask) = box_ray.test(node, r.tmax);
             while mask != 0 {
                 let slot = mask.trailing_zeros() as usize;
@@ -307,10 +296,7 @@ impl Accel for Bvh4Accel {
                             }
                         }
                     }
-                    bvh4::Child::Node(c) => {
-                        stack[top].write(c);
-                        top += 1;
-                    }
+                    bvh4::Child::Node(c) => stack.push(c),
                 }
             }
         }
@@ -430,6 +416,21 @@ mod tests {
         ]
     }
 
+    /// The closest hit of `ray` by testing every primitive in scene order: (distance, index),
+    /// or (+∞, `usize::MAX`) on a miss.
+    fn brute_force(geoms: &[PrimGeom], analytic: &Analytic, ray: &Ray) -> (f32, usize) {
+        let mut r = to_bvh_ray(ray);
+        let mut best = (f32::INFINITY, usize::MAX);
+        for (i, g) in geoms.iter().enumerate() {
+            let t = intersect_geom(g, analytic, &r).0;
+            if t < r.tmax {
+                best = (t, i);
+                r.tmax = t;
+            }
+        }
+        best
+    }
+
     /// Closest hit and occlusion agree with testing every primitive (the same primitive
     /// routine, so the distances are bit-identical), for rays starting inside and outside the
     /// geometry, long and short, and with axis-parallel directions.
@@ -457,21 +458,7 @@ mod tests {
                     ray.tmax = rng.next_f32() * 2.0;
                 }
                 let br = to_bvh_ray(&ray);
-                let mut best = (f32::INFINITY, usize::MAX);
-                for (i, g) in geoms.iter().enumerate() {
-                    let t = intersect_geom(
-                        g,
-                        &analytic,
-                        &BvhRay {
-                            tmax: best.0.min(br.tmax),
-                            ..br
-                        },
-                    )
-                    .0;
-                    if t < best.0.min(br.tmax) {
-                        best = (t, i);
-                    }
-                }
+                let best = brute_force(&geoms, &analytic, &ray);
                 let hit = accel.intersect(&ray);
                 match hit {
                     None => assert_eq!(best.1, usize::MAX, "missed a hit, n = {n}, ray {k}"),
@@ -522,11 +509,7 @@ mod tests {
         for k in 0..200 {
             let o = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 2.0);
             let ray = Ray::new(o, Vec3::new(0.1 * rng.next_f32(), 0.0, -1.0).normalize());
-            let br = to_bvh_ray(&ray);
-            let best = geoms
-                .iter()
-                .map(|g| intersect_geom(g, &analytic, &br).0)
-                .fold(f32::INFINITY, f32::min);
+            let best = brute_force(&geoms, &analytic, &ray).0;
             let hit = accel.intersect(&ray).map_or(f32::INFINITY, |h| h.t);
             assert_eq!(hit, best, "ray {k}");
             assert_eq!(accel.occluded(&ray), best < f32::INFINITY, "ray {k}");

@@ -6,6 +6,7 @@
 
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
+use std::mem::MaybeUninit;
 
 /// Marks a child slot as a leaf: the low bits hold `first << LEAF_COUNT_BITS | count`.
 const LEAF: u32 = 1 << 31;
@@ -17,6 +18,46 @@ const EMPTY: u32 = u32::MAX;
 pub const STACK_SIZE: usize = 256;
 /// Primitives a leaf slot can address (exclusive bound).
 pub const MAX_PRIMITIVES: usize = 1 << (31 - LEAF_COUNT_BITS);
+
+/// A fixed-capacity traversal stack left uninitialised: zeroing [`STACK_SIZE`] entries per ray
+/// cost more than traversing a small scene. The build guarantees the capacity (3 per level + 1).
+pub struct TraversalStack<T: Copy> {
+    /// Entries below `top` are written.
+    entries: [MaybeUninit<T>; STACK_SIZE],
+    /// Number of entries on the stack.
+    top: usize,
+}
+
+impl<T: Copy> TraversalStack<T> {
+    /// A stack holding `first`.
+    #[inline(always)]
+    pub fn new(first: T) -> Self {
+        let mut stack = TraversalStack {
+            entries: [const { MaybeUninit::uninit() }; STACK_SIZE],
+            top: 0,
+        };
+        stack.push(first);
+        stack
+    }
+
+    /// Pushes `entry` (panics past the capacity instead of writing out of bounds).
+    #[inline(always)]
+    pub fn push(&mut self, entry: T) {
+        self.entries[self.top].write(entry);
+        self.top += 1;
+    }
+
+    /// Pops the last entry pushed.
+    #[inline(always)]
+    pub fn pop(&mut self) -> Option<T> {
+        if self.top == 0 {
+            return None;
+        }
+        self.top -= 1;
+        // SAFETY: entries below the old `top` were written by `push`.
+        Some(unsafe { self.entries[self.top].assume_init() })
+    }
+}
 
 /// One node: the boxes of up to four children, one lane per child.
 #[derive(Debug, Clone, Copy)]
@@ -110,6 +151,15 @@ impl BuildEntries {
             .map(|(k, &n)| (*k, Vec::with_capacity(n as usize)))
             .collect();
         drop(count);
+        if large.is_empty() {
+            // The usual case: one entry per primitive, without hashing the boxes again.
+            let n = bounds.len() as u32;
+            return BuildEntries {
+                boxes: bounds.to_vec(),
+                start: (0..=n).collect(),
+                items: (0..n).collect(),
+            };
+        }
         for (i, b) in bounds.iter().enumerate() {
             if let Some(members) = large.get_mut(&key(b)) {
                 members.push(i as u32);
@@ -148,6 +198,8 @@ pub struct Collapsed {
     pub order: Vec<u32>,
     /// Depth in nodes.
     pub depth: usize,
+    /// The primitives of the leaf being emitted (reused across leaves).
+    scratch: Vec<u32>,
 }
 
 /// Collapses `bvh2` (built over `entries.boxes`, see [`BuildEntries`]) into 4-wide nodes. Each BVH2 node keeps its two
@@ -160,6 +212,7 @@ pub fn collapse(bvh2: &Bvh2, entries: &BuildEntries) -> Collapsed {
         nodes: Vec::with_capacity(bvh2.nodes.len() / 2 + 1),
         order: Vec::with_capacity(entries.items.len()),
         depth: 1,
+        scratch: Vec::new(),
     };
     c.nodes.push(Node4::empty());
     let root = &bvh2.nodes[0];
@@ -186,11 +239,17 @@ fn leaf(first: u32, count: u32) -> u32 {
 fn leaf_of(bvh2: &Bvh2, entries: &BuildEntries, n2: usize, c: &mut Collapsed) -> (u32, usize) {
     let node = &bvh2.nodes[n2];
     let first = node.first_index as usize;
-    let prims: Vec<u32> = bvh2.primitive_indices[first..first + node.prim_count as usize]
-        .iter()
-        .flat_map(|&g| entries.members(g).iter().copied())
-        .collect();
-    emit(&prims, &node.aabb, c)
+    // One buffer for every leaf (taken out of `c` while `emit` appends to it).
+    let mut prims = std::mem::take(&mut c.scratch);
+    prims.clear();
+    prims.extend(
+        bvh2.primitive_indices[first..first + node.prim_count as usize]
+            .iter()
+            .flat_map(|&g| entries.members(g).iter().copied()),
+    );
+    let slot = emit(&prims, &node.aabb, c);
+    c.scratch = prims;
+    slot
 }
 
 /// A leaf of `prims`, or a subtree of leaves all bounded by `aabb` when they do not fit one.
