@@ -3,10 +3,11 @@
 
 pub mod evaluate;
 pub mod model_dir;
+pub mod native;
 pub mod preview;
 pub mod report;
 pub mod tiling;
 
 pub use model_dir::TrainedModel;
 pub use report::ErrorReport;
-pub use tiling::{reconstruct_tiled, Reconstruction};
+pub use tiling::{reconstruct_tiled, Engine, Inference, Reconstruction};

@@ -12,7 +12,7 @@ use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image,
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use infer::preview::{write_side_by_side, write_weight_map, Panel};
-use infer::{reconstruct_tiled, ErrorReport, TrainedModel};
+use infer::{reconstruct_tiled, Engine, ErrorReport, TrainedModel};
 use model::backend::Backend;
 use model::features::{interleaved, pack, planar_reference};
 use model::training::write_atomic;
@@ -45,6 +45,10 @@ struct Cli {
     /// Tensor backend.
     #[arg(long, default_value = "flex", value_parser = Backend::parse)]
     backend: Backend,
+    /// Inference engine: `native` (CPU im2col + gemm, fused combination) or `burn` (Burn's
+    /// tensor operations on `--backend`). Default: native with flex, Burn otherwise.
+    #[arg(long, value_enum)]
+    engine: Option<Engine>,
     /// Tile side in pixels (a halo covering the receptive field is added; the last layer and
     /// the combination run in bands of rows, so memory stays near 1 GB); 0 = whole image.
     #[arg(long, default_value_t = 512)]
@@ -92,13 +96,14 @@ fn run(cli: &Cli) -> Result<()> {
     let model = TrainedModel::open(&cli.model, &device)
         .with_context(|| format!("loading model {}", cli.model.display()))?;
     eprintln!(
-        "model {}: preset {:?}, window {}×{}, receptive radius {} px, backend {:?}",
+        "model {}: preset {:?}, window {}×{}, receptive radius {} px, backend {:?}, engine {:?}",
         cli.model.display(),
         model.config.preset,
         model.config.window,
         model.config.window,
         model.config.receptive_radius(),
-        cli.backend
+        cli.backend,
+        cli.engine.unwrap_or(Engine::default_for(cli.backend))
     );
 
     let output = match (&cli.output, &cli.scene) {
@@ -149,7 +154,8 @@ fn run(cli: &Cli) -> Result<()> {
             .expect("valid template")
             .progress_chars("=> "),
     );
-    let result = reconstruct_tiled(&model, &packed, cli.tile, &device, |done, total| {
+    let engine = cli.engine.unwrap_or(Engine::default_for(cli.backend));
+    let result = reconstruct_tiled(&model, &packed, cli.tile, engine, &device, |done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     });

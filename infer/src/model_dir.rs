@@ -6,7 +6,7 @@ pub use model::model_dir::{ModelDirError, TrainedModel, CONFIG_FILE, WEIGHTS_FIL
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::reconstruct_tiled;
+    use crate::{reconstruct_tiled, Engine};
     use burn::tensor::Device;
     use model::synthetic::synthetic_sample;
     use model::training::save_burnpack;
@@ -34,12 +34,17 @@ mod tests {
         let pixels = packed.pixels();
         let y = packed.level(0).to_vec();
         packed.levels[9 * pixels..12 * pixels].copy_from_slice(&y);
-        for tile in [0, 4] {
-            let rec = reconstruct_tiled(&model, &packed, tile, &device, |_, _| {});
+        for (tile, engine) in [
+            (0, Engine::Burn),
+            (4, Engine::Burn),
+            (0, Engine::Native),
+            (4, Engine::Native),
+        ] {
+            let rec = reconstruct_tiled(&model, &packed, tile, engine, &device, |_, _| {});
             for (o, e) in rec.image.iter().zip(&y) {
                 assert!(
                     (o - e).abs() <= 1e-4 * e.abs().max(1.0),
-                    "tile {tile}: {o} vs {e}"
+                    "tile {tile} {engine:?}: {o} vs {e}"
                 );
             }
             assert_eq!(rec.shares.len(), 4 * pixels);

@@ -17,6 +17,8 @@
 //! of rows at a time, so memory is bounded by the band while tiles can be large (the hidden
 //! layers' halo recomputation shrinks with the tile: 1.08× at 512 px, 1.37× at 128 px).
 
+use std::borrow::Cow;
+
 use burn::nn::conv::Conv2d;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
@@ -25,7 +27,31 @@ use model::combine::{combine_block, level_weight_shares_block};
 use model::features::PackedImage;
 use model::model::{positive_weights, LEVELS};
 
+use crate::native::{CombinationInputs, NativeNetwork};
 use crate::TrainedModel;
+
+/// Which code runs the network and the combination.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Engine {
+    /// The native CPU engine (`native.rs`: im2col + gemm, fused Eq. 6); ignores the device.
+    Native,
+    /// Burn's tensor operations on the chosen backend's device (the training code path).
+    Burn,
+}
+
+impl Engine {
+    /// The engine used when none is named: native on the CPU backend `flex` (≈ 2× faster than
+    /// Burn there, docs/performance.md), Burn on every other backend.
+    pub fn default_for(backend: model::backend::Backend) -> Self {
+        match backend {
+            model::backend::Backend::Flex => Engine::Native,
+            _ => Engine::Burn,
+        }
+    }
+}
 
 /// Pixels per band of the last layer and the combination: about 0.8 GB of transient tensors
 /// for the paper network (1444 weights and 4·3·361 gathered differences per pixel).
@@ -99,6 +125,31 @@ fn crop_planes(
     out
 }
 
+/// How to run inference: tile side, engine and (for the Burn engine) device.
+#[derive(Clone, Copy, Debug)]
+pub struct Inference<'a> {
+    /// Tile side in pixels (0 = whole image).
+    pub tile: usize,
+    /// Which code computes the network and the combination.
+    pub engine: Engine,
+    /// Device of the Burn engine.
+    pub device: &'a Device,
+}
+
+impl Inference<'_> {
+    /// [`reconstruct_tiled`] with these settings and no progress report.
+    pub fn reconstruct(&self, model: &TrainedModel, packed: &PackedImage) -> Reconstruction {
+        reconstruct_tiled(
+            model,
+            packed,
+            self.tile,
+            self.engine,
+            self.device,
+            |_, _| {},
+        )
+    }
+}
+
 /// A pixel rectangle `[x0, y0, x1, y1)`.
 type Rect = [usize; 4];
 
@@ -156,10 +207,62 @@ pub fn reconstruct_tiled(
     model: &TrainedModel,
     packed: &PackedImage,
     tile: usize,
+    engine: Engine,
     device: &Device,
     on_tile: impl FnMut(usize, usize),
 ) -> Reconstruction {
-    reconstruct_banded(model, packed, tile, BAND_PIXELS, device, on_tile)
+    match engine {
+        Engine::Burn => reconstruct_banded(model, packed, tile, BAND_PIXELS, device, on_tile),
+        Engine::Native => reconstruct_native(model, packed, tile, on_tile),
+    }
+}
+
+/// The packed image reduced to the levels `model` combines (borrowed when it reads all five).
+fn model_levels<'a>(model: &TrainedModel, packed: &'a PackedImage) -> Cow<'a, PackedImage> {
+    if model.config.levels == model::model::all_levels() {
+        Cow::Borrowed(packed)
+    } else {
+        Cow::Owned(packed.select_levels(&model.config.levels))
+    }
+}
+
+/// [`reconstruct_tiled`] on the native engine: the same tiles and exact regions, the last layer
+/// and the combination fused per chunk of pixels (memory bounded by the tile).
+pub fn reconstruct_native(
+    model: &TrainedModel,
+    packed: &PackedImage,
+    tile: usize,
+    mut on_tile: impl FnMut(usize, usize),
+) -> Reconstruction {
+    let chosen = &model.config.levels;
+    let packed = &*model_levels(model, packed);
+    let (width, height) = (packed.width, packed.height);
+    let pixels = width * height;
+    let network = NativeNetwork::new(&model.network, &model.config);
+    let layers = model.config.hidden_layers + 1;
+    // Share plane j of the model belongs to its correlated level chosen[j + 1] (z̃1 = 1).
+    let share_planes: Vec<usize> = chosen[1..].iter().map(|l| l - 1).collect();
+    let colours = CombinationInputs {
+        width,
+        height,
+        levels: &packed.levels,
+        share_planes: &share_planes,
+    };
+    let mut image = vec![0.0f32; 3 * pixels];
+    let mut shares = vec![0.0f32; (LEVELS - 1) * pixels];
+    let tiles = plan_tiles(width, height, tile, layers * (model.config.kernel / 2));
+    for (done, t) in tiles.iter().enumerate() {
+        let (x, region) =
+            network.hidden_layers(&packed.features, width, height, t.region, t.interior);
+        network.combine(&x, region, t.interior, &colours, &mut image, &mut shares);
+        on_tile(done + 1, tiles.len());
+    }
+    Reconstruction {
+        width,
+        height,
+        image,
+        shares,
+    }
 }
 
 /// [`reconstruct_tiled`] with the last layer and the combination run on bands of about
@@ -173,13 +276,7 @@ pub fn reconstruct_banded(
     mut on_tile: impl FnMut(usize, usize),
 ) -> Reconstruction {
     let chosen = &model.config.levels;
-    let selected;
-    let packed = if *chosen == model::model::all_levels() {
-        packed
-    } else {
-        selected = packed.select_levels(chosen);
-        &selected
-    };
+    let packed = &*model_levels(model, packed);
     let (width, height) = (packed.width, packed.height);
     let feature_channels = packed.features.len() / (width * height).max(1);
     let colour_channels = packed.levels.len() / (width * height).max(1);

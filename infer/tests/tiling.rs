@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use burn::tensor::Device;
-use infer::{reconstruct_tiled, TrainedModel};
+use infer::{reconstruct_tiled, Engine, TrainedModel};
 use model::features::pack;
 use model::synthetic::synthetic_bundle;
 use model::training::save_burnpack;
@@ -45,14 +45,16 @@ fn tiled_equals_untiled_on_an_odd_sized_image() {
     let (bundle, _) = synthetic_bundle(53, 41, 0.3, 7);
     let packed = pack(&bundle).unwrap();
     let device = Device::flex();
-    for (preset, weighting) in [
-        (Preset::Small, Weighting::Relu),
-        (Preset::Tiny, Weighting::Softmax),
+    for (preset, weighting, engine) in [
+        (Preset::Small, Weighting::Relu, Engine::Burn),
+        (Preset::Tiny, Weighting::Softmax, Engine::Burn),
+        (Preset::Small, Weighting::Relu, Engine::Native),
+        (Preset::Tiny, Weighting::Softmax, Engine::Native),
     ] {
         let m = model(preset, weighting, 11);
-        let whole = reconstruct_tiled(&m, &packed, 0, &device, |_, _| {});
+        let whole = reconstruct_tiled(&m, &packed, 0, engine, &device, |_, _| {});
         let mut calls = 0;
-        let tiled = reconstruct_tiled(&m, &packed, 16, &device, |done, total| {
+        let tiled = reconstruct_tiled(&m, &packed, 16, engine, &device, |done, total| {
             calls += 1;
             assert_eq!((done, total), (calls, 12));
         });
@@ -60,10 +62,13 @@ fn tiled_equals_untiled_on_an_odd_sized_image() {
         let d = max_relative_difference(&tiled.image, &whole.image);
         assert!(
             d <= 1e-5,
-            "{preset:?}: tiled differs from untiled by {d:e} (relative)"
+            "{preset:?} {engine:?}: tiled differs from untiled by {d:e} (relative)"
         );
         let d = max_relative_difference(&tiled.shares, &whole.shares);
-        assert!(d <= 1e-5, "{preset:?}: weight shares differ by {d:e}");
+        assert!(
+            d <= 1e-5,
+            "{preset:?} {engine:?}: weight shares differ by {d:e}"
+        );
         assert!(whole.image.iter().all(|v| v.is_finite()));
         // Shares are a partition of the weight at every pixel.
         let pixels = packed.pixels();
@@ -72,6 +77,58 @@ fn tiled_equals_untiled_on_an_odd_sized_image() {
             assert!((s - 1.0).abs() < 1e-4, "shares sum to {s} at pixel {p}");
         }
     }
+}
+
+#[test]
+fn native_engine_equals_burn() {
+    // Every preset, both weightings and a dual (ỹ, z̃3) network, on an image smaller than the
+    // paper network's window in one direction (window entries outside the image on both sides).
+    let (bundle, _) = synthetic_bundle(31, 17, 0.3, 9);
+    let packed = pack(&bundle).unwrap();
+    let device = Device::flex();
+    let mut dual = model(Preset::Tiny, Weighting::Relu, 4);
+    dual.config = dual.config.clone().with_levels(vec![0, 3]);
+    dual.network = dual.config.init(4, &device);
+    for (name, m) in [
+        ("paper", model(Preset::Paper, Weighting::Relu, 1)),
+        ("small", model(Preset::Small, Weighting::Relu, 2)),
+        ("small softmax", model(Preset::Small, Weighting::Softmax, 2)),
+        ("tiny", model(Preset::Tiny, Weighting::Relu, 3)),
+        ("dual", dual),
+    ] {
+        let burn = reconstruct_tiled(&m, &packed, 0, Engine::Burn, &device, |_, _| {});
+        let native = reconstruct_tiled(&m, &packed, 0, Engine::Native, &device, |_, _| {});
+        let d = max_relative_difference(&native.image, &burn.image);
+        assert!(
+            d <= 2e-5,
+            "{name}: native differs from Burn by {d:e} (relative)"
+        );
+        let d = native
+            .shares
+            .iter()
+            .zip(&burn.shares)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(d <= 1e-5, "{name}: weight shares differ by {d:e}");
+    }
+}
+
+#[test]
+fn native_engine_is_bit_identical_on_any_thread_count() {
+    let (bundle, _) = synthetic_bundle(45, 38, 0.3, 2);
+    let packed = pack(&bundle).unwrap();
+    let device = Device::flex();
+    let m = model(Preset::Small, Weighting::Relu, 8);
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| reconstruct_tiled(&m, &packed, 0, Engine::Native, &device, |_, _| {}))
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(3));
 }
 
 #[test]
@@ -89,8 +146,8 @@ fn saved_model_directory_reloads_to_identical_output() {
     assert_eq!(loaded.config, m.config);
     let (bundle, _) = synthetic_bundle(19, 13, 0.2, 3);
     let packed = pack(&bundle).unwrap();
-    let a = reconstruct_tiled(&m, &packed, 0, &device, |_, _| {});
-    let b = reconstruct_tiled(&loaded, &packed, 0, &device, |_, _| {});
+    let a = reconstruct_tiled(&m, &packed, 0, Engine::Burn, &device, |_, _| {});
+    let b = reconstruct_tiled(&loaded, &packed, 0, Engine::Burn, &device, |_, _| {});
     assert_eq!(a, b);
     let _ = std::fs::remove_dir_all(&dir);
 }

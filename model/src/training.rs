@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::combine::combine;
 use crate::data::{BadSample, Batch, PatchDataset};
-use crate::loss::relative_log_l1;
+use crate::loss::Loss;
 use crate::metrics::relmse_sum_planar;
 use crate::model::{ModelConfig, Network, LEVELS};
 use crate::model_dir::TrainedModel;
@@ -33,6 +33,9 @@ pub struct TrainSettings {
     pub lr_end: Option<f64>,
     /// Seed of the initial weights and of the patch order.
     pub seed: u64,
+    /// The loss minimised (paper Eq. 8 unless set).
+    #[serde(default, skip_serializing_if = "Loss::is_default")]
+    pub loss: Loss,
 }
 
 impl TrainSettings {
@@ -132,16 +135,17 @@ pub fn reconstruct(
     combine(levels, model.weights(features), config.window).clamp_min(0.0)
 }
 
-/// One optimisation step; returns the updated model and the batch loss.
+/// One optimisation step minimising `loss`; returns the updated model and the batch loss.
 pub fn train_step(
     model: Network,
     optim: &mut ModuleOptimizer,
     config: &ModelConfig,
     batch: Batch,
     lr: f64,
+    loss: Loss,
 ) -> (Network, f64) {
     let prediction = reconstruct(&model, config, batch.features, batch.levels);
-    let loss = relative_log_l1(prediction, batch.reference);
+    let loss = loss.evaluate(prediction, batch.reference);
     let grads = loss.backward();
     let value: f32 = loss.into_scalar::<f32>();
     let grads = GradientsParams::from_grads(grads, &model);
@@ -340,7 +344,14 @@ impl Trainer {
             let lr = self
                 .settings
                 .lr_at(epoch * steps_per_epoch + batches, total_steps);
-            let (model, loss) = train_step(model, &mut self.optim, &self.config, batch, lr);
+            let (model, loss) = train_step(
+                model,
+                &mut self.optim,
+                &self.config,
+                batch,
+                lr,
+                self.settings.loss,
+            );
             self.model = model;
             loss_sum += loss;
             batches += 1;
@@ -408,6 +419,7 @@ impl Trainer {
                 && a.lr == b.lr
                 && a.seed == b.seed
                 && a.lr_end == b.lr_end
+                && a.loss == b.loss
                 && (a.lr_end.is_none() || a.epochs == b.epochs)
         };
         if !same(&state.settings, &settings) {

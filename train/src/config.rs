@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use model::loss::Loss;
 use model::training::TrainSettings;
 use model::{ModelConfig, Preset, Weighting};
 use serde::Deserialize;
@@ -66,6 +67,10 @@ pub struct TrainConfig {
     /// all steps of `epochs`. Absent: constant `lr`.
     #[serde(default)]
     pub lr_end: Option<f64>,
+    /// Loss minimised: `relative-log-l1` (paper Eq. 8, default) or `relmse` (the evaluation
+    /// metric; for fine-tuning).
+    #[serde(default)]
+    pub loss: Loss,
     /// Start from the weights of this trained model directory (`model.json` + `model.bpk`, e.g.
     /// an earlier run's output or `models/default`) instead of random ones, with a fresh
     /// optimizer: fine-tuning. The architecture must match this config's. Ignored by `--resume`.
@@ -124,6 +129,7 @@ impl TrainConfig {
             lr: self.lr,
             lr_end: self.lr_end,
             seed: self.seed,
+            loss: self.loss,
         }
     }
 }
@@ -148,6 +154,21 @@ mod tests {
         let bad: TrainConfig = toml::from_str(&format!("{BASE}levels = [2]\n")).unwrap();
         assert!(bad.model_config().validate().is_err());
         assert!(toml::from_str::<TrainConfig>(&format!("{BASE}level = [0, 2]\n")).is_err());
+    }
+
+    #[test]
+    fn loss_key_chooses_the_training_loss() {
+        let default: TrainConfig = toml::from_str(BASE).unwrap();
+        assert_eq!(default.settings().loss, Loss::RelativeLogL1);
+        let relmse: TrainConfig = toml::from_str(&format!("{BASE}loss = \"relmse\"\n")).unwrap();
+        assert_eq!(relmse.settings().loss, Loss::Relmse);
+        let eq8: TrainConfig =
+            toml::from_str(&format!("{BASE}loss = \"relative-log-l1\"\n")).unwrap();
+        assert_eq!(eq8.settings().loss, Loss::RelativeLogL1);
+        let err = toml::from_str::<TrainConfig>(&format!("{BASE}loss = \"l2\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("l2") && err.contains("relmse"), "{err}");
     }
 
     #[test]

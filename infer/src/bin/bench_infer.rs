@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use infer::{reconstruct_tiled, TrainedModel};
+use infer::{reconstruct_tiled, Engine, TrainedModel};
 use model::backend::Backend;
 use model::features::pack;
 use model::synthetic::synthetic_bundle;
@@ -35,6 +35,10 @@ struct Cli {
     /// Tensor backend.
     #[arg(long, default_value = "flex", value_parser = Backend::parse)]
     backend: Backend,
+    /// Inference engine to time; absent: both, native first (the default for flex), in the
+    /// same run, with their ratio.
+    #[arg(long, value_enum)]
+    engine: Option<Engine>,
     /// PyTorch peer script, or `none`.
     #[arg(long, default_value = "bench/peer.py")]
     peer: String,
@@ -80,23 +84,31 @@ fn run(cli: &Cli) -> Result<()> {
     let packed = pack(&bundle)?;
     drop(bundle);
     let rss_before = peak_rss_mib();
-    let mut times = Vec::new();
-    for k in 0..=cli.repeats.max(1) {
-        let t = Instant::now();
-        let r = reconstruct_tiled(&model, &packed, cli.tile, &device, |_, _| {});
-        let s = t.elapsed().as_secs_f64();
-        assert!(r.image.iter().all(|v| v.is_finite()));
-        eprintln!(
-            "run {k}: {s:.3} s{}",
-            if k == 0 { " (warm-up)" } else { "" }
-        );
-        if k > 0 {
-            times.push(s);
+    let engines = match cli.engine {
+        Some(e) => vec![e],
+        None => vec![Engine::Native, Engine::Burn],
+    };
+    // (engine, median seconds, all timed runs, peak RSS after it)
+    let mut timed = Vec::new();
+    for &engine in &engines {
+        let mut times = Vec::new();
+        for k in 0..=cli.repeats.max(1) {
+            let t = Instant::now();
+            let r = reconstruct_tiled(&model, &packed, cli.tile, engine, &device, |_, _| {});
+            let s = t.elapsed().as_secs_f64();
+            assert!(r.image.iter().all(|v| v.is_finite()));
+            eprintln!(
+                "{engine:?} run {k}: {s:.3} s{}",
+                if k == 0 { " (warm-up)" } else { "" }
+            );
+            if k > 0 {
+                times.push(s);
+            }
         }
+        times.sort_by(|a, b| a.total_cmp(b));
+        timed.push((engine, times[times.len() / 2], times, peak_rss_mib()));
     }
-    times.sort_by(|a, b| a.total_cmp(b));
-    let ours = times[times.len() / 2];
-    let rss = peak_rss_mib();
+    let ours = timed[0].1;
 
     let peer = if cli.peer == "none" || preset != Preset::Paper {
         Value::Null
@@ -132,24 +144,33 @@ fn run(cli: &Cli) -> Result<()> {
         model.config.receptive_radius(),
         cli.backend
     );
-    println!(
-        "  burn (infer, tiled):  {ours:.3} s   peak RSS {:.0} MiB (before: {:.0} MiB)",
-        rss.unwrap_or(f64::NAN),
-        rss_before.unwrap_or(f64::NAN)
-    );
+    for (engine, median, _, rss) in &timed {
+        println!(
+            "  {engine:?} engine (infer, tiled): {median:.3} s   peak RSS so far {:.0} MiB (before: {:.0} MiB)",
+            rss.unwrap_or(f64::NAN),
+            rss_before.unwrap_or(f64::NAN)
+        );
+    }
+    if let [(_, native, ..), (_, burn, ..)] = timed.as_slice() {
+        println!("  native / burn: {:.2}", native / burn);
+    }
     if let Some(p) = peer["infer_s"].as_f64() {
         println!(
             "  {} (whole image): {p:.3} s",
             peer["framework"].as_str().unwrap_or("pytorch")
         );
-        println!("  burn / pytorch: {:.2}", ours / p);
+        println!("  ours ({:?}) / pytorch: {:.2}", timed[0].0, ours / p);
     } else if !peer.is_null() {
         println!("  peer failed: {}", peer["error"]);
     }
     if let Some(path) = &cli.output {
         let all = json!({
             "preset": cli.preset, "size": n, "tile": cli.tile, "backend": format!("{:?}", cli.backend),
-            "burn_infer_s": ours, "burn_all_s": times, "peak_rss_mib": rss, "pytorch": peer,
+            "infer_s": ours,
+            "engines": timed.iter().map(|(e, median, all, rss)| json!({
+                "engine": format!("{e:?}"), "infer_s": median, "all_s": all, "peak_rss_mib": rss,
+            })).collect::<Vec<_>>(),
+            "pytorch": peer,
         });
         std::fs::write(path, serde_json::to_string_pretty(&all)?)
             .with_context(|| path.display().to_string())?;

@@ -30,6 +30,9 @@ pub struct EvalConfig {
     /// Tensor backend name (`flex`, `ndarray`, `wgpu`).
     #[serde(default = "default_backend")]
     pub backend: String,
+    /// Inference engine (`native`, `burn`); absent: native on `flex`, Burn otherwise.
+    #[serde(default)]
+    pub engine: Option<crate::Engine>,
     /// Bound on SPPM eye (delta/glossy) and photon bounces; default the renderer's (16).
     #[serde(default)]
     pub max_depth: Option<u32>,
@@ -264,6 +267,13 @@ mod tests {
         assert_eq!(scene_name(Path::new("x/cbox.xml")), "cbox");
         let bad = format!("{base}colour = 3\n");
         assert!(toml::from_str::<EvalConfig>(&bad).is_err());
+        assert_eq!(c.engine, None);
+        let native: EvalConfig = toml::from_str(&format!("engine = \"native\"\n{base}")).unwrap();
+        assert_eq!(native.engine, Some(crate::Engine::Native));
+        let err = toml::from_str::<EvalConfig>(&format!("engine = \"gpu\"\n{base}"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("gpu") && err.contains("native"), "{err}");
         let zero = base.replace("[4, 2, 4]", "[0, 2]");
         let c: EvalConfig = toml::from_str(&zero).unwrap();
         assert!(c.validate().is_err());

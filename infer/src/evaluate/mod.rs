@@ -14,7 +14,6 @@ pub mod scene;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use burn::tensor::Device;
 use model::ModelConfig;
 use serde::Serialize;
 
@@ -147,7 +146,12 @@ pub fn run(config: &EvalConfig) -> Result<EvalResults> {
             max_depth: config.max_depth,
             scene_name: s.name.clone(),
         };
-        let r = evaluate_one(config, s, &settings, &passes, &model, &variants, &device);
+        let inference = crate::Inference {
+            tile: config.tile,
+            engine: config.engine.unwrap_or(crate::Engine::default_for(backend)),
+            device: &device,
+        };
+        let r = evaluate_one(config, s, &settings, &passes, &model, &variants, &inference);
         match &r.error {
             Some(e) => eprintln!("  FAILED: {e}"),
             None => {
@@ -222,12 +226,11 @@ fn evaluate_one(
     passes: &[u32],
     model: &TrainedModel,
     variants: &[TrainedModel],
-    device: &Device,
+    inference: &crate::Inference,
 ) -> SceneResult {
     let mut r = SceneResult::new(s.name.clone(), s.xml.clone(), s.reference.clone());
     let outcome = (|| -> Result<()> {
-        let (eval, imgs) =
-            evaluate_scene(s, settings, passes, model, variants, config.tile, device)?;
+        let (eval, imgs) = evaluate_scene(s, settings, passes, model, variants, inference)?;
         let stem = file_stem(&s.name);
         let plot = format!("{stem}_convergence.png");
         plot::write_convergence_plot(

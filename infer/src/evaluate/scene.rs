@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use bundle::read_rgb_exr_image;
-use burn::tensor::Device;
 use model::features::{pack, planar_reference};
 use model::metrics::relmse_planar;
 use renderer::integrators::sppm::{SppmMode, StopCondition};
@@ -16,7 +15,7 @@ use super::compare::{dense_checkpoints, relmse_at_time, CurvePoint, Interpolated
 use super::config::EvalScene;
 use super::runs::{load_scene, multi_level, run_timed, RunSettings};
 use crate::report::LEVEL_NAMES;
-use crate::{reconstruct_tiled, ErrorReport, TrainedModel};
+use crate::{ErrorReport, Inference, TrainedModel};
 
 /// The standard run's dense checkpoints go up to this multiple of the largest pass count.
 const STANDARD_PASS_CAP_FACTOR: u32 = 64;
@@ -89,8 +88,7 @@ pub fn evaluate_scene(
     passes: &[u32],
     model: &TrainedModel,
     variants: &[TrainedModel],
-    tile: usize,
-    device: &Device,
+    inference: &Inference,
 ) -> Result<(SceneEval, SceneImages)> {
     let built = load_scene(&scene.xml)?;
     let res = built.camera.resolution();
@@ -109,13 +107,13 @@ pub fn evaluate_scene(
         let packed = pack(&tb.bundle).with_context(|| {
             format!("{}: bundle at {} passes", scene.name, tb.bundle.meta.passes)
         })?;
-        let rec = reconstruct_tiled(model, &packed, tile, device, |_, _| {});
+        let rec = inference.reconstruct(model, &packed);
         let inference_seconds = t.elapsed().as_secs_f64() + tb.assembly_seconds;
         let report = ErrorReport::new(&packed, &rec.image, &reference);
         let variant_relmse = variants
             .iter()
             .map(|v| {
-                let image = reconstruct_tiled(v, &packed, tile, device, |_, _| {}).image;
+                let image = inference.reconstruct(v, &packed).image;
                 relmse_planar(&image, &reference)
             })
             .collect();

@@ -11,6 +11,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use clap::{Parser, ValueEnum};
 use model::data::Batch;
+use model::loss::Loss;
 use model::training::{adam, reconstruct, train_step};
 use model::{ModelConfig, Preset};
 use serde_json::{json, Value};
@@ -143,7 +144,14 @@ fn run(cli: &Cli) -> Result<()> {
             levels: tensor([b, 15, p, p], 2, &ad),
             reference: tensor([b, 3, p, p], 3, &ad),
         };
-        let (next, _) = train_step(net.clone(), &mut optim, &config, batch, 1e-4);
+        let (next, _) = train_step(
+            net.clone(),
+            &mut optim,
+            &config,
+            batch,
+            1e-4,
+            Loss::default(),
+        );
         net = next;
     });
     let rss_train = peak_rss_mib();

@@ -1,0 +1,372 @@
+//! The native CPU inference engine: the trained network's forward pass and the Eq. 6
+//! combination computed with im2col + `gemm` matrix products and one fused combination loop,
+//! outside Burn's tensor machinery.
+//!
+//! Why it exists: on the CPU the Burn (flex) convolution spends more time on layout copies,
+//! im2col bookkeeping and the scatter of its result than in its matrix kernels, and the tensor
+//! form of Eq. 6 materialises a 4·3·|Ω| gather per pixel. Here activations stay channels-last
+//! (`[y][x][channel]`), so an im2col row is a run of contiguous copies and a layer's output is
+//! the product's rows; the last layer's weights are consumed per pixel straight out of the
+//! product, never stored for the image. The arithmetic is the same as the Burn path, only
+//! summed in another order (equal within 1e-5, `tests::native_equals_burn`).
+//!
+//! Determinism: rows are cut into fixed chunks (independent of the thread count) and each
+//! chunk's product runs single-threaded, so the result is bit-identical on any thread count.
+
+use model::model::{Network, Weighting, LEVELS};
+use model::ModelConfig;
+use rayon::prelude::*;
+
+/// A pixel rectangle `[x0, y0, x1, y1)` in image coordinates.
+pub type Rect = [usize; 4];
+
+/// Output pixels per chunk: im2col buffer and product of one chunk stay a few MB.
+const CHUNK_PIXELS: usize = 1024;
+
+/// One convolution as a matrix: `matrix[(ky·k + kx)·cin + ci][cout]` (the im2col order) and
+/// the bias.
+#[derive(Clone, Debug)]
+struct ConvMatrix {
+    kernel: usize,
+    cin: usize,
+    cout: usize,
+    matrix: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+impl ConvMatrix {
+    /// Rearranges a Burn `Conv2d` (weight `[cout, cin, k, k]`, cross-correlation).
+    fn from_conv(conv: &burn::nn::conv::Conv2d) -> Self {
+        let [cout, cin, kernel, _] = conv.weight.val().dims();
+        let weight: Vec<f32> = conv
+            .weight
+            .val()
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .expect("f32 convolution weights");
+        let bias = match &conv.bias {
+            Some(b) => b
+                .val()
+                .into_data()
+                .convert::<f32>()
+                .try_to_vec::<f32>()
+                .expect("f32 convolution bias"),
+            None => vec![0.0; cout],
+        };
+        let mut matrix = vec![0.0f32; kernel * kernel * cin * cout];
+        for co in 0..cout {
+            for ci in 0..cin {
+                for ky in 0..kernel {
+                    for kx in 0..kernel {
+                        matrix[((ky * kernel + kx) * cin + ci) * cout + co] =
+                            weight[((co * cin + ci) * kernel + ky) * kernel + kx];
+                    }
+                }
+            }
+        }
+        Self {
+            kernel,
+            cin,
+            cout,
+            matrix,
+            bias,
+        }
+    }
+
+    /// Rows of the im2col matrix (one per output pixel).
+    fn depth(&self) -> usize {
+        self.kernel * self.kernel * self.cin
+    }
+
+    /// Fills `columns` (`pixels × depth`) with the im2col rows of the output pixels
+    /// `first..first + pixels` of `out` (row-major), reading channels-last `x` laid out on
+    /// `input`; taps outside `input` are zero (they lie outside the image).
+    fn im2col(&self, x: &[f32], input: Rect, out: Rect, first: usize, columns: &mut [f32]) {
+        let (k, cin) = (self.kernel, self.cin);
+        let r = k / 2;
+        let out_w = out[2] - out[0];
+        let in_w = input[2] - input[0];
+        let depth = self.depth();
+        for (p, row) in columns.chunks_exact_mut(depth).enumerate() {
+            let (oy, ox) = (out[1] + (first + p) / out_w, out[0] + (first + p) % out_w);
+            for ky in 0..k {
+                let taps = &mut row[ky * k * cin..(ky + 1) * k * cin];
+                let iy = (oy + ky).wrapping_sub(r);
+                if iy < input[1] || iy >= input[3] {
+                    taps.fill(0.0);
+                    continue;
+                }
+                // Taps kx read column ox + kx − r; those inside the input rectangle are one run.
+                let kx_lo = (input[0] + r).saturating_sub(ox).min(k);
+                let kx_hi = (input[2] + r - ox).min(k).max(kx_lo);
+                taps[..kx_lo * cin].fill(0.0);
+                let src = ((iy - input[1]) * in_w + (ox + kx_lo - r - input[0])) * cin;
+                let len = (kx_hi - kx_lo) * cin;
+                taps[kx_lo * cin..kx_hi * cin].copy_from_slice(&x[src..src + len]);
+                taps[kx_hi * cin..].fill(0.0);
+            }
+        }
+    }
+
+    /// `dst` (`pixels × cout`) = bias + columns · matrix.
+    fn product(&self, columns: &[f32], pixels: usize, dst: &mut [f32]) {
+        let (depth, cout) = (self.depth(), self.cout);
+        for row in dst.chunks_exact_mut(cout) {
+            row.copy_from_slice(&self.bias);
+        }
+        // SAFETY: the three buffers hold pixels×depth, depth×cout and pixels×cout f32 values in
+        // row-major order, matching the strides given, and do not overlap.
+        unsafe {
+            gemm::gemm(
+                pixels,
+                cout,
+                depth,
+                dst.as_mut_ptr(),
+                1,
+                cout as isize,
+                true,
+                columns.as_ptr(),
+                1,
+                depth as isize,
+                self.matrix.as_ptr(),
+                1,
+                cout as isize,
+                1.0,
+                1.0,
+                false,
+                false,
+                false,
+                gemm::Parallelism::None,
+            );
+        }
+    }
+
+    /// The convolution ("same" padding in the whole image) followed by ReLU, evaluated on
+    /// `out` from channels-last `x` on `input` = `out` grown by the kernel radius and clipped
+    /// to the image. Returns channels-last values on `out`.
+    fn forward_relu(&self, x: &[f32], input: Rect, out: Rect) -> Vec<f32> {
+        let pixels = (out[2] - out[0]) * (out[3] - out[1]);
+        let mut y = vec![0.0f32; pixels * self.cout];
+        y.par_chunks_mut(CHUNK_PIXELS * self.cout)
+            .enumerate()
+            .for_each(|(chunk, dst)| {
+                let n = dst.len() / self.cout;
+                let mut columns = vec![0.0f32; n * self.depth()];
+                self.im2col(x, input, out, chunk * CHUNK_PIXELS, &mut columns);
+                self.product(&columns, n, dst);
+                for v in dst.iter_mut() {
+                    *v = v.max(0.0);
+                }
+            });
+        y
+    }
+}
+
+/// A trained network rearranged for the native engine.
+#[derive(Clone, Debug)]
+pub struct NativeNetwork {
+    hidden: Vec<ConvMatrix>,
+    output: ConvMatrix,
+    weighting: Weighting,
+    window: usize,
+    pairs: usize,
+}
+
+/// Planar colours of the whole image that the combination reads.
+pub struct CombinationInputs<'a> {
+    /// Image width.
+    pub width: usize,
+    /// Image height.
+    pub height: usize,
+    /// Planar colours `[3·m][pixels]`: ỹ RGB, then each correlated level's RGB.
+    pub levels: &'a [f32],
+    /// The output plane of each correlated level's weight share (level j of the network →
+    /// plane `share_planes[j]`).
+    pub share_planes: &'a [usize],
+}
+
+impl NativeNetwork {
+    /// Copies the weights of `network` (architecture `config`) into matrix form.
+    pub fn new(network: &Network, config: &ModelConfig) -> Self {
+        Self {
+            hidden: network.hidden.iter().map(ConvMatrix::from_conv).collect(),
+            output: ConvMatrix::from_conv(&network.output),
+            weighting: network.weighting,
+            window: config.window,
+            pairs: config.pairs(),
+        }
+    }
+
+    /// Hidden layers on shrinking regions: features (planar `[C][pixels]` of the whole image)
+    /// on `region`, layer l exact on `interior` grown by the reach of the layers after it.
+    /// Returns the last hidden activation (channels-last) and the rectangle it covers.
+    pub fn hidden_layers(
+        &self,
+        features: &[f32],
+        width: usize,
+        height: usize,
+        region: Rect,
+        interior: Rect,
+    ) -> (Vec<f32>, Rect) {
+        let channels = features.len() / (width * height).max(1);
+        let (rw, rh) = (region[2] - region[0], region[3] - region[1]);
+        let mut x = vec![0.0f32; rw * rh * channels];
+        for (c, plane) in features.chunks_exact(width * height).enumerate() {
+            for y in 0..rh {
+                let src = &plane[(region[1] + y) * width + region[0]..][..rw];
+                for (i, v) in src.iter().enumerate() {
+                    x[(y * rw + i) * channels + c] = *v;
+                }
+            }
+        }
+        let reach = self.output.kernel / 2;
+        let layers = self.hidden.len() + 1;
+        let mut region = region;
+        for (l, conv) in self.hidden.iter().enumerate() {
+            let out = grow(interior, (layers - 1 - l) * reach, width, height);
+            x = conv.forward_relu(&x, region, out);
+            region = out;
+        }
+        (x, region)
+    }
+
+    /// Last layer, positive weights and Eq. 6 for the pixels of `out` (inside `region`, which
+    /// covers `out` grown by the kernel radius or the image border), from the last hidden
+    /// activation `x` on `region`. Writes ŷ (clamped at zero) into the planar `image` and
+    /// the weight share of correlated level j into plane `colours.share_planes[j]` of the
+    /// planar `shares`, both of the whole image.
+    pub fn combine(
+        &self,
+        x: &[f32],
+        region: Rect,
+        out: Rect,
+        colours: &CombinationInputs,
+        image: &mut [f32],
+        shares: &mut [f32],
+    ) {
+        let pixels = colours.width * colours.height;
+        let width = colours.width;
+        let out_w = out[2] - out[0];
+        let count = out_w * (out[3] - out[1]);
+        let conv = &self.output;
+        let chunks: Vec<(Vec<f32>, Vec<f32>)> = (0..count.div_ceil(CHUNK_PIXELS))
+            .into_par_iter()
+            .map(|chunk| {
+                let first = chunk * CHUNK_PIXELS;
+                let n = CHUNK_PIXELS.min(count - first);
+                let mut columns = vec![0.0f32; n * conv.depth()];
+                conv.im2col(x, region, out, first, &mut columns);
+                let mut raw = vec![0.0f32; n * conv.cout];
+                conv.product(&columns, n, &mut raw);
+                let mut colour = vec![0.0f32; 3 * n];
+                let mut share = vec![0.0f32; self.pairs * n];
+                for (p, weights) in raw.chunks_exact_mut(conv.cout).enumerate() {
+                    let q = first + p;
+                    let (py, px) = (out[1] + q / out_w, out[0] + q % out_w);
+                    let (rgb, sums) = self.combine_pixel(weights, px, py, colours);
+                    for c in 0..3 {
+                        colour[c * n + p] = rgb[c];
+                    }
+                    for j in 0..self.pairs {
+                        share[j * n + p] = sums[j];
+                    }
+                }
+                (colour, share)
+            })
+            .collect();
+        for (chunk, (colour, share)) in chunks.iter().enumerate() {
+            let first = chunk * CHUNK_PIXELS;
+            let n = colour.len() / 3;
+            for p in 0..n {
+                let q = first + p;
+                let at = (out[1] + q / out_w) * width + out[0] + q % out_w;
+                for c in 0..3 {
+                    image[c * pixels + at] = colour[c * n + p];
+                }
+                for (j, &plane) in colours.share_planes.iter().enumerate() {
+                    shares[plane * pixels + at] = share[j * n + p];
+                }
+            }
+        }
+    }
+
+    /// Eq. 6 at pixel (px, py) from its raw network outputs (overwritten with the positive
+    /// weights): returns ŷ clamped at zero and each correlated level's share of the weight.
+    fn combine_pixel(
+        &self,
+        weights: &mut [f32],
+        px: usize,
+        py: usize,
+        colours: &CombinationInputs,
+    ) -> ([f32; 3], [f32; LEVELS - 1]) {
+        match self.weighting {
+            Weighting::Relu => {
+                for w in weights.iter_mut() {
+                    *w = w.max(0.0) + 1e-4;
+                }
+            }
+            Weighting::Softmax => {
+                // The maximum cancels in the normalisation; subtracting it keeps exp() finite.
+                let max = weights.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                for w in weights.iter_mut() {
+                    *w = (*w - max).exp();
+                }
+            }
+        }
+        let (width, height) = (colours.width, colours.height);
+        let pixels = width * height;
+        let window = self.window;
+        let r = window / 2;
+        let area = window * window;
+        // Window rows and columns that lie inside the image: the others get zero weight.
+        let (ky0, ky1) = (r.saturating_sub(py), (height + r - py).min(window));
+        let (kx0, kx1) = (r.saturating_sub(px), (width + r - px).min(window));
+        let centre = py * width + px;
+        let y_planes = &colours.levels[..3 * pixels];
+        let mut numerator = [0.0f32; 3];
+        let mut sums = [0.0f32; LEVELS - 1];
+        for j in 0..self.pairs {
+            let z_planes = &colours.levels[3 * (j + 1) * pixels..3 * (j + 2) * pixels];
+            let w_j = &weights[j * area..(j + 1) * area];
+            let mut sum = 0.0f32;
+            let mut acc = [0.0f32; 3];
+            for ky in ky0..ky1 {
+                // First in-image pixel of this window row (px + kx0 ≥ r by construction).
+                let start = (py + ky - r) * width + px + kx0 - r;
+                let len = kx1 - kx0;
+                let w_row = &w_j[ky * window + kx0..ky * window + kx1];
+                sum += w_row.iter().sum::<f32>();
+                for c in 0..3 {
+                    let yc = &y_planes[c * pixels + start..][..len];
+                    let zc = &z_planes[c * pixels + start..][..len];
+                    acc[c] += w_row
+                        .iter()
+                        .zip(yc.iter().zip(zc))
+                        .map(|(w, (y, z))| w * (y - z))
+                        .sum::<f32>();
+                }
+            }
+            for c in 0..3 {
+                numerator[c] += acc[c] + sum * z_planes[c * pixels + centre];
+            }
+            sums[j] = sum;
+        }
+        let total: f32 = sums.iter().sum();
+        let rgb = numerator.map(|v| (v / total).max(0.0));
+        for s in sums.iter_mut() {
+            *s /= total;
+        }
+        (rgb, sums)
+    }
+}
+
+/// `r` grown by `by` pixels on every side, clipped to the `width`×`height` image.
+pub fn grow(r: Rect, by: usize, width: usize, height: usize) -> Rect {
+    [
+        r[0].saturating_sub(by),
+        r[1].saturating_sub(by),
+        (r[2] + by).min(width),
+        (r[3] + by).min(height),
+    ]
+}
