@@ -300,20 +300,6 @@ impl NativeNetwork {
         py: usize,
         colours: &CombinationInputs,
     ) -> ([f32; 3], [f32; LEVELS - 1]) {
-        match self.weighting {
-            Weighting::Relu => {
-                for w in weights.iter_mut() {
-                    *w = w.max(0.0) + 1e-4;
-                }
-            }
-            Weighting::Softmax => {
-                // The maximum cancels in the normalisation; subtracting it keeps exp() finite.
-                let max = weights.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-                for w in weights.iter_mut() {
-                    *w = (*w - max).exp();
-                }
-            }
-        }
         let (width, height) = (colours.width, colours.height);
         let pixels = width * height;
         let window = self.window;
@@ -322,6 +308,28 @@ impl NativeNetwork {
         // Window rows and columns that lie inside the image: the others get zero weight.
         let (ky0, ky1) = (r.saturating_sub(py), (height + r - py).min(window));
         let (kx0, kx1) = (r.saturating_sub(px), (width + r - px).min(window));
+        match self.weighting {
+            Weighting::Relu => {
+                for w in weights.iter_mut() {
+                    *w = w.max(0.0) + 1e-4;
+                }
+            }
+            Weighting::Softmax => {
+                // The maximum cancels in the normalisation; subtracting it keeps exp() finite.
+                // Taken over the entries inside the image (Burn's path takes it over all), so
+                // the largest kept weight is exactly 1 and the sum can never underflow to 0.
+                let mut max = f32::NEG_INFINITY;
+                for j in 0..self.pairs {
+                    for ky in ky0..ky1 {
+                        let row = &weights[j * area + ky * window..][kx0..kx1];
+                        max = row.iter().copied().fold(max, f32::max);
+                    }
+                }
+                for w in weights.iter_mut() {
+                    *w = (*w - max).exp();
+                }
+            }
+        }
         let centre = py * width + px;
         let y_planes = &colours.levels[..3 * pixels];
         let mut numerator = [0.0f32; 3];
@@ -369,4 +377,73 @@ pub fn grow(r: Rect, by: usize, width: usize, height: usize) -> Rect {
         (r[2] + by).min(width),
         (r[3] + by).min(height),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A network with no layers, only the combination settings (combine_pixel reads nothing
+    /// else).
+    fn combiner(weighting: Weighting, window: usize, pairs: usize) -> NativeNetwork {
+        let empty = ConvMatrix {
+            kernel: 1,
+            cin: 0,
+            cout: 0,
+            matrix: Vec::new(),
+            bias: Vec::new(),
+        };
+        NativeNetwork {
+            hidden: Vec::new(),
+            output: empty,
+            weighting,
+            window,
+            pairs,
+        }
+    }
+
+    #[test]
+    fn hand_computed_corner_pixel() {
+        // 2×2 image, 3×3 window, one correlated level, pixel (0, 0): the window entries
+        // (ky, kx) ∈ {1, 2}² are the four pixels, the other five lie outside. ỹ = 1, 2, 3, 4 and
+        // z̃ = 1 in every channel; equal weights → ŷ = mean(ỹ − z̃) + z̃_c = 1.5 + 1 = 2.5.
+        let levels: Vec<f32> = [1.0, 2.0, 3.0, 4.0]
+            .repeat(3)
+            .into_iter()
+            .chain([1.0; 12])
+            .collect();
+        let colours = CombinationInputs {
+            width: 2,
+            height: 2,
+            levels: &levels,
+            share_planes: &[0],
+        };
+        // Raw outputs: 0 inside, 1000 outside. ReLU: outside 1000 + 1e-4 but masked; inside
+        // 1e-4 each. Softmax: exp(1000 − max) would overflow or, with the maximum taken over
+        // all entries, underflow every kept weight to zero; inside-only maximum keeps them 1.
+        let mut raw = [1000.0f32; 9];
+        for (ky, kx) in [(1, 1), (1, 2), (2, 1), (2, 2)] {
+            raw[ky * 3 + kx] = 0.0;
+        }
+        for weighting in [Weighting::Relu, Weighting::Softmax] {
+            let mut w = raw;
+            let (rgb, shares) = combiner(weighting, 3, 1).combine_pixel(&mut w, 0, 0, &colours);
+            for c in rgb {
+                assert!((c - 2.5).abs() < 1e-6, "{weighting:?}: {c}");
+            }
+            assert_eq!(shares[0], 1.0, "{weighting:?}");
+        }
+        // Clamped at zero: z̃ = 0, 0, 0, 14 → mean(ỹ − z̃) + z̃_c = (1 + 2 + 3 − 10) / 4 + 0 = −1.
+        let mut negative = levels.clone();
+        for c in 0..3 {
+            negative[12 + c * 4..12 + c * 4 + 4].copy_from_slice(&[0.0, 0.0, 0.0, 14.0]);
+        }
+        let colours = CombinationInputs {
+            levels: &negative,
+            ..colours
+        };
+        let mut w = raw;
+        let (rgb, _) = combiner(Weighting::Relu, 3, 1).combine_pixel(&mut w, 0, 0, &colours);
+        assert_eq!(rgb, [0.0; 3]);
+    }
 }
