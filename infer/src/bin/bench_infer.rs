@@ -1,7 +1,8 @@
 //! `bench_infer`: speed and memory of tiled inference (issue 6 "Speed"): a randomly
 //! initialised network of a preset reconstructs a synthetic bundle of the given size through
-//! `infer`'s tiled path; the PyTorch peer (`bench/peer.py`) does the same forward +
-//! combination on the whole image in the same run. Prints a table and optionally JSON.
+//! `infer`'s tiled path, on the native engine and on Burn in the same run (or on the one named
+//! by `--engine`); the PyTorch peer (`bench/peer.py`) does the same forward + combination on the
+//! whole image. Prints a table and optionally JSON.
 
 use std::path::PathBuf;
 use std::process::{Command, ExitCode};
