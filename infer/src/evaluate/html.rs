@@ -74,7 +74,7 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
     let _ = writeln!(
         h,
         "<p>Model <code>{}</code> ({:?} preset, {}×{} window); {} photons per pass; passes {:?}; \
-         seed {}; renderer threads {}; backend {}.</p>",
+         seed {}; renderer threads {}; backend {}; inference engine {}.</p>",
         escape(&c.model.display().to_string()),
         results.model.preset,
         results.model.window,
@@ -87,7 +87,12 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
         } else {
             c.threads.to_string()
         },
-        escape(&c.backend)
+        escape(&c.backend),
+        c.engine
+            .or_else(|| model::backend::Backend::parse(&c.backend)
+                .ok()
+                .map(crate::Engine::default_for))
+            .map_or("?".to_string(), |e| format!("{e:?}").to_lowercase())
     );
     let _ = writeln!(
         h,
