@@ -16,6 +16,10 @@
 //! gather, is what fills memory. It is computed once per pixel (no halo recomputation), a band
 //! of rows at a time, so memory is bounded by the band while tiles can be large (the hidden
 //! layers' halo recomputation shrinks with the tile: 1.08× at 512 px, 1.37× at 128 px).
+//!
+//! Two engines run this plan: Burn's tensor operations on any backend (bands as above), and the
+//! native CPU engine of `native.rs` (same tiles and regions, the last layer and the combination
+//! fused per chunk of pixels, so no bands are needed).
 
 use std::borrow::Cow;
 
@@ -27,7 +31,7 @@ use model::combine::{combine_block, level_weight_shares_block};
 use model::features::PackedImage;
 use model::model::{positive_weights, LEVELS};
 
-use crate::native::{CombinationInputs, NativeNetwork};
+use crate::native::{grow, CombinationInputs, NativeNetwork, Rect};
 use crate::TrainedModel;
 
 /// Which code runs the network and the combination.
@@ -148,19 +152,6 @@ impl Inference<'_> {
             |_, _| {},
         )
     }
-}
-
-/// A pixel rectangle `[x0, y0, x1, y1)`.
-type Rect = [usize; 4];
-
-/// `r` grown by `by` pixels on every side, clipped to the `width`×`height` image.
-fn grow(r: Rect, by: usize, width: usize, height: usize) -> Rect {
-    [
-        r[0].saturating_sub(by),
-        r[1].saturating_sub(by),
-        (r[2] + by).min(width),
-        (r[3] + by).min(height),
-    ]
 }
 
 /// How far `inner` lies inside `outer` on each side, `[top, bottom, left, right]`.
