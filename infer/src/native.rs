@@ -148,13 +148,15 @@ impl ConvMatrix {
     fn forward_relu(&self, x: &[f32], input: Rect, out: Rect) -> Vec<f32> {
         let pixels = (out[2] - out[0]) * (out[3] - out[1]);
         let mut y = vec![0.0f32; pixels * self.cout];
+        // One im2col buffer per worker, reused across its chunks: im2col overwrites every
+        // entry, and a fresh multi-MB allocation per chunk would be zero-filled and page-faulted.
         y.par_chunks_mut(CHUNK_PIXELS * self.cout)
             .enumerate()
-            .for_each(|(chunk, dst)| {
+            .for_each_init(Vec::new, |columns, (chunk, dst)| {
                 let n = dst.len() / self.cout;
-                let mut columns = vec![0.0f32; n * self.depth()];
-                self.im2col(x, input, out, chunk * CHUNK_PIXELS, &mut columns);
-                self.product(&columns, n, dst);
+                columns.resize(n * self.depth(), 0.0);
+                self.im2col(x, input, out, chunk * CHUNK_PIXELS, columns);
+                self.product(columns, n, dst);
                 for v in dst.iter_mut() {
                     *v = v.max(0.0);
                 }
@@ -252,28 +254,32 @@ impl NativeNetwork {
         let conv = &self.output;
         let chunks: Vec<(Vec<f32>, Vec<f32>)> = (0..count.div_ceil(CHUNK_PIXELS))
             .into_par_iter()
-            .map(|chunk| {
-                let first = chunk * CHUNK_PIXELS;
-                let n = CHUNK_PIXELS.min(count - first);
-                let mut columns = vec![0.0f32; n * conv.depth()];
-                conv.im2col(x, region, out, first, &mut columns);
-                let mut raw = vec![0.0f32; n * conv.cout];
-                conv.product(&columns, n, &mut raw);
-                let mut colour = vec![0.0f32; 3 * n];
-                let mut share = vec![0.0f32; self.pairs * n];
-                for (p, weights) in raw.chunks_exact_mut(conv.cout).enumerate() {
-                    let q = first + p;
-                    let (py, px) = (out[1] + q / out_w, out[0] + q % out_w);
-                    let (rgb, sums) = self.combine_pixel(weights, px, py, colours);
-                    for c in 0..3 {
-                        colour[c * n + p] = rgb[c];
+            .map_init(
+                || (Vec::new(), Vec::new()),
+                |(columns, raw), chunk| {
+                    let first = chunk * CHUNK_PIXELS;
+                    let n = CHUNK_PIXELS.min(count - first);
+                    // Per-worker buffers, fully overwritten (im2col; bias then product).
+                    columns.resize(n * conv.depth(), 0.0);
+                    conv.im2col(x, region, out, first, columns);
+                    raw.resize(n * conv.cout, 0.0);
+                    conv.product(columns, n, raw);
+                    let mut colour = vec![0.0f32; 3 * n];
+                    let mut share = vec![0.0f32; self.pairs * n];
+                    for (p, weights) in raw.chunks_exact_mut(conv.cout).enumerate() {
+                        let q = first + p;
+                        let (py, px) = (out[1] + q / out_w, out[0] + q % out_w);
+                        let (rgb, sums) = self.combine_pixel(weights, px, py, colours);
+                        for c in 0..3 {
+                            colour[c * n + p] = rgb[c];
+                        }
+                        for j in 0..self.pairs {
+                            share[j * n + p] = sums[j];
+                        }
                     }
-                    for j in 0..self.pairs {
-                        share[j * n + p] = sums[j];
-                    }
-                }
-                (colour, share)
-            })
+                    (colour, share)
+                },
+            )
             .collect();
         for (chunk, (colour, share)) in chunks.iter().enumerate() {
             let first = chunk * CHUNK_PIXELS;

@@ -217,6 +217,12 @@ fn model_levels<'a>(model: &TrainedModel, packed: &'a PackedImage) -> Cow<'a, Pa
     }
 }
 
+/// The output share plane of each correlated level a model combines: its plane j belongs to
+/// correlated level `levels[j + 1]` (z̃1 = plane 0).
+fn share_planes(levels: &[usize]) -> Vec<usize> {
+    levels[1..].iter().map(|l| l - 1).collect()
+}
+
 /// [`reconstruct_tiled`] on the native engine: the same tiles and exact regions, the last layer
 /// and the combination fused per chunk of pixels (memory bounded by the tile).
 pub fn reconstruct_native(
@@ -231,8 +237,7 @@ pub fn reconstruct_native(
     let pixels = width * height;
     let network = NativeNetwork::new(&model.network, &model.config);
     let layers = model.config.hidden_layers + 1;
-    // Share plane j of the model belongs to its correlated level chosen[j + 1] (z̃1 = 1).
-    let share_planes: Vec<usize> = chosen[1..].iter().map(|l| l - 1).collect();
+    let share_planes = share_planes(chosen);
     let colours = CombinationInputs {
         width,
         height,
@@ -271,7 +276,8 @@ pub fn reconstruct_banded(
     let (width, height) = (packed.width, packed.height);
     let feature_channels = packed.features.len() / (width * height).max(1);
     let colour_channels = packed.levels.len() / (width * height).max(1);
-    let pairs = chosen.len() - 1;
+    let share_planes = share_planes(chosen);
+    let pairs = share_planes.len();
     let pixels = width * height;
     let network = &model.network;
     let kernel_reach = model.config.kernel / 2;
@@ -337,8 +343,7 @@ pub fn reconstruct_banded(
                     }
                 };
             paste(&mut image, &combined, 3, &|p| p);
-            // Share plane j of the model belongs to its correlated level chosen[j + 1] (z̃1 = 1).
-            paste(&mut shares, &band_shares, pairs, &|j| chosen[j + 1] - 1);
+            paste(&mut shares, &band_shares, pairs, &|j| share_planes[j]);
         }
         on_tile(done + 1, tiles.len());
     }
