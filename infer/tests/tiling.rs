@@ -91,6 +91,7 @@ fn native_engine_equals_burn() {
     dual.network = dual.config.init(4, &device);
     for (name, m) in [
         ("paper", model(Preset::Paper, Weighting::Relu, 1)),
+        ("medium", model(Preset::Medium, Weighting::Relu, 6)),
         ("small", model(Preset::Small, Weighting::Relu, 2)),
         ("small softmax", model(Preset::Small, Weighting::Softmax, 2)),
         ("tiny", model(Preset::Tiny, Weighting::Relu, 3)),

@@ -39,6 +39,9 @@ pub enum Preset {
     Paper,
     /// 6 layers of 5×5, 32 filters, 11×11 window: trains on a 2-core CPU.
     Small,
+    /// 8 layers of 5×5, 48 filters, 11×11 window: the `small` network with more capacity, meant
+    /// to be grown from trained `small` weights ([`ModelConfig::grow`]) and fine-tuned on a CPU.
+    Medium,
     /// 3 layers of 3×3, 12 filters, 5×5 window: for tests.
     Tiny,
 }
@@ -83,6 +86,7 @@ impl ModelConfig {
         let (hidden_layers, filters, kernel, window) = match preset {
             Preset::Paper => (9, 50, 5, 19),
             Preset::Small => (5, 32, 5, 11),
+            Preset::Medium => (7, 48, 5, 11),
             Preset::Tiny => (2, 12, 3, 5),
         };
         Self {
@@ -177,6 +181,138 @@ impl ModelConfig {
     }
 }
 
+impl ModelConfig {
+    /// Why a network of architecture `from` cannot be grown into this one (`None`: it can).
+    /// Growing needs the same inputs, kernel, window and weighting, and no fewer hidden layers
+    /// or filters.
+    pub fn growth_obstacle(&self, from: &ModelConfig) -> Option<String> {
+        let same = |what: &str, a: String, b: String| (a != b).then(|| format!("{what} {b} ≠ {a}"));
+        same(
+            "levels",
+            format!("{:?}", self.levels),
+            format!("{:?}", from.levels),
+        )
+        .or_else(|| {
+            same(
+                "in_channels",
+                self.in_channels.to_string(),
+                from.in_channels.to_string(),
+            )
+        })
+        .or_else(|| same("kernel", self.kernel.to_string(), from.kernel.to_string()))
+        .or_else(|| same("window", self.window.to_string(), from.window.to_string()))
+        .or_else(|| {
+            same(
+                "weighting",
+                format!("{:?}", self.weighting),
+                format!("{:?}", from.weighting),
+            )
+        })
+        .or_else(|| {
+            (from.hidden_layers > self.hidden_layers || from.filters > self.filters).then(|| {
+                format!(
+                    "{} hidden layers of {} filters do not fit into {} of {}",
+                    from.hidden_layers, from.filters, self.hidden_layers, self.filters
+                )
+            })
+        })
+    }
+
+    /// Embeds the trained network `net` (architecture `from`) into a network of this wider
+    /// and/or deeper architecture that computes exactly the same function (Net2Net-style
+    /// growth, Chen et al. 2016), so fine-tuning starts from the trained network's quality
+    /// with spare capacity:
+    /// * each old hidden layer keeps its filters; its new filters read every input channel
+    ///   with Glorot-uniform weights from `seed`, and the old filters ignore the new channels
+    ///   (zero weights);
+    /// * the extra hidden layers come after the old ones and copy their input (a 1 at the
+    ///   kernel centre from channel c to channel c): their input is a ReLU output, ≥ 0, so the
+    ///   ReLU after them changes nothing;
+    /// * the last layer reads only the old channels (zero weights from the new ones).
+    ///
+    /// Zero weights still receive gradients, so the new capacity is used once training moves.
+    pub fn grow(
+        &self,
+        from: &ModelConfig,
+        net: &Network,
+        seed: u64,
+        device: &Device,
+    ) -> Result<Network, String> {
+        if let Some(why) = self.growth_obstacle(from) {
+            return Err(format!("cannot grow the network: {why}"));
+        }
+        if net.hidden.len() != from.hidden_layers {
+            return Err(format!(
+                "cannot grow the network: it has {} hidden layers, its config says {}",
+                net.hidden.len(),
+                from.hidden_layers
+            ));
+        }
+        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let k = self.kernel;
+        let area = k * k;
+        let (big, small) = (self.filters, from.filters);
+        let mut hidden = Vec::with_capacity(self.hidden_layers);
+        for layer in 0..self.hidden_layers {
+            let cin = if layer == 0 { self.in_channels } else { big };
+            let mut weight = vec![0.0f32; big * cin * area];
+            let mut bias = vec![0.0f32; big];
+            if let Some(old) = net.hidden.get(layer) {
+                let old_cin = if layer == 0 { from.in_channels } else { small };
+                let (old_weight, old_bias) = conv_values(old)?;
+                for o in 0..small {
+                    for i in 0..old_cin {
+                        let src = (o * old_cin + i) * area;
+                        let dst = (o * cin + i) * area;
+                        weight[dst..dst + area].copy_from_slice(&old_weight[src..src + area]);
+                    }
+                }
+                bias[..small].copy_from_slice(&old_bias);
+                let limit = (6.0 / ((cin + big) * area) as f64).sqrt() as f32;
+                for w in &mut weight[small * cin * area..] {
+                    *w = (2.0 * unit_f32(&mut rng) - 1.0) * limit;
+                }
+            } else {
+                for c in 0..big {
+                    weight[(c * cin + c) * area + area / 2] = 1.0;
+                }
+            }
+            hidden.push(conv_from_values(weight, bias, big, cin, k, device));
+        }
+        let (old_weight, old_bias) = conv_values(&net.output)?;
+        let cout = self.out_channels();
+        let mut weight = vec![0.0f32; cout * big * area];
+        for o in 0..cout {
+            for i in 0..small {
+                let src = (o * small + i) * area;
+                let dst = (o * big + i) * area;
+                weight[dst..dst + area].copy_from_slice(&old_weight[src..src + area]);
+            }
+        }
+        let output = conv_from_values(weight, old_bias, cout, big, k, device);
+        Ok(Network {
+            hidden,
+            output,
+            weighting: self.weighting,
+        })
+    }
+}
+
+/// A convolution's weights `[cout, cin, k, k]` and bias as host vectors.
+fn conv_values(conv: &Conv2d) -> Result<(Vec<f32>, Vec<f32>), String> {
+    let values = |t: Tensor<1>| {
+        t.into_data()
+            .try_to_vec::<f32>()
+            .map_err(|e| format!("weights are not f32: {e:?}"))
+    };
+    let weight = values(conv.weight.val().flatten(0, 3))?;
+    let bias = match &conv.bias {
+        Some(b) => values(b.val())?,
+        None => vec![0.0; conv.weight.shape().dims::<4>()[0]],
+    };
+    Ok((weight, bias))
+}
+
 /// Checks a level choice: ỹ (0) first, at least one correlated level, indices increasing and
 /// below [`LEVELS`] (Eq. 6 pairs ỹ with each correlated estimate).
 pub fn validate_levels(levels: &[usize]) -> Result<(), String> {
@@ -216,11 +352,23 @@ fn glorot_conv(
     let weights: Vec<f32> = (0..cout * cin * area)
         .map(|_| (2.0 * unit_f32(rng) - 1.0) * limit)
         .collect();
+    conv_from_values(weights, vec![0.0f32; cout], cout, cin, kernel, device)
+}
+
+/// A "same"-padded convolution with the given weights `[cout, cin, kernel, kernel]` and bias.
+fn conv_from_values(
+    weights: Vec<f32>,
+    bias: Vec<f32>,
+    cout: usize,
+    cin: usize,
+    kernel: usize,
+    device: &Device,
+) -> Conv2d {
     let weight = Param::from_data(
         TensorData::new(weights, [cout, cin, kernel, kernel]),
         device,
     );
-    let bias = Param::from_data(TensorData::new(vec![0.0f32; cout], [cout]), device);
+    let bias = Param::from_data(TensorData::new(bias, [cout]), device);
     let pad = kernel / 2;
     Conv2d {
         weight,

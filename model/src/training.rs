@@ -282,7 +282,8 @@ impl Trainer {
 
     /// A fresh run (new optimizer, epoch 0) that starts from the weights of the trained model
     /// directory `dir` instead of random ones: fine-tuning. The directory's architecture must
-    /// equal `config`.
+    /// equal `config`, or be a narrower/shallower one of the same kind, which is then grown
+    /// into `config` without changing what it computes ([`ModelConfig::grow`]).
     pub fn from_weights(
         config: ModelConfig,
         settings: TrainSettings,
@@ -291,15 +292,23 @@ impl Trainer {
     ) -> Result<Self, String> {
         let device = device.clone().autodiff();
         let trained = TrainedModel::open(dir, &device).map_err(|e| e.to_string())?;
-        if trained.config != config {
+        if trained.config == config {
+            return Ok(Self::fresh(trained.network, config, settings, device));
+        }
+        // A smaller network of the same kind is grown into this architecture, computing the
+        // same function (ModelConfig::grow); anything else is a mistake in the config.
+        if let Some(why) = config.growth_obstacle(&trained.config) {
             return Err(format!(
-                "{}: architecture {:?} differs from the config's {:?}",
+                "{}: architecture {:?} differs from the config's {:?} and cannot be grown into it: {why}",
                 dir.display(),
                 trained.config,
                 config
             ));
         }
-        Ok(Self::fresh(trained.network, config, settings, device))
+        let grown = config
+            .grow(&trained.config, &trained.network, settings.seed, &device)
+            .map_err(|e| format!("{}: {e}", dir.display()))?;
+        Ok(Self::fresh(grown, config, settings, device))
     }
 
     /// Epoch 0 of a run on the autodiff `device` from `model`, with a new optimizer.

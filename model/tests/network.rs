@@ -17,20 +17,18 @@ fn temp_dir(name: &str) -> std::path::PathBuf {
     dir
 }
 
+/// A convolution's bias values.
+fn bias(conv: &burn::nn::conv::Conv2d) -> Vec<f32> {
+    let b = conv.bias.as_ref().expect("convolutions have a bias");
+    b.val().into_data().try_to_vec::<f32>().unwrap()
+}
+
 /// Parameter values of a module, flattened in visiting order.
 fn parameters(model: &model::Network) -> Vec<f32> {
     let mut out = Vec::new();
     for conv in model.hidden.iter().chain(std::iter::once(&model.output)) {
         out.extend(conv.weight.val().into_data().try_to_vec::<f32>().unwrap());
-        out.extend(
-            conv.bias
-                .as_ref()
-                .unwrap()
-                .val()
-                .into_data()
-                .try_to_vec::<f32>()
-                .unwrap(),
-        );
+        out.extend(bias(conv));
     }
     out
 }
@@ -76,16 +74,7 @@ fn paper_preset_has_about_2_4_million_parameters() {
         .unwrap();
     assert!(w.iter().all(|v| v.abs() <= limit));
     assert!(w.iter().any(|v| v.abs() > 0.9 * limit));
-    let b = net
-        .output
-        .bias
-        .as_ref()
-        .unwrap()
-        .val()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap();
-    assert!(b.iter().all(|&v| v == 0.0));
+    assert!(bias(&net.output).iter().all(|&v| v == 0.0));
 }
 
 /// Eq. 6 goes negative next to a spike that only the correlated levels hold (ỹ ≡ 0, z̃ = a
@@ -156,18 +145,26 @@ fn tiny_sets() -> (PatchDataset, PatchDataset) {
     )
 }
 
+/// Settings of the tests' tiny training runs: batch 4, constant `lr`, the default loss.
+fn tiny_settings(epochs: usize, lr: f64, seed: u64) -> TrainSettings {
+    TrainSettings {
+        batch: 4,
+        epochs,
+        lr,
+        lr_end: None,
+        seed,
+        loss: Loss::default(),
+    }
+}
+
 #[test]
 fn resume_continues_exactly() {
     let device = Device::flex();
     let config = ModelConfig::preset(Preset::Tiny);
     // With a decaying learning rate: the resumed run must continue the schedule, not restart it.
     let settings = TrainSettings {
-        batch: 4,
-        epochs: 2,
-        lr: 1e-3,
         lr_end: Some(1e-4),
-        seed: 5,
-        loss: Loss::default(),
+        ..tiny_settings(2, 1e-3, 5)
     };
     let (mut train, _) = tiny_sets();
     let mut none = |_| {};
@@ -217,14 +214,7 @@ fn resume_continues_exactly() {
 
 #[test]
 fn cosine_decay_runs_from_lr_to_lr_end() {
-    let constant = TrainSettings {
-        batch: 4,
-        epochs: 2,
-        lr: 1e-3,
-        lr_end: None,
-        seed: 1,
-        loss: Loss::default(),
-    };
+    let constant = tiny_settings(2, 1e-3, 1);
     assert_eq!(constant.lr_at(0, 10), 1e-3);
     assert_eq!(constant.lr_at(9, 10), 1e-3);
     let decay = TrainSettings {
@@ -295,12 +285,8 @@ fn training_beats_the_best_input_level_with(loss: Loss) {
     let device = Device::flex();
     let config = ModelConfig::preset(Preset::Tiny);
     let settings = TrainSettings {
-        batch: 4,
-        epochs: 6,
-        lr: 3e-3,
-        lr_end: None,
-        seed: 1,
         loss,
+        ..tiny_settings(6, 3e-3, 1)
     };
     let (mut train, mut val) = tiny_sets();
     let mut trainer = Trainer::new(config.clone(), settings.clone(), &device);
@@ -349,4 +335,102 @@ fn training_beats_the_best_input_level() {
 #[test]
 fn training_on_relmse_beats_the_best_input_level() {
     training_beats_the_best_input_level_with(Loss::Relmse);
+}
+
+/// Raw network output on a synthetic bundle's features.
+fn raw_output(net: &model::Network, device: &Device) -> Vec<f32> {
+    let s = synthetic_sample(12, 10, 0.3, 4);
+    let f = Tensor::<4>::from_data(
+        TensorData::new(s.packed.features.clone(), [1, 27, 10, 12]),
+        device,
+    );
+    net.forward(f).into_data().try_to_vec::<f32>().unwrap()
+}
+
+/// A trained network grown into a wider and deeper architecture computes the same output (so
+/// fine-tuning starts where the small network stands), and training then moves the weights
+/// that were zero — the new filters are used. Incompatible architectures are refused by name.
+#[test]
+fn grown_network_computes_the_same_function_and_trains() {
+    let device = Device::flex();
+    let small = ModelConfig::preset(Preset::Tiny);
+    let settings = tiny_settings(1, 3e-3, 1);
+    let (mut train, _) = tiny_sets();
+    let mut none = |_| {};
+    // One epoch first, so that the biases are not zero, as in a trained model.
+    let mut trainer = Trainer::new(small.clone(), settings.clone(), &device);
+    trainer.run_epoch(&mut train, None, &mut none).unwrap();
+    let net = trainer.model.valid();
+    assert!(bias(&net.hidden[0]).iter().any(|&v| v != 0.0));
+
+    let big = ModelConfig {
+        hidden_layers: small.hidden_layers + 2,
+        filters: small.filters + 8,
+        ..small.clone()
+    };
+    let grown = big.grow(&small, &net, 9, &device).unwrap();
+    assert_eq!(grown.hidden.len(), big.hidden_layers);
+    assert_eq!(grown.num_params(), big.init(0, &device).num_params());
+    let (a, b) = (raw_output(&net, &device), raw_output(&grown, &device));
+    let scale = a.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    assert!(scale > 0.0);
+    let worst = a
+        .iter()
+        .zip(&b)
+        .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+    assert!(
+        worst <= 1e-5 * scale,
+        "grown output differs by {worst} (scale {scale})"
+    );
+
+    // Through `init` of a training config: a model directory with the small network.
+    let dir = temp_dir("grow");
+    save_burnpack(&net, &dir.join("model.bpk")).unwrap();
+    std::fs::write(
+        dir.join("model.json"),
+        serde_json::to_string(&small).unwrap(),
+    )
+    .unwrap();
+    let mut tuned = Trainer::from_weights(big.clone(), settings.clone(), &dir, &device).unwrap();
+    assert_eq!(
+        raw_output(&tuned.model.valid(), &device),
+        raw_output(
+            &big.grow(&small, &net, settings.seed, &device).unwrap(),
+            &device
+        )
+    );
+    tuned.run_epoch(&mut train, None, &mut none).unwrap();
+    // The last layer's weights from the new channels started at zero.
+    let w = tuned
+        .model
+        .output
+        .weight
+        .val()
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    let area = big.kernel * big.kernel;
+    let from_new = (0..big.out_channels())
+        .flat_map(|o| (small.filters..big.filters).map(move |i| (o * big.filters + i) * area))
+        .flat_map(|start| start..start + area)
+        .filter(|&i| w[i] != 0.0)
+        .count();
+    assert!(from_new > 0, "the new channels' output weights never moved");
+
+    let other_window = ModelConfig {
+        window: small.window + 2,
+        ..big.clone()
+    };
+    let err = Trainer::from_weights(other_window, settings.clone(), &dir, &device)
+        .err()
+        .expect("another window must be refused");
+    assert!(err.contains("window"), "{err}");
+    let narrower = ModelConfig {
+        filters: small.filters - 1,
+        ..small.clone()
+    };
+    let err = Trainer::from_weights(narrower, settings, &dir, &device)
+        .err()
+        .expect("a narrower network must be refused");
+    assert!(err.contains("do not fit"), "{err}");
 }

@@ -43,7 +43,7 @@ pub struct TrainConfig {
     /// Split validated on after every epoch.
     #[serde(default = "default_split_val")]
     pub val_split: String,
-    /// Network preset: `paper`, `small` or `tiny`.
+    /// Network preset: `paper`, `medium`, `small` or `tiny`.
     pub preset: Preset,
     /// Weight transform: `relu` (paper) or `softmax`.
     #[serde(default)]
@@ -73,7 +73,10 @@ pub struct TrainConfig {
     pub loss: Loss,
     /// Start from the weights of this trained model directory (`model.json` + `model.bpk`, e.g.
     /// an earlier run's output or `models/default`) instead of random ones, with a fresh
-    /// optimizer: fine-tuning. The architecture must match this config's. Ignored by `--resume`.
+    /// optimizer: fine-tuning. The architecture must match this config's, or be a smaller one
+    /// (fewer hidden layers or filters, same kernel, window, levels, weighting) that is grown
+    /// into it computing the same function (e.g. `small` weights into the `medium` preset).
+    /// Ignored by `--resume`.
     #[serde(default)]
     pub init: Option<PathBuf>,
     /// Seed of the weights and the patch order.

@@ -21,7 +21,7 @@ use serde_json::{json, Value};
 #[derive(Debug, Parser)]
 #[command(version)]
 struct Cli {
-    /// Network preset: paper, small or tiny.
+    /// Network preset: paper, medium, small or tiny.
     #[arg(long, default_value = "paper")]
     preset: String,
     /// Image side in pixels (square synthetic bundle).
@@ -70,8 +70,13 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: &Cli) -> Result<()> {
-    let preset: Preset = serde_json::from_value(Value::String(cli.preset.clone()))
-        .with_context(|| format!("unknown preset `{}` (paper, small, tiny)", cli.preset))?;
+    let preset: Preset =
+        serde_json::from_value(Value::String(cli.preset.clone())).with_context(|| {
+            format!(
+                "unknown preset `{}` (paper, medium, small, tiny)",
+                cli.preset
+            )
+        })?;
     let device = cli.backend.device().map_err(anyhow::Error::msg)?;
     let config = ModelConfig::preset(preset);
     let network = config.init(0, &device);

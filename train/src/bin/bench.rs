@@ -52,6 +52,7 @@ struct Cli {
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum PresetArg {
     Paper,
+    Medium,
     Small,
     Tiny,
 }
@@ -123,6 +124,7 @@ fn main() -> ExitCode {
 fn run(cli: &Cli) -> Result<()> {
     let preset = match cli.preset {
         PresetArg::Paper => Preset::Paper,
+        PresetArg::Medium => Preset::Medium,
         PresetArg::Small => Preset::Small,
         PresetArg::Tiny => Preset::Tiny,
     };
