@@ -186,7 +186,9 @@ impl ModelConfig {
     /// Growing needs the same inputs, kernel, window and weighting, and no fewer hidden layers
     /// or filters.
     pub fn growth_obstacle(&self, from: &ModelConfig) -> Option<String> {
-        let same = |what: &str, a: String, b: String| (a != b).then(|| format!("{what} {b} ≠ {a}"));
+        let same = |what: &str, a: String, b: String| {
+            (a != b).then(|| format!("{what} differs (the trained network's {b}, this {a})"))
+        };
         same(
             "levels",
             format!("{:?}", self.levels),
