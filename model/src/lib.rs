@@ -16,4 +16,4 @@ pub mod training;
 pub use combine::{combine, level_weight_shares};
 pub use loss::relative_log_l1;
 pub use metrics::{relmse, relmse_planar};
-pub use model::{ModelConfig, Network, Preset, Weighting};
+pub use model::{ModelConfig, Network, Preset, Weighting, NEW_WINDOW_ENTRY};

@@ -183,8 +183,8 @@ impl ModelConfig {
 
 impl ModelConfig {
     /// Why a network of architecture `from` cannot be grown into this one (`None`: it can).
-    /// Growing needs the same inputs, kernel, window and weighting, and no fewer hidden layers
-    /// or filters.
+    /// Growing needs the same inputs, kernel and weighting, no fewer hidden layers or filters,
+    /// and the same window or (ReLU weighting) a wider one.
     pub fn growth_obstacle(&self, from: &ModelConfig) -> Option<String> {
         let same = |what: &str, a: String, b: String| {
             (a != b).then(|| format!("{what} differs (the trained network's {b}, this {a})"))
@@ -202,13 +202,22 @@ impl ModelConfig {
             )
         })
         .or_else(|| same("kernel", self.kernel.to_string(), from.kernel.to_string()))
-        .or_else(|| same("window", self.window.to_string(), from.window.to_string()))
         .or_else(|| {
             same(
                 "weighting",
                 format!("{:?}", self.weighting),
                 format!("{:?}", from.weighting),
             )
+        })
+        .or_else(|| {
+            // A wider window only with ReLU weights: the new entries start at a weight of
+            // `NEW_WINDOW_ENTRY`, next to nothing (below). Softmax weights have no such floor.
+            let grows = self.window > from.window && self.weighting == Weighting::Relu;
+            if grows {
+                None
+            } else {
+                same("window", self.window.to_string(), from.window.to_string())
+            }
         })
         .or_else(|| {
             (from.hidden_layers > self.hidden_layers || from.filters > self.filters).then(|| {
@@ -221,16 +230,21 @@ impl ModelConfig {
     }
 
     /// Embeds the trained network `net` (architecture `from`) into a network of this wider
-    /// and/or deeper architecture that computes exactly the same function (Net2Net-style
-    /// growth, Chen et al. 2016), so fine-tuning starts from the trained network's quality
-    /// with spare capacity:
+    /// and/or deeper architecture that computes the same function (exactly, or nearly when the
+    /// window grows; Net2Net-style growth, Chen et al. 2016), so fine-tuning starts from the
+    /// trained network's quality with spare capacity:
     /// * each old hidden layer keeps its filters; its new filters read every input channel
     ///   with Glorot-uniform weights from `seed`, and the old filters ignore the new channels
     ///   (zero weights);
     /// * the extra hidden layers come after the old ones and copy their input (a 1 at the
     ///   kernel centre from channel c to channel c): their input is a ReLU output, ≥ 0, so the
     ///   ReLU after them changes nothing;
-    /// * the last layer reads only the old channels (zero weights from the new ones).
+    /// * the last layer reads only the old channels (zero weights from the new ones);
+    /// * a wider combination window (ReLU weighting only) keeps every old entry's output and
+    ///   gives each new outer entry zero weights and the bias [`NEW_WINDOW_ENTRY`]: its
+    ///   combination weight is that plus the 1e-4 floor, ≈ 10⁻³, against per-pixel weight sums
+    ///   of ≈ 20–2 000 in a trained network — the output moves by a fraction of a per cent at
+    ///   most, and the entries are alive (ReLU passes their gradient).
     ///
     /// Zero weights still receive gradients, so the new capacity is used once training moves.
     pub fn grow(
@@ -284,14 +298,27 @@ impl ModelConfig {
         let (old_weight, old_bias) = conv_values(&net.output)?;
         let cout = self.out_channels();
         let mut weight = vec![0.0f32; cout * big * area];
-        for o in 0..cout {
+        let mut bias = vec![NEW_WINDOW_ENTRY; cout];
+        let (window, old_window) = (self.window, from.window);
+        let shift = (window - old_window) / 2;
+        for (o, b) in bias.iter_mut().enumerate() {
+            // Output channels are pair-major, then window entries row-major.
+            let (pair, entry) = (o / (window * window), o % (window * window));
+            let (row, col) = (entry / window, entry % window);
+            let inside = (shift..shift + old_window).contains(&row)
+                && (shift..shift + old_window).contains(&col);
+            if !inside {
+                continue;
+            }
+            let old_o = pair * old_window * old_window + (row - shift) * old_window + (col - shift);
+            *b = old_bias[old_o];
             for i in 0..small {
-                let src = (o * small + i) * area;
+                let src = (old_o * small + i) * area;
                 let dst = (o * big + i) * area;
                 weight[dst..dst + area].copy_from_slice(&old_weight[src..src + area]);
             }
         }
-        let output = conv_from_values(weight, old_bias, cout, big, k, device);
+        let output = conv_from_values(weight, bias, cout, big, k, device);
         Ok(Network {
             hidden,
             output,
@@ -299,6 +326,11 @@ impl ModelConfig {
         })
     }
 }
+
+/// Raw output (bias) given to the new outer entries when [`ModelConfig::grow`] widens the
+/// combination window: small, so the grown network computes nearly what the old one did, and
+/// positive, so ReLU lets gradients reach them.
+pub const NEW_WINDOW_ENTRY: f32 = 1e-3;
 
 /// A convolution's weights `[cout, cin, k, k]` and bias as host vectors.
 fn conv_values(conv: &Conv2d) -> Result<(Vec<f32>, Vec<f32>), String> {

@@ -417,14 +417,20 @@ fn grown_network_computes_the_same_function_and_trains() {
         .count();
     assert!(from_new > 0, "the new channels' output weights never moved");
 
-    let other_window = ModelConfig {
-        window: small.window + 2,
+    let narrower_window = ModelConfig {
+        window: small.window - 2,
         ..big.clone()
     };
-    let err = Trainer::from_weights(other_window, settings.clone(), &dir, &device)
+    let err = Trainer::from_weights(narrower_window, settings.clone(), &dir, &device)
         .err()
-        .expect("another window must be refused");
+        .expect("a narrower window must be refused");
     assert!(err.contains("window"), "{err}");
+    let softmax_wider = ModelConfig {
+        window: small.window + 2,
+        weighting: model::Weighting::Softmax,
+        ..big.clone()
+    };
+    assert!(softmax_wider.growth_obstacle(&small).is_some());
     let narrower = ModelConfig {
         filters: small.filters - 1,
         ..small.clone()
@@ -433,4 +439,64 @@ fn grown_network_computes_the_same_function_and_trains() {
         .err()
         .expect("a narrower network must be refused");
     assert!(err.contains("do not fit"), "{err}");
+}
+
+/// Widening the combination window keeps every old window entry's raw output and starts the
+/// new outer entries at the small positive `NEW_WINDOW_ENTRY`, so the reconstruction barely
+/// moves.
+#[test]
+fn wider_window_keeps_the_old_entries() {
+    let device = Device::flex();
+    let small = ModelConfig::preset(Preset::Tiny);
+    let mut trainer = Trainer::new(small.clone(), tiny_settings(1, 3e-3, 2), &device);
+    let (mut train, _) = tiny_sets();
+    trainer.run_epoch(&mut train, None, &mut |_| {}).unwrap();
+    let net = trainer.model.valid();
+    let wide = ModelConfig {
+        window: small.window + 4,
+        ..small.clone()
+    };
+    assert!(wide.growth_obstacle(&small).is_none());
+    let grown = wide.grow(&small, &net, 3, &device).unwrap();
+    let (old, new) = (raw_output(&net, &device), raw_output(&grown, &device));
+    let pixels = 12 * 10;
+    let (w_old, w_new) = (small.window, wide.window);
+    assert_eq!(new.len(), wide.out_channels() * pixels);
+    for pair in 0..wide.pairs() {
+        for row in 0..w_new {
+            for col in 0..w_new {
+                let o = (pair * w_new + row) * w_new + col;
+                let got = &new[o * pixels..(o + 1) * pixels];
+                let (r, c) = (row as i64 - 2, col as i64 - 2);
+                if (0..w_old as i64).contains(&r) && (0..w_old as i64).contains(&c) {
+                    let old_o = (pair * w_old + r as usize) * w_old + c as usize;
+                    let want = &old[old_o * pixels..(old_o + 1) * pixels];
+                    for (g, w) in got.iter().zip(want) {
+                        assert!(
+                            (g - w).abs() <= 1e-5 * (1.0 + w.abs()),
+                            "entry {o}: {g} vs {w}"
+                        );
+                    }
+                } else {
+                    assert!(
+                        got.iter().all(|&g| g == model::NEW_WINDOW_ENTRY),
+                        "entry {o}"
+                    );
+                }
+            }
+        }
+    }
+    // The reconstructions differ by the new entries' ≈ 1e-3 weights only.
+    let a = forward_values(&net, &small, 3, &device);
+    let b = forward_values(&grown, &wide, 3, &device);
+    let scale = a.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    let worst = a
+        .iter()
+        .zip(&b)
+        .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+    println!("wider window: largest change {worst} (scale {scale})");
+    assert!(
+        worst <= 0.05 * scale,
+        "largest change {worst}, scale {scale}"
+    );
 }

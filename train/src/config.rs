@@ -48,6 +48,10 @@ pub struct TrainConfig {
     /// Weight transform: `relu` (paper) or `softmax`.
     #[serde(default)]
     pub weighting: Option<Weighting>,
+    /// Combination window side (odd), replacing the preset's: e.g. a `small` network with the
+    /// window grown from 11 to 15 through `init`. Absent: the preset's.
+    #[serde(default)]
+    pub window: Option<usize>,
     /// Estimates the network combines, as indices into ỹ, z̃1..z̃4 (0 = ỹ first, increasing):
     /// all five by default (the paper's network); `[0, j]` trains Dual(ỹ, z̃j) of paper Table 1.
     #[serde(default)]
@@ -118,6 +122,9 @@ impl TrainConfig {
         if let Some(w) = self.weighting {
             c.weighting = w;
         }
+        if let Some(window) = self.window {
+            c.window = window;
+        }
         match &self.levels {
             Some(levels) => c.with_levels(levels.clone()),
             None => c,
@@ -172,6 +179,18 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("l2") && err.contains("relmse"), "{err}");
+    }
+
+    #[test]
+    fn window_key_replaces_the_presets_window() {
+        let default: TrainConfig = toml::from_str(BASE).unwrap();
+        assert_eq!(default.model_config().window, 5);
+        let wide: TrainConfig = toml::from_str(&format!("{BASE}window = 9\n")).unwrap();
+        assert_eq!(wide.model_config().window, 9);
+        assert_eq!(wide.model_config().out_channels(), 4 * 81);
+        let even: TrainConfig = toml::from_str(&format!("{BASE}window = 8\n")).unwrap();
+        let err = even.model_config().validate().unwrap_err();
+        assert!(err.contains("window must be odd"), "{err}");
     }
 
     #[test]
