@@ -243,8 +243,9 @@ impl ModelConfig {
     /// * a wider combination window (ReLU weighting only) keeps every old entry's output and
     ///   gives each new outer entry zero weights and the bias [`NEW_WINDOW_ENTRY`]: its
     ///   combination weight is that plus the 1e-4 floor, ≈ 10⁻³, against per-pixel weight sums
-    ///   of ≈ 20–2 000 in a trained network — the output moves by a fraction of a per cent at
-    ///   most, and the entries are alive (ReLU passes their gradient).
+    ///   of ≈ 20–2 000 in a trained network (all new entries together: ≈ 0.1–3 % of the weight
+    ///   at the pixels with the smallest sums, far less elsewhere), and the entries are alive
+    ///   (ReLU passes their gradient).
     ///
     /// Zero weights still receive gradients, so the new capacity is used once training moves.
     pub fn grow(
