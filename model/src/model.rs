@@ -285,10 +285,14 @@ impl ModelConfig {
                     }
                 }
                 bias[..small].copy_from_slice(&old_bias);
-                let limit = (6.0 / ((cin + big) * area) as f64).sqrt() as f32;
-                for w in &mut weight[small * cin * area..] {
-                    *w = (2.0 * unit_f32(&mut rng) - 1.0) * limit;
-                }
+                let new_filters = &mut weight[small * cin * area..];
+                new_filters.copy_from_slice(&glorot_values(
+                    new_filters.len(),
+                    cin,
+                    big,
+                    k,
+                    &mut rng,
+                ));
             } else {
                 for c in 0..big {
                     weight[(c * cin + c) * area + area / 2] = 1.0;
@@ -374,6 +378,15 @@ fn unit_f32(rng: &mut Pcg64Mcg) -> f32 {
     (rng.next_u32() >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
+/// `n` Glorot-uniform draws for a `kernel`×`kernel` convolution from `cin` to `cout` channels:
+/// uniform in ±sqrt(6 / ((cin + cout)·kernel²)).
+fn glorot_values(n: usize, cin: usize, cout: usize, kernel: usize, rng: &mut Pcg64Mcg) -> Vec<f32> {
+    let limit = (6.0 / ((cin + cout) * kernel * kernel) as f64).sqrt() as f32;
+    (0..n)
+        .map(|_| (2.0 * unit_f32(rng) - 1.0) * limit)
+        .collect()
+}
+
 /// A "same"-padded convolution with Glorot-uniform weights and a zero bias.
 fn glorot_conv(
     cin: usize,
@@ -382,11 +395,7 @@ fn glorot_conv(
     rng: &mut Pcg64Mcg,
     device: &Device,
 ) -> Conv2d {
-    let area = kernel * kernel;
-    let limit = (6.0 / ((cin + cout) * area) as f64).sqrt() as f32;
-    let weights: Vec<f32> = (0..cout * cin * area)
-        .map(|_| (2.0 * unit_f32(rng) - 1.0) * limit)
-        .collect();
+    let weights = glorot_values(cout * cin * kernel * kernel, cin, cout, kernel, rng);
     conv_from_values(weights, vec![0.0f32; cout], cout, cin, kernel, device)
 }
 

@@ -297,17 +297,16 @@ impl Trainer {
         }
         // A smaller network of the same kind is grown into this architecture, computing the
         // same function (ModelConfig::grow); anything else is a mistake in the config.
-        if let Some(why) = config.growth_obstacle(&trained.config) {
-            return Err(format!(
-                "{}: architecture {:?} differs from the config's {:?} and cannot be grown into it: {why}",
-                dir.display(),
-                trained.config,
-                config
-            ));
-        }
         let grown = config
             .grow(&trained.config, &trained.network, settings.seed, &device)
-            .map_err(|e| format!("{}: {e}", dir.display()))?;
+            .map_err(|e| {
+                format!(
+                    "{}: architecture {:?} differs from the config's {:?}: {e}",
+                    dir.display(),
+                    trained.config,
+                    config
+                )
+            })?;
         Ok(Self::fresh(grown, config, settings, device))
     }
 

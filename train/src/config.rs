@@ -78,8 +78,9 @@ pub struct TrainConfig {
     /// Start from the weights of this trained model directory (`model.json` + `model.bpk`, e.g.
     /// an earlier run's output or `models/default`) instead of random ones, with a fresh
     /// optimizer: fine-tuning. The architecture must match this config's, or be a smaller one
-    /// (fewer hidden layers or filters, same kernel, window, levels, weighting) that is grown
-    /// into it computing the same function (e.g. `small` weights into the `medium` preset).
+    /// (fewer hidden layers or filters, a narrower window with ReLU weighting; same kernel,
+    /// levels, weighting) that is grown into it computing the same function (nearly, for a
+    /// wider window), e.g. `small` weights into the `medium` preset.
     /// Ignored by `--resume`.
     #[serde(default)]
     pub init: Option<PathBuf>,
