@@ -9,31 +9,33 @@ use crate::spectrum::Rgb;
 use std::path::{Path, PathBuf};
 
 /// An image file could not be read or written; every variant names the file.
+// The cause is part of each message, not a `source`: error chains printed with `{:#}` would
+// otherwise repeat it.
 #[derive(Debug, thiserror::Error)]
 pub enum ImageIoError {
     /// The file could not be opened, created or renamed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The OpenEXR decoder or encoder failed (corrupt file, no R/G/B channels, …).
-    #[error("{path}: OpenEXR: {source}")]
+    #[error("{path}: OpenEXR: {error}")]
     Exr {
         /// The file.
         path: PathBuf,
         /// The underlying error.
-        source: exr::error::Error,
+        error: exr::error::Error,
     },
     /// The PNG decoder or encoder failed.
-    #[error("{path}: PNG: {source}")]
+    #[error("{path}: PNG: {error}")]
     Png {
         /// The file.
         path: PathBuf,
         /// The underlying error.
-        source: image::ImageError,
+        error: image::ImageError,
     },
     /// The file name has an extension other than `.png` or `.exr`.
     #[error("{path}: unsupported image format (expected .png or .exr)")]
@@ -115,19 +117,19 @@ pub fn read_rgb_image_encoded(path: &Path, raw: bool) -> Result<RgbImage, ImageI
 }
 
 fn read_png(path: &Path, raw: bool) -> Result<RgbImage, ImageIoError> {
-    let png_err = |source| ImageIoError::Png {
+    let png_err = |error| ImageIoError::Png {
         path: path.to_owned(),
-        source,
+        error,
     };
-    let reader = image::ImageReader::open(path).map_err(|source| ImageIoError::Io {
+    let reader = image::ImageReader::open(path).map_err(|error| ImageIoError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })?;
     let reader = reader
         .with_guessed_format()
-        .map_err(|source| ImageIoError::Io {
+        .map_err(|error| ImageIoError::Io {
             path: path.to_owned(),
-            source,
+            error,
         })?;
     let decoded = reader.decode().map_err(png_err)?;
     let rgb = decoded.to_rgb32f();
@@ -142,9 +144,9 @@ fn read_png(path: &Path, raw: bool) -> Result<RgbImage, ImageIoError> {
 
 fn read_exr(path: &Path) -> Result<RgbImage, ImageIoError> {
     // Open the file ourselves so that "not found" is an I/O error naming the file.
-    std::fs::metadata(path).map_err(|source| ImageIoError::Io {
+    std::fs::metadata(path).map_err(|error| ImageIoError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })?;
     let image = exr::prelude::read_first_rgba_layer_from_file(
         path,
@@ -158,14 +160,14 @@ fn read_exr(path: &Path) -> Result<RgbImage, ImageIoError> {
             pixels[position.y() * *width + position.x()] = Rgb::new(r, g, b);
         },
     )
-    .map_err(|source| match source {
-        exr::error::Error::Io(source) => ImageIoError::Io {
+    .map_err(|error| match error {
+        exr::error::Error::Io(error) => ImageIoError::Io {
             path: path.to_owned(),
-            source,
+            error,
         },
-        source => ImageIoError::Exr {
+        error => ImageIoError::Exr {
             path: path.to_owned(),
-            source,
+            error,
         },
     })?;
     let size = image.layer_data.size;
@@ -211,26 +213,26 @@ fn write_atomically(
         let _ = std::fs::remove_file(&tmp);
         // Name the real target, not the temporary file, in the error.
         return Err(match e {
-            ImageIoError::Io { source, .. } => ImageIoError::Io {
+            ImageIoError::Io { error, .. } => ImageIoError::Io {
                 path: path.to_owned(),
-                source,
+                error,
             },
-            ImageIoError::Exr { source, .. } => ImageIoError::Exr {
+            ImageIoError::Exr { error, .. } => ImageIoError::Exr {
                 path: path.to_owned(),
-                source,
+                error,
             },
-            ImageIoError::Png { source, .. } => ImageIoError::Png {
+            ImageIoError::Png { error, .. } => ImageIoError::Png {
                 path: path.to_owned(),
-                source,
+                error,
             },
             other => other,
         });
     }
-    std::fs::rename(&tmp, path).map_err(|source| {
+    std::fs::rename(&tmp, path).map_err(|error| {
         let _ = std::fs::remove_file(&tmp);
         ImageIoError::Io {
             path: path.to_owned(),
-            source,
+            error,
         }
     })
 }
@@ -249,14 +251,14 @@ pub fn write_rgb_exr(
             let p = pixels[y * w + x];
             (p.x, p.y, p.z)
         })
-        .map_err(|source| match source {
-            exr::error::Error::Io(source) => ImageIoError::Io {
+        .map_err(|error| match error {
+            exr::error::Error::Io(error) => ImageIoError::Io {
                 path: tmp.to_owned(),
-                source,
+                error,
             },
-            source => ImageIoError::Exr {
+            error => ImageIoError::Exr {
                 path: tmp.to_owned(),
-                source,
+                error,
             },
         })
     })
@@ -284,9 +286,9 @@ pub fn write_png_srgb(
             image::ExtendedColorType::Rgb8,
             image::ImageFormat::Png,
         )
-        .map_err(|source| ImageIoError::Png {
+        .map_err(|error| ImageIoError::Png {
             path: tmp.to_owned(),
-            source,
+            error,
         })
     })
 }
@@ -356,32 +358,46 @@ mod tests {
         assert!((srgb_to_linear(0.5) - 0.214_041).abs() < 1e-5);
     }
 
+    /// Every error names its file, and states its cause once: the cause is in the message and
+    /// is not also a `source`, which `{:#}` chains (the binaries' error output) would repeat.
     #[test]
-    fn errors_name_the_file() {
+    fn errors_name_the_file_once_with_the_cause() {
+        use std::error::Error;
         let dir = temp_dir("errors");
-        let missing = dir.join("missing.exr");
-        let e = read_rgb_image(&missing).unwrap_err().to_string();
-        assert!(e.contains("missing.exr"), "{e}");
-        let missing = dir.join("missing.png");
-        let e = read_rgb_image(&missing).unwrap_err().to_string();
-        assert!(e.contains("missing.png"), "{e}");
-        let garbage = dir.join("garbage.exr");
-        std::fs::write(&garbage, b"not an exr").unwrap();
-        let e = read_rgb_image(&garbage).unwrap_err().to_string();
-        assert!(e.contains("garbage.exr"), "{e}");
-        let garbage = dir.join("garbage.png");
-        std::fs::write(&garbage, b"not a png").unwrap();
-        let e = read_rgb_image(&garbage).unwrap_err().to_string();
-        assert!(e.contains("garbage.png"), "{e}");
-        let e = read_rgb_image(&dir.join("x.jpg")).unwrap_err().to_string();
-        assert!(e.contains("x.jpg"), "{e}");
-        let e = write_rgb_exr(&dir.join("short.exr"), 2, 2, &[Rgb::ZERO; 3])
+        let garbage_exr = dir.join("garbage.exr");
+        std::fs::write(&garbage_exr, b"not an exr").unwrap();
+        let garbage_png = dir.join("garbage.png");
+        std::fs::write(&garbage_png, b"not a png").unwrap();
+        let cases = [
+            (
+                "missing.exr",
+                read_rgb_image(&dir.join("missing.exr")).unwrap_err(),
+            ),
+            (
+                "missing.png",
+                read_rgb_image(&dir.join("missing.png")).unwrap_err(),
+            ),
+            ("garbage.exr", read_rgb_image(&garbage_exr).unwrap_err()),
+            ("garbage.png", read_rgb_image(&garbage_png).unwrap_err()),
+            ("x.jpg", read_rgb_image(&dir.join("x.jpg")).unwrap_err()),
+            (
+                "short.exr",
+                write_rgb_exr(&dir.join("short.exr"), 2, 2, &[Rgb::ZERO; 3]).unwrap_err(),
+            ),
+            (
+                "nodir/x.png",
+                write_png_srgb(&dir.join("nodir/x.png"), 1, 1, &[Rgb::ZERO]).unwrap_err(),
+            ),
+        ];
+        for (name, e) in cases {
+            let message = e.to_string();
+            assert!(message.contains(name), "{message}");
+            assert!(e.source().is_none(), "{name}: the cause would print twice");
+            assert_eq!(format!("{:#}", anyhow::Error::from(e)), message);
+        }
+        let missing = read_rgb_image(&dir.join("missing.exr"))
             .unwrap_err()
             .to_string();
-        assert!(e.contains("short.exr"), "{e}");
-        let e = write_png_srgb(&dir.join("nodir/x.png"), 1, 1, &[Rgb::ZERO])
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("nodir/x.png"), "{e}");
+        assert!(missing.contains("No such file"), "{missing}");
     }
 }

@@ -25,12 +25,13 @@ impl std::fmt::Display for Location {
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     /// The scene file (or an included file) could not be read.
-    #[error("{}: {source}", file.display())]
+    // The cause is part of the message, not a `source` (`{:#}` chains would repeat it).
+    #[error("{}: {error}", file.display())]
     Io {
         /// The file.
         file: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file is not well-formed XML.
     #[error("{location}: malformed XML: {message}")]

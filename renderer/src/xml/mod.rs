@@ -191,9 +191,9 @@ pub(crate) fn read_file(
     depth: usize,
     diag: &mut Diagnostics,
 ) -> Result<Element, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
         file: path.to_owned(),
-        source,
+        error,
     })?;
     let file: Arc<Path> = Arc::from(path);
     let options = roxmltree::ParsingOptions {

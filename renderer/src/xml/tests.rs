@@ -119,6 +119,20 @@ fn error_missing_mesh_file() {
     assert_error_at(&path, line_of(&body, "nope.ply"), "nope.ply");
 }
 
+/// A scene file that cannot be read is named, with its cause stated once (the cause is not
+/// also a `source`, which the binaries' `{:#}` error chains would print a second time).
+#[test]
+fn error_unreadable_scene_file_states_the_cause_once() {
+    use std::error::Error;
+    let path = temp_dir("unreadable").join("absent.xml");
+    let err = load_scene(&path, &[], false).unwrap_err();
+    let message = err.to_string();
+    assert!(message.contains("absent.xml"), "{message}");
+    assert!(message.contains("No such file"), "{message}");
+    assert!(err.source().is_none());
+    assert_eq!(format!("{:#}", anyhow::Error::from(err)), message);
+}
+
 #[test]
 fn error_malformed_number() {
     let dir = temp_dir("malformed-number");
