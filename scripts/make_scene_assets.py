@@ -113,6 +113,59 @@ def texture_pixel(x: int, y: int):
     return (r, g, b)
 
 
+def write_exr_rgb32(path: Path, width: int, height: int, pixel):
+    """Uncompressed float32 RGB OpenEXR (scanline, one line per block) from
+    pixel(x, y) -> (r, g, b) linear floats (row 0 = top of the image)."""
+
+    def attr(name: str, kind: str, data: bytes) -> bytes:
+        return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(data)) + data
+
+    channels = b"".join(c + b"\0" + struct.pack("<iB3xii", 2, 0, 1, 1) for c in (b"B", b"G", b"R"))
+    box = struct.pack("<iiii", 0, 0, width - 1, height - 1)
+    header = struct.pack("<ii", 20000630, 2)
+    header += attr("channels", "chlist", channels + b"\0")
+    header += attr("compression", "compression", b"\0")
+    header += attr("dataWindow", "box2i", box)
+    header += attr("displayWindow", "box2i", box)
+    header += attr("lineOrder", "lineOrder", b"\0")
+    header += attr("pixelAspectRatio", "float", struct.pack("<f", 1.0))
+    header += attr("screenWindowCenter", "v2f", struct.pack("<ff", 0.0, 0.0))
+    header += attr("screenWindowWidth", "float", struct.pack("<f", 1.0))
+    header += b"\0"
+    line_bytes = 3 * 4 * width
+    first = len(header) + 8 * height
+    offsets = b"".join(struct.pack("<Q", first + y * (8 + line_bytes)) for y in range(height))
+    blocks = bytearray()
+    for y in range(height):
+        row = [pixel(x, y) for x in range(width)]
+        blocks += struct.pack("<ii", y, line_bytes)
+        for c in (2, 1, 0):  # channels in name order: B, G, R
+            blocks += struct.pack("<%df" % width, *(p[c] for p in row))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(header + offsets + bytes(blocks))
+
+
+def sky_pixel(x: int, y: int, width: int = 64, height: int = 32):
+    """A latitude-longitude sky (Mitsuba's envmap layout: row 0 = +y, column centres at
+    u = (x + 0.5) / width): blue above the horizon brightening towards it, a warm ground below,
+    and a small sun 35 degrees up whose few texels carry most of the power."""
+    theta = math.pi * y / (height - 1)
+    phi = 2.0 * math.pi * (x + 0.5) / width
+    elevation = 0.5 * math.pi - theta
+    if elevation > 0:
+        t = 1.0 - elevation / (0.5 * math.pi)
+        c = (0.25 + 0.6 * t, 0.45 + 0.45 * t, 0.9 + 0.1 * t)
+    else:
+        c = (0.30, 0.22, 0.15)
+    sun_elevation, sun_phi = math.radians(35.0), math.radians(60.0)
+    d = math.acos(max(-1.0, min(1.0, math.sin(elevation) * math.sin(sun_elevation)
+                                 + math.cos(elevation) * math.cos(sun_elevation)
+                                 * math.cos(phi - sun_phi))))
+    if d < math.radians(7.0):
+        c = (220.0, 190.0, 150.0)
+    return c
+
+
 def main():
     pos, nrm, uv, faces = torus(0.22, 0.08, 48, 24)
     write_obj(SCENES / "default" / "meshes" / "torus.obj", pos, nrm, uv, faces,
@@ -125,6 +178,7 @@ def main():
               faces, "torus, major radius 0.2, minor radius 0.08, axis +y, uv = (around, tube)")
     write_png_rgb8(SCENES / "validation" / "textured-diffuse" / "textures" / "pattern.png",
                    64, 64, texture_pixel)
+    write_exr_rgb32(SCENES / "validation" / "envmap" / "textures" / "sky.exr", 64, 32, sky_pixel)
 
 
 if __name__ == "__main__":

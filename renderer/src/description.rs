@@ -90,6 +90,17 @@ pub enum EmitterDesc {
         /// Radiance from every direction.
         radiance: Rgb,
     },
+    /// `envmap`: environment radiance from a latitude–longitude image.
+    Envmap {
+        /// The image (linear RGB).
+        image: std::sync::Arc<crate::texture::Bitmap>,
+        /// Map frame → world (a rotation; Mitsuba's `to_world`).
+        to_world: glam::Mat3,
+        /// Radiance multiplier.
+        scale: f32,
+        /// The image file, for error messages.
+        filename: std::path::PathBuf,
+    },
 }
 
 /// Which axis `fov` measures (Mitsuba's `fov_axis`).

@@ -8,8 +8,8 @@ use crate::camera::Camera;
 use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription};
 use crate::frame::Frame;
 use crate::lights::{
-    channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, Light, LightSample,
-    PointLight, SceneSphere, SpotLight,
+    channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, EnvmapLight, Light,
+    LightSample, PointLight, SceneSphere, SpotLight,
 };
 use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
 use crate::sampling::Distribution1D;
@@ -107,8 +107,10 @@ pub struct Scene {
     light_selection: Distribution1D,
     /// Indices of environment (constant) lights.
     environment_lights: Vec<u32>,
-    /// Sum of the environment lights' radiance.
+    /// Sum of the constant environment lights' radiance.
     environment_radiance: Rgb,
+    /// Indices of environment-map lights (their radiance depends on the direction).
+    environment_maps: Vec<u32>,
     /// Ray-tracing acceleration structure.
     accel: Bvh4Accel,
     /// The same over emitting shapes only, for rays that only look for emitted light.
@@ -219,8 +221,9 @@ impl Scene {
         }
         let mut environment_lights = Vec::new();
         let mut environment_radiance = Rgb::ZERO;
+        let mut environment_maps = Vec::new();
         for (i, e) in desc.emitters.iter().enumerate() {
-            let light = match *e {
+            let light = match e.clone() {
                 EmitterDesc::Point {
                     position,
                     intensity,
@@ -277,6 +280,19 @@ impl Scene {
                     environment_radiance += radiance;
                     Light::Constant(ConstantLight { radiance })
                 }
+                EmitterDesc::Envmap {
+                    image,
+                    to_world,
+                    scale,
+                    filename,
+                } => {
+                    let map = EnvmapLight::new(&image, to_world, scale).map_err(|e| {
+                        anyhow::anyhow!("envmap emitter #{i} ({}): {e}", filename.display())
+                    })?;
+                    environment_lights.push(lights.len() as u32);
+                    environment_maps.push(lights.len() as u32);
+                    Light::Envmap(Box::new(map))
+                }
             };
             lights.push(light);
         }
@@ -316,6 +332,7 @@ impl Scene {
             lights,
             environment_lights,
             environment_radiance,
+            environment_maps,
             accel,
             emitter_accel,
             bounds: (lo, hi),
@@ -443,8 +460,14 @@ impl Scene {
 
     /// Radiance arriving along a ray that escapes the scene in direction `d`.
     #[inline]
-    pub fn environment(&self, _d: Vec3) -> Rgb {
-        self.environment_radiance
+    pub fn environment(&self, d: Vec3) -> Rgb {
+        let mut radiance = self.environment_radiance;
+        for &i in &self.environment_maps {
+            if let Light::Envmap(map) = &self.lights[i as usize] {
+                radiance += map.eval(d);
+            }
+        }
+        radiance
     }
 
     /// Probability of selecting light `i` for NEE or photon emission.
@@ -476,6 +499,7 @@ impl Scene {
             Light::Spot(l) => l.sample_li(p)?,
             Light::Directional(l) => l.sample_li(p, &self.sphere),
             Light::Constant(l) => l.sample_li(p, u, &self.sphere),
+            Light::Envmap(l) => l.sample_li(p, u, &self.sphere)?,
         };
         ls.light = i as u32;
         ls.pdf *= pmf;
@@ -502,11 +526,12 @@ impl Scene {
     /// Solid-angle density (selection included) of sampling escaping direction `d` through the
     /// environment lights.
     #[inline]
-    pub fn pdf_li_environment(&self, _d: Vec3) -> f32 {
+    pub fn pdf_li_environment(&self, d: Vec3) -> f32 {
         self.environment_lights
             .iter()
             .map(|&i| match &self.lights[i as usize] {
                 Light::Constant(c) => c.pdf_li() * self.light_pmf(i),
+                Light::Envmap(m) => m.pdf_li(d) * self.light_pmf(i),
                 _ => 0.0,
             })
             .sum()
@@ -530,6 +555,7 @@ impl Scene {
             Light::Spot(l) => l.sample_emission(u_dir),
             Light::Directional(l) => l.sample_emission(u_pos, &self.sphere),
             Light::Constant(l) => l.sample_emission(u_dir, u_pos, &self.sphere),
+            Light::Envmap(l) => l.sample_emission(u_dir, u_pos, &self.sphere),
         };
         e.light = i as u32;
         e.flux /= pmf;
@@ -545,6 +571,7 @@ fn light_power(l: &Light, shapes: &[Shape], sphere: &SceneSphere) -> Rgb {
         Light::Spot(s) => s.power(),
         Light::Directional(d) => d.power(sphere),
         Light::Constant(c) => c.power(sphere),
+        Light::Envmap(m) => m.power(sphere),
     }
 }
 

@@ -209,6 +209,11 @@ mod tests {
 
     /// A diffuse sphere of albedo `rho` seen from outside, in a constant environment of radiance 1.
     fn sphere_in_environment(rho: f32) -> Scene {
+        sphere_lit_by(rho, EmitterDesc::Constant { radiance: Rgb::ONE })
+    }
+
+    /// A diffuse sphere of albedo `rho` seen from outside, lit by `emitter` alone.
+    fn sphere_lit_by(rho: f32, emitter: EmitterDesc) -> Scene {
         let desc = SceneDescription {
             camera: camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 8),
             sample_count: None,
@@ -225,7 +230,7 @@ mod tests {
                 bsdf: 0,
                 emission: None,
             }],
-            emitters: vec![EmitterDesc::Constant { radiance: Rgb::ONE }],
+            emitters: vec![emitter],
             warnings: vec![],
         };
         Scene::build(&desc).unwrap()
@@ -266,6 +271,31 @@ mod tests {
                 "pixel {i}: {p:?}"
             );
         }
+        assert!(
+            (film.mean() - Rgb::ONE).abs().max_element() < 0.01,
+            "{:?}",
+            film.mean()
+        );
+    }
+
+    /// The furnace again, lit by an environment *map* of radiance 1 (a 5×3 image, rotated):
+    /// its lookup, importance sampling and MIS weights must add up to the same 1.
+    #[test]
+    fn white_furnace_sphere_under_a_uniform_envmap() {
+        let scene = sphere_lit_by(
+            1.0,
+            EmitterDesc::Envmap {
+                image: std::sync::Arc::new(crate::texture::Bitmap {
+                    width: 5,
+                    height: 3,
+                    texels: vec![Rgb::splat(0.5); 15],
+                }),
+                to_world: glam::Mat3::from_rotation_x(0.4),
+                scale: 2.0,
+                filename: "uniform.exr".into(),
+            },
+        );
+        let film = PathTracer::default().render(&scene, 256, 1, None);
         assert!(
             (film.mean() - Rgb::ONE).abs().max_element() < 0.01,
             "{:?}",

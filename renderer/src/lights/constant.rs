@@ -1,10 +1,8 @@
 //! Constant environment (Mitsuba's `constant`): the same radiance from every direction.
 
 use super::{EmissionSample, LightSample, SceneSphere};
-use crate::math::{coordinate_system, Ray};
-use crate::sampling::{
-    square_to_uniform_disk_concentric, square_to_uniform_sphere, UNIFORM_SPHERE_PDF,
-};
+use crate::math::Ray;
+use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -46,11 +44,8 @@ impl ConstantLight {
         sphere: &SceneSphere,
     ) -> EmissionSample {
         let d = -square_to_uniform_sphere(u_dir);
-        let (s, t) = coordinate_system(d);
-        let q = square_to_uniform_disk_concentric(u_pos) * sphere.radius;
-        let o = sphere.center - d * sphere.radius + s * q.x + t * q.y;
         EmissionSample {
-            ray: Ray::new(o, d),
+            ray: Ray::new(sphere.photon_origin(d, u_pos), d),
             flux: self.power(sphere),
             light: 0,
         }

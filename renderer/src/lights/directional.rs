@@ -1,8 +1,7 @@
 //! Directional light (Mitsuba's `directional`): irradiance E arriving from one direction.
 
 use super::{EmissionSample, LightSample, SceneSphere};
-use crate::math::{coordinate_system, Ray};
-use crate::sampling::square_to_uniform_disk_concentric;
+use crate::math::Ray;
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -34,11 +33,8 @@ impl DirectionalLight {
 
     /// A photon starting on a disk covering the scene's bounding sphere, facing the light.
     pub fn sample_emission(&self, u: Vec2, sphere: &SceneSphere) -> EmissionSample {
-        let (s, t) = coordinate_system(self.direction);
-        let d = square_to_uniform_disk_concentric(u) * sphere.radius;
-        let o = sphere.center - self.direction * sphere.radius + s * d.x + t * d.y;
         EmissionSample {
-            ray: Ray::new(o, self.direction),
+            ray: Ray::new(sphere.photon_origin(self.direction, u), self.direction),
             flux: self.irradiance * (PI * sphere.radius * sphere.radius),
             light: 0,
         }

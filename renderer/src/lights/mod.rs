@@ -1,5 +1,5 @@
 //! Light sources (Mitsuba 3's emitters): area lights attached to shapes (front side only),
-//! point, spot, directional and constant-environment lights, each with
+//! point, spot, directional, constant-environment and environment-map lights, each with
 //! - `sample_li`: a direction towards the light from a reference point, for next-event estimation,
 //! - `pdf_li`: the solid-angle density of that strategy, for MIS with BSDF sampling,
 //! - `sample_emission`: a ray leaving the light with its flux weight, for photon tracing,
@@ -11,18 +11,23 @@
 pub mod area;
 pub mod constant;
 pub mod directional;
+pub mod envmap;
+#[cfg(test)]
+mod envmap_reference;
 pub mod point;
 pub mod spot;
 
 pub use area::AreaLight;
 pub use constant::ConstantLight;
 pub use directional::DirectionalLight;
+pub use envmap::{EnvmapError, EnvmapLight};
 pub use point::PointLight;
 pub use spot::SpotLight;
 
-use crate::math::Ray;
+use crate::math::{coordinate_system, Ray};
+use crate::sampling::square_to_uniform_disk_concentric;
 use crate::spectrum::Rgb;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// Bounding sphere of the scene, used by infinite lights to emit photons over it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,6 +36,17 @@ pub struct SceneSphere {
     pub center: Vec3,
     /// Radius (> 0).
     pub radius: f32,
+}
+
+impl SceneSphere {
+    /// Where a photon from infinity travelling along `d` (unit) starts: a point uniform (by
+    /// `u`) on the disk of the sphere's radius that faces `d`, one radius behind the centre, so
+    /// every such ray crosses the sphere with density 1/(πR²).
+    pub fn photon_origin(&self, d: Vec3, u: Vec2) -> Vec3 {
+        let (s, t) = coordinate_system(d);
+        let q = square_to_uniform_disk_concentric(u) * self.radius;
+        self.center - d * self.radius + s * q.x + t * q.y
+    }
 }
 
 /// A direction sampled towards a light from a reference point.
@@ -81,6 +97,8 @@ pub enum Light {
     Directional(DirectionalLight),
     /// Uniform environment.
     Constant(ConstantLight),
+    /// Environment from a latitude–longitude image (boxed: it owns the image and its tables).
+    Envmap(Box<EnvmapLight>),
 }
 
 impl Light {
@@ -94,7 +112,10 @@ impl Light {
 
     /// Whether the light is at infinity.
     pub fn is_infinite(&self) -> bool {
-        matches!(self, Light::Directional(_) | Light::Constant(_))
+        matches!(
+            self,
+            Light::Directional(_) | Light::Constant(_) | Light::Envmap(_)
+        )
     }
 }
 

@@ -1,11 +1,13 @@
-//! `<emitter>` plugins: `area` (inside a shape), `point`, `spot`, `directional`, `constant`.
+//! `<emitter>` plugins: `area` (inside a shape), `point`, `spot`, `directional`, `constant`,
+//! `envmap`.
 //! Emission spectra are converted without D65 weighting, as Mitsuba's RGB variants do.
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
 use crate::description::EmitterDesc;
+use crate::lights::{EnvmapError, EnvmapLight};
 use crate::spectrum::{Rgb, SpectrumKind};
-use glam::{Mat4, Vec3};
+use glam::{Mat3, Mat4, Vec3};
 
 const EMISSION: SpectrumKind = SpectrumKind::Emission;
 
@@ -16,9 +18,9 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
     if kind == "area" {
         return Err(el.error("an area emitter must be nested inside a <shape>"));
     }
-    if !["point", "spot", "directional", "constant"].contains(&kind) {
+    if !["point", "spot", "directional", "constant", "envmap"].contains(&kind) {
         let err = el.error(format!(
-            "unknown plugin \"{kind}\" (supported emitters: area, point, spot, directional, constant)"
+            "unknown plugin \"{kind}\" (supported emitters: area, point, spot, directional, constant, envmap)"
         ));
         return b.diag.unknown(err);
     }
@@ -81,6 +83,35 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
             EmitterDesc::Directional {
                 direction,
                 irradiance,
+            }
+        }
+        "envmap" => {
+            let file_el = p.element_of("filename");
+            let Some(filename) = p.string("filename")? else {
+                return Err(el.error("missing parameter \"filename\""));
+            };
+            let scale_el = p.element_of("scale");
+            let scale = p.float("scale")?.unwrap_or(1.0) as f32;
+            let to_world_el = p.element_of("to_world");
+            let to_world = Mat3::from_mat4(p.transform("to_world")?.unwrap_or(Mat4::IDENTITY));
+            let image = super::textures::load_bitmap(b, file_el, filename, false)?;
+            let path = file_el.resolve_path(filename);
+            match EnvmapLight::check(&image, to_world, scale) {
+                Ok(()) => {}
+                Err(e @ EnvmapError::BadScale(_)) => return Err(scale_el.error(e.to_string())),
+                Err(e @ EnvmapError::NotARotation) => return Err(to_world_el.error(e.to_string())),
+                Err(e) => return Err(file_el.error(format!("envmap \"{}\": {e}", path.display()))),
+            }
+            p.ignore(
+                b,
+                &["mis_compensation"],
+                "the map is sampled by its own luminance (changes noise only, not the image)",
+            );
+            EmitterDesc::Envmap {
+                image,
+                to_world,
+                scale,
+                filename: path,
             }
         }
         _ => EmitterDesc::Constant {

@@ -944,3 +944,93 @@ fn external_scenes_load() {
     }
     assert!(loaded >= 3, "only {loaded} external scenes found");
 }
+
+/// `envmap`: the image is found relative to the scene file, `scale` and `to_world` are read
+/// (the rotation part; a translation is irrelevant at infinity), `mis_compensation` is ignored
+/// with a warning; bad values are reported at their own element's line.
+#[test]
+fn envmap_loads_and_reports_bad_parameters_by_line() {
+    use crate::texture::Bitmap;
+    let dir = temp_dir("envmap");
+    let texels = vec![Rgb::new(1.0, 2.0, 3.0); 8];
+    crate::image_io::write_rgb_exr(&dir.join("sky.exr"), 4, 2, &texels).unwrap();
+    let body = format!(
+        "{SENSOR}\n<emitter type=\"envmap\">\n<string name=\"filename\" value=\"sky.exr\"/>\n\
+         <float name=\"scale\" value=\"2\"/>\n<boolean name=\"mis_compensation\" value=\"true\"/>\n\
+         <transform name=\"to_world\"><rotate y=\"1\" angle=\"90\"/><translate x=\"5\"/></transform>\n\
+         </emitter>"
+    );
+    let desc = load(&write_scene(&dir, "ok.xml", &body)).unwrap();
+    let [EmitterDesc::Envmap {
+        image,
+        to_world,
+        scale,
+        filename,
+    }] = &desc.emitters[..]
+    else {
+        panic!("{:?}", desc.emitters);
+    };
+    let expect: &Bitmap = image;
+    assert_eq!((expect.width, expect.height), (4, 2));
+    assert_eq!(expect.texels, texels);
+    assert_eq!(*scale, 2.0);
+    assert!(filename.ends_with("sky.exr"));
+    // rotate y 90 takes +x to −z.
+    assert!((*to_world * Vec3::X - Vec3::NEG_Z).length() < 1e-6);
+    assert!(desc.warnings.iter().any(|w| w.contains("mis_compensation")));
+    // Scene::build accepts it.
+    crate::scene::Scene::build(&desc).unwrap();
+
+    let bad = |name: &str, param: &str, marker: &str, needle: &str| {
+        let body = format!(
+            "{SENSOR}\n<emitter type=\"envmap\">\n<string name=\"filename\" value=\"sky.exr\"/>\n{param}\n</emitter>"
+        );
+        let path = write_scene(&dir, name, &body);
+        assert_error_at(&path, line_of(&body, marker), needle);
+    };
+    bad(
+        "scale.xml",
+        "<float name=\"scale\" value=\"-1\"/>",
+        "scale",
+        "scale -1",
+    );
+    bad(
+        "shear.xml",
+        "<transform name=\"to_world\"><scale x=\"2\"/></transform>",
+        "to_world",
+        "must be a rotation",
+    );
+    bad(
+        "filter.xml",
+        "<string name=\"filter_type\" value=\"nearest\"/>",
+        "filter_type",
+        "filter_type",
+    );
+    let body = format!(
+        "{SENSOR}\n<emitter type=\"envmap\">\n<string name=\"filename\" value=\"nope.exr\"/>\n</emitter>"
+    );
+    assert_error_at(
+        &write_scene(&dir, "missing.xml", &body),
+        line_of(&body, "nope.exr"),
+        "nope.exr",
+    );
+    let body = format!("{SENSOR}\n<emitter type=\"envmap\">\n</emitter>");
+    assert_error_at(
+        &write_scene(&dir, "nofile.xml", &body),
+        line_of(&body, "envmap"),
+        "missing parameter \"filename\"",
+    );
+    // A NaN texel: the image file is named.
+    let mut nan = texels.clone();
+    nan[5] = Rgb::new(f32::NAN, 0.0, 0.0);
+    crate::image_io::write_rgb_exr(&dir.join("nan.exr"), 4, 2, &nan).unwrap();
+    let body = format!(
+        "{SENSOR}\n<emitter type=\"envmap\">\n<string name=\"filename\" value=\"nan.exr\"/>\n</emitter>"
+    );
+    let err = assert_error_at(
+        &write_scene(&dir, "nan.xml", &body),
+        line_of(&body, "nan.exr"),
+        "texel (1, 1)",
+    );
+    assert!(err.to_string().contains("nan.exr"), "{err}");
+}

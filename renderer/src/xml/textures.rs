@@ -55,27 +55,7 @@ pub(super) fn build_texture<'a>(
                 )))?,
             }
             let to_uv = to_uv(&mut p)?;
-            let path = file_el.resolve_path(filename);
-            let key = (path.clone(), raw);
-            let image = match b.bitmaps.get(&key) {
-                Some(img) => img.clone(),
-                None => {
-                    let (width, height, texels) = image_io::read_rgb_image_encoded(&path, raw)
-                        .map_err(|e| file_el.error(format!("cannot load bitmap: {e}")))?;
-                    if texels.is_empty() {
-                        return Err(
-                            file_el.error(format!("bitmap \"{}\" is empty", path.display()))
-                        );
-                    }
-                    let img = Arc::new(Bitmap {
-                        width,
-                        height,
-                        texels,
-                    });
-                    b.bitmaps.insert(key, img.clone());
-                    img
-                }
-            };
+            let image = load_bitmap(b, file_el, filename, raw)?;
             Texture::Bitmap {
                 image,
                 filter,
@@ -92,6 +72,33 @@ pub(super) fn build_texture<'a>(
     };
     p.finish(b)?;
     Ok(tex)
+}
+
+/// The image `filename` (relative to the file of `file_el`), linear RGB, loaded once per
+/// scene for each (path, `raw`) however many plugins use it.
+pub(super) fn load_bitmap<'a>(
+    b: &mut Builder<'a>,
+    file_el: &Element,
+    filename: &str,
+    raw: bool,
+) -> Result<Arc<Bitmap>, SceneError> {
+    let path = file_el.resolve_path(filename);
+    let key = (path.clone(), raw);
+    if let Some(img) = b.bitmaps.get(&key) {
+        return Ok(img.clone());
+    }
+    let (width, height, texels) = image_io::read_rgb_image_encoded(&path, raw)
+        .map_err(|e| file_el.error(format!("cannot load bitmap: {e}")))?;
+    if texels.is_empty() {
+        return Err(file_el.error(format!("bitmap \"{}\" is empty", path.display())));
+    }
+    let img = Arc::new(Bitmap {
+        width,
+        height,
+        texels,
+    });
+    b.bitmaps.insert(key, img.clone());
+    Ok(img)
 }
 
 /// `to_uv`: Mitsuba takes the 2-D affine part (x/y rows and columns plus the translation) of
