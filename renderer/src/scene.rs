@@ -105,7 +105,7 @@ pub struct Scene {
     pub lights: Vec<Light>,
     /// Light selection proportional to power.
     light_selection: Distribution1D,
-    /// Indices of environment (constant) lights.
+    /// Indices of environment lights (constant and map).
     environment_lights: Vec<u32>,
     /// Sum of the constant environment lights' radiance.
     environment_radiance: Rgb,
