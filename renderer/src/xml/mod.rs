@@ -378,8 +378,8 @@ pub(crate) struct Builder<'a> {
     pub bitmaps: HashMap<(PathBuf, bool), Arc<Bitmap>>,
     /// All materials.
     pub bsdfs: Vec<Bsdf>,
-    /// Index of the default material (diffuse 0.5), once needed.
-    default_bsdf: Option<usize>,
+    /// Indices of the default materials (diffuse 0.5; black for emitters), once needed.
+    default_bsdf: [Option<usize>; 2],
     /// All shapes.
     pub shapes: Vec<ShapeDesc>,
     /// Emitters that are not area lights.
@@ -390,6 +390,8 @@ pub(crate) struct Builder<'a> {
     pub sample_count: Option<u32>,
     /// The integrator.
     pub integrator: Option<IntegratorDesc>,
+    /// While the shapes of a `shapegroup` are built for an `instance`: its `to_world` and name.
+    pub instance: Option<(glam::Mat4, String)>,
 }
 
 impl<'a> Builder<'a> {
@@ -421,12 +423,13 @@ impl<'a> Builder<'a> {
             building: Vec::new(),
             bitmaps: HashMap::new(),
             bsdfs: Vec::new(),
-            default_bsdf: None,
+            default_bsdf: [None; 2],
             shapes: Vec::new(),
             emitters: Vec::new(),
             camera: None,
             sample_count: None,
             integrator: None,
+            instance: None,
         })
     }
 
@@ -503,16 +506,20 @@ impl<'a> Builder<'a> {
         Ok(self.bsdfs[i].clone())
     }
 
-    /// The default material (Mitsuba: diffuse, reflectance 0.5) for shapes without a BSDF.
-    pub fn default_bsdf(&mut self) -> usize {
-        if let Some(i) = self.default_bsdf {
+    /// The default material for shapes without a BSDF, as Mitsuba 3's `Shape`: diffuse with
+    /// reflectance 0.5, but 0 (black) for a shape that emits — a light without a BSDF reflects
+    /// nothing.
+    pub fn default_bsdf(&mut self, emits: bool) -> usize {
+        let slot = usize::from(emits);
+        if let Some(i) = self.default_bsdf[slot] {
             return i;
         }
+        let reflectance = if emits { 0.0 } else { 0.5 };
         self.bsdfs.push(Bsdf::Diffuse(Diffuse {
-            reflectance: Texture::Constant(Rgb::splat(0.5)),
+            reflectance: Texture::Constant(Rgb::splat(reflectance)),
         }));
         let i = self.bsdfs.len() - 1;
-        self.default_bsdf = Some(i);
+        self.default_bsdf[slot] = Some(i);
         i
     }
 

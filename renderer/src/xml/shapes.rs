@@ -1,4 +1,6 @@
-//! `<shape>` plugins: `rectangle`, `cube`, `sphere`, `disk`, `obj`, `ply`. Meshes are moved to
+//! `<shape>` plugins: `rectangle`, `cube`, `sphere`, `disk`, `obj`, `ply`, and Mitsuba's
+//! instancing, `shapegroup` + `instance` (each instance's shapes are built as copies with the
+//! instance's `to_world` applied after their own: the same geometry, memory per copy). Meshes are moved to
 //! world space here (positions by `to_world`, normals by its inverse transpose) and follow
 //! Mitsuba 3's loaders: polygons fan-triangulated around their first corner, file normals used
 //! when present, otherwise angle-weighted smooth vertex normals computed in world space unless
@@ -16,7 +18,16 @@ use std::path::Path;
 pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
-    const SHAPES: [&str; 6] = ["rectangle", "cube", "sphere", "disk", "obj", "ply"];
+    const SHAPES: [&str; 8] = [
+        "rectangle",
+        "cube",
+        "sphere",
+        "disk",
+        "obj",
+        "ply",
+        "shapegroup",
+        "instance",
+    ];
     if !SHAPES.contains(&kind) {
         let err = el.error(format!(
             "unknown plugin \"{kind}\" (supported shapes: {})",
@@ -24,8 +35,22 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
         ));
         return b.diag.unknown(err);
     }
+    if b.instance.is_some() && (kind == "shapegroup" || kind == "instance") {
+        return Err(
+            el.error("a shapegroup holds plain shapes only (no nested shapegroup or instance)")
+        );
+    }
+    match kind {
+        "shapegroup" => return check_shapegroup(b, el),
+        "instance" => return build_instance(b, el),
+        _ => {}
+    }
     let mut p = Props::parse(b, el)?;
-    let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+    let own_to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+    let to_world = match &b.instance {
+        Some((instance_to_world, _)) => *instance_to_world * own_to_world,
+        None => own_to_world,
+    };
     let flip_normals = p.bool_or("flip_normals", false)?;
 
     let geometry = match kind {
@@ -92,6 +117,9 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
                 bsdf = Some(b.bsdf_index(obj)?);
             }
             "emitter" => {
+                if b.instance.is_some() {
+                    return Err(obj.error("emitters cannot be instanced (as in Mitsuba): give the shape its own <shape> outside the shapegroup"));
+                }
                 if emission.is_some() {
                     return Err(obj.error("a shape can have only one emitter"));
                 }
@@ -106,12 +134,16 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
     p.finish(b)?;
     let bsdf = match bsdf {
         Some(i) => i,
-        None => b.default_bsdf(),
+        None => b.default_bsdf(emission.is_some()),
     };
     let name = el
         .attr("id")
         .map(str::to_owned)
         .unwrap_or_else(|| format!("{kind}#{}", b.shapes.len()));
+    let name = match &b.instance {
+        Some((_, instance)) => format!("{instance}/{name}"),
+        None => name,
+    };
     b.shapes.push(ShapeDesc {
         name,
         geometry,
@@ -119,6 +151,64 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
         emission,
     });
     Ok(())
+}
+
+/// A `shapegroup` at the top level: nothing is built (its shapes appear through instances),
+/// but its contents are checked now, so a group that is never instanced still reports errors.
+fn check_shapegroup<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type", "id"], &mut b.diag)?;
+    for child in &el.children {
+        let kind = child.attr("type").unwrap_or_default();
+        if child.tag != "shape" || kind == "shapegroup" || kind == "instance" {
+            return Err(child.error(format!(
+                "a shapegroup holds plain shapes only, not {}",
+                child.describe()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// An `instance`: `to_world` and a `<ref>` to a `shapegroup`, whose shapes are built with
+/// `to_world` = the instance's · their own.
+fn build_instance<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneError> {
+    let mut p = Props::parse(b, el)?;
+    let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+    let mut group = None;
+    for obj in p.objects(&["ref", "shape"]) {
+        let target = b.deref(obj)?;
+        if target.tag != "shape" || target.attr("type") != Some("shapegroup") {
+            return Err(obj.error(format!(
+                "an instance refers to a shapegroup, not {}",
+                target.describe()
+            )));
+        }
+        if group.is_some() {
+            return Err(obj.error("an instance refers to exactly one shapegroup"));
+        }
+        group = Some(target);
+    }
+    p.finish(b)?;
+    let Some(group) = group else {
+        return Err(el.error("an instance needs a <ref id=\"…\"/> to a shapegroup"));
+    };
+    let name = el
+        .attr("id")
+        .map(str::to_owned)
+        .unwrap_or_else(|| format!("instance#{}", b.shapes.len()));
+    b.instance = Some((to_world, name));
+    let built = group
+        .children
+        .iter()
+        .try_for_each(|child| match child.tag.as_str() {
+            "shape" => build_shape(b, child),
+            _ => Err(child.error(format!(
+                "a shapegroup holds plain shapes only, not {}",
+                child.describe()
+            ))),
+        });
+    b.instance = None;
+    built
 }
 
 /// Mitsuba's `rectangle`: [−1, 1]² in the z = 0 plane, normal +z, uv = ((x+1)/2, (y+1)/2).
