@@ -1132,3 +1132,30 @@ fn instances_copy_their_group_with_the_instance_transform() {
         "needs a <ref",
     );
 }
+
+/// Every scene bundled in `scenes/` (the default scene and the validation scenes) loads
+/// without warnings and builds: the README, `validate_pt.py` and the docs rely on them.
+#[test]
+fn bundled_scenes_load_and_build() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let mut dirs = vec![root.join("default")];
+    let mut validation: Vec<PathBuf> = std::fs::read_dir(root.join("validation"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .collect();
+    validation.sort();
+    dirs.extend(validation);
+    for dir in &dirs {
+        let path = dir.join("scene.xml");
+        let desc = load(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            desc.warnings.is_empty(),
+            "{}: {:?}",
+            path.display(),
+            desc.warnings
+        );
+        crate::scene::Scene::build(&desc).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+    }
+    assert!(dirs.len() >= 10, "{dirs:?}");
+}
