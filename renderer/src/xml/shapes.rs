@@ -36,9 +36,7 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
         return b.diag.unknown(err);
     }
     if b.instance.is_some() && (kind == "shapegroup" || kind == "instance") {
-        return Err(
-            el.error("a shapegroup holds plain shapes only (no nested shapegroup or instance)")
-        );
+        return Err(not_a_plain_shape(el));
     }
     match kind {
         "shapegroup" => return check_shapegroup(b, el),
@@ -160,13 +158,18 @@ fn check_shapegroup<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), Scen
     for child in &el.children {
         let kind = child.attr("type").unwrap_or_default();
         if child.tag != "shape" || kind == "shapegroup" || kind == "instance" {
-            return Err(child.error(format!(
-                "a shapegroup holds plain shapes only, not {}",
-                child.describe()
-            )));
+            return Err(not_a_plain_shape(child));
         }
     }
     Ok(())
+}
+
+/// The error for `el` inside a shapegroup when it is not a plain shape.
+fn not_a_plain_shape(el: &Element) -> SceneError {
+    el.error(format!(
+        "a shapegroup holds plain shapes only, not {}",
+        el.describe()
+    ))
 }
 
 /// An `instance`: `to_world` and a `<ref>` to a `shapegroup`, whose shapes are built with
@@ -202,10 +205,7 @@ fn build_instance<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneE
         .iter()
         .try_for_each(|child| match child.tag.as_str() {
             "shape" => build_shape(b, child),
-            _ => Err(child.error(format!(
-                "a shapegroup holds plain shapes only, not {}",
-                child.describe()
-            ))),
+            _ => Err(not_a_plain_shape(child)),
         });
     b.instance = None;
     built
