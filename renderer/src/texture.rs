@@ -24,6 +24,36 @@ pub enum BitmapFilter {
     Bilinear,
 }
 
+/// How texel indices outside the image are mapped back into it (Mitsuba's `wrap_mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BitmapWrap {
+    /// Tile the image.
+    Repeat,
+    /// Tile the image, every other copy mirrored.
+    Mirror,
+    /// Extend the border texels.
+    Clamp,
+}
+
+impl BitmapWrap {
+    /// The texel index in `0..n` that index `i` reads.
+    #[inline]
+    fn apply(self, i: i64, n: i64) -> i64 {
+        match self {
+            BitmapWrap::Repeat => i.rem_euclid(n),
+            BitmapWrap::Mirror => {
+                let j = i.rem_euclid(2 * n);
+                if j < n {
+                    j
+                } else {
+                    2 * n - 1 - j
+                }
+            }
+            BitmapWrap::Clamp => i.clamp(0, n - 1),
+        }
+    }
+}
+
 /// A spatially varying colour, Mitsuba's texture plugins plus constants.
 #[derive(Debug, Clone)]
 pub enum Texture {
@@ -40,14 +70,16 @@ pub enum Texture {
         to_uv: Mat3,
     },
     /// Mitsuba's `bitmap`: an image looked up by uv exactly as Mitsuba 3 does: texel row
-    /// ⌊v·height⌋ counted from the **top** row of the file (no flip here), repeat wrapping,
-    /// bilinear filtering between texel centres. Mitsuba's OBJ/PLY loaders store `1 − v`, so the
+    /// ⌊v·height⌋ counted from the **top** row of the file (no flip here), wrapping by
+    /// `wrap_mode`, bilinear filtering between texel centres. Mitsuba's OBJ/PLY loaders store `1 − v`, so the
     /// importers must do the same for textured meshes to come out upright.
     Bitmap {
         /// The decoded image.
         image: Arc<Bitmap>,
         /// Filtering mode.
         filter: BitmapFilter,
+        /// Wrapping of texel indices outside the image.
+        wrap: BitmapWrap,
         /// Affine uv transform (Mitsuba's `to_uv`).
         to_uv: Mat3,
     },
@@ -81,14 +113,15 @@ impl Texture {
             Texture::Bitmap {
                 image,
                 filter,
+                wrap,
                 to_uv,
             } => {
                 let p = *to_uv * uv.extend(1.0);
                 let (w, h) = (image.width as i64, image.height as i64);
                 let fetch = |x: i64, y: i64| {
-                    // Repeat wrapping; row 0 is the file's top row, reached at v ∈ [0, 1/h).
-                    let x = x.rem_euclid(w);
-                    let y = y.rem_euclid(h);
+                    // Row 0 is the file's top row, reached at v ∈ [0, 1/h).
+                    let x = wrap.apply(x, w);
+                    let y = wrap.apply(y, h);
                     image.texels[(y * w + x) as usize]
                 };
                 let u = p.x * w as f32;
@@ -136,5 +169,46 @@ impl Texture {
                 image.texels.iter().copied().sum::<Rgb>() / n
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Texel indices past the edges, for a 3-texel row: repeat tiles, mirror reflects at each
+    /// edge (the edge texel repeated once), clamp extends the border texel.
+    #[test]
+    fn wrap_modes_map_indices_into_the_image() {
+        let at = |wrap: BitmapWrap| (-4..7).map(|i| wrap.apply(i, 3)).collect::<Vec<_>>();
+        assert_eq!(at(BitmapWrap::Repeat), [2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0]);
+        assert_eq!(at(BitmapWrap::Mirror), [2, 2, 1, 0, 0, 1, 2, 2, 1, 0, 0]);
+        assert_eq!(at(BitmapWrap::Clamp), [0, 0, 0, 0, 0, 1, 2, 2, 2, 2, 2]);
+    }
+
+    /// Bilinear lookups across the edge blend with the texel the wrap mode names.
+    #[test]
+    fn bilinear_lookup_at_the_edge_follows_the_wrap_mode() {
+        let image = Arc::new(Bitmap {
+            width: 2,
+            height: 1,
+            texels: vec![Rgb::splat(1.0), Rgb::splat(3.0)],
+        });
+        let tex = |wrap| Texture::Bitmap {
+            image: image.clone(),
+            filter: BitmapFilter::Bilinear,
+            wrap,
+            to_uv: Mat3::IDENTITY,
+        };
+        // u = 0: half-way between texel −1 and texel 0.
+        let u0 = Vec2::new(0.0, 0.5);
+        assert_eq!(tex(BitmapWrap::Repeat).eval(u0), Rgb::splat(2.0));
+        assert_eq!(tex(BitmapWrap::Mirror).eval(u0), Rgb::splat(1.0));
+        assert_eq!(tex(BitmapWrap::Clamp).eval(u0), Rgb::splat(1.0));
+        // u = 1: between texel 1 and texel 2.
+        let u1 = Vec2::new(1.0, 0.5);
+        assert_eq!(tex(BitmapWrap::Repeat).eval(u1), Rgb::splat(2.0));
+        assert_eq!(tex(BitmapWrap::Mirror).eval(u1), Rgb::splat(3.0));
+        assert_eq!(tex(BitmapWrap::Clamp).eval(u1), Rgb::splat(3.0));
     }
 }

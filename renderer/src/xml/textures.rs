@@ -4,7 +4,7 @@ use super::props::Props;
 use super::{Builder, Element, SceneError};
 use crate::image_io;
 use crate::spectrum::SpectrumKind;
-use crate::texture::{Bitmap, BitmapFilter, Texture};
+use crate::texture::{Bitmap, BitmapFilter, BitmapWrap, Texture};
 use glam::{Mat3, Mat4};
 use std::sync::Arc;
 
@@ -48,17 +48,22 @@ pub(super) fn build_texture<'a>(
                 }
             };
             let wrap_el = p.element_of("wrap_mode");
-            match p.string("wrap_mode")?.unwrap_or("repeat") {
-                "repeat" => {}
-                other => b.diag.unknown(wrap_el.error(format!(
-                    "wrap_mode \"{other}\" is not supported (only \"repeat\")"
-                )))?,
-            }
+            let wrap = match p.string("wrap_mode")?.unwrap_or("repeat") {
+                "repeat" => BitmapWrap::Repeat,
+                "mirror" => BitmapWrap::Mirror,
+                "clamp" => BitmapWrap::Clamp,
+                other => {
+                    return Err(wrap_el.error(format!(
+                        "unknown wrap_mode \"{other}\" (use \"repeat\", \"mirror\" or \"clamp\")"
+                    )))
+                }
+            };
             let to_uv = to_uv(&mut p)?;
             let image = load_bitmap(b, file_el, filename, raw)?;
             Texture::Bitmap {
                 image,
                 filter,
+                wrap,
                 to_uv,
             }
         }
