@@ -80,6 +80,8 @@ class Scene:
             self.max_depth = int(m.group(1)) if m else int(self.meta.get("max_depth", -1))
         m = re.search(r'name="rr_depth"\s+value="(\d+)"', text)
         self.rr_depth = int(m.group(1)) if m else int(self.meta.get("rr_depth", 5))
+        m = re.search(r'name="hide_emitters"\s+value="(true|false)"', text)
+        self.hide_emitters = bool(m) and m.group(1) == "true"
         self.has_integrator = "<integrator" in text
         # Externals: the shared reference was made with `path` unless meta.json says otherwise.
         self.path_traceable = self.meta.get("integrator", "path") == "path"
@@ -147,6 +149,8 @@ def mitsuba_reference(scene, spp, out_dir, force):
         "rr_depth": scene.rr_depth,
         "integrator": "path",
     }
+    if scene.hide_emitters:  # only then: the cache keys of the other scenes stay as they were
+        settings["hide_emitters"] = True
     key = scene.files_hash(settings)
     exr, npy, info_path = out_dir / "mitsuba.exr", out_dir / "mitsuba_chunks.npy", out_dir / "mitsuba.json"
     if not force and info_path.exists() and exr.exists() and npy.exists():
@@ -158,7 +162,8 @@ def mitsuba_reference(scene, spp, out_dir, force):
     chunks = max(1, spp // CHUNK_SPP)
     chunk_spp = spp // chunks
     sc = mi.load_file(str(scene.xml), **scene.load_params(chunk_spp))
-    integrator = mi.load_dict({"type": "path", "max_depth": scene.max_depth, "rr_depth": scene.rr_depth})
+    integrator = mi.load_dict({"type": "path", "max_depth": scene.max_depth, "rr_depth": scene.rr_depth,
+                               "hide_emitters": scene.hide_emitters})
     t0 = time.time()
     acc, downs = None, []
     for k in range(chunks):

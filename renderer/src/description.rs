@@ -150,6 +150,9 @@ pub struct IntegratorDesc {
     pub max_depth: i32,
     /// `rr_depth` (Mitsuba's default 5).
     pub rr_depth: u32,
+    /// `hide_emitters`: emitters seen directly from the camera (area lights and the
+    /// environment, not their reflections) render black, as in Mitsuba.
+    pub hide_emitters: bool,
 }
 
 /// A whole scene as data.

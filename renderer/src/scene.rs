@@ -352,6 +352,12 @@ impl Scene {
         (self.bounds.1 - self.bounds.0).length()
     }
 
+    /// Whether the scene file's integrator hides emitters seen directly from the camera
+    /// (Mitsuba's `hide_emitters`).
+    pub fn hide_emitters(&self) -> bool {
+        self.integrator.as_ref().is_some_and(|i| i.hide_emitters)
+    }
+
     /// Bounding sphere used by infinite lights.
     pub fn bounding_sphere(&self) -> SceneSphere {
         self.sphere

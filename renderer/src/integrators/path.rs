@@ -49,7 +49,10 @@ impl PathTracer {
         let mut prev_p = ray.o;
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
+        // Mitsuba's `hide_emitters`: the camera ray's own emission is dropped (only that).
+        let hide_direct = scene.hide_emitters();
         loop {
+            let hidden = hide_direct && depth == 0;
             // Emission found by BSDF sampling (or seen from the camera), MIS-weighted against
             // light sampling from the previous vertex.
             let environment = |ray: &Ray| {
@@ -73,6 +76,9 @@ impl PathTracer {
                 throughput * le * w
             };
             if depth + 1 >= max_depth {
+                if hidden {
+                    break;
+                }
                 // The last vertex: only its emission counts, so the ray looks for emitters
                 // only (the same answer as a closest hit, for less work).
                 result += match scene.intersect_emitter(&ray) {
@@ -83,12 +89,12 @@ impl PathTracer {
                 break;
             }
             let Some(si) = scene.intersect(&ray) else {
-                if scene.has_environment() {
+                if scene.has_environment() && !hidden {
                     result += environment(&ray);
                 }
                 break;
             };
-            if si.light.is_some() {
+            if si.light.is_some() && !hidden {
                 result += emission(&si);
             }
             let bsdf = scene.bsdf(&si);
@@ -301,6 +307,30 @@ mod tests {
             "{:?}",
             film.mean()
         );
+    }
+
+    /// `hide_emitters`: the environment seen directly renders black, while the sphere it lights
+    /// keeps its furnace value (only the camera ray's own emission is dropped).
+    #[test]
+    fn hide_emitters_blacks_out_only_the_directly_seen_environment() {
+        let mut scene = sphere_in_environment(1.0);
+        let shown = PathTracer::default().render(&scene, 64, 1, None);
+        scene.integrator = Some(crate::description::IntegratorDesc {
+            kind: "path".into(),
+            max_depth: -1,
+            rr_depth: 5,
+            hide_emitters: true,
+        });
+        let hidden = PathTracer::default().render(&scene, 64, 1, None);
+        // Corner pixels see only the environment; the centre sees only the sphere.
+        assert_eq!(shown.get(0, 0), Rgb::ONE);
+        assert_eq!(hidden.get(0, 0), Rgb::ZERO);
+        assert_eq!(
+            shown.get(4, 4),
+            hidden.get(4, 4),
+            "same random streams, same light"
+        );
+        assert!((hidden.get(4, 4) - Rgb::ONE).abs().max_element() < 0.1);
     }
 
     #[test]

@@ -294,10 +294,10 @@ pub(super) fn build_integrator<'a>(
         Some(v) if v >= 0 && v <= i64::from(u32::MAX) => v as u32,
         Some(v) => return Err(rr_el.error(format!("\"rr_depth\" must be >= 0, got {v}"))),
     };
+    let hide_emitters = p.bool_or("hide_emitters", false)?;
     p.ignore(
         b,
         &[
-            "hide_emitters",
             "photon_count",
             "initial_radius",
             "alpha",
@@ -312,5 +312,6 @@ pub(super) fn build_integrator<'a>(
         kind: kind.to_owned(),
         max_depth,
         rr_depth,
+        hide_emitters,
     })
 }

@@ -138,9 +138,13 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
         pdf: 1.0,
         delta: true,
     };
+    // Mitsuba's `hide_emitters`: the camera ray's own emission is dropped (only that).
+    let hide_direct = scene.hide_emitters();
     for depth in 0..=max_depth {
         let hit = scene.intersect(&ray);
-        out.direct += beta * emission_along(scene, &ray, hit.as_ref(), &last);
+        if !(hide_direct && depth == 0) {
+            out.direct += beta * emission_along(scene, &ray, hit.as_ref(), &last);
+        }
         let Some(si) = hit else {
             break;
         };
