@@ -145,6 +145,36 @@ def write_exr_rgb32(path: Path, width: int, height: int, pixel):
     path.write_bytes(header + offsets + bytes(blocks))
 
 
+def write_serialized(path: Path, meshes):
+    """Mitsuba's .serialized mesh file (format 0x041C, version 4, little-endian, float32), one
+    zlib stream per mesh and the offset table at the end. `meshes`: (name, positions, normals or
+    None, uvs or None, triangles (0-based), face_normals flag)."""
+    out = bytearray()
+    offsets = []
+    for name, pos, nrm, uv, tris, face_normals in meshes:
+        flags = 0x1000 | (0x0001 if nrm else 0) | (0x0002 if uv else 0) | (0x0010 if face_normals else 0)
+        body = struct.pack("<I", flags) + name.encode() + b"\0"
+        body += struct.pack("<QQ", len(pos), len(tris))
+        body += b"".join(struct.pack("<3f", *p) for p in pos)
+        if nrm:
+            body += b"".join(struct.pack("<3f", *n) for n in nrm)
+        if uv:
+            body += b"".join(struct.pack("<2f", *t) for t in uv)
+        body += b"".join(struct.pack("<3I", *t) for t in tris)
+        offsets.append(len(out))
+        out += struct.pack("<HH", 0x041C, 4) + zlib.compress(body, 9)
+    out += b"".join(struct.pack("<Q", o) for o in offsets) + struct.pack("<I", len(meshes))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(bytes(out))
+
+
+def octahedron():
+    """A unit octahedron (flat-shaded when loaded with face normals)."""
+    pos = [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
+    tris = [(0, 2, 4), (2, 1, 4), (1, 3, 4), (3, 0, 4), (2, 0, 5), (1, 2, 5), (3, 1, 5), (0, 3, 5)]
+    return pos, tris
+
+
 def sky_pixel(x: int, y: int, width: int = 64, height: int = 32):
     """A latitude-longitude sky (Mitsuba's envmap layout: row 0 = +y, column centres at
     u = (x + 0.5) / width): blue above the horizon brightening towards it, a warm ground below,
@@ -179,6 +209,11 @@ def main():
     write_png_rgb8(SCENES / "validation" / "textured-diffuse" / "textures" / "pattern.png",
                    64, 64, texture_pixel)
     write_exr_rgb32(SCENES / "validation" / "envmap" / "textures" / "sky.exr", 64, 32, sky_pixel)
+    pos, nrm, uv, faces = torus(0.3, 0.12, 40, 20)
+    tris = [t for a, b, c, d in faces for t in ((a, b, c), (a, c, d))]
+    opos, otris = octahedron()
+    write_serialized(SCENES / "validation" / "serialized" / "meshes" / "two.serialized",
+                     [("torus", pos, nrm, uv, tris, False), ("octahedron", opos, None, None, otris, True)])
 
 
 if __name__ == "__main__":

@@ -1159,3 +1159,92 @@ fn bundled_scenes_load_and_build() {
     }
     assert!(dirs.len() >= 10, "{dirs:?}");
 }
+
+/// A Mitsuba `.serialized` file with the given meshes (positions, triangles), format version
+/// `version` (3: u32 offsets and no names; 4: u64 offsets and names), f32, no normals.
+fn serialized_file(version: u16, meshes: &[(Vec<Vec3>, Vec<[u32; 3]>)]) -> Vec<u8> {
+    use std::io::Write;
+    let mut out = Vec::new();
+    let mut offsets = Vec::new();
+    for (i, (pos, tris)) in meshes.iter().enumerate() {
+        let mut body = 0x1000u32.to_le_bytes().to_vec();
+        if version == 4 {
+            body.extend(format!("mesh{i}\0").bytes());
+        }
+        body.extend((pos.len() as u64).to_le_bytes());
+        body.extend((tris.len() as u64).to_le_bytes());
+        for p in pos {
+            body.extend(p.to_array().iter().flat_map(|c| c.to_le_bytes()));
+        }
+        for t in tris {
+            body.extend(t.iter().flat_map(|c| c.to_le_bytes()));
+        }
+        offsets.push(out.len() as u64);
+        out.extend(0x041Cu16.to_le_bytes());
+        out.extend(version.to_le_bytes());
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        z.write_all(&body).unwrap();
+        out.extend(z.finish().unwrap());
+    }
+    for o in offsets {
+        if version == 4 {
+            out.extend(o.to_le_bytes());
+        } else {
+            out.extend((o as u32).to_le_bytes());
+        }
+    }
+    out.extend((meshes.len() as u32).to_le_bytes());
+    out
+}
+
+/// `serialized` meshes load by `shape_index` from version 3 and 4 files; bad files and
+/// indices are reported at the parameter's line.
+#[test]
+fn serialized_meshes_load_by_index_and_report_bad_files() {
+    let dir = temp_dir("serialized");
+    let tri = (vec![Vec3::ZERO, Vec3::X, Vec3::Y], vec![[0u32, 1, 2]]);
+    let quad = (
+        vec![Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+        vec![[0u32, 1, 2], [0, 2, 3]],
+    );
+    for version in [3u16, 4] {
+        std::fs::write(
+            dir.join("m.serialized"),
+            serialized_file(version, &[tri.clone(), quad.clone()]),
+        )
+        .unwrap();
+        let body = format!(
+            "{SENSOR}\n<shape type=\"serialized\"><string name=\"filename\" value=\"m.serialized\"/>\n\
+             <integer name=\"shape_index\" value=\"1\"/><transform name=\"to_world\"><translate z=\"2\"/></transform></shape>"
+        );
+        let desc = load(&write_scene(&dir, "ok.xml", &body)).unwrap();
+        let Geometry::Mesh(m) = &desc.shapes[0].geometry else {
+            panic!("{:?}", desc.shapes[0].geometry);
+        };
+        assert_eq!(m.indices.len(), 2, "version {version}");
+        assert_eq!(
+            m.positions[2],
+            Vec3::new(1.0, 1.0, 2.0),
+            "version {version}"
+        );
+    }
+    let bad = |name: &str, param: &str, marker: &str, needle: &str| {
+        let body = format!(
+            "{SENSOR}\n<shape type=\"serialized\">\n<string name=\"filename\" value=\"{name}\"/>\n{param}\n</shape>"
+        );
+        let path = write_scene(&dir, &format!("{name}.xml"), &body);
+        assert_error_at(&path, line_of(&body, marker), needle);
+    };
+    bad(
+        "m.serialized",
+        "<integer name=\"shape_index\" value=\"2\"/>",
+        "m.serialized",
+        "shape_index 2, but the file holds 2 mesh(es)",
+    );
+    std::fs::write(dir.join("garbage.serialized"), b"not a mesh at all").unwrap();
+    bad("garbage.serialized", "", "garbage.serialized", "0x041C");
+    let mut cut = serialized_file(4, std::slice::from_ref(&tri));
+    cut.drain(12..20); // damage the zlib stream
+    std::fs::write(dir.join("cut.serialized"), cut).unwrap();
+    bad("cut.serialized", "", "cut.serialized", "cut.serialized");
+}
