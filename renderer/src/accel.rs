@@ -6,7 +6,7 @@
 //! indirection; triangles are pre-transformed to (p0, e1, e2).
 
 use crate::math::Ray;
-use crate::shapes::{Disk, Shape, Sphere};
+use crate::shapes::{Cylinder, Disk, Shape, Sphere};
 use anyhow::{bail, Result};
 use glam::{Vec2, Vec3A};
 use obvhs::aabb::Aabb;
@@ -48,6 +48,8 @@ enum PrimGeom {
     Sphere(u32),
     /// An analytic disk (index into [`Analytic::disks`], which are large).
     Disk(u32),
+    /// An analytic open cylinder (index into [`Analytic::cylinders`]).
+    Cylinder(u32),
 }
 
 /// The analytic shapes [`PrimGeom`] refers to by index.
@@ -57,6 +59,8 @@ struct Analytic {
     spheres: Vec<Sphere>,
     /// Disks.
     disks: Vec<Disk>,
+    /// Open cylinders.
+    cylinders: Vec<Cylinder>,
 }
 
 /// Primitives of the shapes `keep` accepts: their boxes, geometry, (shape, primitive) ids and
@@ -92,6 +96,10 @@ fn gather(shapes: &[Shape], keep: impl Fn(usize) -> bool) -> Gathered {
                     analytic.disks.push(*d);
                     PrimGeom::Disk(analytic.disks.len() as u32 - 1)
                 }
+                Shape::Cylinder(c) => {
+                    analytic.cylinders.push(*c);
+                    PrimGeom::Cylinder(analytic.cylinders.len() as u32 - 1)
+                }
             });
         }
     }
@@ -117,6 +125,15 @@ fn intersect_geom(geom: &PrimGeom, analytic: &Analytic, ray: &BvhRay) -> (f32, V
         ),
         PrimGeom::Disk(d) => (
             analytic.disks[*d as usize].intersect(ray.origin, ray.direction, ray.tmin, ray.tmax),
+            Vec2::ZERO,
+        ),
+        PrimGeom::Cylinder(c) => (
+            analytic.cylinders[*c as usize].intersect(
+                ray.origin,
+                ray.direction,
+                ray.tmin,
+                ray.tmax,
+            ),
             Vec2::ZERO,
         ),
     }

@@ -35,6 +35,14 @@ pub enum Geometry {
         /// Normals point inwards.
         flip_normals: bool,
     },
+    /// Analytic open cylinder (`cylinder`): the unit tube x² + y² = 1, 0 ≤ z ≤ 1, mapped by
+    /// `to_world` (which includes p0, p1 and the radius).
+    Cylinder {
+        /// Object-to-world transform.
+        to_world: Mat4,
+        /// Normals point inwards.
+        flip_normals: bool,
+    },
     /// Analytic disk (`disk`): the unit disk in the local z = 0 plane, normal +z, mapped by `to_world`.
     Disk {
         /// Object-to-world transform.

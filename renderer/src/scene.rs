@@ -195,6 +195,14 @@ impl Scene {
                         bail!("disk '{}' has a singular or non-finite to_world", s.name);
                     }
                 }
+                Geometry::Cylinder {
+                    to_world,
+                    flip_normals,
+                } => {
+                    if let Err(e) = crate::shapes::Cylinder::new(*to_world, *flip_normals) {
+                        bail!("cylinder '{}': {e}", s.name);
+                    }
+                }
             }
             let shape = Shape::new(&s.geometry);
             let light = match s.emission {

@@ -1,11 +1,13 @@
-//! Renderable shapes: triangle meshes, analytic spheres and disks. Each shape can be intersected
+//! Renderable shapes: triangle meshes, analytic spheres, disks and open cylinders. Each shape can be intersected
 //! primitive by primitive (for the BVH), describe the local surface at a hit, and be sampled
 //! uniformly by area (for area lights and photon emission).
 
+pub mod cylinder;
 pub mod disk;
 pub mod mesh;
 pub mod sphere;
 
+pub use cylinder::Cylinder;
 pub use disk::Disk;
 pub use mesh::Mesh;
 pub use sphere::Sphere;
@@ -52,6 +54,8 @@ pub enum Shape {
     Sphere(Sphere),
     /// Analytic disk.
     Disk(Disk),
+    /// Analytic open cylinder.
+    Cylinder(Cylinder),
 }
 
 impl Shape {
@@ -71,6 +75,13 @@ impl Shape {
                 to_world,
                 flip_normals,
             } => Shape::Disk(Disk::new(*to_world, *flip_normals)),
+            Geometry::Cylinder {
+                to_world,
+                flip_normals,
+            } => Shape::Cylinder(
+                Cylinder::new(*to_world, *flip_normals)
+                    .expect("cylinder transforms are checked by the importer and Scene::build"),
+            ),
         }
     }
 
@@ -88,6 +99,7 @@ impl Shape {
             Shape::Mesh(m) => m.triangle_bounds(prim),
             Shape::Sphere(s) => s.bounds(),
             Shape::Disk(d) => d.bounds(),
+            Shape::Cylinder(c) => c.bounds(),
         }
     }
 
@@ -97,6 +109,7 @@ impl Shape {
             Shape::Mesh(m) => m.area(),
             Shape::Sphere(s) => s.area(),
             Shape::Disk(d) => d.area(),
+            Shape::Cylinder(c) => c.area(),
         }
     }
 
@@ -109,6 +122,7 @@ impl Shape {
             Shape::Mesh(m) => m.hit_geometry_bary(prim, ray, t, bary),
             Shape::Sphere(s) => s.hit_geometry(ray, t),
             Shape::Disk(d) => d.hit_geometry(ray, t),
+            Shape::Cylinder(c) => c.hit_geometry(ray, t),
         }
     }
 
@@ -120,6 +134,7 @@ impl Shape {
             Shape::Mesh(m) => m.sample_area(u_prim, u),
             Shape::Sphere(s) => s.sample_area(u),
             Shape::Disk(d) => d.sample_area(u),
+            Shape::Cylinder(c) => c.sample_area(u),
         }
     }
 }

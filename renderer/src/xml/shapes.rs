@@ -18,7 +18,7 @@ use std::path::Path;
 pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
-    const SHAPES: [&str; 9] = [
+    const SHAPES: [&str; 10] = [
         "rectangle",
         "cube",
         "sphere",
@@ -26,6 +26,7 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
         "obj",
         "ply",
         "serialized",
+        "cylinder",
         "shapegroup",
         "instance",
     ];
@@ -59,6 +60,34 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
             to_world,
             flip_normals,
         },
+        "cylinder" => {
+            // Mitsuba: to_world · translate(p0) · frame(p1 − p0) · scale(radius, radius, length).
+            let p0 = p.vector("p0")?.unwrap_or(Vec3::ZERO);
+            let p1 = p.vector("p1")?.unwrap_or(Vec3::Z);
+            let radius = p.positive_float_or("radius", 1.0)? as f32;
+            let axis = p1 - p0;
+            let length = axis.length();
+            if length <= 0.0 || !length.is_finite() {
+                return Err(p.element_of("p1").error("a cylinder needs p1 != p0"));
+            }
+            let (s, t) = crate::math::coordinate_system(axis / length);
+            let frame = Mat4::from_cols(
+                s.extend(0.0),
+                t.extend(0.0),
+                (axis / length).extend(0.0),
+                glam::Vec4::W,
+            );
+            let local = Mat4::from_translation(p0)
+                * frame
+                * Mat4::from_scale(Vec3::new(radius, radius, length));
+            let to_world = to_world * local;
+            crate::shapes::Cylinder::new(to_world, flip_normals)
+                .map_err(|e| p.element_of("to_world").error(e))?;
+            Geometry::Cylinder {
+                to_world,
+                flip_normals,
+            }
+        }
         "sphere" => {
             let center = p.vector("center")?.unwrap_or(Vec3::ZERO);
             let radius = p.positive_float_or("radius", 1.0)? as f32;

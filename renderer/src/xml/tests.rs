@@ -1248,3 +1248,43 @@ fn serialized_meshes_load_by_index_and_report_bad_files() {
     std::fs::write(dir.join("cut.serialized"), cut).unwrap();
     bad("cut.serialized", "", "cut.serialized", "cut.serialized");
 }
+
+/// `cylinder`: p0, p1 and radius compose with `to_world` as in Mitsuba; a degenerate axis or an
+/// elliptic section is reported at its line.
+#[test]
+fn cylinder_parameters_and_errors() {
+    let dir = temp_dir("cylinder");
+    let body = format!(
+        "{SENSOR}\n<shape type=\"cylinder\"><point name=\"p0\" x=\"1\" y=\"0\" z=\"0\"/>\n\
+         <point name=\"p1\" x=\"1\" y=\"2\" z=\"0\"/><float name=\"radius\" value=\"0.5\"/>\n\
+         <transform name=\"to_world\"><translate z=\"3\"/></transform></shape>"
+    );
+    let desc = load(&write_scene(&dir, "ok.xml", &body)).unwrap();
+    let Geometry::Cylinder { to_world, .. } = desc.shapes[0].geometry else {
+        panic!("{:?}", desc.shapes[0].geometry);
+    };
+    // Local (0, 0, 1) is p1 moved by to_world; local (1, 0, 0) is half a unit off the axis.
+    assert!((to_world.transform_point3(Vec3::Z) - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-5);
+    let rim = to_world.transform_point3(Vec3::X) - Vec3::new(1.0, 0.0, 3.0);
+    assert!((rim.length() - 0.5).abs() < 1e-5 && rim.y.abs() < 1e-5);
+    let scene = crate::scene::Scene::build(&desc).unwrap();
+    assert!((scene.shapes[0].area() - 2.0 * std::f32::consts::PI).abs() < 1e-4);
+
+    let bad = |name: &str, param: &str, marker: &str, needle: &str| {
+        let body = format!("{SENSOR}\n<shape type=\"cylinder\">\n{param}\n</shape>");
+        let path = write_scene(&dir, name, &body);
+        assert_error_at(&path, line_of(&body, marker), needle);
+    };
+    bad(
+        "degenerate.xml",
+        "<point name=\"p1\" x=\"0\" y=\"0\" z=\"0\"/>",
+        "p1",
+        "p1 != p0",
+    );
+    bad(
+        "elliptic.xml",
+        "<transform name=\"to_world\"><scale x=\"2\"/></transform>",
+        "to_world",
+        "circular",
+    );
+}
