@@ -399,7 +399,8 @@ mod tests {
         assert!(accel.occluded(&short));
     }
 
-    /// A soup of `n` small random triangles in the cube [-1, 1]³, plus spheres and a disk.
+    /// A soup of `n` small random triangles in the cube [-1, 1]³, plus spheres, a disk and a
+    /// cylinder.
     fn random_scene(n: usize, rng: &mut crate::sampling::Pcg32) -> Vec<Shape> {
         use crate::sampling::UniformSource;
         let mut p = |s: f32| {
@@ -430,6 +431,17 @@ mod tests {
                 ),
                 false,
             )),
+            Shape::Cylinder(
+                Cylinder::new(
+                    glam::Mat4::from_scale_rotation_translation(
+                        Vec3::new(0.2, 0.2, 0.9),
+                        glam::Quat::from_rotation_y(0.9),
+                        Vec3::new(-0.5, -0.3, -0.4),
+                    ),
+                    false,
+                )
+                .unwrap(),
+            ),
         ]
     }
 
@@ -521,7 +533,7 @@ mod tests {
         shapes.push(Shape::Mesh(Mesh::new(&tri)));
         // Before the grouping this build took minutes (quadratic in the copies).
         let accel = Bvh4Accel::build(&shapes).unwrap();
-        assert_eq!(accel.primitive_count(), 300 + 3 + copies as usize);
+        assert_eq!(accel.primitive_count(), 300 + 4 + copies as usize);
         let (_, geoms, _, analytic) = gather(&shapes, |_| true);
         for k in 0..200 {
             let o = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 2.0);
