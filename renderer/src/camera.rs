@@ -1,8 +1,8 @@
-//! Perspective and thin-lens cameras with Mitsuba 3's conventions: the camera looks along its
+//! Perspective, thin-lens and orthographic cameras with Mitsuba 3's conventions: the camera looks along its
 //! local +z, local +y is up and local +x points to the image's LEFT (Mitsuba's `lookat` builds
 //! x = up × dir); pixel (0, 0) is the top-left corner of the image.
 
-use crate::description::{CameraDesc, FovAxis};
+use crate::description::{CameraDesc, FovAxis, Projection};
 use crate::math::Ray;
 use crate::sampling::square_to_uniform_disk_concentric;
 use glam::{Mat4, UVec2, Vec2, Vec3};
@@ -12,6 +12,10 @@ use glam::{Mat4, UVec2, Vec2, Vec3};
 pub struct Camera {
     /// Camera-to-world transform.
     to_world: Mat4,
+    /// Perspective or orthographic.
+    projection: Projection,
+    /// 1 / aspect ratio: the half height of an orthographic view (its half width is 1).
+    inv_aspect: f32,
     /// Origin of the camera in world space.
     position: Vec3,
     /// tan(horizontal fov / 2).
@@ -86,6 +90,8 @@ impl Camera {
         let tan_half_x = (0.5 * x_fov).to_radians().tan();
         Camera {
             to_world: desc.to_world,
+            projection: desc.projection,
+            inv_aspect: 1.0 / aspect,
             position: desc.to_world.transform_point3(Vec3::ZERO),
             tan_half_x,
             tan_half_y: tan_half_x / aspect,
@@ -112,12 +118,39 @@ impl Camera {
         self.to_world.transform_vector3(Vec3::Z).normalize()
     }
 
+    /// Distance of a point seen by a primary ray from the camera (G-buffer depth): from the
+    /// lens centre for a perspective camera, from the image plane for an orthographic one.
+    pub fn depth_of(&self, p: Vec3) -> f32 {
+        match self.projection {
+            Projection::Perspective => p.distance(self.position),
+            Projection::Orthographic => (p - self.position).dot(self.forward()),
+        }
+    }
+
     /// The primary ray through `pixel` at sub-pixel offset `u_film` ∈ [0,1)², using `u_lens`
     /// for the lens position of a thin-lens camera (ignored by a pinhole). The direction is unit
     /// length; the ray starts on the near clip plane and ends on the far one, as in Mitsuba.
     #[inline]
     pub fn generate_ray(&self, pixel: UVec2, u_film: Vec2, u_lens: Vec2) -> Ray {
         let s = (pixel.as_vec2() + u_film) / self.resolution.as_vec2();
+        if self.projection == Projection::Orthographic {
+            // Parallel rays from the near plane of the view rectangle; the (scaled) to_world
+            // sizes it, as in Mitsuba.
+            let o = self.to_world.transform_point3(Vec3::new(
+                1.0 - 2.0 * s.x,
+                (1.0 - 2.0 * s.y) * self.inv_aspect,
+                self.near_clip,
+            ));
+            let axis = self.to_world.transform_vector3(Vec3::Z);
+            let d = axis.normalize();
+            let scale = axis.length();
+            return Ray {
+                o,
+                d,
+                tmin: 0.0,
+                tmax: (self.far_clip - self.near_clip) * scale,
+            };
+        }
         // Film x grows to the right, camera-space +x points left: hence 1 − 2s.
         let plane = Vec3::new(
             (1.0 - 2.0 * s.x) * self.tan_half_x,
@@ -153,6 +186,7 @@ mod tests {
     fn desc(w: u32, h: u32, fov: f32, axis: FovAxis) -> CameraDesc {
         CameraDesc {
             to_world: Mat4::IDENTITY,
+            projection: crate::description::Projection::Perspective,
             fov,
             fov_axis: axis,
             near_clip: 0.01,
@@ -162,6 +196,34 @@ mod tests {
             width: w,
             height: h,
         }
+    }
+
+    /// Orthographic: parallel rays along the scaled local +z from a rectangle [−1, 1] ×
+    /// [−1/aspect, 1/aspect] of the scaled frame (a 4×2 film, to_world scaling x and y by 3);
+    /// the G-buffer depth is measured from the image plane.
+    #[test]
+    fn orthographic_rays_are_parallel_and_span_the_scaled_view() {
+        let mut d = desc(4, 2, 45.0, FovAxis::X);
+        d.projection = Projection::Orthographic;
+        d.to_world = Mat4::from_translation(Vec3::new(0.0, 0.0, -5.0))
+            * Mat4::from_scale(Vec3::new(3.0, 3.0, 1.0));
+        let cam = Camera::new(&d);
+        let left = cam.generate_ray(UVec2::new(0, 0), Vec2::new(0.0, 0.5), Vec2::ZERO);
+        let right = cam.generate_ray(UVec2::new(3, 0), Vec2::new(1.0, 0.5), Vec2::ZERO);
+        let top = cam.generate_ray(UVec2::new(2, 0), Vec2::ZERO, Vec2::ZERO);
+        for r in [left, right, top] {
+            assert!((r.d - Vec3::Z).length() < 1e-6, "{:?}", r.d);
+        }
+        // Local +x is the image's left (as the perspective camera): x = +3 … −3.
+        assert!(
+            (left.o - Vec3::new(3.0, 0.75, -5.0 + 0.01)).length() < 1e-5,
+            "{:?}",
+            left.o
+        );
+        assert!((right.o.x + 3.0).abs() < 1e-5);
+        // The top edge: y = 3 · 1/aspect = 1.5.
+        assert!((top.o.y - 1.5).abs() < 1e-5, "{:?}", top.o);
+        assert!((cam.depth_of(Vec3::new(2.0, 1.0, 1.0)) - 6.0).abs() < 1e-5);
     }
 
     #[test]

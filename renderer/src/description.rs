@@ -111,6 +111,16 @@ pub enum EmitterDesc {
     },
 }
 
+/// How a camera projects the scene onto its film.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Projection {
+    /// Rays from one point (or from a thin lens) through the image plane: `fov` applies.
+    Perspective,
+    /// Parallel rays along local +z from the rectangle x ∈ [−1, 1], y ∈ [−1/aspect, 1/aspect]
+    /// of the camera's (scaled) local frame, as Mitsuba's `orthographic`.
+    Orthographic,
+}
+
 /// Which axis `fov` measures (Mitsuba's `fov_axis`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FovAxis {
@@ -131,6 +141,8 @@ pub enum FovAxis {
 pub struct CameraDesc {
     /// Camera-to-world; the camera looks along local +z with +y up (Mitsuba's convention).
     pub to_world: Mat4,
+    /// Perspective (`perspective`, `thinlens`) or parallel (`orthographic`) projection.
+    pub projection: Projection,
     /// Field of view in degrees.
     pub fov: f32,
     /// Which axis `fov` measures.

@@ -604,6 +604,7 @@ mod tests {
         SceneDescription {
             camera: CameraDesc {
                 to_world: Mat4::IDENTITY,
+                projection: crate::description::Projection::Perspective,
                 fov: 45.0,
                 fov_axis: FovAxis::X,
                 near_clip: 0.01,

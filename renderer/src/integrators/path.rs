@@ -196,6 +196,7 @@ mod tests {
     fn camera(origin: Vec3, target: Vec3, res: u32) -> CameraDesc {
         CameraDesc {
             to_world: crate::camera::look_at(origin, target, Vec3::Y),
+            projection: crate::description::Projection::Perspective,
             fov: 40.0,
             fov_axis: FovAxis::X,
             near_clip: 0.01,

@@ -1,9 +1,9 @@
-//! `<sensor>` (`perspective`, `thinlens`) with its `<film>` (`hdrfilm`), `<rfilter>` and
+//! `<sensor>` (`perspective`, `thinlens`, `orthographic`) with its `<film>` (`hdrfilm`), `<rfilter>` and
 //! `<sampler>`, and the `<integrator>`.
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
-use crate::description::{CameraDesc, FovAxis, IntegratorDesc};
+use crate::description::{CameraDesc, FovAxis, IntegratorDesc, Projection};
 use glam::Mat4;
 
 /// Mitsuba's default film size.
@@ -17,6 +17,7 @@ const MAX_FILM_SIDE: i64 = 1 << 16;
 pub(super) fn default_camera() -> CameraDesc {
     CameraDesc {
         to_world: Mat4::IDENTITY,
+        projection: Projection::Perspective,
         fov: 45.0,
         fov_axis: FovAxis::X,
         near_clip: 0.01,
@@ -35,11 +36,12 @@ pub(super) fn build_sensor<'a>(
 ) -> Result<CameraDesc, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
-    if kind != "perspective" && kind != "thinlens" {
+    if !["perspective", "thinlens", "orthographic"].contains(&kind) {
         return Err(el.error(format!(
-            "unknown plugin \"{kind}\" (supported sensors: perspective, thinlens)"
+            "unknown plugin \"{kind}\" (supported sensors: perspective, thinlens, orthographic)"
         )));
     }
+    let orthographic = kind == "orthographic";
     let mut p = Props::parse(b, el)?;
 
     let (mut width, mut height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
@@ -51,7 +53,12 @@ pub(super) fn build_sensor<'a>(
     }
 
     let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
-    let (fov, fov_axis) = parse_fov(&mut p)?;
+    // An orthographic view has no field of view: its to_world's scale sizes it.
+    let (fov, fov_axis) = if orthographic {
+        (45.0, FovAxis::X)
+    } else {
+        parse_fov(&mut p)?
+    };
     let near_clip = p.float_or("near_clip", 0.01)?;
     let far_clip = p.float_or("far_clip", 10_000.0)?;
     if near_clip <= 0.0 {
@@ -83,7 +90,14 @@ pub(super) fn build_sensor<'a>(
     let scaled = [m3.x_axis, m3.y_axis, m3.z_axis]
         .iter()
         .any(|c| (c.length() - 1.0).abs() > 1e-3);
-    if scaled {
+    // An orthographic camera is sized by the x/y scale of its to_world (Mitsuba's convention).
+    if orthographic {
+        if m3.determinant() == 0.0 || !m3.is_finite() {
+            return Err(p
+                .element_of("to_world")
+                .error("an orthographic camera's to_world must not be singular"));
+        }
+    } else if scaled {
         return Err(p
             .element_of("to_world")
             .error("scale factors in the camera's to_world are not allowed"));
@@ -92,6 +106,11 @@ pub(super) fn build_sensor<'a>(
     p.finish(b)?;
     Ok(CameraDesc {
         to_world,
+        projection: if orthographic {
+            Projection::Orthographic
+        } else {
+            Projection::Perspective
+        },
         fov: fov as f32,
         fov_axis,
         near_clip: near_clip as f32,

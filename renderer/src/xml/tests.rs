@@ -1288,3 +1288,26 @@ fn cylinder_parameters_and_errors() {
         "circular",
     );
 }
+
+/// `orthographic`: parsed with the scale of its to_world (which perspective cameras refuse);
+/// a `fov` is not one of its parameters.
+#[test]
+fn orthographic_sensor_keeps_its_scale_and_has_no_fov() {
+    use crate::description::Projection;
+    let dir = temp_dir("orthographic");
+    let sensor = |extra: &str| {
+        format!(
+            "<sensor type=\"orthographic\">{extra}<transform name=\"to_world\"><scale x=\"2\" y=\"2\"/></transform>\n\
+             <film type=\"hdrfilm\"><integer name=\"width\" value=\"16\"/><integer name=\"height\" value=\"8\"/></film></sensor>"
+        )
+    };
+    let desc = load(&write_scene(&dir, "ok.xml", &sensor(""))).unwrap();
+    assert_eq!(desc.camera.projection, Projection::Orthographic);
+    assert!((desc.camera.to_world.transform_vector3(Vec3::X).length() - 2.0).abs() < 1e-6);
+    let body = sensor("\n<float name=\"fov\" value=\"40\"/>");
+    assert_error_at(
+        &write_scene(&dir, "fov.xml", &body),
+        line_of(&body, "fov"),
+        "fov",
+    );
+}

@@ -12,6 +12,7 @@ use glam::Vec3;
 fn camera(origin: Vec3, target: Vec3, fov: f32, res: u32) -> CameraDesc {
     CameraDesc {
         to_world: crate::camera::look_at(origin, target, Vec3::Y),
+        projection: crate::description::Projection::Perspective,
         fov,
         fov_axis: FovAxis::X,
         near_clip: 0.01,

@@ -129,7 +129,6 @@ fn direct_light(
 /// Traces one eye subpath starting with `ray`; `max_depth` bounds the number of delta/glossy
 /// bounces before the path gives up without a visible point.
 pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u32) -> EyePath {
-    let camera_pos = scene.camera.position();
     let mut out = EyePath::default();
     let mut beta = Rgb::ONE;
     let mut path_length = 0.0f32;
@@ -149,7 +148,7 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
             break;
         };
         path_length += if depth == 0 {
-            si.p.distance(camera_pos)
+            scene.camera.depth_of(si.p)
         } else {
             si.t
         };
