@@ -268,6 +268,12 @@ mod tests {
         Scene::build(&desc).unwrap()
     }
 
+    /// The furnace's verdict: the image's mean is 1 within 1 %.
+    fn assert_mean_is_one(film: &Film) {
+        let mean = film.mean();
+        assert!((mean - Rgb::ONE).abs().max_element() < 0.01, "{mean:?}");
+    }
+
     #[test]
     fn white_furnace_sphere_in_environment() {
         let scene = sphere_in_environment(1.0);
@@ -278,11 +284,7 @@ mod tests {
                 "pixel {i}: {p:?}"
             );
         }
-        assert!(
-            (film.mean() - Rgb::ONE).abs().max_element() < 0.01,
-            "{:?}",
-            film.mean()
-        );
+        assert_mean_is_one(&film);
     }
 
     /// The furnace again, lit by an environment *map* of radiance 1 (a 5×3 image, rotated):
@@ -303,11 +305,7 @@ mod tests {
             },
         );
         let film = PathTracer::default().render(&scene, 256, 1, None);
-        assert!(
-            (film.mean() - Rgb::ONE).abs().max_element() < 0.01,
-            "{:?}",
-            film.mean()
-        );
+        assert_mean_is_one(&film);
     }
 
     /// `hide_emitters`: the environment seen directly renders black, while the sphere it lights

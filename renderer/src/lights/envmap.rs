@@ -172,6 +172,12 @@ impl EnvmapLight {
     #[inline]
     pub fn eval(&self, d: Vec3) -> Rgb {
         let (x, y, _) = self.image_coordinates(d);
+        self.eval_at(x, y)
+    }
+
+    /// Bilinear radiance at continuous texel coordinates (texel centres at integers).
+    #[inline]
+    fn eval_at(&self, x: f32, y: f32) -> Rgb {
         let x0 = (x as usize).min(self.width - 1);
         let y0 = (y as usize).min(self.rows - 2);
         let (fx, fy) = (x - x0 as f32, y - y0 as f32);
@@ -219,7 +225,9 @@ impl EnvmapLight {
         if !(pdf.is_finite() && pdf > 0.0) {
             return None;
         }
-        Some((wi, pdf, self.eval(wi)))
+        // The radiance where the sample landed, read from its texel coordinates (the direction's
+        // own lookup would redo atan2/acos to reach the same point).
+        Some((wi, pdf, self.eval_at(x as f32 + rx, y as f32 + ry)))
     }
 
     /// Direct illumination at `p`: a direction drawn from the map.

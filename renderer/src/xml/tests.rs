@@ -56,6 +56,19 @@ fn assert_error_at(path: &Path, line: usize, needle: &str) -> SceneError {
     err
 }
 
+/// Writes `body` as scene `file` in `dir` and asserts that loading it fails at the line of the
+/// first body line containing `marker`, with a message containing `needle`.
+fn assert_body_error_at(
+    dir: &Path,
+    file: &str,
+    body: &str,
+    marker: &str,
+    needle: &str,
+) -> SceneError {
+    let path = write_scene(dir, file, body);
+    assert_error_at(&path, line_of(body, marker), needle)
+}
+
 const SENSOR: &str = r#"<sensor type="perspective"><float name="fov" value="40"/>
 <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="8"/></film></sensor>"#;
 
@@ -637,11 +650,7 @@ fn include_and_references_across_files() {
     assert_eq!(c.ior, ior::conductor_ior("Au"));
     // A missing include and an error inside an included file are both located.
     let body = format!("{SENSOR}\n<include filename=\"nope.xml\"/>");
-    assert_error_at(
-        &write_scene(&dir, "missing.xml", &body),
-        line_of(&body, "nope"),
-        "included file",
-    );
+    assert_body_error_at(&dir, "missing.xml", &body, "nope", "included file");
     std::fs::write(
         dir.join("parts/broken.xml"),
         "<scene version=\"3.0.0\">\n\n<bsdf type=\"velvet\"/>\n</scene>\n",
@@ -985,8 +994,7 @@ fn envmap_loads_and_reports_bad_parameters_by_line() {
         let body = format!(
             "{SENSOR}\n<emitter type=\"envmap\">\n<string name=\"filename\" value=\"sky.exr\"/>\n{param}\n</emitter>"
         );
-        let path = write_scene(&dir, name, &body);
-        assert_error_at(&path, line_of(&body, marker), needle);
+        assert_body_error_at(&dir, name, &body, marker, needle);
     };
     bad(
         "scale.xml",
@@ -1009,15 +1017,13 @@ fn envmap_loads_and_reports_bad_parameters_by_line() {
     let body = format!(
         "{SENSOR}\n<emitter type=\"envmap\">\n<string name=\"filename\" value=\"nope.exr\"/>\n</emitter>"
     );
-    assert_error_at(
-        &write_scene(&dir, "missing.xml", &body),
-        line_of(&body, "nope.exr"),
-        "nope.exr",
-    );
+    assert_body_error_at(&dir, "missing.xml", &body, "nope.exr", "nope.exr");
     let body = format!("{SENSOR}\n<emitter type=\"envmap\">\n</emitter>");
-    assert_error_at(
-        &write_scene(&dir, "nofile.xml", &body),
-        line_of(&body, "envmap"),
+    assert_body_error_at(
+        &dir,
+        "nofile.xml",
+        &body,
+        "envmap",
         "missing parameter \"filename\"",
     );
     // A NaN texel: the image file is named.
@@ -1027,11 +1033,7 @@ fn envmap_loads_and_reports_bad_parameters_by_line() {
     let body = format!(
         "{SENSOR}\n<emitter type=\"envmap\">\n<string name=\"filename\" value=\"nan.exr\"/>\n</emitter>"
     );
-    let err = assert_error_at(
-        &write_scene(&dir, "nan.xml", &body),
-        line_of(&body, "nan.exr"),
-        "texel (1, 1)",
-    );
+    let err = assert_body_error_at(&dir, "nan.xml", &body, "nan.exr", "texel (1, 1)");
     assert!(err.to_string().contains("nan.exr"), "{err}");
 }
 
@@ -1102,8 +1104,7 @@ fn instances_copy_their_group_with_the_instance_transform() {
     assert!(desc.shapes.is_empty());
 
     let bad = |name: &str, body: String, marker: &str, needle: &str| {
-        let path = write_scene(&dir, name, &body);
-        assert_error_at(&path, line_of(&body, marker), needle);
+        assert_body_error_at(&dir, name, &body, marker, needle);
     };
     bad(
         "emitter.xml",
@@ -1232,8 +1233,7 @@ fn serialized_meshes_load_by_index_and_report_bad_files() {
         let body = format!(
             "{SENSOR}\n<shape type=\"serialized\">\n<string name=\"filename\" value=\"{name}\"/>\n{param}\n</shape>"
         );
-        let path = write_scene(&dir, &format!("{name}.xml"), &body);
-        assert_error_at(&path, line_of(&body, marker), needle);
+        assert_body_error_at(&dir, &format!("{name}.xml"), &body, marker, needle);
     };
     bad(
         "m.serialized",
@@ -1272,8 +1272,7 @@ fn cylinder_parameters_and_errors() {
 
     let bad = |name: &str, param: &str, marker: &str, needle: &str| {
         let body = format!("{SENSOR}\n<shape type=\"cylinder\">\n{param}\n</shape>");
-        let path = write_scene(&dir, name, &body);
-        assert_error_at(&path, line_of(&body, marker), needle);
+        assert_body_error_at(&dir, name, &body, marker, needle);
     };
     bad(
         "degenerate.xml",
@@ -1305,9 +1304,5 @@ fn orthographic_sensor_keeps_its_scale_and_has_no_fov() {
     assert_eq!(desc.camera.projection, Projection::Orthographic);
     assert!((desc.camera.to_world.transform_vector3(Vec3::X).length() - 2.0).abs() < 1e-6);
     let body = sensor("\n<float name=\"fov\" value=\"40\"/>");
-    assert_error_at(
-        &write_scene(&dir, "fov.xml", &body),
-        line_of(&body, "fov"),
-        "fov",
-    );
+    assert_body_error_at(&dir, "fov.xml", &body, "fov", "fov");
 }
