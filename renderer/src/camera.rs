@@ -3,6 +3,7 @@
 //! x = up × dir); pixel (0, 0) is the top-left corner of the image.
 
 use crate::description::{CameraDesc, FovAxis, Projection};
+use crate::filter::PixelFilter;
 use crate::math::Ray;
 use crate::sampling::square_to_uniform_disk_concentric;
 use glam::{Mat4, UVec2, Vec2, Vec3};
@@ -32,6 +33,18 @@ pub struct Camera {
     focus_distance: f32,
     /// Film size in pixels.
     resolution: UVec2,
+    /// The film's reconstruction filter, which places each pixel's samples.
+    filter: PixelFilter,
+}
+
+/// A primary ray and the weight its radiance enters the pixel with (1 unless the
+/// reconstruction filter has negative lobes).
+#[derive(Debug, Clone, Copy)]
+pub struct CameraSample {
+    /// The ray.
+    pub ray: Ray,
+    /// The filter weight of the sample.
+    pub weight: f32,
 }
 
 /// Mitsuba's `parse_fov`: the horizontal field of view (degrees) for a given fov and axis.
@@ -100,6 +113,24 @@ impl Camera {
             aperture_radius: desc.aperture_radius,
             focus_distance: desc.focus_distance,
             resolution: UVec2::new(desc.width, desc.height),
+            filter: PixelFilter::new(desc.filter, desc.sample_border),
+        }
+    }
+
+    /// The film's reconstruction filter.
+    pub fn filter(&self) -> &PixelFilter {
+        &self.filter
+    }
+
+    /// A primary ray for `pixel`: its film position drawn from the reconstruction filter
+    /// centred on the pixel with `u_film` ∈ [0,1)² (uniform in the pixel for the box filter),
+    /// `u_lens` for the lens position of a thin-lens camera.
+    #[inline]
+    pub fn sample_ray(&self, pixel: UVec2, u_film: Vec2, u_lens: Vec2) -> CameraSample {
+        let (position, weight) = self.filter.sample(pixel, self.resolution, u_film);
+        CameraSample {
+            ray: self.ray_at(position, u_lens),
+            weight,
         }
     }
 
@@ -127,12 +158,20 @@ impl Camera {
         }
     }
 
-    /// The primary ray through `pixel` at sub-pixel offset `u_film` ∈ [0,1)², using `u_lens`
-    /// for the lens position of a thin-lens camera (ignored by a pinhole). The direction is unit
+    /// The primary ray through `pixel` at sub-pixel offset `u_film` ∈ [0,1)² (the film
+    /// position `pixel + u_film`, whatever the reconstruction filter), using `u_lens` for the
+    /// lens position of a thin-lens camera (ignored by a pinhole). The direction is unit
     /// length; the ray starts on the near clip plane and ends on the far one, as in Mitsuba.
     #[inline]
     pub fn generate_ray(&self, pixel: UVec2, u_film: Vec2, u_lens: Vec2) -> Ray {
-        let s = (pixel.as_vec2() + u_film) / self.resolution.as_vec2();
+        self.ray_at(pixel.as_vec2() + u_film, u_lens)
+    }
+
+    /// The primary ray through film position `position` (pixels from the image's top-left
+    /// corner; it may lie outside the image), using `u_lens` as [`Camera::generate_ray`].
+    #[inline]
+    pub fn ray_at(&self, position: Vec2, u_lens: Vec2) -> Ray {
+        let s = position / self.resolution.as_vec2();
         if self.projection == Projection::Orthographic {
             // Parallel rays from the near plane of the view rectangle; the (scaled) to_world
             // sizes it, as in Mitsuba.
@@ -195,6 +234,8 @@ mod tests {
             focus_distance: 1.0,
             width: w,
             height: h,
+            filter: crate::filter::FilterDesc::Box,
+            sample_border: false,
         }
     }
 

@@ -159,6 +159,10 @@ pub struct CameraDesc {
     pub width: u32,
     /// Film height in pixels.
     pub height: u32,
+    /// The film's reconstruction filter (`<rfilter>`; Mitsuba's default is a Gaussian).
+    pub filter: crate::filter::FilterDesc,
+    /// The film's `sample_border`: edge pixels also take samples from outside the image.
+    pub sample_border: bool,
 }
 
 /// Integrator settings found in the file (the command line may override them).

@@ -7,6 +7,7 @@ pub mod bsdf;
 pub mod camera;
 pub mod description;
 pub mod film;
+pub mod filter;
 pub mod frame;
 pub mod image_io;
 pub mod integrators;

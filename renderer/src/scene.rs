@@ -613,6 +613,8 @@ mod tests {
                 focus_distance: 1.0,
                 width: 4,
                 height: 4,
+                filter: crate::filter::FilterDesc::Box,
+                sample_border: false,
             },
             sample_count: None,
             integrator: None,

@@ -158,8 +158,8 @@ impl PathTracer {
         for _ in 0..spp {
             let u_film = rng.next_2d();
             let u_lens = rng.next_2d();
-            let ray = scene.camera.generate_ray(UVec2::new(x, y), u_film, u_lens);
-            let l = self.li(scene, ray, &mut rng);
+            let sample = scene.camera.sample_ray(UVec2::new(x, y), u_film, u_lens);
+            let l = self.li(scene, sample.ray, &mut rng) * sample.weight;
             if l.is_finite() {
                 sum += l;
             }
@@ -187,7 +187,7 @@ mod tests {
     use super::*;
     use crate::bsdf::{Bsdf, Diffuse};
     use crate::description::{
-        CameraDesc, EmitterDesc, FovAxis, Geometry, SceneDescription, ShapeDesc,
+        CameraDesc, EmitterDesc, FovAxis, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
     };
     use crate::film::with_threads;
     use crate::texture::Texture;
@@ -205,6 +205,8 @@ mod tests {
             focus_distance: 1.0,
             width: res,
             height: res,
+            filter: crate::filter::FilterDesc::Box,
+            sample_border: false,
         }
     }
 
@@ -390,5 +392,63 @@ mod tests {
             .all(|(p, q)| p.to_array().map(f32::to_bits) == q.to_array().map(f32::to_bits)));
         let c = with_threads(2, || pt.render(&scene, 8, 43, None)).unwrap();
         assert_ne!(a, c, "the seed changes the image");
+    }
+
+    /// An edge seen through each reconstruction filter: a black screen covers the film left of
+    /// x = 7.3 pixels in front of a constant environment of radiance 1 (orthographic view, so
+    /// the edge is a straight line in the film). Each pixel's value must be the filter's mass
+    /// right of the edge over the image (the filter truncated at the image borders, as
+    /// Mitsuba's film only takes samples inside the image) — overshoot of the negative-lobed
+    /// filters included.
+    #[test]
+    fn reconstruction_filters_blur_an_edge_by_their_integral() {
+        use crate::filter::FilterDesc;
+        let (width, height, edge) = (16u32, 4u32, 7.3f64);
+        // Camera-space +x is the image's left: film x = X maps to local x = 1 − 2X/width.
+        let x_edge = 1.0 - 2.0 * edge as f32 / width as f32;
+        let (x0, x1) = (x_edge, 10.0f32);
+        let screen = TriangleMesh {
+            positions: vec![
+                Vec3::new(x0, -10.0, 5.0),
+                Vec3::new(x1, -10.0, 5.0),
+                Vec3::new(x1, 10.0, 5.0),
+                Vec3::new(x0, 10.0, 5.0),
+            ],
+            normals: None,
+            uvs: None,
+            indices: vec![[0, 1, 2], [2, 3, 0]],
+        };
+        let tent = FilterDesc::Tent { radius: 1.5 };
+        for filter in crate::filter::TEST_FILTERS.into_iter().chain([tent]) {
+            let mut cam = camera(Vec3::ZERO, Vec3::Z, width);
+            cam.height = height;
+            cam.projection = crate::description::Projection::Orthographic;
+            cam.filter = filter;
+            let desc = SceneDescription {
+                camera: cam,
+                sample_count: None,
+                integrator: None,
+                bsdfs: vec![diffuse(0.0)],
+                shapes: vec![ShapeDesc {
+                    name: "screen".into(),
+                    geometry: Geometry::Mesh(screen.clone()),
+                    bsdf: 0,
+                    emission: None,
+                }],
+                emitters: vec![EmitterDesc::Constant { radiance: Rgb::ONE }],
+                warnings: vec![],
+            };
+            let scene = Scene::build(&desc).unwrap();
+            let film = PathTracer::default().render(&scene, 4096, 9, None);
+            for x in 0..width {
+                let expected = crate::filter::edge_response(&filter, width, edge, x);
+                let column: f64 =
+                    (0..height).map(|y| film.get(x, y).x as f64).sum::<f64>() / height as f64;
+                assert!(
+                    (column - expected).abs() < 0.025,
+                    "{filter:?}, pixel column {x}: {column} vs {expected}"
+                );
+            }
+        }
     }
 }

@@ -4,6 +4,7 @@
 use super::props::Props;
 use super::{Builder, Element, SceneError};
 use crate::description::{CameraDesc, FovAxis, IntegratorDesc, Projection};
+use crate::filter::FilterDesc;
 use glam::Mat4;
 
 /// Mitsuba's default film size.
@@ -26,7 +27,21 @@ pub(super) fn default_camera() -> CameraDesc {
         focus_distance: 10_000.0,
         width: DEFAULT_WIDTH,
         height: DEFAULT_HEIGHT,
+        filter: FilterDesc::MITSUBA_DEFAULT,
+        sample_border: false,
     }
+}
+
+/// What the sensor takes from its `<film>`.
+struct Film {
+    /// `width`.
+    width: u32,
+    /// `height`.
+    height: u32,
+    /// The `<rfilter>` (Mitsuba's Gaussian when there is none).
+    filter: FilterDesc,
+    /// `sample_border`.
+    sample_border: bool,
 }
 
 /// Builds the camera of a `<sensor>` element (film and sampler included).
@@ -44,9 +59,14 @@ pub(super) fn build_sensor<'a>(
     let orthographic = kind == "orthographic";
     let mut p = Props::parse(b, el)?;
 
-    let (mut width, mut height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
-    for film in p.objects(&["film"]) {
-        (width, height) = build_film(b, film)?;
+    let mut film = Film {
+        width: DEFAULT_WIDTH,
+        height: DEFAULT_HEIGHT,
+        filter: FilterDesc::MITSUBA_DEFAULT,
+        sample_border: false,
+    };
+    for el in p.objects(&["film"]) {
+        film = build_film(b, el)?;
     }
     for sampler in p.objects(&["sampler"]) {
         b.sample_count = Some(build_sampler(b, sampler)?);
@@ -117,8 +137,10 @@ pub(super) fn build_sensor<'a>(
         far_clip: far_clip as f32,
         aperture_radius: aperture_radius as f32,
         focus_distance: focus_distance as f32,
-        width,
-        height,
+        width: film.width,
+        height: film.height,
+        filter: film.filter,
+        sample_border: film.sample_border,
     })
 }
 
@@ -175,8 +197,8 @@ fn parse_fov(p: &mut Props) -> Result<(f64, FovAxis), SceneError> {
     Ok((fov, axis))
 }
 
-/// `hdrfilm`: width, height and the reconstruction filter.
-fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(u32, u32), SceneError> {
+/// `hdrfilm`: width, height, the reconstruction filter and `sample_border`.
+fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Film, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
     if kind != "hdrfilm" {
@@ -198,27 +220,11 @@ fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(u32, u32), Sc
     };
     let width = side("width", DEFAULT_WIDTH)?;
     let height = side("height", DEFAULT_HEIGHT)?;
+    let mut filter = FilterDesc::MITSUBA_DEFAULT;
     for f in p.objects(&["rfilter"]) {
-        f.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
-        match f.attr("type").unwrap_or_default() {
-            "box" => {
-                let fp = Props::parse(b, f)?;
-                fp.finish(b)?;
-            }
-            "gaussian" | "tent" | "mitchell" | "catmullrom" | "lanczos" => {
-                b.diag.warn(
-                    f,
-                    "reconstruction filter replaced by \"box\": one sample lands in one pixel",
-                );
-            }
-            other => {
-                let err = f.error(format!(
-                    "unknown plugin \"{other}\" (supported rfilters: box)"
-                ));
-                b.diag.unknown(err)?;
-            }
-        }
+        filter = build_rfilter(b, f)?;
     }
+    let sample_border = p.bool_or("sample_border", false)?;
     p.ignore(
         b,
         &[
@@ -226,7 +232,6 @@ fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(u32, u32), Sc
             "component_format",
             "file_format",
             "banner",
-            "sample_border",
             "compensate",
         ],
         "the renderer writes float32 RGB",
@@ -239,7 +244,69 @@ fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(u32, u32), Sc
         return Err(el.error("film cropping (crop_*) is not supported"));
     }
     p.finish(b)?;
-    Ok((width, height))
+    Ok(Film {
+        width,
+        height,
+        filter,
+        sample_border,
+    })
+}
+
+/// `<rfilter>`: `box`, `gaussian` (`stddev`), `tent` (`radius`), `mitchell` (`B`, `C`),
+/// `catmullrom`, `lanczos` (`lobes`), with Mitsuba's defaults.
+fn build_rfilter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<FilterDesc, SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let mut p = Props::parse(b, el)?;
+    // A positive parameter that keeps the filter's support within a sane number of pixels.
+    let width = |p: &mut Props, name: &str, default: f64, max: f64| {
+        let e = p.element_of(name);
+        match p.float(name)? {
+            None => Ok(default as f32),
+            Some(v) if v > 0.0 && v <= max => Ok(v as f32),
+            Some(v) => Err(e.error(format!("\"{name}\" must be in (0, {max}], got {v}"))),
+        }
+    };
+    let filter = match el.attr("type").unwrap_or_default() {
+        "box" => FilterDesc::Box,
+        "gaussian" => FilterDesc::Gaussian {
+            stddev: width(&mut p, "stddev", 0.5, 8.0)?,
+        },
+        "tent" => FilterDesc::Tent {
+            radius: width(&mut p, "radius", 1.0, 32.0)?,
+        },
+        "mitchell" => {
+            let mut param = |name: &str| -> Result<f32, SceneError> {
+                let e = p.element_of(name);
+                match p.float(name)? {
+                    None => Ok(1.0 / 3.0),
+                    Some(v) if v.is_finite() && v.abs() <= 10.0 => Ok(v as f32),
+                    Some(v) => Err(e.error(format!("\"{name}\" must be in [-10, 10], got {v}"))),
+                }
+            };
+            let b_ = param("B")?;
+            let c = param("C")?;
+            FilterDesc::Mitchell { b: b_, c }
+        }
+        "catmullrom" => FilterDesc::Mitchell { b: 0.0, c: 0.5 },
+        "lanczos" => {
+            let e = p.element_of("lobes");
+            match p.int("lobes")? {
+                None => FilterDesc::Lanczos { lobes: 3 },
+                Some(v) if (1..=32).contains(&v) => FilterDesc::Lanczos { lobes: v as u32 },
+                Some(v) => return Err(e.error(format!("\"lobes\" must be in 1..=32, got {v}"))),
+            }
+        }
+        other => {
+            let err = el.error(format!(
+                "unknown plugin \"{other}\" (supported rfilters: box, gaussian, tent, mitchell, catmullrom, lanczos)"
+            ));
+            b.diag.unknown(err)?;
+            // Lenient mode: the project's own choice for unknown filters.
+            FilterDesc::Box
+        }
+    };
+    p.finish(b)?;
+    Ok(filter)
 }
 
 /// Any of Mitsuba's samplers: only `sample_count` matters here (the renderer uses its own

@@ -4,6 +4,7 @@
 use super::*;
 use crate::bsdf::MicrofacetKind;
 use crate::description::{EmitterDesc, FovAxis, Geometry, TriangleMesh};
+use crate::filter::FilterDesc;
 use glam::{Mat4, Vec2, Vec3, Vec4};
 use std::path::PathBuf;
 
@@ -769,8 +770,8 @@ fn spectra_emitters_and_cameras() {
         scene.integrator.as_ref().map(|i| (i.max_depth, i.rr_depth)),
         Some((8, 5))
     );
-    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
-    assert!(scene.warnings[0].contains("gaussian"));
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert_eq!(c.filter, FilterDesc::Gaussian { stddev: 0.5 });
     // A constant reflectance spectrum of one is white.
     let Bsdf::Diffuse(d) = &scene.bsdfs[0] else {
         panic!()
@@ -1305,4 +1306,99 @@ fn orthographic_sensor_keeps_its_scale_and_has_no_fov() {
     assert!((desc.camera.to_world.transform_vector3(Vec3::X).length() - 2.0).abs() < 1e-6);
     let body = sensor("\n<float name=\"fov\" value=\"40\"/>");
     assert_body_error_at(&dir, "fov.xml", &body, "fov", "fov");
+}
+
+#[test]
+fn reconstruction_filters_with_mitsubas_defaults() {
+    let dir = temp_dir("rfilters");
+    let film = |inner: &str| {
+        format!(
+            r#"<sensor type="perspective"><float name="fov" value="40"/>
+<film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="8"/>{inner}</film></sensor>"#
+        )
+    };
+    let camera = |body: &str| {
+        let scene = load(&write_scene(&dir, "scene.xml", body)).unwrap();
+        let sensorless = !body.contains("<sensor");
+        assert_eq!(
+            scene.warnings.len(),
+            sensorless as usize,
+            "{:?}",
+            scene.warnings
+        );
+        (scene.camera.filter, scene.camera.sample_border)
+    };
+    // Mitsuba's default is a Gaussian of standard deviation ½, with or without a film.
+    let gaussian = FilterDesc::Gaussian { stddev: 0.5 };
+    assert_eq!(camera(&film("")), (gaussian, false));
+    assert_eq!(camera(r#"<sensor type="perspective"/>"#), (gaussian, false));
+    assert_eq!(camera("<shape type=\"sphere\"/>").0, gaussian);
+    let cases = [
+        (r#"<rfilter type="box"/>"#, FilterDesc::Box),
+        (
+            r#"<rfilter type="gaussian"><float name="stddev" value="0.25"/></rfilter>"#,
+            FilterDesc::Gaussian { stddev: 0.25 },
+        ),
+        (
+            r#"<rfilter type="tent"/>"#,
+            FilterDesc::Tent { radius: 1.0 },
+        ),
+        (
+            r#"<rfilter type="tent"><float name="radius" value="1.5"/></rfilter>"#,
+            FilterDesc::Tent { radius: 1.5 },
+        ),
+        (
+            r#"<rfilter type="mitchell"/>"#,
+            FilterDesc::Mitchell {
+                b: 1.0 / 3.0,
+                c: 1.0 / 3.0,
+            },
+        ),
+        (
+            r#"<rfilter type="mitchell"><float name="B" value="0.2"/><float name="C" value="0.4"/></rfilter>"#,
+            FilterDesc::Mitchell { b: 0.2, c: 0.4 },
+        ),
+        (
+            r#"<rfilter type="catmullrom"/>"#,
+            FilterDesc::Mitchell { b: 0.0, c: 0.5 },
+        ),
+        (
+            r#"<rfilter type="lanczos"/>"#,
+            FilterDesc::Lanczos { lobes: 3 },
+        ),
+        (
+            r#"<rfilter type="lanczos"><integer name="lobes" value="2"/></rfilter>"#,
+            FilterDesc::Lanczos { lobes: 2 },
+        ),
+    ];
+    for (xml, expected) in cases {
+        assert_eq!(camera(&film(xml)), (expected, false), "{xml}");
+    }
+    let border = film(r#"<boolean name="sample_border" value="true"/><rfilter type="tent"/>"#);
+    assert_eq!(camera(&border), (FilterDesc::Tent { radius: 1.0 }, true));
+    // Bad parameters and unknown filters name their line.
+    for (inner, marker, needle) in [
+        (
+            "\n<rfilter type=\"gaussian\">\n<float name=\"stddev\" value=\"-1\"/></rfilter>",
+            "stddev",
+            "\"stddev\" must be in (0, 8]",
+        ),
+        (
+            "\n<rfilter type=\"lanczos\">\n<integer name=\"lobes\" value=\"0\"/></rfilter>",
+            "lobes",
+            "\"lobes\" must be in 1..=32",
+        ),
+        (
+            "\n<rfilter type=\"tent\">\n<float name=\"width\" value=\"2\"/></rfilter>",
+            "width\" value=\"2",
+            "width",
+        ),
+        (
+            "\n<rfilter type=\"sinc\"/>",
+            "sinc",
+            "unknown plugin \"sinc\"",
+        ),
+    ] {
+        assert_body_error_at(&dir, "bad.xml", &film(inner), marker, needle);
+    }
 }

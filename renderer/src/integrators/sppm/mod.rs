@@ -219,17 +219,22 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
     let scene = ctx.scene;
     let width = scene.camera.resolution().x as usize;
     let pixel = UVec2::new((index % width) as u32, (index / width) as u32);
-    let trace = |sub: u64| -> EyePath {
+    // Each subpath with the reconstruction filter's weight of its film position.
+    let trace = |sub: u64| -> (EyePath, f32) {
         let mut rng = rng_for(ctx.settings.seed, ctx.pass as u64, 2 * index as u64 + sub);
         let u_film = rng.next_2d();
         let u_lens = rng.next_2d();
-        let ray = scene.camera.generate_ray(pixel, u_film, u_lens);
-        trace_eye_path(scene, ray, &mut rng, ctx.settings.max_depth)
+        let sample = scene.camera.sample_ray(pixel, u_film, u_lens);
+        let path = trace_eye_path(scene, sample.ray, &mut rng, ctx.settings.max_depth);
+        (path, sample.weight)
     };
-    let a = trace(0);
-    let b = match ctx.settings.mode {
-        SppmMode::MultiLevel => Some(trace(1)),
-        SppmMode::Single => None,
+    let (a, weight_a) = trace(0);
+    let (b, weight_b) = match ctx.settings.mode {
+        SppmMode::MultiLevel => {
+            let (b, w) = trace(1);
+            (Some(b), w)
+        }
+        SppmMode::Single => (None, 1.0),
     };
     if state.r2 == 0.0 {
         let first = a.vp.or(b.and_then(|b| b.vp));
@@ -257,6 +262,10 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
                 gather::gather(scene, ctx.grid, vp, &radii[1..], n, &mut estimates[1..]);
                 found += 1;
             }
+            estimates[0] *= weight_a;
+            for e in &mut estimates[1..] {
+                *e *= weight_b;
+            }
             for (w, e) in state.levels.iter_mut().zip(&estimates) {
                 w.push(sanitize(*e));
             }
@@ -267,7 +276,7 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
                 gather::gather(scene, ctx.grid, vp, &radii[..1], n, &mut estimates[..1]);
                 found += 1;
             }
-            state.levels[0].push(sanitize(estimates[0]));
+            state.levels[0].push(sanitize(estimates[0] * weight_a));
         }
     }
     state.gbuffer.push(&a.gbuffer);

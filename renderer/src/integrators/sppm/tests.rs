@@ -21,6 +21,8 @@ fn camera(origin: Vec3, target: Vec3, fov: f32, res: u32) -> CameraDesc {
         focus_distance: 1.0,
         width: res,
         height: res,
+        filter: crate::filter::FilterDesc::Box,
+        sample_border: false,
     }
 }
 
@@ -507,4 +509,69 @@ fn gather_matches_brute_force_sum() {
         }
     }
     assert!(lambertian_nonzero >= 8, "fast path must be exercised");
+}
+
+/// The reconstruction filter in SPPM: an edge (a black screen over the film left of x = 7.3
+/// pixels, a constant environment of radiance 1 behind it, orthographic view) must come out in
+/// every level as the filter's mass right of the edge over the image — the eye subpaths take
+/// their film positions and (signed) weights from the filter — and the bundle stays
+/// bit-identical with 1 and 2 threads.
+#[test]
+fn reconstruction_filter_shapes_every_level() {
+    use crate::filter::FilterDesc;
+    let (width, height, edge) = (16u32, 4u32, 7.3f64);
+    let x_edge = 1.0 - 2.0 * edge as f32 / width as f32;
+    let screen = quad(
+        "screen",
+        Vec3::new(0.5 * (x_edge + 10.0), 0.0, 5.0),
+        Vec3::new(0.5 * (10.0 - x_edge), 0.0, 0.0),
+        Vec3::new(0.0, 10.0, 0.0),
+        0,
+        None,
+    );
+    for filter in [
+        FilterDesc::Gaussian { stddev: 0.5 },
+        FilterDesc::Lanczos { lobes: 3 },
+    ] {
+        let mut cam = camera(Vec3::ZERO, Vec3::Z, 40.0, width);
+        cam.height = height;
+        cam.projection = crate::description::Projection::Orthographic;
+        cam.filter = filter;
+        let scene = scene(
+            cam,
+            vec![diffuse(0.0)],
+            vec![screen.clone()],
+            vec![EmitterDesc::Constant { radiance: Rgb::ONE }],
+        );
+        for mode in [SppmMode::MultiLevel, SppmMode::Single] {
+            let mut s = settings(mode, 200, 4);
+            let bundle = render(&scene, &s, 8192);
+            for x in 0..width as usize {
+                let expected = crate::filter::edge_response(&filter, width, edge, x as u32);
+                for (l, level) in bundle.levels.iter().enumerate() {
+                    let column = (0..height as usize)
+                        .map(|y| level.data[3 * (y * width as usize + x)] as f64)
+                        .sum::<f64>()
+                        / height as f64;
+                    assert!(
+                        (column - expected).abs() < 0.03,
+                        "{filter:?} {mode:?} level {l} column {x}: {column} vs {expected}"
+                    );
+                }
+            }
+            s.threads = 2;
+            let mut two = render(&scene, &s, 16);
+            s.threads = 1;
+            let mut one = render(&scene, &s, 16);
+            one.meta.seconds = 0.0;
+            two.meta.seconds = 0.0;
+            for (a, b) in one.levels.iter().zip(&two.levels) {
+                assert!(a
+                    .data
+                    .iter()
+                    .zip(&b.data)
+                    .all(|(p, q)| p.to_bits() == q.to_bits()));
+            }
+        }
+    }
 }
