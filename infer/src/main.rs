@@ -224,6 +224,9 @@ fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
     for w in &desc.warnings {
         eprintln!("warning: {w}");
     }
+    if let Some(w) = renderer::integrators::sppm::filter_warning(desc.camera.filter) {
+        eprintln!("warning: {w}");
+    }
     let scene = renderer::scene::Scene::build(&desc)
         .with_context(|| format!("building {}", scene_path.display()))?;
     let settings = SppmSettings {

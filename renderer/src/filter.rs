@@ -54,6 +54,18 @@ impl FilterDesc {
     /// Mitsuba's default filter (a film without `<rfilter>`).
     pub const MITSUBA_DEFAULT: FilterDesc = FilterDesc::Gaussian { stddev: 0.5 };
 
+    /// The filter as Mitsuba's XML would name it, with its parameters.
+    pub fn describe(&self) -> String {
+        match *self {
+            FilterDesc::Box => "box".into(),
+            FilterDesc::Gaussian { stddev } => format!("gaussian (stddev {stddev})"),
+            FilterDesc::Tent { radius } => format!("tent (radius {radius})"),
+            FilterDesc::Mitchell { b, c } if b == 0.0 && c == 0.5 => "catmullrom".into(),
+            FilterDesc::Mitchell { b, c } => format!("mitchell (B {b}, C {c})"),
+            FilterDesc::Lanczos { lobes } => format!("lanczos ({lobes} lobes)"),
+        }
+    }
+
     /// Half width of the support in pixels.
     pub fn radius(&self) -> f64 {
         match *self {

@@ -185,6 +185,9 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
     if cli.passes.contains(&0) {
         bail!("--passes values must be at least 1");
     }
+    if let Some(w) = renderer::integrators::sppm::filter_warning(scene.camera.filter().desc()) {
+        eprintln!("warning: {w}");
+    }
     let mode = if multi_level {
         SppmMode::MultiLevel
     } else {

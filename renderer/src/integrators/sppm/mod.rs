@@ -57,6 +57,22 @@ pub const DEFAULT_ALPHA: f32 = 2.0 / 3.0;
 /// Default bound on eye-path delta/glossy bounces and on photon bounces.
 pub const DEFAULT_MAX_DEPTH: u32 = 16;
 
+/// The warning for a bundle rendered with a reconstruction filter other than the box: its
+/// pixels are smoother than those of the box-filtered bundles the networks are trained on
+/// (the toolkit's scenes and datagen families name `box`). `None` for the box.
+pub fn filter_warning(filter: crate::filter::FilterDesc) -> Option<String> {
+    if filter == crate::filter::FilterDesc::Box {
+        return None;
+    }
+    Some(format!(
+        "the film's reconstruction filter is {} (Mitsuba's default when the film names none): \
+         each pixel's samples spread over its neighbours' area, so the bundle is smoother than \
+         the box-filtered bundles the networks were trained on; add <rfilter type=\"box\"/> to \
+         the film to match them",
+        filter.describe()
+    ))
+}
+
 /// Which estimator to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SppmMode {

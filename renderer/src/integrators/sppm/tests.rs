@@ -575,3 +575,17 @@ fn reconstruction_filter_shapes_every_level() {
         }
     }
 }
+
+/// Bundles with another filter than the box are flagged, naming the filter and the remedy.
+#[test]
+fn non_box_filters_are_flagged_for_bundles() {
+    use crate::filter::FilterDesc;
+    assert_eq!(filter_warning(FilterDesc::Box), None);
+    let w = filter_warning(FilterDesc::MITSUBA_DEFAULT).unwrap();
+    assert!(
+        w.contains("gaussian (stddev 0.5)") && w.contains("<rfilter type=\"box\"/>"),
+        "{w}"
+    );
+    let w = filter_warning(FilterDesc::Mitchell { b: 0.0, c: 0.5 }).unwrap();
+    assert!(w.contains("catmullrom"), "{w}");
+}
