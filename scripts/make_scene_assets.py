@@ -196,6 +196,32 @@ def sky_pixel(x: int, y: int, width: int = 64, height: int = 32):
     return c
 
 
+def bumps_normal_pixel(x: int, y: int, size: int = 64):
+    """A tangent-space normal map (RGB = (n + 1)/2, 8 bit): a 4x4 grid of domes in the top
+    half, sawtooth ridges along x in the bottom-left quarter and along y in the bottom-right
+    one. The sawtooth slopes have one sign only, so a normal map read with a flipped or
+    swapped tangent frame lights them differently."""
+    u, v = (x + 0.5) / size, (y + 0.5) / size
+    if v < 0.5:
+        cu, cv = (u * 4) % 1.0 - 0.5, (v * 8) % 1.0 - 0.5
+        r2 = cu * cu + cv * cv
+        if r2 < 0.16:
+            h = math.sqrt(0.16 - r2)
+            dx, dy = -cu / h * 0.6, -cv / h * 0.6
+            # Clamp the slope near the dome's rim.
+            k = min(1.0, 2.5 / math.hypot(dx, dy)) if (dx or dy) else 1.0
+            dx, dy = dx * k, dy * k
+        else:
+            dx = dy = 0.0
+    elif u < 0.5:
+        dx, dy = 0.9 if (u * 8) % 1.0 < 0.75 else -2.7, 0.0
+    else:
+        dx, dy = 0.0, 0.9 if (v * 8) % 1.0 < 0.75 else -2.7
+    n = (-dx, -dy, 1.0)
+    inv = 1.0 / math.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2)
+    return tuple(int(round((c * inv + 1.0) * 0.5 * 255.0)) for c in n)
+
+
 def main():
     pos, nrm, uv, faces = torus(0.22, 0.08, 48, 24)
     write_obj(SCENES / "default" / "meshes" / "torus.obj", pos, nrm, uv, faces,
@@ -214,6 +240,8 @@ def main():
     opos, otris = octahedron()
     write_serialized(SCENES / "validation" / "serialized" / "meshes" / "two.serialized",
                      [("torus", pos, nrm, uv, tris, False), ("octahedron", opos, None, None, otris, True)])
+    write_png_rgb8(SCENES / "validation" / "normalmap" / "textures" / "bumps.png", 64, 64,
+                   bumps_normal_pixel)
 
 
 if __name__ == "__main__":

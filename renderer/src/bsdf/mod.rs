@@ -23,6 +23,7 @@ mod dielectric;
 mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
+mod normalmap;
 mod plastic;
 mod roughconductor;
 mod roughdielectric;
@@ -37,6 +38,8 @@ mod tests;
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
+
+pub use normalmap::NormalMap;
 
 /// Roughness below which a rough conductor/dielectric counts as [`Lobe::Glossy`] (the larger of
 /// `alpha_u`, `alpha_v` is compared): SPPM continues eye paths through such surfaces instead of
@@ -223,6 +226,8 @@ pub enum Bsdf {
     Plastic(Plastic),
     /// `roughplastic`
     RoughPlastic(RoughPlastic),
+    /// `normalmap`: a nested model in a shading frame perturbed by a texture.
+    NormalMap(NormalMap),
     /// `twosided`: `front` on the front side, `back` (default: the same model) on the back.
     TwoSided {
         /// Model for the side the normal points to.
@@ -252,6 +257,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::Plastic(b) => b.sample(wo, uv, u_lobe, u),
             Bsdf::RoughPlastic(b) => b.sample(wo, uv, u_lobe, u),
+            Bsdf::NormalMap(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.sample(wo, uv, u_lobe, u, mode)
@@ -279,6 +285,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.eval(wo, wi, uv, mode),
             Bsdf::Plastic(b) => b.eval(wo, wi, uv),
             Bsdf::RoughPlastic(b) => b.eval(wo, wi, uv),
+            Bsdf::NormalMap(b) => b.eval(wo, wi, uv, mode),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.eval(wo, wi, uv, mode)
@@ -293,7 +300,8 @@ impl Bsdf {
 
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` through non-delta lobes.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
-        let _ = uv; // Lobe-selection weights use texture means, not the local value (as Mitsuba).
+        // Lobe-selection weights use texture means, not the local value (as Mitsuba); only a
+        // normal map reads `uv`, for its frame.
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
@@ -301,6 +309,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
             Bsdf::Plastic(b) => b.pdf(wo, wi),
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
+            Bsdf::NormalMap(b) => b.pdf(wo, wi, uv),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.pdf(wo, wi, uv)
@@ -321,6 +330,7 @@ impl Bsdf {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Lobe::Delta,
             Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
             Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
+            Bsdf::NormalMap(b) => b.nested.lobe(),
             Bsdf::TwoSided { front, back } => {
                 let (f, b) = (front.lobe(), back.lobe());
                 if lobe_rank(f) <= lobe_rank(b) {
@@ -342,6 +352,8 @@ impl Bsdf {
                     back.lobe_for(flip(wo))
                 }
             }
+            // The perturbed normal stays on the viewer's side (or nearly): the side is wo's.
+            Bsdf::NormalMap(b) => b.nested.lobe_for(wo),
             b => b.lobe(),
         }
     }
@@ -351,6 +363,7 @@ impl Bsdf {
         match self {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => false,
             Bsdf::TwoSided { front, back } => front.has_non_delta() || back.has_non_delta(),
+            Bsdf::NormalMap(b) => b.nested.has_non_delta(),
             _ => true,
         }
     }
@@ -372,6 +385,7 @@ impl Bsdf {
             Bsdf::Dielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(uv),
+            Bsdf::NormalMap(b) => b.nested.albedo(uv),
             Bsdf::TwoSided { front, .. } => front.albedo(uv),
         }
     }

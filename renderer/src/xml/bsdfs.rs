@@ -3,14 +3,14 @@
 use super::props::Props;
 use super::{ior, Builder, Element, SceneError};
 use crate::bsdf::{
-    Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, MicrofacetKind, Plastic, RoughConductor,
-    RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
+    Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, MicrofacetKind, NormalMap, Plastic,
+    RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
 };
 use crate::spectrum::{Rgb, SpectrumKind};
 use crate::texture::Texture;
 
 /// The BSDF plugins this importer knows.
-const BSDF_PLUGINS: [&str; 9] = [
+const BSDF_PLUGINS: [&str; 10] = [
     "diffuse",
     "conductor",
     "roughconductor",
@@ -20,6 +20,7 @@ const BSDF_PLUGINS: [&str; 9] = [
     "plastic",
     "roughplastic",
     "twosided",
+    "normalmap",
 ];
 
 /// Builds the BSDF declared by a `<bsdf>` element.
@@ -124,6 +125,24 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
                     return Err(el.error(format!("twosided needs one or two nested BSDFs, got {n}")))
                 }
             }
+        }
+        "normalmap" => {
+            let Some(normalmap) = p.texture(b, "normalmap", SpectrumKind::Unbounded)? else {
+                return Err(el.error("missing parameter \"normalmap\" (a texture)"));
+            };
+            let nested = p.objects(&["bsdf", "ref"]);
+            let [inner] = nested[..] else {
+                return Err(el.error(format!(
+                    "normalmap needs exactly one nested BSDF, got {}",
+                    nested.len()
+                )));
+            };
+            Bsdf::NormalMap(NormalMap {
+                normalmap,
+                nested: Box::new(b.bsdf_value(inner)?),
+                flip_invalid_normals: p.bool_or("flip_invalid_normals", true)?,
+                use_shadowing_function: p.bool_or("use_shadowing_function", true)?,
+            })
         }
         _ => unreachable_plugin(el)?,
     };

@@ -507,12 +507,13 @@ impl<'a> Props<'a> {
             .unwrap_or(self.owner)
     }
 
-    /// Takes every nested plugin (or `<ref>`) whose tag is one of `tags`, named or not, in order.
+    /// Takes every nested plugin (or `<ref>`) whose tag is one of `tags`, named or not, in order
+    /// — except those already taken as named parameters (e.g. a texture given by `<ref>`).
     pub fn objects(&mut self, tags: &[&str]) -> Vec<&'a Element> {
         let mut out = Vec::new();
         for p in &mut self.items {
             if let Value::Object(o) = p.value {
-                if tags.contains(&o.tag.as_str()) {
+                if !p.used && tags.contains(&o.tag.as_str()) {
                     p.used = true;
                     out.push(o);
                 }

@@ -1402,3 +1402,55 @@ fn reconstruction_filters_with_mitsubas_defaults() {
         assert_body_error_at(&dir, "bad.xml", &film(inner), marker, needle);
     }
 }
+
+#[test]
+fn normalmap_wraps_one_bsdf_and_reports_misuse_by_line() {
+    let dir = temp_dir("normalmap");
+    let body = format!(
+        r#"{SENSOR}
+<texture type="checkerboard" id="map"/>
+<bsdf type="normalmap" id="a">
+  <ref name="normalmap" id="map"/>
+  <bsdf type="roughconductor"/>
+</bsdf>
+<bsdf type="normalmap" id="b">
+  <rgb name="normalmap" value="0.5, 0.5, 1"/>
+  <boolean name="flip_invalid_normals" value="false"/>
+  <boolean name="use_shadowing_function" value="false"/>
+  <bsdf type="twosided"><bsdf type="diffuse"/></bsdf>
+</bsdf>
+<shape type="sphere"><ref id="a"/></shape>
+<shape type="sphere"><ref id="b"/></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let [Bsdf::NormalMap(a), Bsdf::NormalMap(b)] = &scene.bsdfs[..] else {
+        panic!("{:?}", scene.bsdfs)
+    };
+    assert!(matches!(a.normalmap, Texture::Checkerboard { .. }));
+    assert!(matches!(*a.nested, Bsdf::RoughConductor(_)));
+    assert!(a.flip_invalid_normals && a.use_shadowing_function);
+    assert!(matches!(*b.nested, Bsdf::TwoSided { .. }));
+    assert!(!b.flip_invalid_normals && !b.use_shadowing_function);
+    assert!(matches!(b.normalmap, Texture::Constant(c) if c == Vec3::new(0.5, 0.5, 1.0)));
+    for (inner, marker, needle) in [
+        (
+            "<bsdf type=\"normalmap\">\n<bsdf type=\"diffuse\"/></bsdf>",
+            "normalmap",
+            "missing parameter \"normalmap\"",
+        ),
+        (
+            "<bsdf type=\"normalmap\"><rgb name=\"normalmap\" value=\"0.5\"/></bsdf>",
+            "normalmap",
+            "exactly one nested BSDF, got 0",
+        ),
+        (
+            "<bsdf type=\"normalmap\"><rgb name=\"normalmap\" value=\"0.5\"/>\n<bsdf type=\"diffuse\"/><bsdf type=\"diffuse\"/></bsdf>",
+            "normalmap",
+            "exactly one nested BSDF, got 2",
+        ),
+    ] {
+        let body = format!("{SENSOR}\n{inner}\n<shape type=\"sphere\"/>");
+        assert_body_error_at(&dir, "bad.xml", &body, marker, needle);
+    }
+}

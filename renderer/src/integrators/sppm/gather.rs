@@ -24,6 +24,7 @@ fn transmits(bsdf: &Bsdf) -> bool {
     match bsdf {
         Bsdf::RoughDielectric(_) => true,
         Bsdf::TwoSided { front, back } => transmits(front) || transmits(back),
+        Bsdf::NormalMap(b) => transmits(&b.nested),
         _ => false,
     }
 }
