@@ -194,6 +194,23 @@ pub struct SceneDescription {
     pub shapes: Vec<ShapeDesc>,
     /// Emitters not attached to shapes.
     pub emitters: Vec<EmitterDesc>,
-    /// Non-fatal messages from the importer (e.g. a Gaussian rfilter mapped to box).
+    /// Non-fatal messages from the importer (e.g. an ignored parameter).
     pub warnings: Vec<String>,
+}
+
+/// The unit sphere at the origin seen from inside (normals inward), emitting radiance 1, with
+/// material `bsdf`: the furnace enclosure of the integrators' tests.
+#[cfg(test)]
+pub(crate) fn emitting_unit_enclosure(bsdf: usize) -> ShapeDesc {
+    ShapeDesc {
+        name: "enclosure".into(),
+        geometry: Geometry::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+            rotation: glam::Mat3::IDENTITY,
+            flip_normals: true,
+        },
+        bsdf,
+        emission: Some(crate::spectrum::Rgb::ONE),
+    }
 }

@@ -358,6 +358,27 @@ impl Bsdf {
         }
     }
 
+    /// Probability that [`Bsdf::sample`] picks a delta (specular) lobe for `wo`: 0 for models
+    /// without one, 1 for purely specular ones, in between for models mixing both (`plastic`'s
+    /// smooth coating over its diffuse base). SPPM eye paths split on it at visible points.
+    pub fn delta_probability(&self, wo: Vec3, uv: Vec2) -> f32 {
+        match self {
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 1.0,
+            Bsdf::Plastic(b) => b.delta_probability(wo),
+            Bsdf::NormalMap(b) => b.delta_probability(wo, uv),
+            Bsdf::TwoSided { front, back } => {
+                if wo.z > 0.0 {
+                    front.delta_probability(wo, uv)
+                } else if wo.z < 0.0 {
+                    back.delta_probability(flip(wo), uv)
+                } else {
+                    0.0
+                }
+            }
+            _ => 0.0,
+        }
+    }
+
     /// Whether [`Bsdf::eval`] can be non-zero (next-event estimation is worthwhile).
     pub fn has_non_delta(&self) -> bool {
         match self {

@@ -125,6 +125,13 @@ impl NormalMap {
         self.nested.pdf(frame.to_local(wo), pwi, uv)
     }
 
+    /// Probability that the nested model picks a delta lobe, seen from `wo` in the perturbed
+    /// frame.
+    pub fn delta_probability(&self, wo: Vec3, uv: Vec2) -> f32 {
+        let frame = self.frame(wo, uv);
+        self.nested.delta_probability(frame.to_local(wo), uv)
+    }
+
     /// Samples the nested model in the perturbed frame. Radiance: the nested weight times the
     /// shadowing term (f·|cos θi| / pdf as [`NormalMap::eval`]). Importance: the adjoint's
     /// weight, which also covers delta lobes: w'·|cos′ θo|·|cos θi| / (|cos θo|·|cos′ θi|)·G(wo)

@@ -45,6 +45,14 @@ impl Plastic {
         }
     }
 
+    /// Probability that [`Plastic::sample`] picks the specular coating for `wo`.
+    pub(super) fn delta_probability(&self, wo: Vec3) -> f32 {
+        if wo.z <= 0.0 {
+            return 0.0;
+        }
+        self.prob_specular(fresnel_dielectric(wo.z, self.eta).r)
+    }
+
     fn diffuse_value(&self, uv: Vec2, f_o: f32, f_i: f32) -> Rgb {
         let fdr_int = fresnel_diffuse_reflectance(1.0 / self.eta);
         let rho = internal_scattering(self.diffuse_reflectance.eval(uv), fdr_int, self.nonlinear);

@@ -1041,3 +1041,50 @@ fn lobes_and_flags() {
         Rgb::ZERO
     );
 }
+
+#[test]
+fn delta_probability_is_the_frequency_of_delta_samples() {
+    let mut all = glossy_catalogue();
+    all.push(("dielectric 1.5", dielectric(1.5), true));
+    all.push(("conductor Au", conductor(gold()), false));
+    all.push((
+        "twosided plastic / diffuse",
+        two_sided(
+            plastic(1.5, rgb(0.3, 0.2, 0.1), false),
+            diffuse(constant(0.5)),
+        ),
+        true,
+    ));
+    all.push((
+        "normalmap / plastic",
+        normal_mapped(
+            rgb(0.6, 0.45, 0.9),
+            plastic(1.49, rgb(0.1, 0.1, 0.1), false),
+        ),
+        false,
+    ));
+    let mut r = rng(77);
+    for (name, bsdf, two_sided) in all {
+        for wo in test_directions(two_sided) {
+            let p = bsdf.delta_probability(wo, Vec2::ZERO) as f64;
+            let n = 40_000;
+            let mut delta = 0;
+            for _ in 0..n {
+                let s = bsdf.sample(
+                    wo,
+                    Vec2::ZERO,
+                    uniform(&mut r),
+                    uniform2(&mut r),
+                    TransportMode::Radiance,
+                );
+                delta += s.is_some_and(|s| s.delta) as u32;
+            }
+            let freq = delta as f64 / n as f64;
+            let sigma = (p * (1.0 - p) / n as f64).sqrt();
+            assert!(
+                (freq - p).abs() <= 5.0 * sigma + 1e-3,
+                "{name} wo={wo}: delta samples {freq} vs delta_probability {p}"
+            );
+        }
+    }
+}

@@ -253,17 +253,7 @@ mod tests {
             sample_count: None,
             integrator: None,
             bsdfs: vec![diffuse(rho)],
-            shapes: vec![ShapeDesc {
-                name: "enclosure".into(),
-                geometry: Geometry::Sphere {
-                    center: Vec3::ZERO,
-                    radius: 1.0,
-                    rotation: glam::Mat3::IDENTITY,
-                    flip_normals: true,
-                },
-                bsdf: 0,
-                emission: Some(Rgb::ONE),
-            }],
+            shapes: vec![crate::description::emitting_unit_enclosure(0)],
             emitters: vec![],
             warnings: vec![],
         };

@@ -5,8 +5,10 @@
 //! seen directly or through delta bounces, direct light at glossy vertices (NEE + MIS with the
 //! continuing BSDF sample), and direct light at the visible point itself (NEE + MIS, completed by
 //! one BSDF-sampled ray that only looks for emitters; the photons hold the indirect part).
+//! A diffuse surface under a smooth coating (`plastic`) splits the path on one BSDF sample: the
+//! coating's specular reflection continues it, the diffuse base takes the visible point.
 
-use crate::bsdf::{Bsdf, Lobe, TransportMode};
+use crate::bsdf::{Bsdf, BsdfSample, Lobe, TransportMode};
 use crate::frame::Frame;
 use crate::math::Ray;
 use crate::sampling::{power_heuristic, Pcg32, UniformSource};
@@ -126,10 +128,41 @@ fn direct_light(
     f * (wi.z.abs() * w) * ls.weight
 }
 
+/// Emission found by the BSDF-sampled probe ray `bs` from `si` (the BSDF-sampling half of the
+/// MIS pair at a visible point): it only looks for emitters.
+fn probe_emission(scene: &Scene, si: &SurfaceInteraction, bs: &BsdfSample) -> Rgb {
+    let probe = si.spawn_ray(si.to_world(bs.wi));
+    let probe_last = LastScatter {
+        p: si.p,
+        pdf: bs.pdf,
+        delta: bs.delta,
+    };
+    match scene.intersect_emitter(&probe) {
+        EmitterHit::Emitter(e) => emission_along(scene, &probe, Some(&e), &probe_last),
+        EmitterHit::Escaped => emission_along(scene, &probe, None, &probe_last),
+        EmitterHit::Blocked => Rgb::ZERO,
+    }
+}
+
+/// The visible point at `si` with path throughput `beta`.
+fn visible_point(si: &SurfaceInteraction, wo: Vec3, beta: Rgb) -> VisiblePoint {
+    VisiblePoint {
+        p: si.p,
+        ng: si.ng,
+        frame: si.frame,
+        wo_world: si.wo,
+        wo,
+        uv: si.uv,
+        material: si.material,
+        beta,
+    }
+}
+
 /// Traces one eye subpath starting with `ray`; `max_depth` bounds the number of delta/glossy
 /// bounces before the path gives up without a visible point.
 pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u32) -> EyePath {
     let mut out = EyePath::default();
+    let mut gbuffer_set = false;
     let mut beta = Rgb::ONE;
     let mut path_length = 0.0f32;
     let mut last = LastScatter {
@@ -156,39 +189,53 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
         let wo = si.to_local(si.wo);
         let lobe = bsdf.lobe_for(wo);
         if lobe == Lobe::Diffuse {
+            // The G-buffer describes the first diffuse surface, also when the path goes on
+            // through its specular coating (below).
+            if !gbuffer_set {
+                out.gbuffer = GBufferSample {
+                    albedo: bsdf.albedo(si.uv),
+                    normal: si.frame.n,
+                    depth: path_length,
+                };
+                gbuffer_set = true;
+            }
+            let p_delta = bsdf.delta_probability(wo, si.uv);
+            if p_delta > 0.0 {
+                // A diffuse base under a smooth coating (`plastic`): the photons hold the
+                // diffuse part only, so one BSDF sample splits the path. A coating sample (with
+                // probability p_delta, its weight already divided by it) continues the path as
+                // a specular bounce, finding what the coating reflects, emitters and lit
+                // surfaces alike. Otherwise the visible point is stored here, with β/(1 −
+                // p_delta) for NEE and the photons, and the sample serves as the MIS probe.
+                let u_lobe = rng.next_f32();
+                let u = rng.next_2d();
+                let bs = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance);
+                if let Some(bs) = bs.filter(|bs| bs.delta) {
+                    if depth == max_depth || !scatter(&si, &bs, &mut beta, &mut last, &mut ray) {
+                        break;
+                    }
+                    continue;
+                }
+                if p_delta >= 1.0 {
+                    // No diffuse base to store (a black one): the failed sample ends the path.
+                    break;
+                }
+                let vp_beta = beta / (1.0 - p_delta);
+                out.direct += vp_beta * direct_light(scene, &si, bsdf, wo, rng);
+                if let Some(bs) = bs {
+                    out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
+                }
+                out.vp = Some(visible_point(&si, wo, vp_beta));
+                break;
+            }
             out.direct += beta * direct_light(scene, &si, bsdf, wo, rng);
             // The BSDF-sampling half of the MIS pair: it only looks for emitters.
             let u_lobe = rng.next_f32();
             let u = rng.next_2d();
             if let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance) {
-                let probe = si.spawn_ray(si.to_world(bs.wi));
-                let probe_last = LastScatter {
-                    p: si.p,
-                    pdf: bs.pdf,
-                    delta: bs.delta,
-                };
-                let found = match scene.intersect_emitter(&probe) {
-                    EmitterHit::Emitter(e) => emission_along(scene, &probe, Some(&e), &probe_last),
-                    EmitterHit::Escaped => emission_along(scene, &probe, None, &probe_last),
-                    EmitterHit::Blocked => Rgb::ZERO,
-                };
-                out.direct += beta * bs.weight * found;
+                out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
             }
-            out.vp = Some(VisiblePoint {
-                p: si.p,
-                ng: si.ng,
-                frame: si.frame,
-                wo_world: si.wo,
-                wo,
-                uv: si.uv,
-                material: si.material,
-                beta,
-            });
-            out.gbuffer = GBufferSample {
-                albedo: bsdf.albedo(si.uv),
-                normal: si.frame.n,
-                depth: path_length,
-            };
+            out.vp = Some(visible_point(&si, wo, beta));
             break;
         }
         if depth == max_depth {
@@ -202,16 +249,31 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
         let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance) else {
             break;
         };
-        beta *= bs.weight;
-        if !beta.is_finite() || beta.max_element() <= 0.0 {
+        if !scatter(&si, &bs, &mut beta, &mut last, &mut ray) {
             break;
         }
-        last = LastScatter {
-            p: si.p,
-            pdf: bs.pdf,
-            delta: bs.delta,
-        };
-        ray = si.spawn_ray(si.to_world(bs.wi));
     }
     out
+}
+
+/// Continues an eye path at `si` with BSDF sample `bs`: throughput, MIS state and the next ray.
+/// False when the throughput vanishes or stops being finite (the path ends).
+fn scatter(
+    si: &SurfaceInteraction,
+    bs: &BsdfSample,
+    beta: &mut Rgb,
+    last: &mut LastScatter,
+    ray: &mut Ray,
+) -> bool {
+    *beta *= bs.weight;
+    if !beta.is_finite() || beta.max_element() <= 0.0 {
+        return false;
+    }
+    *last = LastScatter {
+        p: si.p,
+        pdf: bs.pdf,
+        delta: bs.delta,
+    };
+    *ray = si.spawn_ray(si.to_world(bs.wi));
+    true
 }
