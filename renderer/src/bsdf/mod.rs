@@ -18,6 +18,7 @@
 //! Everything follows Mitsuba 3's plugins (`src/bsdfs/*.cpp`) term by term; the rough models
 //! always use visible-normal sampling (Mitsuba's default `sample_visible = true`).
 
+mod blend;
 mod conductor;
 mod dielectric;
 mod diffuse;
@@ -39,6 +40,7 @@ use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
+pub use blend::Blend;
 pub use normalmap::NormalMap;
 
 /// Roughness below which a rough conductor/dielectric counts as [`Lobe::Glossy`] (the larger of
@@ -228,6 +230,8 @@ pub enum Bsdf {
     RoughPlastic(RoughPlastic),
     /// `normalmap`: a nested model in a shading frame perturbed by a texture.
     NormalMap(NormalMap),
+    /// `blendbsdf`: a linear blend of two models.
+    Blend(Blend),
     /// `twosided`: `front` on the front side, `back` (default: the same model) on the back.
     TwoSided {
         /// Model for the side the normal points to.
@@ -258,6 +262,7 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.sample(wo, uv, u_lobe, u),
             Bsdf::RoughPlastic(b) => b.sample(wo, uv, u_lobe, u),
             Bsdf::NormalMap(b) => b.sample(wo, uv, u_lobe, u, mode),
+            Bsdf::Blend(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.sample(wo, uv, u_lobe, u, mode)
@@ -286,6 +291,7 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.eval(wo, wi, uv),
             Bsdf::RoughPlastic(b) => b.eval(wo, wi, uv),
             Bsdf::NormalMap(b) => b.eval(wo, wi, uv, mode),
+            Bsdf::Blend(b) => b.eval(wo, wi, uv, mode),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.eval(wo, wi, uv, mode)
@@ -301,7 +307,7 @@ impl Bsdf {
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` through non-delta lobes.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
         // Lobe-selection weights use texture means, not the local value (as Mitsuba); only a
-        // normal map reads `uv`, for its frame.
+        // normal map (its frame) and a blend (its weight) read `uv`.
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
@@ -310,6 +316,7 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.pdf(wo, wi),
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
             Bsdf::NormalMap(b) => b.pdf(wo, wi, uv),
+            Bsdf::Blend(b) => b.pdf(wo, wi, uv),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.pdf(wo, wi, uv)
@@ -331,6 +338,9 @@ impl Bsdf {
             Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
             Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
             Bsdf::NormalMap(b) => b.nested.lobe(),
+            // The most diffuse of the two: a visible point is stored where either model has a
+            // broad lobe (delta parts are split off by the eye path, glossy ones go to photons).
+            Bsdf::Blend(b) => most_diffuse(b.nested[0].lobe(), b.nested[1].lobe()),
             Bsdf::TwoSided { front, back } => {
                 let (f, b) = (front.lobe(), back.lobe());
                 if lobe_rank(f) <= lobe_rank(b) {
@@ -354,6 +364,7 @@ impl Bsdf {
             }
             // The perturbed normal stays on the viewer's side (or nearly): the side is wo's.
             Bsdf::NormalMap(b) => b.nested.lobe_for(wo),
+            Bsdf::Blend(b) => most_diffuse(b.nested[0].lobe_for(wo), b.nested[1].lobe_for(wo)),
             b => b.lobe(),
         }
     }
@@ -366,6 +377,7 @@ impl Bsdf {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 1.0,
             Bsdf::Plastic(b) => b.delta_probability(wo),
             Bsdf::NormalMap(b) => b.delta_probability(wo, uv),
+            Bsdf::Blend(b) => b.delta_probability(wo, uv),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.delta_probability(wo, uv)
@@ -385,6 +397,7 @@ impl Bsdf {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => false,
             Bsdf::TwoSided { front, back } => front.has_non_delta() || back.has_non_delta(),
             Bsdf::NormalMap(b) => b.nested.has_non_delta(),
+            Bsdf::Blend(b) => b.nested.iter().any(Bsdf::has_non_delta),
             _ => true,
         }
     }
@@ -407,6 +420,10 @@ impl Bsdf {
             Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::NormalMap(b) => b.nested.albedo(uv),
+            Bsdf::Blend(b) => {
+                let w = b.weight_at(uv);
+                b.nested[0].albedo(uv) * (1.0 - w) + b.nested[1].albedo(uv) * w
+            }
             Bsdf::TwoSided { front, .. } => front.albedo(uv),
         }
     }
@@ -423,6 +440,15 @@ fn rough_lobe(r: &Roughness) -> Lobe {
         Lobe::Glossy
     } else {
         Lobe::Diffuse
+    }
+}
+
+/// The more diffuse of two lobe classes.
+fn most_diffuse(a: Lobe, b: Lobe) -> Lobe {
+    if lobe_rank(a) >= lobe_rank(b) {
+        a
+    } else {
+        b
     }
 }
 

@@ -276,6 +276,24 @@ fn glossy_catalogue() -> Vec<(&'static str, Bsdf, bool)> {
             true, // test both sides
         ),
         (
+            "blendbsdf 0.3 diffuse / roughconductor ggx 0.2",
+            blend(
+                0.3,
+                diffuse(rgb(0.8, 0.5, 0.2)),
+                rough_conductor(rough(Ggx, 0.2, 0.2), gold()),
+            ),
+            false,
+        ),
+        (
+            "blendbsdf 0.6 roughplastic / roughdielectric",
+            blend(
+                0.6,
+                rough_plastic(rough(Ggx, 0.3, 0.3), 1.49, rgb(0.5, 0.4, 0.3), false),
+                rough_dielectric(rough(Beckmann, 0.3, 0.3), 1.5),
+            ),
+            true,
+        ),
+        (
             "normalmap tilted / diffuse",
             normal_mapped(rgb(0.75, 0.4, 0.85), diffuse(rgb(0.8, 0.5, 0.2))),
             false,
@@ -297,6 +315,14 @@ fn glossy_catalogue() -> Vec<(&'static str, Bsdf, bool)> {
             true,
         ),
     ]
+}
+
+/// `blendbsdf` of `a` (weight 0) and `b` (weight 1) at constant weight `w`.
+fn blend(w: f32, a: Bsdf, b: Bsdf) -> Bsdf {
+    Bsdf::Blend(Blend {
+        weight: constant(w),
+        nested: Box::new([a, b]),
+    })
 }
 
 /// `normalmap` with a constant texel (the perturbed normal (2·texel − 1), normalised) over
@@ -1052,6 +1078,20 @@ fn delta_probability_is_the_frequency_of_delta_samples() {
         two_sided(
             plastic(1.5, rgb(0.3, 0.2, 0.1), false),
             diffuse(constant(0.5)),
+        ),
+        true,
+    ));
+    all.push((
+        "blendbsdf 0.4 diffuse / conductor",
+        blend(0.4, diffuse(constant(0.5)), conductor(gold())),
+        false,
+    ));
+    all.push((
+        "blendbsdf 0.7 plastic / dielectric",
+        blend(
+            0.7,
+            plastic(1.5, rgb(0.3, 0.2, 0.1), false),
+            dielectric(1.5),
         ),
         true,
     ));

@@ -3,14 +3,14 @@
 use super::props::Props;
 use super::{ior, Builder, Element, SceneError};
 use crate::bsdf::{
-    Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, MicrofacetKind, NormalMap, Plastic,
+    Blend, Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, MicrofacetKind, NormalMap, Plastic,
     RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
 };
 use crate::spectrum::{Rgb, SpectrumKind};
 use crate::texture::Texture;
 
 /// The BSDF plugins this importer knows.
-const BSDF_PLUGINS: [&str; 10] = [
+const BSDF_PLUGINS: [&str; 11] = [
     "diffuse",
     "conductor",
     "roughconductor",
@@ -21,6 +21,7 @@ const BSDF_PLUGINS: [&str; 10] = [
     "roughplastic",
     "twosided",
     "normalmap",
+    "blendbsdf",
 ];
 
 /// Builds the BSDF declared by a `<bsdf>` element.
@@ -142,6 +143,20 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
                 nested: Box::new(b.bsdf_value(inner)?),
                 flip_invalid_normals: p.bool_or("flip_invalid_normals", true)?,
                 use_shadowing_function: p.bool_or("use_shadowing_function", true)?,
+            })
+        }
+        "blendbsdf" => {
+            let weight = p.texture_or(b, "weight", SpectrumKind::Unbounded, 0.5)?;
+            let nested = p.objects(&["bsdf", "ref"]);
+            let [first, second] = nested[..] else {
+                return Err(el.error(format!(
+                    "blendbsdf needs exactly two nested BSDFs, got {}",
+                    nested.len()
+                )));
+            };
+            Bsdf::Blend(Blend {
+                weight,
+                nested: Box::new([b.bsdf_value(first)?, b.bsdf_value(second)?]),
             })
         }
         _ => unreachable_plugin(el)?,

@@ -1454,3 +1454,49 @@ fn normalmap_wraps_one_bsdf_and_reports_misuse_by_line() {
         assert_body_error_at(&dir, "bad.xml", &body, marker, needle);
     }
 }
+
+#[test]
+fn blendbsdf_mixes_two_bsdfs_in_file_order() {
+    let dir = temp_dir("blendbsdf");
+    let body = format!(
+        r#"{SENSOR}
+<bsdf type="blendbsdf" id="a">
+  <float name="weight" value="0.25"/>
+  <bsdf type="diffuse"/>
+  <bsdf type="conductor"/>
+</bsdf>
+<bsdf type="blendbsdf" id="b">
+  <texture type="checkerboard" name="weight"/>
+  <bsdf type="roughplastic"/>
+  <ref id="a"/>
+</bsdf>
+<shape type="sphere"><ref id="b"/></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    // Both top-level declarations are scene materials; "b" is the one the sphere uses.
+    let [_, Bsdf::Blend(b)] = &scene.bsdfs[..] else {
+        panic!("{:?}", scene.bsdfs)
+    };
+    assert!(matches!(b.weight, Texture::Checkerboard { .. }));
+    assert!(matches!(b.nested[0], Bsdf::RoughPlastic(_)));
+    let Bsdf::Blend(a) = &b.nested[1] else {
+        panic!("{:?}", b.nested[1])
+    };
+    assert_eq!(a.weight_at(Vec2::ZERO), 0.25);
+    assert!(matches!(a.nested[0], Bsdf::Diffuse(_)));
+    assert!(matches!(a.nested[1], Bsdf::Conductor(_)));
+    for (inner, needle) in [
+        (
+            "<bsdf type=\"blendbsdf\">\n<bsdf type=\"diffuse\"/></bsdf>",
+            "exactly two nested BSDFs, got 1",
+        ),
+        (
+            "<bsdf type=\"blendbsdf\"><bsdf type=\"diffuse\"/>\n<bsdf type=\"diffuse\"/><bsdf type=\"diffuse\"/></bsdf>",
+            "exactly two nested BSDFs, got 3",
+        ),
+    ] {
+        let body = format!("{SENSOR}\n{inner}\n<shape type=\"sphere\"/>");
+        assert_body_error_at(&dir, "bad.xml", &body, "blendbsdf", needle);
+    }
+}

@@ -25,6 +25,7 @@ fn transmits(bsdf: &Bsdf) -> bool {
         Bsdf::RoughDielectric(_) => true,
         Bsdf::TwoSided { front, back } => transmits(front) || transmits(back),
         Bsdf::NormalMap(b) => transmits(&b.nested),
+        Bsdf::Blend(b) => b.nested.iter().any(transmits),
         _ => false,
     }
 }

@@ -1,0 +1,119 @@
+//! `blendbsdf`: (1 − w)·f₀ + w·f₁, a linear blend of two nested BSDFs, as Mitsuba 3's
+//! `blendbsdf`.
+//!
+//! Parameters, in the XML's words: `weight` (a float or texture in [0, 1], clamped; a colour
+//! texture counts by its luminance; default 0.5) and two nested `<bsdf>`s, the first at weight
+//! 0, the second at weight 1.
+//!
+//! Sampling picks the second model with probability w, the first otherwise. Unlike Mitsuba,
+//! whose sample reports the chosen model's own density, a non-delta sample here carries the
+//! density of the whole blend, (1 − w)·p₀ + w·p₁, and the weight f·|cos θi| / that density
+//! (one-sample MIS over the two models): that is the density [`Bsdf::pdf`] reports, which the
+//! integrators' MIS needs to be consistent. A delta sample keeps its model's weight, with the
+//! choice probability folded into its `pdf`.
+
+use super::{Bsdf, BsdfSample, TransportMode};
+use crate::spectrum::{luminance, Rgb};
+use crate::texture::Texture;
+use glam::{Vec2, Vec3};
+
+/// `blendbsdf`: two models mixed by a weight.
+#[derive(Debug, Clone)]
+pub struct Blend {
+    /// `weight`: the share of the second model.
+    pub weight: Texture,
+    /// The model at weight 0 and the one at weight 1.
+    pub nested: Box<[Bsdf; 2]>,
+}
+
+impl Blend {
+    /// The blend weight at `uv`, clamped to [0, 1] (grey values as they are, colours by
+    /// luminance, as Mitsuba's `eval_1`).
+    pub fn weight_at(&self, uv: Vec2) -> f32 {
+        let c = self.weight.eval(uv);
+        let w = if c.x == c.y && c.y == c.z {
+            c.x
+        } else {
+            luminance(c)
+        };
+        if w.is_nan() {
+            0.0
+        } else {
+            w.clamp(0.0, 1.0)
+        }
+    }
+
+    /// (1 − w)·f₀ + w·f₁.
+    pub fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
+        let w = self.weight_at(uv);
+        let [a, b] = &*self.nested;
+        let mut f = Rgb::ZERO;
+        if w < 1.0 {
+            f += a.eval(wo, wi, uv, mode) * (1.0 - w);
+        }
+        if w > 0.0 {
+            f += b.eval(wo, wi, uv, mode) * w;
+        }
+        f
+    }
+
+    /// (1 − w)·p₀ + w·p₁.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
+        let w = self.weight_at(uv);
+        let [a, b] = &*self.nested;
+        let mut p = 0.0;
+        if w < 1.0 {
+            p += a.pdf(wo, wi, uv) * (1.0 - w);
+        }
+        if w > 0.0 {
+            p += b.pdf(wo, wi, uv) * w;
+        }
+        p
+    }
+
+    /// Picks a model (the second with probability w, reusing `u_lobe` rescaled), samples it;
+    /// non-delta samples are weighted against the whole blend.
+    pub fn sample(
+        &self,
+        wo: Vec3,
+        uv: Vec2,
+        u_lobe: f32,
+        u: Vec2,
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        let w = self.weight_at(uv);
+        let [a, b] = &*self.nested;
+        let (chosen, p_choice, u_lobe) = if u_lobe < w {
+            (b, w, u_lobe / w)
+        } else {
+            (a, 1.0 - w, (u_lobe - w) / (1.0 - w))
+        };
+        let s = chosen.sample(wo, uv, u_lobe.min(ONE_MINUS_EPS), u, mode)?;
+        if s.delta {
+            return Some(BsdfSample {
+                pdf: s.pdf * p_choice,
+                ..s
+            });
+        }
+        let pdf = self.pdf(wo, s.wi, uv);
+        if pdf.is_nan() || pdf <= 0.0 {
+            return None;
+        }
+        let f = self.eval(wo, s.wi, uv, mode);
+        Some(BsdfSample {
+            weight: f * (s.wi.z.abs() / pdf),
+            pdf,
+            ..s
+        })
+    }
+
+    /// Probability of a delta sample: (1 − w)·d₀ + w·d₁.
+    pub fn delta_probability(&self, wo: Vec3, uv: Vec2) -> f32 {
+        let w = self.weight_at(uv);
+        let [a, b] = &*self.nested;
+        a.delta_probability(wo, uv) * (1.0 - w) + b.delta_probability(wo, uv) * w
+    }
+}
+
+/// The largest f32 below 1: a rescaled `u_lobe` must stay in [0, 1).
+const ONE_MINUS_EPS: f32 = 1.0 - f32::EPSILON / 2.0;
