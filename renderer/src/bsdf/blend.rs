@@ -13,7 +13,7 @@
 //! choice probability folded into its `pdf`.
 
 use super::{Bsdf, BsdfSample, TransportMode};
-use crate::spectrum::{luminance, Rgb};
+use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
@@ -30,17 +30,7 @@ impl Blend {
     /// The blend weight at `uv`, clamped to [0, 1] (grey values as they are, colours by
     /// luminance, as Mitsuba's `eval_1`).
     pub fn weight_at(&self, uv: Vec2) -> f32 {
-        let c = self.weight.eval(uv);
-        let w = if c.x == c.y && c.y == c.z {
-            c.x
-        } else {
-            luminance(c)
-        };
-        if w.is_nan() {
-            0.0
-        } else {
-            w.clamp(0.0, 1.0)
-        }
+        super::mask::unit_scalar(&self.weight, uv)
     }
 
     /// (1 − w)·f₀ + w·f₁.

@@ -23,6 +23,7 @@ mod conductor;
 mod dielectric;
 mod diffuse;
 pub mod fresnel;
+mod mask;
 pub mod microfacet;
 mod normalmap;
 mod plastic;
@@ -41,6 +42,7 @@ use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 pub use blend::Blend;
+pub use mask::Mask;
 pub use normalmap::NormalMap;
 
 /// Roughness below which a rough conductor/dielectric counts as [`Lobe::Glossy`] (the larger of
@@ -232,6 +234,8 @@ pub enum Bsdf {
     NormalMap(NormalMap),
     /// `blendbsdf`: a linear blend of two models.
     Blend(Blend),
+    /// `mask`: a nested model behind an opacity (the rest passes straight through).
+    Mask(Mask),
     /// `twosided`: `front` on the front side, `back` (default: the same model) on the back.
     TwoSided {
         /// Model for the side the normal points to.
@@ -263,6 +267,7 @@ impl Bsdf {
             Bsdf::RoughPlastic(b) => b.sample(wo, uv, u_lobe, u),
             Bsdf::NormalMap(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::Blend(b) => b.sample(wo, uv, u_lobe, u, mode),
+            Bsdf::Mask(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.sample(wo, uv, u_lobe, u, mode)
@@ -292,6 +297,7 @@ impl Bsdf {
             Bsdf::RoughPlastic(b) => b.eval(wo, wi, uv),
             Bsdf::NormalMap(b) => b.eval(wo, wi, uv, mode),
             Bsdf::Blend(b) => b.eval(wo, wi, uv, mode),
+            Bsdf::Mask(b) => b.eval(wo, wi, uv, mode),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.eval(wo, wi, uv, mode)
@@ -307,7 +313,7 @@ impl Bsdf {
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` through non-delta lobes.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
         // Lobe-selection weights use texture means, not the local value (as Mitsuba); only a
-        // normal map (its frame) and a blend (its weight) read `uv`.
+        // normal map (its frame), a blend (its weight) and a mask (its opacity) read `uv`.
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
@@ -317,6 +323,7 @@ impl Bsdf {
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
             Bsdf::NormalMap(b) => b.pdf(wo, wi, uv),
             Bsdf::Blend(b) => b.pdf(wo, wi, uv),
+            Bsdf::Mask(b) => b.pdf(wo, wi, uv),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.pdf(wo, wi, uv)
@@ -341,6 +348,8 @@ impl Bsdf {
             // The most diffuse of the two: a visible point is stored where either model has a
             // broad lobe (delta parts are split off by the eye path, glossy ones go to photons).
             Bsdf::Blend(b) => most_diffuse(b.nested[0].lobe(), b.nested[1].lobe()),
+            // The pass-through is split off like a coating (delta_probability).
+            Bsdf::Mask(b) => b.nested.lobe(),
             Bsdf::TwoSided { front, back } => {
                 let (f, b) = (front.lobe(), back.lobe());
                 if lobe_rank(f) <= lobe_rank(b) {
@@ -365,6 +374,7 @@ impl Bsdf {
             // The perturbed normal stays on the viewer's side (or nearly): the side is wo's.
             Bsdf::NormalMap(b) => b.nested.lobe_for(wo),
             Bsdf::Blend(b) => most_diffuse(b.nested[0].lobe_for(wo), b.nested[1].lobe_for(wo)),
+            Bsdf::Mask(b) => b.nested.lobe_for(wo),
             b => b.lobe(),
         }
     }
@@ -378,6 +388,7 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.delta_probability(wo),
             Bsdf::NormalMap(b) => b.delta_probability(wo, uv),
             Bsdf::Blend(b) => b.delta_probability(wo, uv),
+            Bsdf::Mask(b) => b.delta_probability(wo, uv),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
                     front.delta_probability(wo, uv)
@@ -398,6 +409,7 @@ impl Bsdf {
             Bsdf::TwoSided { front, back } => front.has_non_delta() || back.has_non_delta(),
             Bsdf::NormalMap(b) => b.nested.has_non_delta(),
             Bsdf::Blend(b) => b.nested.iter().any(Bsdf::has_non_delta),
+            Bsdf::Mask(b) => b.nested.has_non_delta(),
             _ => true,
         }
     }
@@ -420,6 +432,7 @@ impl Bsdf {
             Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::NormalMap(b) => b.nested.albedo(uv),
+            Bsdf::Mask(b) => b.nested.albedo(uv),
             Bsdf::Blend(b) => {
                 let w = b.weight_at(uv);
                 b.nested[0].albedo(uv) * (1.0 - w) + b.nested[1].albedo(uv) * w

@@ -329,6 +329,24 @@ mod tests {
         assert_every_pixel_is_one(&film);
     }
 
+    /// The furnace with a white two-sided diffuse sphere behind an opacity of 0.4 (seen from
+    /// outside and, through the mask, from inside): light passing through the mask (a forward
+    /// delta) and light reflected by it add up to 1 everywhere.
+    #[test]
+    fn white_furnace_masked_sphere() {
+        use crate::bsdf::Mask;
+        let mask = Bsdf::Mask(Mask {
+            opacity: Texture::Constant(Rgb::splat(0.4)),
+            nested: Box::new(Bsdf::TwoSided {
+                front: Box::new(diffuse(1.0)),
+                back: Box::new(diffuse(1.0)),
+            }),
+        });
+        let scene = sphere_of(mask, EmitterDesc::Constant { radiance: Rgb::ONE });
+        let film = PathTracer::default().render(&scene, 2048, 1, None);
+        assert_every_pixel_is_one(&film);
+    }
+
     /// `hide_emitters`: the environment seen directly renders black, while the sphere it lights
     /// keeps its furnace value (only the camera ray's own emission is dropped).
     #[test]

@@ -3,14 +3,14 @@
 use super::props::Props;
 use super::{ior, Builder, Element, SceneError};
 use crate::bsdf::{
-    Blend, Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, MicrofacetKind, NormalMap, Plastic,
-    RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
+    Blend, Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, Mask, MicrofacetKind, NormalMap,
+    Plastic, RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
 };
 use crate::spectrum::{Rgb, SpectrumKind};
 use crate::texture::Texture;
 
 /// The BSDF plugins this importer knows.
-const BSDF_PLUGINS: [&str; 11] = [
+const BSDF_PLUGINS: [&str; 12] = [
     "diffuse",
     "conductor",
     "roughconductor",
@@ -22,6 +22,7 @@ const BSDF_PLUGINS: [&str; 11] = [
     "twosided",
     "normalmap",
     "blendbsdf",
+    "mask",
 ];
 
 /// Builds the BSDF declared by a `<bsdf>` element.
@@ -131,38 +132,58 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             let Some(normalmap) = p.texture(b, "normalmap", SpectrumKind::Unbounded)? else {
                 return Err(el.error("missing parameter \"normalmap\" (a texture)"));
             };
-            let nested = p.objects(&["bsdf", "ref"]);
-            let [inner] = nested[..] else {
-                return Err(el.error(format!(
-                    "normalmap needs exactly one nested BSDF, got {}",
-                    nested.len()
-                )));
-            };
+            let [inner] = nested_bsdfs(b, &mut p, el, "one")?;
             Bsdf::NormalMap(NormalMap {
                 normalmap,
-                nested: Box::new(b.bsdf_value(inner)?),
+                nested: Box::new(inner),
                 flip_invalid_normals: p.bool_or("flip_invalid_normals", true)?,
                 use_shadowing_function: p.bool_or("use_shadowing_function", true)?,
             })
         }
         "blendbsdf" => {
             let weight = p.texture_or(b, "weight", SpectrumKind::Unbounded, 0.5)?;
-            let nested = p.objects(&["bsdf", "ref"]);
-            let [first, second] = nested[..] else {
-                return Err(el.error(format!(
-                    "blendbsdf needs exactly two nested BSDFs, got {}",
-                    nested.len()
-                )));
-            };
             Bsdf::Blend(Blend {
                 weight,
-                nested: Box::new([b.bsdf_value(first)?, b.bsdf_value(second)?]),
+                nested: Box::new(nested_bsdfs(b, &mut p, el, "two")?),
+            })
+        }
+        "mask" => {
+            let opacity = p.texture_or(b, "opacity", SpectrumKind::Unbounded, 0.5)?;
+            let [inner] = nested_bsdfs(b, &mut p, el, "one")?;
+            Bsdf::Mask(Mask {
+                opacity,
+                nested: Box::new(inner),
             })
         }
         _ => unreachable_plugin(el)?,
     };
     p.finish(b)?;
     Ok(bsdf)
+}
+
+/// Exactly `N` nested `<bsdf>`s (or `<ref>`s to them), in file order; `count` spells `N` for
+/// the error.
+fn nested_bsdfs<'a, const N: usize>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+    el: &'a Element,
+    count: &str,
+) -> Result<[Bsdf; N], SceneError> {
+    let nested = p.objects(&["bsdf", "ref"]);
+    if nested.len() != N {
+        let kind = el.attr("type").unwrap_or_default();
+        return Err(el.error(format!(
+            "{kind} needs exactly {count} nested BSDF{}, got {}",
+            if N == 1 { "" } else { "s" },
+            nested.len()
+        )));
+    }
+    let mut out = Vec::with_capacity(N);
+    for n in nested {
+        out.push(b.bsdf_value(n)?);
+    }
+    out.try_into()
+        .map_err(|_| el.error("internal error: nested BSDF count"))
 }
 
 /// Internal consistency guard (never reached: the plugin list was checked above).

@@ -1500,3 +1500,40 @@ fn blendbsdf_mixes_two_bsdfs_in_file_order() {
         assert_body_error_at(&dir, "bad.xml", &body, "blendbsdf", needle);
     }
 }
+
+#[test]
+fn mask_wraps_one_bsdf_with_an_opacity() {
+    let dir = temp_dir("mask");
+    let body = format!(
+        r#"{SENSOR}
+<shape type="sphere">
+  <bsdf type="mask">
+    <texture type="checkerboard" name="opacity"/>
+    <bsdf type="twosided"><bsdf type="diffuse"/></bsdf>
+  </bsdf>
+</shape>
+<shape type="sphere"><bsdf type="mask"><bsdf type="conductor"/></bsdf></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let [Bsdf::Mask(a), Bsdf::Mask(b)] = &scene.bsdfs[..] else {
+        panic!("{:?}", scene.bsdfs)
+    };
+    assert!(matches!(a.opacity, Texture::Checkerboard { .. }));
+    assert!(matches!(*a.nested, Bsdf::TwoSided { .. }));
+    // Mitsuba's default opacity.
+    assert_eq!(b.opacity_at(Vec2::ZERO), 0.5);
+    for (inner, needle) in [
+        (
+            "<bsdf type=\"mask\">\n<float name=\"opacity\" value=\"0.3\"/></bsdf>",
+            "exactly one nested BSDF, got 0",
+        ),
+        (
+            "<bsdf type=\"mask\"><bsdf type=\"diffuse\"/>\n<bsdf type=\"diffuse\"/></bsdf>",
+            "exactly one nested BSDF, got 2",
+        ),
+    ] {
+        let body = format!("{SENSOR}\n{inner}\n<shape type=\"sphere\"/>");
+        assert_body_error_at(&dir, "bad.xml", &body, "mask", needle);
+    }
+}

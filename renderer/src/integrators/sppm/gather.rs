@@ -26,6 +26,8 @@ fn transmits(bsdf: &Bsdf) -> bool {
         Bsdf::TwoSided { front, back } => transmits(front) || transmits(back),
         Bsdf::NormalMap(b) => transmits(&b.nested),
         Bsdf::Blend(b) => b.nested.iter().any(transmits),
+        // The pass-through is a delta: photons beyond it are not this surface's.
+        Bsdf::Mask(b) => transmits(&b.nested),
         _ => false,
     }
 }

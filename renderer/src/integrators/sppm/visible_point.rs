@@ -5,8 +5,9 @@
 //! seen directly or through delta bounces, direct light at glossy vertices (NEE + MIS with the
 //! continuing BSDF sample), and direct light at the visible point itself (NEE + MIS, completed by
 //! one BSDF-sampled ray that only looks for emitters; the photons hold the indirect part).
-//! A diffuse surface under a smooth coating (`plastic`) splits the path on one BSDF sample: the
-//! coating's specular reflection continues it, the diffuse base takes the visible point.
+//! A diffuse surface with a delta part — the smooth coating of `plastic`, the pass-through of a
+//! `mask`, a delta model in a `blendbsdf` — splits the path on one BSDF sample: the delta part
+//! continues it, the diffuse part takes the visible point.
 
 use crate::bsdf::{Bsdf, BsdfSample, Lobe, TransportMode};
 use crate::frame::Frame;
@@ -189,17 +190,19 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
         let wo = si.to_local(si.wo);
         let lobe = bsdf.lobe_for(wo);
         if lobe == Lobe::Diffuse {
+            let p_delta = bsdf.delta_probability(wo, si.uv);
+            let gbuffer = GBufferSample {
+                albedo: bsdf.albedo(si.uv),
+                normal: si.frame.n,
+                depth: path_length,
+            };
             // The G-buffer describes the first diffuse surface, also when the path goes on
-            // through its specular coating (below).
-            if !gbuffer_set {
-                out.gbuffer = GBufferSample {
-                    albedo: bsdf.albedo(si.uv),
-                    normal: si.frame.n,
-                    depth: path_length,
-                };
+            // through its specular coating (below) — unless the surface passes most of the
+            // light on (a mostly transparent `mask`): then what lies behind it.
+            if !gbuffer_set && p_delta < 0.5 {
+                out.gbuffer = gbuffer;
                 gbuffer_set = true;
             }
-            let p_delta = bsdf.delta_probability(wo, si.uv);
             if p_delta > 0.0 {
                 // A diffuse base under a smooth coating (`plastic`): the photons hold the
                 // diffuse part only, so one BSDF sample splits the path. A coating sample (with
@@ -226,6 +229,9 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                     out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
                 }
                 out.vp = Some(visible_point(&si, wo, vp_beta));
+                if !gbuffer_set {
+                    out.gbuffer = gbuffer;
+                }
                 break;
             }
             out.direct += beta * direct_light(scene, &si, bsdf, wo, rng);
