@@ -382,8 +382,9 @@ impl Scene {
         &self.bsdfs[si.material as usize]
     }
 
-    /// The closest surface hit by `ray`.
-    #[inline]
+    /// The closest surface hit by `ray`. Always inlined: the photon and eye loops lose ≈ 6 %
+    /// when the compiler keeps it out of line (measured when the BSDF enum grew).
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
         let hit = self.accel.intersect(ray)?;
         Some(self.interaction(ray, &hit))
