@@ -61,8 +61,9 @@ pub struct ShapeDesc {
     pub geometry: Geometry,
     /// Index into [`SceneDescription::bsdfs`].
     pub bsdf: usize,
-    /// Radiance of a nested `area` emitter (emits from the front side only, as Mitsuba).
-    pub emission: Option<Rgb>,
+    /// Radiance of a nested `area` emitter, a colour or a texture over the shape's uvs (emits
+    /// from the front side only, as Mitsuba).
+    pub emission: Option<crate::texture::Texture>,
 }
 
 /// A light source that is not attached to a shape.
@@ -211,6 +212,6 @@ pub(crate) fn emitting_unit_enclosure(bsdf: usize) -> ShapeDesc {
             flip_normals: true,
         },
         bsdf,
-        emission: Some(crate::spectrum::Rgb::ONE),
+        emission: Some(crate::texture::Texture::Constant(crate::spectrum::Rgb::ONE)),
     }
 }

@@ -15,6 +15,7 @@ use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
 use crate::sampling::Distribution1D;
 use crate::shapes::Shape;
 use crate::spectrum::Rgb;
+use crate::texture::Texture;
 use anyhow::{bail, Result};
 use glam::{Vec2, Vec3};
 
@@ -205,16 +206,21 @@ impl Scene {
                 }
             }
             let shape = Shape::new(&s.geometry);
-            let light = match s.emission {
-                Some(l) if !finite_rgb(l) => bail!(
-                    "area emitter of shape '{}' has invalid radiance {:?}",
-                    s.name,
-                    l
-                ),
-                Some(l) if l.max_element() > 0.0 && shape.area() > 0.0 => {
+            let light = match &s.emission {
+                Some(l) if !l.is_finite_non_negative() => match l {
+                    Texture::Constant(c) => bail!(
+                        "area emitter of shape '{}' has invalid radiance {c:?}",
+                        s.name
+                    ),
+                    _ => bail!(
+                        "area emitter of shape '{}': its radiance texture has negative or non-finite values",
+                        s.name
+                    ),
+                },
+                Some(l) if l.mean().max_element() > 0.0 && shape.area() > 0.0 => {
                     lights.push(Light::Area(AreaLight {
                         shape: i as u32,
-                        radiance: l,
+                        radiance: l.clone(),
                     }));
                     Some(lights.len() as u32 - 1)
                 }
@@ -466,7 +472,7 @@ impl Scene {
     pub fn emitted(&self, si: &SurfaceInteraction, w: Vec3) -> Rgb {
         match si.light {
             Some(l) => match &self.lights[l as usize] {
-                Light::Area(a) => a.eval(si.frame.n, w),
+                Light::Area(a) => a.eval(si.frame.n, w, si.uv),
                 _ => Rgb::ZERO,
             },
             None => Rgb::ZERO,
@@ -644,7 +650,7 @@ mod tests {
                 indices: vec![[0, 1, 2], [0, 2, 3]],
             }),
             bsdf: 0,
-            emission: Some(Rgb::new(1.0, 2.0, 3.0)),
+            emission: Some(Texture::Constant(Rgb::new(1.0, 2.0, 3.0))),
         }
     }
 
@@ -658,7 +664,7 @@ mod tests {
                 flip_normals: false,
             },
             bsdf: 0,
-            emission: Some(Rgb::ONE),
+            emission: Some(Texture::Constant(Rgb::ONE)),
         }
     }
 
@@ -855,5 +861,84 @@ mod tests {
             .unwrap();
         assert!(ls.delta && (ls.wi - Vec3::Y).length() < 1e-6);
         assert!((ls.weight - Rgb::splat(2.0)).abs().max_element() < 1e-5);
+    }
+
+    /// An area light with a checkerboard radiance over its uvs (a 2×1 quad facing down at
+    /// y = 1, uv spanning the quad): photons carry L(uv)·π/pdf, averaging to its power π·A·L̄;
+    /// light samples carry L at the sampled point, so E[weight·cos θ] is the irradiance found by
+    /// quadrature over the quad; and the light seen from below shows the checkerboard.
+    #[test]
+    fn textured_area_light_emits_its_texture() {
+        let (c0, c1) = (Rgb::new(2.0, 1.0, 0.5), Rgb::new(0.0, 0.5, 3.0));
+        let checker = Texture::Checkerboard {
+            color0: c0,
+            color1: c1,
+            to_uv: glam::Mat3::from_scale(glam::Vec2::new(4.0, 2.0)),
+        };
+        let mut light = ceiling_light();
+        if let Geometry::Mesh(m) = &mut light.geometry {
+            m.uvs = Some(vec![
+                Vec2::new(0.0, 0.0),
+                Vec2::new(1.0, 0.0),
+                Vec2::new(1.0, 1.0),
+                Vec2::new(0.0, 1.0),
+            ]);
+        }
+        light.emission = Some(checker.clone());
+        let scene = Scene::build(&desc(vec![light], vec![])).unwrap();
+        let area = 2.0;
+        let power = (c0 + c1) * 0.5 * (std::f32::consts::PI * area);
+        let mut rng = rng_for(5, 0, 0);
+        let n = 200_000;
+        let mut flux = glam::DVec3::ZERO;
+        for _ in 0..n {
+            let e = scene
+                .sample_emission(rng.next_f32(), rng.next_2d(), rng.next_2d())
+                .unwrap();
+            flux += e.flux.as_dvec3();
+        }
+        let flux = (flux / n as f64).as_vec3();
+        assert!(
+            ((flux - power) / power).abs().max_element() < 0.01,
+            "{flux} vs {power}"
+        );
+        // Irradiance at a point below the light, off-centre.
+        let p = Vec3::new(0.3, 0.0, 0.1);
+        let mut e_nee = glam::DVec3::ZERO;
+        for _ in 0..n {
+            if let Some(ls) = scene.sample_li(p, rng.next_f32(), rng.next_2d()) {
+                e_nee += (ls.weight * ls.wi.y.max(0.0)).as_dvec3();
+            }
+        }
+        let e_nee = (e_nee / n as f64).as_vec3();
+        let (nx, nz) = (400, 200);
+        let mut e_quad = Rgb::ZERO;
+        for i in 0..nx {
+            for j in 0..nz {
+                let (u, v) = ((i as f32 + 0.5) / nx as f32, (j as f32 + 0.5) / nz as f32);
+                let q = Vec3::new(-1.0 + 2.0 * u, 1.0, -0.5 + v);
+                let d = q - p;
+                let r2 = d.length_squared();
+                let cos = d.y / r2.sqrt();
+                e_quad += checker.eval(Vec2::new(u, v)) * (cos * cos / r2);
+            }
+        }
+        e_quad *= area / (nx * nz) as f32;
+        assert!(
+            ((e_nee - e_quad) / e_quad).abs().max_element() < 0.01,
+            "{e_nee} vs {e_quad}"
+        );
+        // Seen from below, the light shows its texture.
+        for uv in [
+            Vec2::new(0.1, 0.1),
+            Vec2::new(0.4, 0.1),
+            Vec2::new(0.9, 0.8),
+        ] {
+            let q = Vec3::new(-1.0 + 2.0 * uv.x, 1.0, -0.5 + uv.y);
+            let si = scene
+                .intersect(&Ray::new(Vec3::new(q.x, 0.0, q.z), Vec3::Y))
+                .unwrap();
+            assert_eq!(scene.emitted(&si, -Vec3::Y), checker.eval(uv), "{uv}");
+        }
     }
 }

@@ -86,6 +86,17 @@ pub enum Texture {
 }
 
 impl Texture {
+    /// Whether every value the texture can take is finite and non-negative (a valid emitted
+    /// radiance).
+    pub fn is_finite_non_negative(&self) -> bool {
+        let ok = |c: &Rgb| c.is_finite() && c.min_element() >= 0.0;
+        match self {
+            Texture::Constant(c) => ok(c),
+            Texture::Checkerboard { color0, color1, .. } => ok(color0) && ok(color1),
+            Texture::Bitmap { image, .. } => image.texels.iter().all(ok),
+        }
+    }
+
     /// Whether the texture is the same everywhere.
     pub fn is_constant(&self) -> bool {
         matches!(self, Texture::Constant(_))

@@ -1,4 +1,5 @@
-//! Area light (Mitsuba's `area`): constant radiance leaving the front side of a shape.
+//! Area light (Mitsuba's `area`): radiance leaving the front side of a shape, a colour or a
+//! texture over the shape's uvs (points are sampled uniformly by area either way, as Mitsuba).
 
 use super::{EmissionSample, LightSample};
 use crate::frame::Frame;
@@ -6,24 +7,26 @@ use crate::math::{coordinate_system, spawn_ray};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_uniform_cone, uniform_cone_pdf};
 use crate::shapes::{Shape, Sphere};
 use crate::spectrum::Rgb;
+use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
 /// Emission attached to a shape.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct AreaLight {
     /// Index of the shape in the scene.
     pub shape: u32,
-    /// Emitted radiance.
-    pub radiance: Rgb,
+    /// Emitted radiance (`radiance`), looked up at the surface's uv.
+    pub radiance: Texture,
 }
 
 impl AreaLight {
-    /// Radiance leaving the surface with normal `n` in direction `w` (front side only).
+    /// Radiance leaving the surface with normal `n` at texture coordinates `uv` in direction
+    /// `w` (front side only).
     #[inline]
-    pub fn eval(&self, n: Vec3, w: Vec3) -> Rgb {
+    pub fn eval(&self, n: Vec3, w: Vec3, uv: Vec2) -> Rgb {
         if n.dot(w) > 0.0 {
-            self.radiance
+            self.radiance.eval(uv)
         } else {
             Rgb::ZERO
         }
@@ -51,7 +54,7 @@ impl AreaLight {
                     wi,
                     p: q,
                     dist,
-                    weight: self.radiance / pdf,
+                    weight: self.radiance.eval(sphere.uv_at(q)) / pdf,
                     pdf,
                     delta: false,
                     infinite: false,
@@ -79,7 +82,7 @@ impl AreaLight {
             wi,
             p: s.p,
             dist,
-            weight: self.radiance / pdf,
+            weight: self.radiance.eval(s.uv) / pdf,
             pdf,
             delta: false,
             infinite: false,
@@ -109,7 +112,8 @@ impl AreaLight {
         dist2 / (cos_l * shape.area())
     }
 
-    /// A photon from a uniform point, cosine-distributed over the front hemisphere: flux L·π·A.
+    /// A photon from a uniform point, cosine-distributed over the front hemisphere: flux
+    /// L(uv)·π / pdf (L·π·A for a uniform radiance).
     pub fn sample_emission(
         &self,
         shape: &Shape,
@@ -123,14 +127,15 @@ impl AreaLight {
         let d = (t * local.x + b * local.y + s.n * local.z).normalize();
         EmissionSample {
             ray: spawn_ray(s.p, s.n, d),
-            flux: self.radiance * (PI / s.pdf),
+            flux: self.radiance.eval(s.uv) * (PI / s.pdf),
             light: 0,
         }
     }
 
-    /// Power L·π·A.
+    /// Power L·π·A, with a texture's mean over its texels for L (light selection only needs a
+    /// proportion; called once, when the scene is built).
     pub fn power(&self, shape: &Shape) -> Rgb {
-        self.radiance * (PI * shape.area())
+        self.radiance.mean() * (PI * shape.area())
     }
 }
 

@@ -116,6 +116,11 @@ impl Sphere {
         }
     }
 
+    /// Texture coordinates of the surface point nearest `p` (the uvs of [`Sphere::hit_geometry`]).
+    pub fn uv_at(&self, p: Vec3) -> Vec2 {
+        direction_to_spherical_uv(self.to_local * self.outward(p))
+    }
+
     /// A point uniformly distributed over the sphere.
     pub fn sample_area(&self, u: Vec2) -> AreaSample {
         let local = square_to_uniform_sphere(u);

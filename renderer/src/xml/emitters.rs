@@ -7,6 +7,7 @@ use super::{Builder, Element, SceneError};
 use crate::description::EmitterDesc;
 use crate::lights::{EnvmapError, EnvmapLight};
 use crate::spectrum::{Rgb, SpectrumKind};
+use crate::texture::Texture;
 use glam::{Mat3, Mat4, Vec3};
 
 const EMISSION: SpectrumKind = SpectrumKind::Emission;
@@ -132,7 +133,7 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
 pub(super) fn area_radiance<'a>(
     b: &mut Builder<'a>,
     el: &'a Element,
-) -> Result<Option<Rgb>, SceneError> {
+) -> Result<Option<Texture>, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
     if kind != "area" {
@@ -141,7 +142,16 @@ pub(super) fn area_radiance<'a>(
         return Ok(None);
     }
     let mut p = Props::parse(b, el)?;
-    let radiance = color(b, &mut p, "radiance")?;
+    // A colour, or a texture over the shape's uvs (Mitsuba accepts both).
+    let radiance_el = p.element_of("radiance");
+    let radiance = p
+        .texture(b, "radiance", EMISSION)?
+        .unwrap_or(Texture::Constant(Rgb::ONE));
+    if !radiance.is_finite_non_negative() {
+        return Err(radiance_el.error(
+            "\"radiance\" must be finite and non-negative (a texel of its texture is not)",
+        ));
+    }
     p.ignore(
         b,
         &["sampling_weight"],

@@ -436,21 +436,13 @@ impl<'a> Props<'a> {
         let Some((value, el)) = self.take(name) else {
             return Ok(None);
         };
-        let emission = kind == SpectrumKind::Emission;
         let tex = match value {
             // Mitsuba: a plain number stays grey, also for emitters.
             Value::Float(v) => Texture::Constant(Rgb::splat(v as f32)),
             Value::Integer(v) => Texture::Constant(Rgb::splat(v as f32)),
             Value::Rgb(c) => Texture::Constant(c),
             Value::Spectrum(s) => Texture::Constant(s.to_rgb(kind)),
-            Value::Object(o) if o.tag == "texture" || o.tag == "ref" => {
-                if emission {
-                    return Err(el.error(format!(
-                        "textured emission (\"{name}\") is not supported; use <rgb> or <spectrum>"
-                    )));
-                }
-                b.texture_value(o)?
-            }
+            Value::Object(o) if o.tag == "texture" || o.tag == "ref" => b.texture_value(o)?,
             v => {
                 return Err(Self::wrong_type(
                     el,

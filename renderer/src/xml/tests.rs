@@ -778,7 +778,7 @@ fn spectra_emitters_and_cameras() {
     };
     assert!((d.reflectance.mean() - Vec3::ONE).abs().max_element() < 1e-2);
     // A uniform emission spectrum is D65-unbalanced (Mitsuba: 3.614, 2.845, 2.727).
-    let e = scene.shapes[0].emission.unwrap();
+    let e = scene.shapes[0].emission.as_ref().unwrap().mean();
     assert!(
         (e - Vec3::new(3.61438, 2.84487, 2.72675))
             .abs()
@@ -921,7 +921,7 @@ fn external_scenes_load() {
             "cbox" => {
                 assert_eq!(scene.shapes.len(), 8);
                 // Mitsuba 3.9 scalar_rgb: the light's spectrum → (20.7108, 10.8546, 2.77115).
-                let e = scene.shapes[0].emission.unwrap();
+                let e = scene.shapes[0].emission.as_ref().unwrap().mean();
                 assert!(
                     (e - Vec3::new(20.7108, 10.8546, 2.77115))
                         .abs()
@@ -1536,4 +1536,40 @@ fn mask_wraps_one_bsdf_with_an_opacity() {
         let body = format!("{SENSOR}\n{inner}\n<shape type=\"sphere\"/>");
         assert_body_error_at(&dir, "bad.xml", &body, "mask", needle);
     }
+}
+
+#[test]
+fn area_emitters_take_a_texture_as_radiance() {
+    let dir = temp_dir("textured-emitter");
+    let body = format!(
+        r#"{SENSOR}
+<shape type="rectangle">
+  <emitter type="area">
+    <texture type="checkerboard" name="radiance">
+      <rgb name="color0" value="0.9, 0.5, 0.1"/>
+    </texture>
+  </emitter>
+</shape>
+<shape type="sphere"><emitter type="area"><rgb name="radiance" value="2, 3, 4"/></emitter></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let Some(Texture::Checkerboard { color0, .. }) = &scene.shapes[0].emission else {
+        panic!("{:?}", scene.shapes[0].emission)
+    };
+    assert_eq!(*color0, Vec3::new(0.9, 0.5, 0.1));
+    assert!(
+        matches!(scene.shapes[1].emission, Some(Texture::Constant(c)) if c == Vec3::new(2.0, 3.0, 4.0))
+    );
+    // Point lights still need a colour.
+    let body = format!(
+        "{SENSOR}\n<emitter type=\"point\">\n<texture type=\"checkerboard\" name=\"intensity\"/></emitter>"
+    );
+    assert_body_error_at(
+        &dir,
+        "bad.xml",
+        &body,
+        "checkerboard",
+        "must be a constant colour",
+    );
 }

@@ -43,7 +43,7 @@ fn quad(name: &str, c: Vec3, u: Vec3, v: Vec3, bsdf: usize, emission: Option<Rgb
             indices: vec![[0, 1, 2], [0, 2, 3]],
         }),
         bsdf,
-        emission,
+        emission: emission.map(Texture::Constant),
     }
 }
 
