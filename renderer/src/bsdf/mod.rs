@@ -402,6 +402,36 @@ impl Bsdf {
         }
     }
 
+    /// The shading normal the model works with for viewer `wo`, in the shading frame: +z,
+    /// except under a normal map (also inside `twosided`, `mask` or `blendbsdf`: the first
+    /// normal map found), where it is the perturbed normal (Mitsuba's `sh_frame` override). The
+    /// G-buffer records it.
+    pub fn shading_normal(&self, wo: Vec3, uv: Vec2) -> Vec3 {
+        match self {
+            Bsdf::NormalMap(b) => b.perturbed_normal(wo, uv),
+            Bsdf::Mask(b) => b.nested.shading_normal(wo, uv),
+            Bsdf::Blend(b) => {
+                let (n0, n1) = (
+                    b.nested[0].shading_normal(wo, uv),
+                    b.nested[1].shading_normal(wo, uv),
+                );
+                if n0 != Vec3::Z {
+                    n0
+                } else {
+                    n1
+                }
+            }
+            Bsdf::TwoSided { front, back } => {
+                if wo.z >= 0.0 {
+                    front.shading_normal(wo, uv)
+                } else {
+                    flip(back.shading_normal(flip(wo), uv))
+                }
+            }
+            _ => Vec3::Z,
+        }
+    }
+
     /// Whether [`Bsdf::eval`] can be non-zero (next-event estimation is worthwhile).
     pub fn has_non_delta(&self) -> bool {
         match self {

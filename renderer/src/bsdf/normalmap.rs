@@ -125,6 +125,11 @@ impl NormalMap {
         self.nested.pdf(frame.to_local(wo), pwi, uv)
     }
 
+    /// The perturbed shading normal for viewer `wo`, in the shading frame.
+    pub fn perturbed_normal(&self, wo: Vec3, uv: Vec2) -> Vec3 {
+        self.frame(wo, uv).n
+    }
+
     /// Probability that the nested model picks a delta lobe, seen from `wo` in the perturbed
     /// frame.
     pub fn delta_probability(&self, wo: Vec3, uv: Vec2) -> f32 {
@@ -268,5 +273,24 @@ mod tests {
         let direct = nm.nested.eval(wo, wi, Vec2::ZERO, TransportMode::Radiance);
         let mapped = nm.eval(wo, wi, Vec2::ZERO, TransportMode::Radiance);
         assert!((direct - mapped).abs().max_element() < 1e-6);
+    }
+
+    /// The shading normal the G-buffer records: the perturbed one under a normal map (also
+    /// seen from the back through `twosided`, mirrored), +z for plain models.
+    #[test]
+    fn shading_normal_is_the_perturbed_one() {
+        let nm = Bsdf::NormalMap(diffuse_under(Rgb::new(0.8, 0.5, 0.9)));
+        let wo = Vec3::new(0.1, 0.2, 0.97).normalize();
+        let n = nm.shading_normal(wo, Vec2::ZERO);
+        assert!((n - Vec3::new(0.6, 0.0, 0.8)).length() < 1e-6, "{n}");
+        let two = Bsdf::TwoSided {
+            front: Box::new(nm.clone()),
+            back: Box::new(nm),
+        };
+        let below = Vec3::new(wo.x, wo.y, -wo.z);
+        let n = two.shading_normal(below, Vec2::ZERO);
+        assert!((n - Vec3::new(0.6, 0.0, -0.8)).length() < 1e-6, "{n}");
+        let plain = diffuse_under(Rgb::new(0.8, 0.5, 0.9)).nested;
+        assert_eq!(plain.shading_normal(wo, Vec2::ZERO), Vec3::Z);
     }
 }

@@ -193,7 +193,7 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
             let p_delta = bsdf.delta_probability(wo, si.uv);
             let gbuffer = GBufferSample {
                 albedo: bsdf.albedo(si.uv),
-                normal: si.frame.n,
+                normal: si.frame.to_world(bsdf.shading_normal(wo, si.uv)),
                 depth: path_length,
             };
             // The G-buffer describes the first diffuse surface, also when the path goes on
