@@ -11,7 +11,7 @@ use common::{assert_same, fresh_dir, snapshot, test_config};
 use datagen::manifest::Manifest;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const BIN: &str = env!("CARGO_BIN_EXE_datagen");
 
@@ -36,6 +36,28 @@ fn datagen(args: &[&str]) -> Command {
         cmd.env_remove(var);
     }
     cmd
+}
+
+/// Bundles (EXR files, not the hidden temporaries of atomic writes) finished under `dir`.
+fn finished_bundles(dir: &Path) -> usize {
+    fn walk(dir: &Path) -> usize {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return 0;
+        };
+        entries
+            .flatten()
+            .map(|e| {
+                let p = e.path();
+                let name = e.file_name().to_string_lossy().into_owned();
+                if p.is_dir() {
+                    walk(&p)
+                } else {
+                    usize::from(name.ends_with(".exr") && !name.starts_with('.'))
+                }
+            })
+            .sum()
+    }
+    walk(dir)
 }
 
 fn ok(out: Output) -> Output {
@@ -68,11 +90,9 @@ fn shards_kill_resume_and_check() {
 
     // Reference: one uninterrupted process.
     let single = work.join("single");
-    let start = Instant::now();
     ok(render(&config, &single, &["--threads", "2"])
         .output()
         .unwrap());
-    let full_run = start.elapsed();
     let reference = snapshot(&single);
     let manifest = Manifest::load(&single).unwrap();
     assert_eq!(manifest.scenes.len(), 5);
@@ -98,23 +118,31 @@ fn shards_kill_resume_and_check() {
     }
     assert_same(&reference, &snapshot(&sharded));
 
-    // Kill -9 at several moments (fractions of an uninterrupted run, so on any machine the
-    // kill lands mid-run: during a render, between jobs or inside a write), resume, compare.
-    for (k, fraction) in [0.02f64, 0.25, 0.5].into_iter().enumerate() {
+    // Kill -9 at several moments of a run — before its first finished bundle, right after it,
+    // and halfway through the bundles — then resume and compare. The moments are read from the
+    // run's own progress (finished EXR files), not from a clock, so the kill lands mid-run on
+    // any machine, however loaded; within a moment it may hit a render, the gap between jobs or
+    // a write.
+    let total = reference.keys().filter(|k| k.ends_with(".exr")).count();
+    assert!(total >= 4, "{total} bundles");
+    for (k, after) in [0usize, 1, total / 2].into_iter().enumerate() {
         let dir = work.join(format!("killed{k}"));
         let mut child = render(&config, &dir, &["--threads", "1"]).spawn().unwrap();
-        let delay = full_run.mul_f64(fraction);
-        let start = Instant::now();
-        let mut finished = false;
-        while start.elapsed() < delay && !finished {
-            finished = child.try_wait().unwrap().is_some();
+        let finished = loop {
+            let done = child.try_wait().unwrap().is_some();
+            if done || finished_bundles(&dir) >= after {
+                break done;
+            }
             std::thread::sleep(Duration::from_millis(1));
+        };
+        if after == 0 {
+            std::thread::sleep(Duration::from_millis(20));
         }
         let _ = child.kill(); // SIGKILL
         let _ = child.wait();
         assert!(
             !finished && !dir.join("manifest.json").exists(),
-            "kill {k} at {delay:?} came after the run had finished ({full_run:?} uninterrupted)"
+            "kill {k} (after {after} of {total} bundles) came after the run had finished"
         );
         ok(render(&config, &dir, &["--threads", "2"]).output().unwrap());
         assert_same(&reference, &snapshot(&dir));
