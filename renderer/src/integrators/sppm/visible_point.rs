@@ -204,12 +204,13 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                 gbuffer_set = true;
             }
             if p_delta > 0.0 {
-                // A diffuse base under a smooth coating (`plastic`): the photons hold the
-                // diffuse part only, so one BSDF sample splits the path. A coating sample (with
+                // A diffuse surface with a delta part (the smooth coating of `plastic`, a
+                // mask's pass-through, a delta model in a blend): the photons hold the
+                // non-delta part only, so one BSDF sample splits the path. A delta sample (with
                 // probability p_delta, its weight already divided by it) continues the path as
-                // a specular bounce, finding what the coating reflects, emitters and lit
-                // surfaces alike. Otherwise the visible point is stored here, with β/(1 −
-                // p_delta) for NEE and the photons, and the sample serves as the MIS probe.
+                // a specular bounce, finding what lies along it, emitters and lit surfaces
+                // alike. Otherwise the visible point is stored here, with β/(1 − p_delta) for
+                // NEE and the photons, and the sample serves as the MIS probe.
                 let u_lobe = rng.next_f32();
                 let u = rng.next_2d();
                 let bs = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance);
