@@ -97,6 +97,22 @@ impl Texture {
         }
     }
 
+    /// The texture as one number at `uv`, as Mitsuba's `eval_1`: a grey value as it is, a
+    /// colour by its luminance; NaN reads as 0.
+    pub fn eval_1(&self, uv: Vec2) -> f32 {
+        let c = self.eval(uv);
+        let v = if c.x == c.y && c.y == c.z {
+            c.x
+        } else {
+            crate::spectrum::luminance(c)
+        };
+        if v.is_nan() {
+            0.0
+        } else {
+            v
+        }
+    }
+
     /// Whether the texture is the same everywhere.
     pub fn is_constant(&self) -> bool {
         matches!(self, Texture::Constant(_))

@@ -13,7 +13,7 @@
 //! opacity · p, which is what [`Bsdf::pdf`] returns and the integrators' MIS needs.
 
 use super::{Bsdf, BsdfSample, TransportMode};
-use crate::spectrum::{luminance, Rgb};
+use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
@@ -26,20 +26,9 @@ pub struct Mask {
     pub nested: Box<Bsdf>,
 }
 
-/// A texture read as one value in [0, 1]: grey values as they are, colours by luminance (as
-/// Mitsuba's `eval_1`); NaN counts as 0.
+/// A texture read as one value in [0, 1] ([`Texture::eval_1`], clamped).
 pub(super) fn unit_scalar(texture: &Texture, uv: Vec2) -> f32 {
-    let c = texture.eval(uv);
-    let v = if c.x == c.y && c.y == c.z {
-        c.x
-    } else {
-        luminance(c)
-    };
-    if v.is_nan() {
-        0.0
-    } else {
-        v.clamp(0.0, 1.0)
-    }
+    texture.eval_1(uv).clamp(0.0, 1.0)
 }
 
 impl Mask {

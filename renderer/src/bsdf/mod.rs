@@ -136,6 +136,8 @@ pub struct Conductor {
 pub struct RoughConductor {
     /// `distribution`, `alpha`/`alpha_u`/`alpha_v` (Mitsuba defaults: beckmann, 0.1).
     pub roughness: Roughness,
+    /// `alpha` given as a texture (isotropic): replaces `roughness`'s alphas at each uv.
+    pub alpha_texture: Option<Texture>,
     /// Complex IOR; `None` is a perfect reflector.
     pub ior: Option<ConductorIor>,
     /// `specular_reflectance` multiplier (default 1).
@@ -169,6 +171,8 @@ pub struct ThinDielectric {
 pub struct RoughDielectric {
     /// `distribution`, `alpha`/`alpha_u`/`alpha_v` (defaults: beckmann, 0.1).
     pub roughness: Roughness,
+    /// `alpha` given as a texture (isotropic): replaces `roughness`'s alphas at each uv.
+    pub alpha_texture: Option<Texture>,
     /// Relative index of refraction `int_ior / ext_ior`.
     pub eta: f32,
     /// `specular_reflectance` multiplier (default 1).
@@ -317,8 +321,8 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
-            Bsdf::RoughConductor(b) => b.pdf(wo, wi),
-            Bsdf::RoughDielectric(b) => b.pdf(wo, wi),
+            Bsdf::RoughConductor(b) => b.pdf(wo, wi, uv),
+            Bsdf::RoughDielectric(b) => b.pdf(wo, wi, uv),
             Bsdf::Plastic(b) => b.pdf(wo, wi),
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
             Bsdf::NormalMap(b) => b.pdf(wo, wi, uv),
@@ -342,8 +346,8 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) | Bsdf::RoughPlastic(_) => Lobe::Diffuse,
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Lobe::Delta,
-            Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
-            Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
+            Bsdf::RoughConductor(b) => rough_lobe(&b.roughness, &b.alpha_texture),
+            Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness, &b.alpha_texture),
             Bsdf::NormalMap(b) => b.nested.lobe(),
             // The most diffuse of the two: a visible point is stored where either model has a
             // broad lobe (delta parts are split off by the eye path, glossy ones go to photons).
@@ -472,14 +476,39 @@ impl Bsdf {
     }
 }
 
+/// The microfacet distribution at `uv`: `roughness`, or the isotropic alpha an `alpha`
+/// texture gives there (Mitsuba's `eval_1`).
+fn distribution_at(
+    roughness: &Roughness,
+    alpha_texture: &Option<Texture>,
+    uv: Vec2,
+) -> microfacet::MicrofacetDistribution {
+    match alpha_texture {
+        None => microfacet::MicrofacetDistribution::new(roughness),
+        Some(t) => {
+            let a = t.eval_1(uv);
+            microfacet::MicrofacetDistribution::new(&Roughness {
+                kind: roughness.kind,
+                alpha_u: a,
+                alpha_v: a,
+            })
+        }
+    }
+}
+
 /// Mirror a local direction to the other side of the surface (twosided's back face).
 #[inline]
 fn flip(w: Vec3) -> Vec3 {
     Vec3::new(w.x, w.y, -w.z)
 }
 
-fn rough_lobe(r: &Roughness) -> Lobe {
-    if r.alpha_u.max(r.alpha_v) < GLOSSY_ALPHA_THRESHOLD {
+/// The class of a rough model: by its larger alpha, or a textured alpha's mean.
+fn rough_lobe(r: &Roughness, alpha_texture: &Option<Texture>) -> Lobe {
+    let alpha = match alpha_texture {
+        Some(t) => Texture::Constant(t.mean()).eval_1(Vec2::ZERO),
+        None => r.alpha_u.max(r.alpha_v),
+    };
+    if alpha < GLOSSY_ALPHA_THRESHOLD {
         Lobe::Glossy
     } else {
         Lobe::Diffuse

@@ -3,7 +3,6 @@
 
 use super::conductor::conductor_reflectance;
 use super::fresnel::reflect_about;
-use super::microfacet::MicrofacetDistribution;
 use super::{BsdfSample, RoughConductor};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
@@ -13,7 +12,7 @@ impl RoughConductor {
         if wo.z <= 0.0 {
             return None;
         }
-        let distr = MicrofacetDistribution::new(&self.roughness);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
         let (m, pdf_m) = distr.sample(wo, u);
         let wi = reflect_about(wo, m);
         if pdf_m <= 0.0 || wi.z <= 0.0 {
@@ -41,7 +40,7 @@ impl RoughConductor {
             return Rgb::ZERO;
         }
         let h = (wo + wi).normalize();
-        let distr = MicrofacetDistribution::new(&self.roughness);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
         let d = distr.eval(h);
         if d == 0.0 {
             return Rgb::ZERO;
@@ -51,7 +50,7 @@ impl RoughConductor {
         f * (d * g / (4.0 * wo.z * wi.z)) * self.specular_reflectance.eval(uv)
     }
 
-    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
@@ -60,7 +59,7 @@ impl RoughConductor {
         if wo.dot(m) <= 0.0 || wi.dot(m) <= 0.0 {
             return 0.0;
         }
-        let distr = MicrofacetDistribution::new(&self.roughness);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
         distr.eval(m) * distr.smith_g1(wo, m) / (4.0 * wo.z)
     }
 }

@@ -2,7 +2,6 @@
 //! usable from both sides; radiance is scaled by 1/η² on refraction.
 
 use super::fresnel::{fresnel_dielectric, reflect_about, refract_about};
-use super::microfacet::MicrofacetDistribution;
 use super::{BsdfSample, RoughDielectric, TransportMode};
 use crate::spectrum::Rgb;
 use glam::{Vec2, Vec3};
@@ -20,7 +19,7 @@ impl RoughDielectric {
         if cos_o == 0.0 {
             return None;
         }
-        let distr = MicrofacetDistribution::new(&self.roughness);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
         // Sample a normal visible from the side `wo` is on (the distribution is symmetric).
         let (m, pdf_m) = distr.sample(wo * cos_o.signum(), u);
         if pdf_m.is_nan() || pdf_m <= 0.0 {
@@ -84,7 +83,7 @@ impl RoughDielectric {
         let Some((m, eta)) = self.half_vector(wo, wi, reflect) else {
             return Rgb::ZERO;
         };
-        let distr = MicrofacetDistribution::new(&self.roughness);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
         let d = distr.eval(m);
         if d == 0.0 {
             return Rgb::ZERO;
@@ -106,7 +105,7 @@ impl RoughDielectric {
         }
     }
 
-    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
         let (cos_o, cos_i) = (wo.z, wi.z);
         if cos_o == 0.0 || cos_i == 0.0 {
             return 0.0;
@@ -125,7 +124,7 @@ impl RoughDielectric {
             let denom = wo.dot(m) + eta * wi.dot(m);
             eta * eta * wi.dot(m) / (denom * denom)
         };
-        let distr = MicrofacetDistribution::new(&self.roughness);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
         let f = fresnel_dielectric(wo.dot(m), self.eta).r;
         let prob = distr.pdf(wo * cos_o.signum(), m) * if reflect { f } else { 1.0 - f };
         let pdf = prob * dwh_dwi.abs();

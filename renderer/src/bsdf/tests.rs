@@ -51,6 +51,7 @@ fn diffuse(c: Texture) -> Bsdf {
 fn rough_conductor(r: Roughness, ior: Option<ConductorIor>) -> Bsdf {
     Bsdf::RoughConductor(RoughConductor {
         roughness: r,
+        alpha_texture: None,
         ior,
         specular_reflectance: constant(1.0),
     })
@@ -59,6 +60,7 @@ fn rough_conductor(r: Roughness, ior: Option<ConductorIor>) -> Bsdf {
 fn rough_dielectric(r: Roughness, eta: f32) -> Bsdf {
     Bsdf::RoughDielectric(RoughDielectric {
         roughness: r,
+        alpha_texture: None,
         eta,
         specular_reflectance: constant(1.0),
         specular_transmittance: constant(1.0),
@@ -1162,6 +1164,52 @@ fn delta_probability_is_the_frequency_of_delta_samples() {
                 (freq - p).abs() <= 5.0 * sigma + 1e-3,
                 "{name} wo={wo}: delta samples {freq} vs delta_probability {p}"
             );
+        }
+    }
+}
+
+/// An `alpha` texture gives, at each uv, exactly the model with that constant alpha (eval, pdf
+/// and samples), for the conductor and the dielectric; a colour texel counts by its luminance.
+#[test]
+fn textured_alpha_is_the_constant_model_at_each_uv() {
+    use MicrofacetKind::Ggx;
+    let checker = Texture::Checkerboard {
+        color0: Rgb::splat(0.15),
+        color1: Rgb::new(0.5, 0.3, 0.2),
+        to_uv: glam::Mat3::IDENTITY,
+    };
+    let (uv0, uv1) = (Vec2::new(0.25, 0.25), Vec2::new(0.75, 0.25));
+    let a1 = crate::spectrum::luminance(Rgb::new(0.5, 0.3, 0.2));
+    let textured = |constant: Bsdf| match constant {
+        Bsdf::RoughConductor(b) => Bsdf::RoughConductor(RoughConductor {
+            alpha_texture: Some(checker.clone()),
+            ..b
+        }),
+        Bsdf::RoughDielectric(b) => Bsdf::RoughDielectric(RoughDielectric {
+            alpha_texture: Some(checker.clone()),
+            ..b
+        }),
+        _ => unreachable!(),
+    };
+    let mut r = rng(9);
+    for (uv, alpha) in [(uv0, 0.15), (uv1, a1)] {
+        for constant in [
+            rough_conductor(rough(Ggx, alpha, alpha), gold()),
+            rough_dielectric(rough(Ggx, alpha, alpha), 1.5),
+        ] {
+            let t = textured(constant.clone());
+            for _ in 0..200 {
+                let wo = dir(70.0 * uniform(&mut r), 360.0 * uniform(&mut r));
+                let wi = dir(170.0 * uniform(&mut r), 360.0 * uniform(&mut r));
+                let mode = TransportMode::Radiance;
+                assert_eq!(t.eval(wo, wi, uv, mode), constant.eval(wo, wi, uv, mode));
+                assert_eq!(t.pdf(wo, wi, uv), constant.pdf(wo, wi, uv));
+                let (ul, u) = (uniform(&mut r), uniform2(&mut r));
+                assert_eq!(
+                    t.sample(wo, uv, ul, u, mode),
+                    constant.sample(wo, uv, ul, u, mode)
+                );
+            }
         }
     }
 }

@@ -50,16 +50,21 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             ior: conductor_ior(b, &mut p)?,
             specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
         }),
-        "roughconductor" => Bsdf::RoughConductor(RoughConductor {
-            roughness: roughness(b, &mut p, true)?,
-            ior: conductor_ior(b, &mut p)?,
-            specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
-        }),
+        "roughconductor" => {
+            let (roughness, alpha_texture) = roughness(b, &mut p, true)?;
+            Bsdf::RoughConductor(RoughConductor {
+                roughness,
+                alpha_texture,
+                ior: conductor_ior(b, &mut p)?,
+                specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
+            })
+        }
         "dielectric" | "thindielectric" | "roughdielectric" => {
-            let roughness = if kind == "roughdielectric" {
-                Some(roughness(b, &mut p, true)?)
+            let (roughness, alpha_texture) = if kind == "roughdielectric" {
+                let (r, t) = roughness(b, &mut p, true)?;
+                (Some(r), t)
             } else {
-                None
+                (None, None)
             };
             let eta = relative_ior(&mut p, "bk7")?;
             let specular_reflectance = p.texture_or(b, "specular_reflectance", refl, 1.0)?;
@@ -77,6 +82,7 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
                 }),
                 (_, Some(roughness)) => Bsdf::RoughDielectric(RoughDielectric {
                     roughness,
+                    alpha_texture,
                     eta,
                     specular_reflectance,
                     specular_transmittance,
@@ -91,7 +97,18 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             nonlinear: p.bool_or("nonlinear", false)?,
         }),
         "roughplastic" => Bsdf::RoughPlastic(RoughPlastic::new(
-            roughness(b, &mut p, false)?,
+            {
+                let alpha_el = p.element_of("alpha");
+                match roughness(b, &mut p, false)? {
+                    (r, None) => r,
+                    (_, Some(_)) => {
+                        return Err(alpha_el.error(
+                            "roughplastic needs a constant \"alpha\" (its coating tables are \
+                             computed for one roughness)",
+                        ))
+                    }
+                }
+            },
             relative_ior(&mut p, "polypropylene")?,
             p.texture_or(b, "diffuse_reflectance", refl, 0.5)?,
             p.texture_or(b, "specular_reflectance", refl, 1.0)?,
@@ -198,12 +215,13 @@ fn relative_ior(p: &mut Props, default_int: &str) -> Result<f32, SceneError> {
     Ok((int_ior / ext_ior) as f32)
 }
 
-/// `distribution`, `alpha` or `alpha_u`/`alpha_v` (Mitsuba defaults: beckmann, 0.1).
+/// `distribution`, `alpha` or `alpha_u`/`alpha_v` (Mitsuba defaults: beckmann, 0.1), and the
+/// texture when `alpha` is one (isotropic only; its mean fills the constant roughness).
 fn roughness<'a>(
     b: &mut Builder<'a>,
     p: &mut Props<'a>,
     anisotropic: bool,
-) -> Result<Roughness, SceneError> {
+) -> Result<(Roughness, Option<Texture>), SceneError> {
     let dist_el = p.element_of("distribution");
     let kind = match p.string("distribution")?.unwrap_or("beckmann") {
         "beckmann" => MicrofacetKind::Beckmann,
@@ -215,6 +233,7 @@ fn roughness<'a>(
         }
     };
     let has_uv = p.has("alpha_u") || p.has("alpha_v");
+    let mut textured = None;
     let (alpha_u, alpha_v) = if anisotropic && has_uv {
         if p.has("alpha") {
             return Err(p
@@ -228,8 +247,23 @@ fn roughness<'a>(
         };
         (u, v)
     } else {
-        let a = scalar(p, "alpha")?.unwrap_or(0.1);
-        (a, a)
+        match p.texture(b, "alpha", SpectrumKind::Unbounded)? {
+            None => (0.1, 0.1),
+            Some(Texture::Constant(c)) => {
+                let a = Texture::Constant(c).eval_1(glam::Vec2::ZERO) as f64;
+                (a, a)
+            }
+            Some(t) => {
+                let alpha_el = p.element_of("alpha");
+                if !t.is_finite_non_negative() {
+                    return Err(alpha_el
+                        .error("roughness texture \"alpha\" has negative or non-finite values"));
+                }
+                let a = Texture::Constant(t.mean()).eval_1(glam::Vec2::ZERO) as f64;
+                textured = Some(t);
+                (a, a)
+            }
+        }
     };
     for (name, a) in [("alpha", alpha_u), ("alpha_v", alpha_v)] {
         if !(0.0..=10.0).contains(&a) {
@@ -242,11 +276,14 @@ fn roughness<'a>(
     if !p.bool_or("sample_visible", true)? {
         b.diag.warn(sample_visible_el, "sample_visible=false ignored: visible normals are always sampled (same image, less noise)");
     }
-    Ok(Roughness {
-        kind,
-        alpha_u: alpha_u as f32,
-        alpha_v: alpha_v as f32,
-    })
+    Ok((
+        Roughness {
+            kind,
+            alpha_u: alpha_u as f32,
+            alpha_v: alpha_v as f32,
+        },
+        textured,
+    ))
 }
 
 /// A roughness value: a float (textured roughness is not supported).

@@ -1573,3 +1573,39 @@ fn area_emitters_take_a_texture_as_radiance() {
         "must be a constant colour",
     );
 }
+
+#[test]
+fn alpha_may_be_a_texture_except_for_roughplastic() {
+    let dir = temp_dir("textured-alpha");
+    let body = format!(
+        r#"{SENSOR}
+<shape type="sphere">
+  <bsdf type="roughconductor">
+    <texture type="checkerboard" name="alpha"><rgb name="color0" value="0.1"/><rgb name="color1" value="0.3"/></texture>
+  </bsdf>
+</shape>
+<shape type="sphere"><bsdf type="roughdielectric"><float name="alpha" value="0.2"/></bsdf></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let [Bsdf::RoughConductor(a), Bsdf::RoughDielectric(b)] = &scene.bsdfs[..] else {
+        panic!("{:?}", scene.bsdfs)
+    };
+    assert!(matches!(
+        a.alpha_texture,
+        Some(Texture::Checkerboard { .. })
+    ));
+    // The constant roughness holds the texture's mean (SPPM's glossy/diffuse class uses it).
+    assert!((a.roughness.alpha_u - 0.2).abs() < 1e-6);
+    assert!(b.alpha_texture.is_none() && b.roughness.alpha_u == 0.2);
+    let body = format!(
+        "{SENSOR}\n<bsdf type=\"roughplastic\">\n<texture type=\"checkerboard\" name=\"alpha\"/></bsdf>\n<shape type=\"sphere\"/>"
+    );
+    assert_body_error_at(
+        &dir,
+        "bad.xml",
+        &body,
+        "name=\"alpha\"",
+        "needs a constant \"alpha\"",
+    );
+}
