@@ -286,7 +286,8 @@ fn roughness<'a>(
     ))
 }
 
-/// A roughness value: a float (textured roughness is not supported).
+/// An anisotropic roughness value `alpha_u` / `alpha_v`: a float (only the isotropic `alpha`
+/// may be a texture).
 fn scalar(p: &mut Props, name: &str) -> Result<Option<f64>, SceneError> {
     p.float(name)
 }
