@@ -54,6 +54,21 @@ impl BitmapWrap {
     }
 }
 
+/// A colour as one number (Mitsuba's `eval_1`): a grey value as it is, a colour by its
+/// luminance; NaN reads as 0.
+fn scalar_of(c: Rgb) -> f32 {
+    let v = if c.x == c.y && c.y == c.z {
+        c.x
+    } else {
+        crate::spectrum::luminance(c)
+    };
+    if v.is_nan() {
+        0.0
+    } else {
+        v
+    }
+}
+
 /// A spatially varying colour, Mitsuba's texture plugins plus constants.
 #[derive(Debug, Clone)]
 pub enum Texture {
@@ -100,17 +115,12 @@ impl Texture {
     /// The texture as one number at `uv`, as Mitsuba's `eval_1`: a grey value as it is, a
     /// colour by its luminance; NaN reads as 0.
     pub fn eval_1(&self, uv: Vec2) -> f32 {
-        let c = self.eval(uv);
-        let v = if c.x == c.y && c.y == c.z {
-            c.x
-        } else {
-            crate::spectrum::luminance(c)
-        };
-        if v.is_nan() {
-            0.0
-        } else {
-            v
-        }
+        scalar_of(self.eval(uv))
+    }
+
+    /// The mean colour ([`Texture::mean`]) as one number, read as [`Texture::eval_1`] reads.
+    pub fn mean_1(&self) -> f32 {
+        scalar_of(self.mean())
     }
 
     /// Whether the texture is the same everywhere.

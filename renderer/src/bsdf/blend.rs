@@ -30,7 +30,7 @@ impl Blend {
     /// The blend weight at `uv`, clamped to [0, 1] (grey values as they are, colours by
     /// luminance, as Mitsuba's `eval_1`).
     pub fn weight_at(&self, uv: Vec2) -> f32 {
-        super::mask::unit_scalar(&self.weight, uv)
+        self.weight.eval_1(uv).clamp(0.0, 1.0)
     }
 
     /// (1 − w)·f₀ + w·f₁.

@@ -26,15 +26,10 @@ pub struct Mask {
     pub nested: Box<Bsdf>,
 }
 
-/// A texture read as one value in [0, 1] ([`Texture::eval_1`], clamped).
-pub(super) fn unit_scalar(texture: &Texture, uv: Vec2) -> f32 {
-    texture.eval_1(uv).clamp(0.0, 1.0)
-}
-
 impl Mask {
     /// The opacity at `uv`.
     pub fn opacity_at(&self, uv: Vec2) -> f32 {
-        unit_scalar(&self.opacity, uv)
+        self.opacity.eval_1(uv).clamp(0.0, 1.0)
     }
 
     /// opacity · f (the pass-through is a delta: no value).

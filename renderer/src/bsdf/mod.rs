@@ -136,7 +136,8 @@ pub struct Conductor {
 pub struct RoughConductor {
     /// `distribution`, `alpha`/`alpha_u`/`alpha_v` (Mitsuba defaults: beckmann, 0.1).
     pub roughness: Roughness,
-    /// `alpha` given as a texture (isotropic): replaces `roughness`'s alphas at each uv.
+    /// `alpha` given as a texture (isotropic): replaces `roughness`'s alphas at each uv, while
+    /// `roughness` holds the texture's mean alpha, which classifies the surface for SPPM.
     pub alpha_texture: Option<Texture>,
     /// Complex IOR; `None` is a perfect reflector.
     pub ior: Option<ConductorIor>,
@@ -171,7 +172,8 @@ pub struct ThinDielectric {
 pub struct RoughDielectric {
     /// `distribution`, `alpha`/`alpha_u`/`alpha_v` (defaults: beckmann, 0.1).
     pub roughness: Roughness,
-    /// `alpha` given as a texture (isotropic): replaces `roughness`'s alphas at each uv.
+    /// `alpha` given as a texture (isotropic): replaces `roughness`'s alphas at each uv, while
+    /// `roughness` holds the texture's mean alpha, which classifies the surface for SPPM.
     pub alpha_texture: Option<Texture>,
     /// Relative index of refraction `int_ior / ext_ior`.
     pub eta: f32,
@@ -346,8 +348,8 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) | Bsdf::RoughPlastic(_) => Lobe::Diffuse,
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Lobe::Delta,
-            Bsdf::RoughConductor(b) => rough_lobe(&b.roughness, &b.alpha_texture),
-            Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness, &b.alpha_texture),
+            Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
+            Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
             Bsdf::NormalMap(b) => b.nested.lobe(),
             // The most diffuse of the two: a visible point is stored where either model has a
             // broad lobe (delta parts are split off by the eye path, glossy ones go to photons).
@@ -502,13 +504,10 @@ fn flip(w: Vec3) -> Vec3 {
     Vec3::new(w.x, w.y, -w.z)
 }
 
-/// The class of a rough model: by its larger alpha, or a textured alpha's mean.
-fn rough_lobe(r: &Roughness, alpha_texture: &Option<Texture>) -> Lobe {
-    let alpha = match alpha_texture {
-        Some(t) => Texture::Constant(t.mean()).eval_1(Vec2::ZERO),
-        None => r.alpha_u.max(r.alpha_v),
-    };
-    if alpha < GLOSSY_ALPHA_THRESHOLD {
+/// The class of a rough model, by its larger alpha (a textured alpha's mean: see
+/// `alpha_texture`).
+fn rough_lobe(r: &Roughness) -> Lobe {
+    if r.alpha_u.max(r.alpha_v) < GLOSSY_ALPHA_THRESHOLD {
         Lobe::Glossy
     } else {
         Lobe::Diffuse

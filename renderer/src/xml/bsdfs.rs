@@ -249,8 +249,8 @@ fn roughness<'a>(
     } else {
         match p.texture(b, "alpha", SpectrumKind::Unbounded)? {
             None => (0.1, 0.1),
-            Some(Texture::Constant(c)) => {
-                let a = Texture::Constant(c).eval_1(glam::Vec2::ZERO) as f64;
+            Some(t @ Texture::Constant(_)) => {
+                let a = t.mean_1() as f64;
                 (a, a)
             }
             Some(t) => {
@@ -259,7 +259,7 @@ fn roughness<'a>(
                     return Err(alpha_el
                         .error("roughness texture \"alpha\" has negative or non-finite values"));
                 }
-                let a = Texture::Constant(t.mean()).eval_1(glam::Vec2::ZERO) as f64;
+                let a = t.mean_1() as f64;
                 textured = Some(t);
                 (a, a)
             }
