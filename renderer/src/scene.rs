@@ -3,7 +3,7 @@
 //! occlusion, emitted radiance, light sampling for NEE and photon emission).
 
 use crate::accel::{Accel, Bvh4Accel, PrimitiveHit};
-use crate::bsdf::Bsdf;
+use crate::bsdf::{Bsdf, ShadingPoint};
 use crate::camera::Camera;
 use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription};
 use crate::frame::Frame;
@@ -43,6 +43,10 @@ pub struct SurfaceInteraction {
     pub frame: Frame,
     /// Texture coordinates.
     pub uv: Vec2,
+    /// ∂p/∂u (world space, not normalised).
+    pub dpdu: Vec3,
+    /// ∂p/∂v (world space, not normalised).
+    pub dpdv: Vec3,
     /// Unit direction back along the incoming ray (world space), Mitsuba's `-ray.d`.
     pub wo: Vec3,
     /// Index of the hit shape.
@@ -56,6 +60,17 @@ pub struct SurfaceInteraction {
 }
 
 impl SurfaceInteraction {
+    /// What the BSDF reads at this hit: uv and the differential geometry in the shading frame.
+    #[inline]
+    pub fn shading_point(&self) -> ShadingPoint {
+        ShadingPoint {
+            uv: self.uv,
+            dpdu: self.frame.to_local(self.dpdu),
+            dpdv: self.frame.to_local(self.dpdv),
+            ng: self.frame.to_local(self.ng),
+        }
+    }
+
     /// World vector → shading frame.
     #[inline]
     pub fn to_local(&self, v: Vec3) -> Vec3 {
@@ -434,6 +449,8 @@ impl Scene {
             ng: g.ng,
             frame: Frame::from_normal_tangent(g.ns, g.dpdu),
             uv: g.uv,
+            dpdu: g.dpdu,
+            dpdv: g.dpdv,
             wo: -ray.d,
             shape: hit.shape,
             prim: hit.prim,

@@ -179,6 +179,46 @@ impl Texture {
         }
     }
 
+    /// The gradient (∂/∂u, ∂/∂v) of [`Texture::eval_1`] at `uv`, as Mitsuba's `eval_1_grad`
+    /// (which `bumpmap` reads): for a bilinear bitmap the derivative of the interpolated
+    /// luminance, through `to_uv`; zero where the texture is piecewise constant (constants,
+    /// checkerboards, nearest-neighbour bitmaps — Mitsuba implements it for bitmaps only).
+    pub fn eval_1_grad(&self, uv: Vec2) -> Vec2 {
+        let Texture::Bitmap {
+            image,
+            filter: BitmapFilter::Bilinear,
+            wrap,
+            to_uv,
+        } = self
+        else {
+            return Vec2::ZERO;
+        };
+        let p = *to_uv * uv.extend(1.0);
+        let (w, h) = (image.width as i64, image.height as i64);
+        let fetch = |x: i64, y: i64| {
+            let (x, y) = (wrap.apply(x, w), wrap.apply(y, h));
+            scalar_of(image.texels[(y * w + x) as usize])
+        };
+        let (u, v) = (p.x * w as f32 - 0.5, p.y * h as f32 - 0.5);
+        let (x0, y0) = (u.floor(), v.floor());
+        let (fx, fy) = (u - x0, v - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let (f00, f10) = (fetch(x0, y0), fetch(x0 + 1, y0));
+        let (f01, f11) = (fetch(x0, y0 + 1), fetch(x0 + 1, y0 + 1));
+        // Per texel along x and y, then per unit of the transformed uv, then back through
+        // the affine map's linear part (its transpose). Mitsuba 3.9.1 scales by the resolution
+        // after the transpose instead, which differs only for a non-square image under a
+        // `to_uv` that mixes u and v.
+        let dx = (1.0 - fy) * (f10 - f00) + fy * (f11 - f01);
+        let dy = (1.0 - fx) * (f01 - f00) + fx * (f11 - f10);
+        let (dx, dy) = (dx * w as f32, dy * h as f32);
+        let m = to_uv;
+        Vec2::new(
+            m.x_axis.x * dx + m.x_axis.y * dy,
+            m.y_axis.x * dx + m.y_axis.y * dy,
+        )
+    }
+
     /// A cheap estimate of [`Texture::mean`] for per-sample use (lobe-selection weights): exact
     /// for constants and checkerboards, a fixed stride subsample of ≤ 64 texels for bitmaps.
     pub fn mean_estimate(&self) -> Rgb {

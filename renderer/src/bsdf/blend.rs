@@ -12,7 +12,7 @@
 //! integrators' MIS needs to be consistent. A delta sample keeps its model's weight, with the
 //! choice probability folded into its `pdf`.
 
-use super::{Bsdf, BsdfSample, TransportMode};
+use super::{Bsdf, BsdfSample, ShadingPoint, TransportMode};
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -34,29 +34,29 @@ impl Blend {
     }
 
     /// (1 − w)·f₀ + w·f₁.
-    pub fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
-        let w = self.weight_at(uv);
+    pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
+        let w = self.weight_at(sp.uv);
         let [a, b] = &*self.nested;
         let mut f = Rgb::ZERO;
         if w < 1.0 {
-            f += a.eval(wo, wi, uv, mode) * (1.0 - w);
+            f += a.eval(wo, wi, sp, mode) * (1.0 - w);
         }
         if w > 0.0 {
-            f += b.eval(wo, wi, uv, mode) * w;
+            f += b.eval(wo, wi, sp, mode) * w;
         }
         f
     }
 
     /// (1 − w)·p₀ + w·p₁.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
-        let w = self.weight_at(uv);
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
+        let w = self.weight_at(sp.uv);
         let [a, b] = &*self.nested;
         let mut p = 0.0;
         if w < 1.0 {
-            p += a.pdf(wo, wi, uv) * (1.0 - w);
+            p += a.pdf(wo, wi, sp) * (1.0 - w);
         }
         if w > 0.0 {
-            p += b.pdf(wo, wi, uv) * w;
+            p += b.pdf(wo, wi, sp) * w;
         }
         p
     }
@@ -66,30 +66,30 @@ impl Blend {
     pub fn sample(
         &self,
         wo: Vec3,
-        uv: Vec2,
+        sp: &ShadingPoint,
         u_lobe: f32,
         u: Vec2,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
-        let w = self.weight_at(uv);
+        let w = self.weight_at(sp.uv);
         let [a, b] = &*self.nested;
         let (chosen, p_choice, u_lobe) = if u_lobe < w {
             (b, w, u_lobe / w)
         } else {
             (a, 1.0 - w, (u_lobe - w) / (1.0 - w))
         };
-        let s = chosen.sample(wo, uv, u_lobe.min(ONE_MINUS_EPS), u, mode)?;
+        let s = chosen.sample(wo, sp, u_lobe.min(ONE_MINUS_EPS), u, mode)?;
         if s.delta {
             return Some(BsdfSample {
                 pdf: s.pdf * p_choice,
                 ..s
             });
         }
-        let pdf = self.pdf(wo, s.wi, uv);
+        let pdf = self.pdf(wo, s.wi, sp);
         if pdf.is_nan() || pdf <= 0.0 {
             return None;
         }
-        let f = self.eval(wo, s.wi, uv, mode);
+        let f = self.eval(wo, s.wi, sp, mode);
         Some(BsdfSample {
             weight: f * (s.wi.z.abs() / pdf),
             pdf,
@@ -98,10 +98,10 @@ impl Blend {
     }
 
     /// Probability of a delta sample: (1 − w)·d₀ + w·d₁.
-    pub fn delta_probability(&self, wo: Vec3, uv: Vec2) -> f32 {
-        let w = self.weight_at(uv);
+    pub fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
+        let w = self.weight_at(sp.uv);
         let [a, b] = &*self.nested;
-        a.delta_probability(wo, uv) * (1.0 - w) + b.delta_probability(wo, uv) * w
+        a.delta_probability(wo, sp) * (1.0 - w) + b.delta_probability(wo, sp) * w
     }
 }
 

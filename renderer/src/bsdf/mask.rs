@@ -12,7 +12,7 @@
 //! Unlike Mitsuba, the nested model's samples report the density of the whole mask,
 //! opacity · p, which is what [`Bsdf::pdf`] returns and the integrators' MIS needs.
 
-use super::{Bsdf, BsdfSample, TransportMode};
+use super::{Bsdf, BsdfSample, ShadingPoint, TransportMode};
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Vec2, Vec3};
@@ -33,20 +33,20 @@ impl Mask {
     }
 
     /// opacity · f (the pass-through is a delta: no value).
-    pub fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
-        let a = self.opacity_at(uv);
+    pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
+        let a = self.opacity_at(sp.uv);
         if a > 0.0 {
-            self.nested.eval(wo, wi, uv, mode) * a
+            self.nested.eval(wo, wi, sp, mode) * a
         } else {
             Rgb::ZERO
         }
     }
 
     /// opacity · p.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
-        let a = self.opacity_at(uv);
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
+        let a = self.opacity_at(sp.uv);
         if a > 0.0 {
-            self.nested.pdf(wo, wi, uv) * a
+            self.nested.pdf(wo, wi, sp) * a
         } else {
             0.0
         }
@@ -56,15 +56,15 @@ impl Mask {
     pub fn sample(
         &self,
         wo: Vec3,
-        uv: Vec2,
+        sp: &ShadingPoint,
         u_lobe: f32,
         u: Vec2,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
-        let a = self.opacity_at(uv);
+        let a = self.opacity_at(sp.uv);
         if u_lobe < a {
             let u_nested = (u_lobe / a).min(1.0 - f32::EPSILON / 2.0);
-            let s = self.nested.sample(wo, uv, u_nested, u, mode)?;
+            let s = self.nested.sample(wo, sp, u_nested, u, mode)?;
             return Some(BsdfSample {
                 pdf: s.pdf * a,
                 ..s
@@ -80,8 +80,8 @@ impl Mask {
     }
 
     /// Probability of a delta sample: the pass-through plus the nested model's delta share.
-    pub fn delta_probability(&self, wo: Vec3, uv: Vec2) -> f32 {
-        let a = self.opacity_at(uv);
-        (1.0 - a) + a * self.nested.delta_probability(wo, uv)
+    pub fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
+        let a = self.opacity_at(sp.uv);
+        (1.0 - a) + a * self.nested.delta_probability(wo, sp)
     }
 }

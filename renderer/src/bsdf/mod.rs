@@ -19,6 +19,7 @@
 //! always use visible-normal sampling (Mitsuba's default `sample_visible = true`).
 
 mod blend;
+mod bumpmap;
 mod conductor;
 mod dielectric;
 mod diffuse;
@@ -26,6 +27,7 @@ pub mod fresnel;
 mod mask;
 pub mod microfacet;
 mod normalmap;
+mod perturbed;
 mod plastic;
 mod roughconductor;
 mod roughdielectric;
@@ -42,6 +44,7 @@ use crate::texture::Texture;
 use glam::{Vec2, Vec3};
 
 pub use blend::Blend;
+pub use bumpmap::BumpMap;
 pub use mask::Mask;
 pub use normalmap::NormalMap;
 
@@ -49,6 +52,45 @@ pub use normalmap::NormalMap;
 /// `alpha_u`, `alpha_v` is compared): SPPM continues eye paths through such surfaces instead of
 /// storing a visible point, because a photon-density estimate on a sharp lobe is very noisy.
 pub const GLOSSY_ALPHA_THRESHOLD: f32 = 0.25;
+
+/// Where a BSDF is evaluated: the texture coordinates and the surface's differential geometry
+/// there, in the local shading frame (what Mitsuba's BSDFs read from their
+/// `SurfaceInteraction`). Only `bumpmap` reads the geometry; every other model reads `uv`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShadingPoint {
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// ∂p/∂u in the shading frame (world length per unit of u; Mitsuba's `dp_du`).
+    pub dpdu: Vec3,
+    /// ∂p/∂v in the shading frame (Mitsuba's `dp_dv`).
+    pub dpdv: Vec3,
+    /// The unit geometric normal in the shading frame.
+    pub ng: Vec3,
+}
+
+impl ShadingPoint {
+    /// The point at `uv` of a flat surface parameterised along its shading frame:
+    /// ∂p/∂u = +x, ∂p/∂v = +y, geometric normal +z.
+    pub const fn flat(uv: Vec2) -> Self {
+        Self {
+            uv,
+            dpdu: Vec3::X,
+            dpdv: Vec3::Y,
+            ng: Vec3::Z,
+        }
+    }
+
+    /// The same point seen from a tilted frame (`frame`, given in this point's shading frame):
+    /// what a model nested in a normal or bump map reads.
+    pub fn in_frame(&self, frame: &crate::frame::Frame) -> Self {
+        Self {
+            uv: self.uv,
+            dpdu: frame.to_local(self.dpdu),
+            dpdv: frame.to_local(self.dpdv),
+            ng: frame.to_local(self.ng),
+        }
+    }
+}
 
 /// A direction sampled from a BSDF.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -238,6 +280,8 @@ pub enum Bsdf {
     RoughPlastic(RoughPlastic),
     /// `normalmap`: a nested model in a shading frame perturbed by a texture.
     NormalMap(NormalMap),
+    /// `bumpmap`: a nested model in a shading frame tilted by a height field's gradient.
+    BumpMap(BumpMap),
     /// `blendbsdf`: a linear blend of two models.
     Blend(Blend),
     /// `mask`: a nested model behind an opacity (the rest passes straight through).
@@ -257,11 +301,12 @@ impl Bsdf {
     pub fn sample(
         &self,
         wo: Vec3,
-        uv: Vec2,
+        sp: &ShadingPoint,
         u_lobe: f32,
         u: Vec2,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
+        let uv = sp.uv;
         let s = match self {
             Bsdf::Diffuse(b) => b.sample(wo, uv, u),
             Bsdf::Conductor(b) => b.sample(wo, uv),
@@ -271,14 +316,15 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::Plastic(b) => b.sample(wo, uv, u_lobe, u),
             Bsdf::RoughPlastic(b) => b.sample(wo, uv, u_lobe, u),
-            Bsdf::NormalMap(b) => b.sample(wo, uv, u_lobe, u, mode),
-            Bsdf::Blend(b) => b.sample(wo, uv, u_lobe, u, mode),
-            Bsdf::Mask(b) => b.sample(wo, uv, u_lobe, u, mode),
+            Bsdf::NormalMap(b) => b.sample(wo, sp, u_lobe, u, mode),
+            Bsdf::BumpMap(b) => b.sample(wo, sp, u_lobe, u, mode),
+            Bsdf::Blend(b) => b.sample(wo, sp, u_lobe, u, mode),
+            Bsdf::Mask(b) => b.sample(wo, sp, u_lobe, u, mode),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
-                    front.sample(wo, uv, u_lobe, u, mode)
+                    front.sample(wo, sp, u_lobe, u, mode)
                 } else if wo.z < 0.0 {
-                    back.sample(flip(wo), uv, u_lobe, u, mode)
+                    back.sample(flip(wo), sp, u_lobe, u, mode)
                         .map(|s| BsdfSample {
                             wi: flip(s.wi),
                             ..s
@@ -293,7 +339,8 @@ impl Bsdf {
     }
 
     /// BSDF value f(wo, wi) without the cosine; zero for delta components.
-    pub fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
+    pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
+        let uv = sp.uv;
         match self {
             Bsdf::Diffuse(b) => b.eval(wo, wi, uv),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Rgb::ZERO,
@@ -301,14 +348,15 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.eval(wo, wi, uv, mode),
             Bsdf::Plastic(b) => b.eval(wo, wi, uv),
             Bsdf::RoughPlastic(b) => b.eval(wo, wi, uv),
-            Bsdf::NormalMap(b) => b.eval(wo, wi, uv, mode),
-            Bsdf::Blend(b) => b.eval(wo, wi, uv, mode),
-            Bsdf::Mask(b) => b.eval(wo, wi, uv, mode),
+            Bsdf::NormalMap(b) => b.eval(wo, wi, sp, mode),
+            Bsdf::BumpMap(b) => b.eval(wo, wi, sp, mode),
+            Bsdf::Blend(b) => b.eval(wo, wi, sp, mode),
+            Bsdf::Mask(b) => b.eval(wo, wi, sp, mode),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
-                    front.eval(wo, wi, uv, mode)
+                    front.eval(wo, wi, sp, mode)
                 } else if wo.z < 0.0 {
-                    back.eval(flip(wo), flip(wi), uv, mode)
+                    back.eval(flip(wo), flip(wi), sp, mode)
                 } else {
                     Rgb::ZERO
                 }
@@ -317,9 +365,10 @@ impl Bsdf {
     }
 
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` through non-delta lobes.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
+        let uv = sp.uv;
         // Lobe-selection weights use texture means, not the local value (as Mitsuba); only a
-        // normal map (its frame), a blend (its weight) and a mask (its opacity) read `uv`.
+        // normal or bump map (its frame), a blend (its weight) and a mask (its opacity) read `uv`.
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
@@ -327,14 +376,15 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi, uv),
             Bsdf::Plastic(b) => b.pdf(wo, wi),
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
-            Bsdf::NormalMap(b) => b.pdf(wo, wi, uv),
-            Bsdf::Blend(b) => b.pdf(wo, wi, uv),
-            Bsdf::Mask(b) => b.pdf(wo, wi, uv),
+            Bsdf::NormalMap(b) => b.pdf(wo, wi, sp),
+            Bsdf::BumpMap(b) => b.pdf(wo, wi, sp),
+            Bsdf::Blend(b) => b.pdf(wo, wi, sp),
+            Bsdf::Mask(b) => b.pdf(wo, wi, sp),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
-                    front.pdf(wo, wi, uv)
+                    front.pdf(wo, wi, sp)
                 } else if wo.z < 0.0 {
-                    back.pdf(flip(wo), flip(wi), uv)
+                    back.pdf(flip(wo), flip(wi), sp)
                 } else {
                     0.0
                 }
@@ -351,6 +401,7 @@ impl Bsdf {
             Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
             Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
             Bsdf::NormalMap(b) => b.nested.lobe(),
+            Bsdf::BumpMap(b) => b.nested.lobe(),
             // The most diffuse of the two: a visible point is stored where either model has a
             // broad lobe (delta parts are split off by the eye path, glossy ones go to photons).
             Bsdf::Blend(b) => most_diffuse(b.nested[0].lobe(), b.nested[1].lobe()),
@@ -379,6 +430,7 @@ impl Bsdf {
             }
             // The perturbed normal stays on the viewer's side (or nearly): the side is wo's.
             Bsdf::NormalMap(b) => b.nested.lobe_for(wo),
+            Bsdf::BumpMap(b) => b.nested.lobe_for(wo),
             Bsdf::Blend(b) => most_diffuse(b.nested[0].lobe_for(wo), b.nested[1].lobe_for(wo)),
             Bsdf::Mask(b) => b.nested.lobe_for(wo),
             b => b.lobe(),
@@ -388,18 +440,19 @@ impl Bsdf {
     /// Probability that [`Bsdf::sample`] picks a delta (specular) lobe for `wo`: 0 for models
     /// without one, 1 for purely specular ones, in between for models mixing both (`plastic`'s
     /// smooth coating over its diffuse base). SPPM eye paths split on it at visible points.
-    pub fn delta_probability(&self, wo: Vec3, uv: Vec2) -> f32 {
+    pub fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
         match self {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 1.0,
             Bsdf::Plastic(b) => b.delta_probability(wo),
-            Bsdf::NormalMap(b) => b.delta_probability(wo, uv),
-            Bsdf::Blend(b) => b.delta_probability(wo, uv),
-            Bsdf::Mask(b) => b.delta_probability(wo, uv),
+            Bsdf::NormalMap(b) => b.delta_probability(wo, sp),
+            Bsdf::BumpMap(b) => b.delta_probability(wo, sp),
+            Bsdf::Blend(b) => b.delta_probability(wo, sp),
+            Bsdf::Mask(b) => b.delta_probability(wo, sp),
             Bsdf::TwoSided { front, back } => {
                 if wo.z > 0.0 {
-                    front.delta_probability(wo, uv)
+                    front.delta_probability(wo, sp)
                 } else if wo.z < 0.0 {
-                    back.delta_probability(flip(wo), uv)
+                    back.delta_probability(flip(wo), sp)
                 } else {
                     0.0
                 }
@@ -409,17 +462,18 @@ impl Bsdf {
     }
 
     /// The shading normal the model works with for viewer `wo`, in the shading frame: +z,
-    /// except under a normal map (also inside `twosided`, `mask` or `blendbsdf`: the first
-    /// normal map found), where it is the perturbed normal (Mitsuba's `sh_frame` override). The
+    /// except under a normal or bump map (also inside `twosided`, `mask` or `blendbsdf`: the first
+    /// one found), where it is the perturbed normal (Mitsuba's `sh_frame` override). The
     /// G-buffer records it.
-    pub fn shading_normal(&self, wo: Vec3, uv: Vec2) -> Vec3 {
+    pub fn shading_normal(&self, wo: Vec3, sp: &ShadingPoint) -> Vec3 {
         match self {
-            Bsdf::NormalMap(b) => b.perturbed_normal(wo, uv),
-            Bsdf::Mask(b) => b.nested.shading_normal(wo, uv),
+            Bsdf::NormalMap(b) => b.perturbed_normal(wo, sp),
+            Bsdf::BumpMap(b) => b.perturbed_normal(wo, sp),
+            Bsdf::Mask(b) => b.nested.shading_normal(wo, sp),
             Bsdf::Blend(b) => {
                 let (n0, n1) = (
-                    b.nested[0].shading_normal(wo, uv),
-                    b.nested[1].shading_normal(wo, uv),
+                    b.nested[0].shading_normal(wo, sp),
+                    b.nested[1].shading_normal(wo, sp),
                 );
                 if n0 != Vec3::Z {
                     n0
@@ -429,9 +483,9 @@ impl Bsdf {
             }
             Bsdf::TwoSided { front, back } => {
                 if wo.z >= 0.0 {
-                    front.shading_normal(wo, uv)
+                    front.shading_normal(wo, sp)
                 } else {
-                    flip(back.shading_normal(flip(wo), uv))
+                    flip(back.shading_normal(flip(wo), sp))
                 }
             }
             _ => Vec3::Z,
@@ -444,6 +498,7 @@ impl Bsdf {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => false,
             Bsdf::TwoSided { front, back } => front.has_non_delta() || back.has_non_delta(),
             Bsdf::NormalMap(b) => b.nested.has_non_delta(),
+            Bsdf::BumpMap(b) => b.nested.has_non_delta(),
             Bsdf::Blend(b) => b.nested.iter().any(Bsdf::has_non_delta),
             Bsdf::Mask(b) => b.nested.has_non_delta(),
             _ => true,
@@ -453,7 +508,8 @@ impl Bsdf {
     /// Albedo for the G-buffer: the diffuse reflectance of diffuse and plastic models; for
     /// conductors the specular tint times the normal-incidence Fresnel reflectance (the
     /// metal's colour); for dielectrics the transmittance tint; `twosided`: the front side.
-    pub fn albedo(&self, uv: Vec2) -> Rgb {
+    pub fn albedo(&self, sp: &ShadingPoint) -> Rgb {
+        let uv = sp.uv;
         match self {
             Bsdf::Diffuse(b) => b.reflectance.eval(uv),
             Bsdf::Plastic(b) => b.diffuse_reflectance.eval(uv),
@@ -467,13 +523,14 @@ impl Bsdf {
             Bsdf::Dielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(uv),
-            Bsdf::NormalMap(b) => b.nested.albedo(uv),
-            Bsdf::Mask(b) => b.nested.albedo(uv),
+            Bsdf::NormalMap(b) => b.nested.albedo(sp),
+            Bsdf::BumpMap(b) => b.nested.albedo(sp),
+            Bsdf::Mask(b) => b.nested.albedo(sp),
             Bsdf::Blend(b) => {
                 let w = b.weight_at(uv);
-                b.nested[0].albedo(uv) * (1.0 - w) + b.nested[1].albedo(uv) * w
+                b.nested[0].albedo(sp) * (1.0 - w) + b.nested[1].albedo(sp) * w
             }
-            Bsdf::TwoSided { front, .. } => front.albedo(uv),
+            Bsdf::TwoSided { front, .. } => front.albedo(sp),
         }
     }
 }

@@ -13,7 +13,8 @@
 //! side of the surface differs between the shading frame and the perturbed one contributes
 //! nothing (Mitsuba's check on the sampled/evaluated direction).
 
-use super::{Bsdf, BsdfSample, TransportMode};
+use super::perturbed::{tilted_frame, Perturbed};
+use super::{Bsdf, BsdfSample, ShadingPoint, TransportMode};
 use crate::frame::Frame;
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
@@ -32,14 +33,6 @@ pub struct NormalMap {
     pub use_shadowing_function: bool,
 }
 
-/// Estévez et al.'s shadowing term for a perturbed normal `n` and direction `w`, both in the
-/// shading frame: 2 / (1 + √(1 + α²·tan²θ_w)) with α² = min(tan²θ_n / 8, 1).
-fn shadow_terminator(n: Vec3, w: Vec3) -> f32 {
-    let tan2 = |v: Vec3| (1.0 - v.z * v.z).max(0.0) / (v.z * v.z);
-    let alpha2 = (0.125 * tan2(n)).min(1.0);
-    2.0 / (1.0 + (1.0 + alpha2 * tan2(w)).sqrt())
-}
-
 impl NormalMap {
     /// The perturbed frame relative to the shading frame, for viewer direction `wo`.
     fn frame(&self, wo: Vec3, uv: Vec2) -> Frame {
@@ -53,43 +46,18 @@ impl NormalMap {
         } else {
             Vec3::Z
         };
-        let s = Vec3::X - n * n.x;
-        let s_len2 = s.length_squared();
-        let s = if s_len2 > 0.0 && s_len2.is_finite() {
-            s / s_len2.sqrt()
-        } else {
-            Vec3::Y
-        };
-        Frame {
-            s,
-            t: n.cross(s),
-            n,
-        }
+        tilted_frame(n, Vec3::X)
     }
 
-    /// The shadowing factor for direction `wi` (1 when switched off).
-    fn shadowing(&self, frame: &Frame, wi: Vec3) -> f32 {
-        if self.use_shadowing_function {
-            shadow_terminator(frame.n, wi)
-        } else {
-            1.0
+    /// The nested model in the frame `wo` selects at `sp`.
+    fn perturbed(&self, wo: Vec3, sp: &ShadingPoint) -> Perturbed<'_> {
+        let frame = self.frame(wo, sp.uv);
+        Perturbed {
+            nested: &self.nested,
+            sp: sp.in_frame(&frame),
+            frame,
+            shadowing: self.use_shadowing_function,
         }
-    }
-
-    /// Radiance-mode f(viewer, light) in `frame`, without the cosine of the shading frame: the
-    /// nested model's f·cos in the perturbed frame (what Mitsuba's `eval` returns), times the
-    /// shadowing term, divided by |cos θ| of the shading frame that integrators multiply back.
-    /// Zero where either direction changes sides between the two frames.
-    fn eval_in(&self, frame: &Frame, viewer: Vec3, light: Vec3, uv: Vec2) -> Rgb {
-        let (pv, pl) = (frame.to_local(viewer), frame.to_local(light));
-        if light.z * pl.z <= 0.0 {
-            return Rgb::ZERO;
-        }
-        let f = self.nested.eval(pv, pl, uv, TransportMode::Radiance);
-        if f == Rgb::ZERO {
-            return f;
-        }
-        f * (pl.z.abs() / light.z.abs() * self.shadowing(frame, light))
     }
 
     /// Whether `flip_invalid_normals` mirrors the map's normal for a path arriving from `wo`.
@@ -99,75 +67,38 @@ impl NormalMap {
         self.flip_invalid_normals && wo.z * wo.dot(n) <= 0.0
     }
 
-    /// f(wo, wi) without the cosine of the shading frame. Radiance: viewer `wo`, light `wi`.
-    /// Importance (photons arriving from `wo`, leaving along `wi`): the adjoint, f(wi, wo) —
-    /// the model is not reciprocal — in the frame `wo` selects (the flip of an invalid normal
-    /// is decided by the arriving direction, as the photon's sampling must).
-    pub fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
-        let frame = self.frame(wo, uv);
-        if wi.z * frame.to_local(wi).z <= 0.0 {
-            return Rgb::ZERO;
-        }
-        match mode {
-            TransportMode::Radiance => self.eval_in(&frame, wo, wi, uv),
-            TransportMode::Importance => self.eval_in(&frame, wi, wo, uv),
-        }
+    /// f(wo, wi) without the cosine of the shading frame (the adjoint in Importance mode; see
+    /// [`Perturbed::eval`]).
+    pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
+        self.perturbed(wo, sp).eval(wo, wi, mode)
     }
 
-    /// The nested model's density of `wi`, seen through the perturbed frame (a rotation, so
-    /// solid-angle densities carry over), zero where [`NormalMap::sample`] rejects.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
-        let frame = self.frame(wo, uv);
-        let pwi = frame.to_local(wi);
-        if wi.z * pwi.z <= 0.0 {
-            return 0.0;
-        }
-        self.nested.pdf(frame.to_local(wo), pwi, uv)
+    /// The nested model's density of `wi`, seen through the perturbed frame.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
+        self.perturbed(wo, sp).pdf(wo, wi)
     }
 
     /// The perturbed shading normal for viewer `wo`, in the shading frame.
-    pub fn perturbed_normal(&self, wo: Vec3, uv: Vec2) -> Vec3 {
-        self.frame(wo, uv).n
+    pub fn perturbed_normal(&self, wo: Vec3, sp: &ShadingPoint) -> Vec3 {
+        self.frame(wo, sp.uv).n
     }
 
     /// Probability that the nested model picks a delta lobe, seen from `wo` in the perturbed
     /// frame.
-    pub fn delta_probability(&self, wo: Vec3, uv: Vec2) -> f32 {
-        let frame = self.frame(wo, uv);
-        self.nested.delta_probability(frame.to_local(wo), uv)
+    pub fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
+        self.perturbed(wo, sp).delta_probability(wo)
     }
 
-    /// Samples the nested model in the perturbed frame. Radiance: the nested weight times the
-    /// shadowing term (f·|cos θi| / pdf as [`NormalMap::eval`]). Importance: the adjoint's
-    /// weight, which also covers delta lobes: w'·|cos′ θo|·|cos θi| / (|cos θo|·|cos′ θi|)·G(wo)
-    /// with w' the nested importance weight (cos′: in the perturbed frame).
+    /// Samples the nested model in the perturbed frame (see [`Perturbed::sample`]).
     pub fn sample(
         &self,
         wo: Vec3,
-        uv: Vec2,
+        sp: &ShadingPoint,
         u_lobe: f32,
         u: Vec2,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
-        let frame = self.frame(wo, uv);
-        let pwo = frame.to_local(wo);
-        let s = self.nested.sample(pwo, uv, u_lobe, u, mode)?;
-        let wi = frame.to_world(s.wi);
-        if s.wi.z * wi.z <= 0.0 {
-            return None;
-        }
-        let weight = match mode {
-            TransportMode::Radiance => s.weight * self.shadowing(&frame, wi),
-            TransportMode::Importance => {
-                if wo.z * pwo.z <= 0.0 {
-                    return None;
-                }
-                s.weight
-                    * (pwo.z.abs() * wi.z.abs() / (wo.z.abs() * s.wi.z.abs())
-                        * self.shadowing(&frame, wo))
-            }
-        };
-        Some(BsdfSample { wi, weight, ..s })
+        self.perturbed(wo, sp).sample(wo, u_lobe, u, mode)
     }
 }
 
@@ -175,6 +106,8 @@ impl NormalMap {
 mod tests {
     use super::*;
     use crate::bsdf::Diffuse;
+
+    const FLAT: ShadingPoint = ShadingPoint::flat(Vec2::ZERO);
 
     fn diffuse_under(texel: Rgb) -> NormalMap {
         NormalMap {
@@ -208,8 +141,8 @@ mod tests {
         ];
         for (wi, mitsuba_eval, mitsuba_pdf) in cases {
             let wi = wi.normalize();
-            let value = nm.eval(wo, wi, Vec2::ZERO, TransportMode::Radiance).x * wi.z;
-            let pdf = nm.pdf(wo, wi, Vec2::ZERO);
+            let value = nm.eval(wo, wi, &FLAT, TransportMode::Radiance).x * wi.z;
+            let pdf = nm.pdf(wo, wi, &FLAT);
             assert!(
                 (value - mitsuba_eval).abs() < 2e-6,
                 "{wi}: {value} vs {mitsuba_eval}"
@@ -233,11 +166,11 @@ mod tests {
         let mut mean = 0.0f64;
         for _ in 0..n {
             let (ul, u) = (rng.next_f32(), rng.next_2d());
-            if let Some(s) = nm.sample(wo, Vec2::ZERO, ul, u, TransportMode::Radiance) {
-                let f = nm.eval(wo, s.wi, Vec2::ZERO, TransportMode::Radiance);
+            if let Some(s) = nm.sample(wo, &FLAT, ul, u, TransportMode::Radiance) {
+                let f = nm.eval(wo, s.wi, &FLAT, TransportMode::Radiance);
                 let expected = f * s.wi.z.abs() / s.pdf;
                 assert!((s.weight - expected).abs().max_element() < 1e-4 * expected.x.max(1.0));
-                assert!((s.pdf - nm.pdf(wo, s.wi, Vec2::ZERO)).abs() < 1e-4 * s.pdf.max(1.0));
+                assert!((s.pdf - nm.pdf(wo, s.wi, &FLAT)).abs() < 1e-4 * s.pdf.max(1.0));
                 mean += s.weight.x as f64;
             }
         }
@@ -251,7 +184,7 @@ mod tests {
             for j in 0..np {
                 let phi = (j as f32 + 0.5) / np as f32 * std::f32::consts::TAU;
                 let wi = Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
-                let f = nm.eval(wo, wi, Vec2::ZERO, TransportMode::Radiance).x;
+                let f = nm.eval(wo, wi, &FLAT, TransportMode::Radiance).x;
                 integral += (f * cos_t) as f64;
             }
         }
@@ -270,8 +203,8 @@ mod tests {
         nm.use_shadowing_function = false;
         let wo = Vec3::new(0.2, 0.1, 0.9).normalize();
         let wi = Vec3::new(-0.5, 0.3, 0.4).normalize();
-        let direct = nm.nested.eval(wo, wi, Vec2::ZERO, TransportMode::Radiance);
-        let mapped = nm.eval(wo, wi, Vec2::ZERO, TransportMode::Radiance);
+        let direct = nm.nested.eval(wo, wi, &FLAT, TransportMode::Radiance);
+        let mapped = nm.eval(wo, wi, &FLAT, TransportMode::Radiance);
         assert!((direct - mapped).abs().max_element() < 1e-6);
     }
 
@@ -281,16 +214,16 @@ mod tests {
     fn shading_normal_is_the_perturbed_one() {
         let nm = Bsdf::NormalMap(diffuse_under(Rgb::new(0.8, 0.5, 0.9)));
         let wo = Vec3::new(0.1, 0.2, 0.97).normalize();
-        let n = nm.shading_normal(wo, Vec2::ZERO);
+        let n = nm.shading_normal(wo, &FLAT);
         assert!((n - Vec3::new(0.6, 0.0, 0.8)).length() < 1e-6, "{n}");
         let two = Bsdf::TwoSided {
             front: Box::new(nm.clone()),
             back: Box::new(nm),
         };
         let below = Vec3::new(wo.x, wo.y, -wo.z);
-        let n = two.shading_normal(below, Vec2::ZERO);
+        let n = two.shading_normal(below, &FLAT);
         assert!((n - Vec3::new(0.6, 0.0, -0.8)).length() < 1e-6, "{n}");
         let plain = diffuse_under(Rgb::new(0.8, 0.5, 0.9)).nested;
-        assert_eq!(plain.shading_normal(wo, Vec2::ZERO), Vec3::Z);
+        assert_eq!(plain.shading_normal(wo, &FLAT), Vec3::Z);
     }
 }

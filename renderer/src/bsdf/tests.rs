@@ -8,6 +8,9 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg32;
 use std::f64::consts::PI;
 
+/// A flat shading point at uv (0, 0).
+const FLAT: ShadingPoint = ShadingPoint::flat(Vec2::ZERO);
+
 fn rng(seed: u64) -> Pcg32 {
     Pcg32::seed_from_u64(seed)
 }
@@ -148,7 +151,7 @@ fn eval_and_pdf_match_mitsuba() {
             (TransportMode::Importance, f_imp),
         ] {
             let expect = Rgb::from(expect);
-            let got = b.eval(wo, wi, Vec2::ZERO, mode);
+            let got = b.eval(wo, wi, &FLAT, mode);
             if (got - expect).abs().max_element() > 2e-3 * expect.max_element() + 1e-6 {
                 failures.push(format!(
                     "{} {mode:?} wo={wo} wi={wi}: f {got} vs Mitsuba {expect}",
@@ -156,7 +159,7 @@ fn eval_and_pdf_match_mitsuba() {
                 ));
             }
         }
-        let got = b.pdf(wo, wi, Vec2::ZERO);
+        let got = b.pdf(wo, wi, &FLAT);
         if (got - pdf).abs() > 2e-3 * pdf + 1e-6 {
             failures.push(format!(
                 "{} wo={wo} wi={wi}: pdf {got} vs Mitsuba {pdf}",
@@ -329,7 +332,42 @@ fn glossy_catalogue() -> Vec<(&'static str, Bsdf, bool)> {
             ),
             true,
         ),
+        (
+            "bumpmap tilted / diffuse",
+            bumped(diffuse(rgb(0.8, 0.5, 0.2))),
+            false,
+        ),
+        (
+            "bumpmap tilted / roughconductor ggx 0.3",
+            bumped(rough_conductor(rough(Ggx, 0.3, 0.3), gold())),
+            false,
+        ),
     ]
+}
+
+/// `bumpmap` over `nested` with Mitsuba's defaults and a 2×2 height field whose gradient at
+/// uv (0, 0) on [`FLAT`] (∂p/∂u = +x, ∂p/∂v = +y) is (0.6, −0.4): a normal tilted by ≈ 36°.
+fn bumped(nested: Bsdf) -> Bsdf {
+    use crate::texture::{Bitmap, BitmapFilter, BitmapWrap};
+    // At uv (0, 0) the lookup sits halfway between texel columns 1 and 0 (wrapping) and rows 1
+    // and 0: ∂h/∂u = 2·mean(0.6 − 0.3, 0.4 − 0.1) = 0.6, ∂h/∂v = 2·mean(0.1 − 0.3, 0.4 − 0.6) = −0.4.
+    let image = Bitmap {
+        width: 2,
+        height: 2,
+        texels: [0.4, 0.1, 0.6, 0.3].map(Rgb::splat).to_vec(),
+    };
+    Bsdf::BumpMap(BumpMap {
+        height: Texture::Bitmap {
+            image: std::sync::Arc::new(image),
+            filter: BitmapFilter::Bilinear,
+            wrap: BitmapWrap::Repeat,
+            to_uv: glam::Mat3::IDENTITY,
+        },
+        scale: 1.0,
+        nested: Box::new(nested),
+        flip_invalid_normals: true,
+        use_shadowing_function: true,
+    })
 }
 
 /// `blendbsdf` of `a` (weight 0) and `b` (weight 1) at constant weight `w`.
@@ -472,7 +510,7 @@ fn integrate_pdf(bsdf: &Bsdf, wo: Vec3) -> Vec<f64> {
                         (theta.sin() * phi.sin()) as f32,
                         theta.cos() as f32,
                     );
-                    sum += bsdf.pdf(wo, wi, Vec2::ZERO) as f64 * theta.sin();
+                    sum += bsdf.pdf(wo, wi, &FLAT) as f64 * theta.sin();
                 }
             }
             out[i * PHI_RES + j] = sum * dt * dp / (SUB * SUB) as f64;
@@ -490,7 +528,7 @@ fn chi2_test(bsdf: &Bsdf, wo: Vec3, mode: TransportMode, n: usize, seed: u64) ->
     let mut rest_observed = 0u64;
     let mut r = rng(seed);
     for _ in 0..n {
-        match bsdf.sample(wo, Vec2::ZERO, uniform(&mut r), uniform2(&mut r), mode) {
+        match bsdf.sample(wo, &FLAT, uniform(&mut r), uniform2(&mut r), mode) {
             Some(s) if !s.delta => {
                 observed[cell_of(s.wi)] += 1;
                 check_sample_consistency(bsdf, wo, &s, mode);
@@ -561,8 +599,8 @@ fn chi2_test(bsdf: &Bsdf, wo: Vec3, mode: TransportMode, n: usize, seed: u64) ->
 /// A non-delta sample must agree with eval and pdf: pdf == pdf(wo, wi), weight ==
 /// eval·|cos|/pdf.
 fn check_sample_consistency(bsdf: &Bsdf, wo: Vec3, s: &BsdfSample, mode: TransportMode) {
-    let pdf = bsdf.pdf(wo, s.wi, Vec2::ZERO);
-    let f = bsdf.eval(wo, s.wi, Vec2::ZERO, mode);
+    let pdf = bsdf.pdf(wo, s.wi, &FLAT);
+    let f = bsdf.eval(wo, s.wi, &FLAT, mode);
     assert!(
         (s.pdf - pdf).abs() <= 2e-3 * pdf.max(s.pdf) + 1e-6,
         "sample pdf {} vs pdf() {} for wo={wo} wi={}",
@@ -649,7 +687,7 @@ fn albedo(bsdf: &Bsdf, wo: Vec3, mode: TransportMode, n: usize, seed: u64) -> (R
     let mut r = rng(seed);
     let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
     for _ in 0..n {
-        if let Some(s) = bsdf.sample(wo, Vec2::ZERO, uniform(&mut r), uniform2(&mut r), mode) {
+        if let Some(s) = bsdf.sample(wo, &FLAT, uniform(&mut r), uniform2(&mut r), mode) {
             for c in 0..3 {
                 let w = s.weight[c] as f64;
                 sum[c] += w;
@@ -701,9 +739,9 @@ fn energy_is_conserved_for_every_bsdf_and_direction() {
             // is legitimately scaled by 1/η²). A normal map conserves energy in radiance
             // transport only: its adjoint (photons) gains up to |cos′θo| / |cos θo| where the
             // perturbed normal faces a grazing arrival, as any shading normal does (Veach 1997,
-            // §5.3).
+            // §5.3). A bump map likewise.
             seed += 1;
-            let mode = if matches!(bsdf, Bsdf::NormalMap(_)) {
+            let mode = if matches!(bsdf, Bsdf::NormalMap(_) | Bsdf::BumpMap(_)) {
                 TransportMode::Radiance
             } else {
                 TransportMode::Importance
@@ -784,7 +822,7 @@ fn smooth_dielectric_chooses_lobes_by_fresnel_and_scales_radiance() {
             let s = b
                 .sample(
                     wo,
-                    Vec2::ZERO,
+                    &FLAT,
                     uniform(&mut r),
                     uniform2(&mut r),
                     TransportMode::Radiance,
@@ -833,7 +871,7 @@ fn thin_dielectric_sums_internal_bounces() {
         let s = b
             .sample(
                 wo,
-                Vec2::ZERO,
+                &FLAT,
                 uniform(&mut r),
                 uniform2(&mut r),
                 TransportMode::Radiance,
@@ -891,13 +929,17 @@ fn eval_is_reciprocal_and_adjoint() {
             // A normal map is the adjoint of itself except where the arriving direction picks
             // another perturbed frame than the leaving one would (an invalid normal flipped
             // for one of them only): photons decide by the arriving direction.
-            if let Bsdf::NormalMap(m) = &bsdf {
-                if m.flips(wo, Vec2::ZERO) != m.flips(wi, Vec2::ZERO) {
-                    continue;
-                }
+            // A bump map likewise.
+            let flips_differ = match &bsdf {
+                Bsdf::NormalMap(m) => m.flips(wo, Vec2::ZERO) != m.flips(wi, Vec2::ZERO),
+                Bsdf::BumpMap(m) => m.flips(wo, &FLAT) != m.flips(wi, &FLAT),
+                _ => false,
+            };
+            if flips_differ {
+                continue;
             }
-            let a = bsdf.eval(wo, wi, Vec2::ZERO, TransportMode::Radiance);
-            let b = bsdf.eval(wi, wo, Vec2::ZERO, TransportMode::Importance);
+            let a = bsdf.eval(wo, wi, &FLAT, TransportMode::Radiance);
+            let b = bsdf.eval(wi, wo, &FLAT, TransportMode::Importance);
             // Refraction near the critical angle is ill-conditioned in f32 (the Fresnel slope and
             // the cancellation in (wo·m + η wi·m)² amplify rounding; Mitsuba itself differs by
             // 0.4 % on such pairs), so transmission gets 1 %, reflection 0.1 %. Below f ≈ 10⁻⁴
@@ -917,9 +959,9 @@ fn eval_is_reciprocal_and_adjoint() {
                 nonzero += 1;
             }
             // Radiance and importance agree for reflection (of a reciprocal model: not a normal
-            // map, whose importance mode is its adjoint, checked above).
-            if wo.z * wi.z > 0.0 && !matches!(bsdf, Bsdf::NormalMap(_)) {
-                let c = bsdf.eval(wo, wi, Vec2::ZERO, TransportMode::Importance);
+            // or bump map, whose importance mode is its adjoint, checked above).
+            if wo.z * wi.z > 0.0 && !matches!(bsdf, Bsdf::NormalMap(_) | Bsdf::BumpMap(_)) {
+                let c = bsdf.eval(wo, wi, &FLAT, TransportMode::Importance);
                 assert!(
                     (a - c).abs().max_element() <= tol,
                     "{name}: mode-dependent reflection"
@@ -940,27 +982,21 @@ fn one_sided_models_are_black_from_below() {
         }
         let mut r = rng(51);
         assert!(
-            bsdf.sample(
-                below,
-                Vec2::ZERO,
-                0.3,
-                uniform2(&mut r),
-                TransportMode::Radiance
-            )
-            .is_none(),
+            bsdf.sample(below, &FLAT, 0.3, uniform2(&mut r), TransportMode::Radiance)
+                .is_none(),
             "{name}"
         );
         assert_eq!(
-            bsdf.eval(below, above, Vec2::ZERO, TransportMode::Radiance),
+            bsdf.eval(below, above, &FLAT, TransportMode::Radiance),
             Rgb::ZERO,
             "{name}"
         );
         assert_eq!(
-            bsdf.eval(above, below, Vec2::ZERO, TransportMode::Radiance),
+            bsdf.eval(above, below, &FLAT, TransportMode::Radiance),
             Rgb::ZERO,
             "{name}"
         );
-        assert_eq!(bsdf.pdf(below, above, Vec2::ZERO), 0.0, "{name}");
+        assert_eq!(bsdf.pdf(below, above, &FLAT), 0.0, "{name}");
     }
 }
 
@@ -975,29 +1011,26 @@ fn twosided_mirrors_the_back_side() {
     let flip = |w: Vec3| Vec3::new(w.x, w.y, -w.z);
     let m = TransportMode::Radiance;
     assert_eq!(
-        two.eval(flip(wo), flip(wi), Vec2::ZERO, m),
-        inner.eval(wo, wi, Vec2::ZERO, m)
+        two.eval(flip(wo), flip(wi), &FLAT, m),
+        inner.eval(wo, wi, &FLAT, m)
     );
-    assert_eq!(
-        two.pdf(flip(wo), flip(wi), Vec2::ZERO),
-        inner.pdf(wo, wi, Vec2::ZERO)
-    );
+    assert_eq!(two.pdf(flip(wo), flip(wi), &FLAT), inner.pdf(wo, wi, &FLAT));
     assert!(
-        (two.eval(wo, wi, Vec2::ZERO, m) - Rgb::splat(0.5 / std::f32::consts::PI))
+        (two.eval(wo, wi, &FLAT, m) - Rgb::splat(0.5 / std::f32::consts::PI))
             .abs()
             .max_element()
             < 1e-7
     );
     let s = two
-        .sample(flip(wo), Vec2::ZERO, 0.5, Vec2::new(0.3, 0.6), m)
+        .sample(flip(wo), &FLAT, 0.5, Vec2::new(0.3, 0.6), m)
         .unwrap();
     let t = inner
-        .sample(wo, Vec2::ZERO, 0.5, Vec2::new(0.3, 0.6), m)
+        .sample(wo, &FLAT, 0.5, Vec2::new(0.3, 0.6), m)
         .unwrap();
     assert_eq!(s.wi, flip(t.wi));
     assert_eq!(s.weight, t.weight);
     // Crossing sides is black.
-    assert_eq!(two.eval(wo, flip(wi), Vec2::ZERO, m), Rgb::ZERO);
+    assert_eq!(two.eval(wo, flip(wi), &FLAT, m), Rgb::ZERO);
     assert_eq!(two.lobe(), Lobe::Diffuse);
     let mirror_back = Bsdf::TwoSided {
         front: Box::new(diffuse(constant(0.5))),
@@ -1018,20 +1051,20 @@ fn hand_computed_values() {
     let m = TransportMode::Radiance;
     // Lambert: ρ/π.
     let d = diffuse(constant(0.5));
-    assert!((d.eval(n, dir(40.0, 0.0), Vec2::ZERO, m).x - 0.5 / std::f32::consts::PI).abs() < 1e-7);
+    assert!((d.eval(n, dir(40.0, 0.0), &FLAT, m).x - 0.5 / std::f32::consts::PI).abs() < 1e-7);
     // Rough conductor at normal incidence and normal reflection: H = n, D = 1/(πα²) for both
     // distributions, G = 1, so f = F0/(4πα²); "none" conductor F0 = 1.
     for kind in [MicrofacetKind::Beckmann, MicrofacetKind::Ggx] {
         let rc = rough_conductor(rough(kind, 0.2, 0.2), None);
         let expect = 1.0 / (4.0 * std::f32::consts::PI * 0.04);
-        let got = rc.eval(n, n, Vec2::ZERO, m).x;
+        let got = rc.eval(n, n, &FLAT, m).x;
         assert!(
             (got - expect).abs() < 1e-4 * expect,
             "{kind:?}: {got} vs {expect}"
         );
         // Rough glass reflection: F(1) = 0.04 for η = 1.5.
         let rd = rough_dielectric(rough(kind, 0.2, 0.2), 1.5);
-        let got = rd.eval(n, n, Vec2::ZERO, m).x;
+        let got = rd.eval(n, n, &FLAT, m).x;
         assert!(
             (got - 0.04 * expect).abs() < 1e-4 * expect,
             "{kind:?}: {got}"
@@ -1042,7 +1075,7 @@ fn hand_computed_values() {
     // = 0.596_79.
     let p = plastic(1.5, constant(0.5), false);
     let expect = 0.5 / (1.0 - 0.596_79) * 0.96 * 0.96 / (2.25 * std::f32::consts::PI);
-    let got = p.eval(n, n, Vec2::ZERO, m).x;
+    let got = p.eval(n, n, &FLAT, m).x;
     assert!(
         (got - expect).abs() < 1e-3 * expect,
         "plastic: {got} vs {expect}"
@@ -1050,7 +1083,7 @@ fn hand_computed_values() {
     // Nonlinear: ρ/(1 − ρ·Fdr_int).
     let p = plastic(1.5, constant(0.5), true);
     let expect = 0.5 / (1.0 - 0.5 * 0.596_79) * 0.96 * 0.96 / (2.25 * std::f32::consts::PI);
-    let got = p.eval(n, n, Vec2::ZERO, m).x;
+    let got = p.eval(n, n, &FLAT, m).x;
     assert!(
         (got - expect).abs() < 1e-3 * expect,
         "nonlinear plastic: {got} vs {expect}"
@@ -1061,7 +1094,7 @@ fn hand_computed_values() {
     let w = 1.0 / 1.5;
     let p_spec = 0.04 * w / (0.04 * w + 0.96 * (1.0 - w));
     let s = p
-        .sample(n, Vec2::ZERO, 0.5 * p_spec, Vec2::splat(0.5), m)
+        .sample(n, &FLAT, 0.5 * p_spec, Vec2::splat(0.5), m)
         .unwrap();
     assert!(s.delta && (s.pdf - p_spec).abs() < 1e-6 && (s.weight.x - 0.04 / p_spec).abs() < 1e-4);
     // Gold conductor albedo = F0 per channel.
@@ -1072,7 +1105,7 @@ fn hand_computed_values() {
     let g = gold().unwrap();
     let f0 =
         ((g.eta - Rgb::ONE).powf(2.0) + g.k * g.k) / ((g.eta + Rgb::ONE).powf(2.0) + g.k * g.k);
-    assert!((au.albedo(Vec2::ZERO) - f0).abs().max_element() < 1e-5);
+    assert!((au.albedo(&FLAT) - f0).abs().max_element() < 1e-5);
 }
 
 #[test]
@@ -1097,7 +1130,7 @@ fn lobes_and_flags() {
     assert!(!dielectric(1.5).has_non_delta());
     assert!(plastic(1.5, constant(0.5), false).has_non_delta());
     assert_eq!(
-        dielectric(1.5).eval(Vec3::Z, Vec3::Z, Vec2::ZERO, TransportMode::Radiance),
+        dielectric(1.5).eval(Vec3::Z, Vec3::Z, &FLAT, TransportMode::Radiance),
         Rgb::ZERO
     );
 }
@@ -1135,6 +1168,11 @@ fn delta_probability_is_the_frequency_of_delta_samples() {
         false,
     ));
     all.push((
+        "bumpmap / plastic",
+        bumped(plastic(1.49, rgb(0.1, 0.1, 0.1), false)),
+        false,
+    ));
+    all.push((
         "normalmap / plastic",
         normal_mapped(
             rgb(0.6, 0.45, 0.9),
@@ -1145,13 +1183,13 @@ fn delta_probability_is_the_frequency_of_delta_samples() {
     let mut r = rng(77);
     for (name, bsdf, two_sided) in all {
         for wo in test_directions(two_sided) {
-            let p = bsdf.delta_probability(wo, Vec2::ZERO) as f64;
+            let p = bsdf.delta_probability(wo, &FLAT) as f64;
             let n = 40_000;
             let mut delta = 0;
             for _ in 0..n {
                 let s = bsdf.sample(
                     wo,
-                    Vec2::ZERO,
+                    &FLAT,
                     uniform(&mut r),
                     uniform2(&mut r),
                     TransportMode::Radiance,
@@ -1202,12 +1240,18 @@ fn textured_alpha_is_the_constant_model_at_each_uv() {
                 let wo = dir(70.0 * uniform(&mut r), 360.0 * uniform(&mut r));
                 let wi = dir(170.0 * uniform(&mut r), 360.0 * uniform(&mut r));
                 let mode = TransportMode::Radiance;
-                assert_eq!(t.eval(wo, wi, uv, mode), constant.eval(wo, wi, uv, mode));
-                assert_eq!(t.pdf(wo, wi, uv), constant.pdf(wo, wi, uv));
+                assert_eq!(
+                    t.eval(wo, wi, &ShadingPoint::flat(uv), mode),
+                    constant.eval(wo, wi, &ShadingPoint::flat(uv), mode)
+                );
+                assert_eq!(
+                    t.pdf(wo, wi, &ShadingPoint::flat(uv)),
+                    constant.pdf(wo, wi, &ShadingPoint::flat(uv))
+                );
                 let (ul, u) = (uniform(&mut r), uniform2(&mut r));
                 assert_eq!(
-                    t.sample(wo, uv, ul, u, mode),
-                    constant.sample(wo, uv, ul, u, mode)
+                    t.sample(wo, &ShadingPoint::flat(uv), ul, u, mode),
+                    constant.sample(wo, &ShadingPoint::flat(uv), ul, u, mode)
                 );
             }
         }

@@ -99,6 +99,7 @@ impl PathTracer {
             }
             let bsdf = scene.bsdf(&si);
             let wo = si.to_local(si.wo);
+            let sp = si.shading_point();
 
             // Next-event estimation.
             let u_light = rng.next_f32();
@@ -106,12 +107,12 @@ impl PathTracer {
             if bsdf.has_non_delta() {
                 if let Some(ls) = scene.sample_li(si.p, u_light, u_light2) {
                     let wi = si.to_local(ls.wi);
-                    let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance);
+                    let f = bsdf.eval(wo, wi, &sp, TransportMode::Radiance);
                     if f.max_element() > 0.0 && !scene.light_occluded(si.p, si.ng, &ls) {
                         let w = if ls.delta {
                             1.0
                         } else {
-                            power_heuristic(ls.pdf, bsdf.pdf(wo, wi, si.uv))
+                            power_heuristic(ls.pdf, bsdf.pdf(wo, wi, &sp))
                         };
                         result += throughput * f * (wi.z.abs() * w) * ls.weight;
                     }
@@ -121,7 +122,7 @@ impl PathTracer {
             // Continue the path by BSDF sampling.
             let u_lobe = rng.next_f32();
             let u_bsdf = rng.next_2d();
-            let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u_bsdf, TransportMode::Radiance) else {
+            let Some(bs) = bsdf.sample(wo, &sp, u_lobe, u_bsdf, TransportMode::Radiance) else {
                 break;
             };
             let wi_world = si.to_world(bs.wi);

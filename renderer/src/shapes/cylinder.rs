@@ -148,6 +148,7 @@ impl Cylinder {
             dpdu: self
                 .to_world
                 .transform_vector3(Vec3::new(-q.y, q.x, 0.0) * (2.0 * PI)),
+            dpdv: self.to_world.transform_vector3(Vec3::Z),
             uv: Self::local_uv(q),
         }
     }

@@ -85,12 +85,26 @@ impl Disk {
         let mut q = self.to_local.transform_point3(ray.at(t));
         q.z = 0.0;
         let p = self.to_world.transform_point3(q);
-        let dpdu = self.to_world.transform_vector3(Vec3::X);
+        // Mitsuba's polar parameterisation (u = r, v = φ/2π): ∂p/∂u is radial, so the shading
+        // tangent (anisotropy, normal maps) turns with φ as in Mitsuba; zero at the centre.
+        let r = (q.x * q.x + q.y * q.y).sqrt();
+        let (cos_phi, sin_phi) = if r > 0.0 {
+            (q.x / r, q.y / r)
+        } else {
+            (0.0, 0.0)
+        };
+        let dpdu = self
+            .to_world
+            .transform_vector3(Vec3::new(cos_phi, sin_phi, 0.0));
+        let dpdv = self
+            .to_world
+            .transform_vector3(Vec3::new(-sin_phi, cos_phi, 0.0) * (2.0 * PI * r));
         HitGeometry {
             p,
             ng: self.normal,
             ns: self.normal,
             dpdu,
+            dpdv,
             uv: Self::local_uv(q),
         }
     }

@@ -182,25 +182,28 @@ impl Mesh {
             }
             None => ng,
         };
-        let (uv, dpdu) = match &self.data.uvs {
+        // Mitsuba's parameterisation: by the texture coordinates when the mesh has them (an
+        // arbitrary basis where they are degenerate), else barycentric.
+        let (uv, dpdu, dpdv) = match &self.data.uvs {
             Some(uv) => {
                 let (t0, t1, t2) = (uv[i0 as usize], uv[i1 as usize], uv[i2 as usize]);
                 let (d1, d2) = (t1 - t0, t2 - t0);
                 let det = d1.x * d2.y - d1.y * d2.x;
-                let dpdu = if det != 0.0 {
-                    (e1 * d2.y - e2 * d1.y) / det
+                let (dpdu, dpdv) = if det != 0.0 {
+                    ((e1 * d2.y - e2 * d1.y) / det, (e2 * d1.x - e1 * d2.x) / det)
                 } else {
-                    coordinate_system(ng).0
+                    coordinate_system(ng)
                 };
-                (t0 * b0 + t1 * b.x + t2 * b.y, dpdu)
+                (t0 * b0 + t1 * b.x + t2 * b.y, dpdu, dpdv)
             }
-            None => (b, e1),
+            None => (b, e1, e2),
         };
         HitGeometry {
             p,
             ng,
             ns,
             dpdu,
+            dpdv,
             uv,
         }
     }
@@ -290,6 +293,48 @@ mod tests {
         assert!((g.ng - Vec3::Z).length() < 1e-6);
         assert!(g.ns.y > 0.0 && (g.ns.length() - 1.0).abs() < 1e-5);
         assert!((g.dpdu - Vec3::X).length() < 1e-5);
+        assert!((g.dpdv - Vec3::Y).length() < 1e-5);
+    }
+
+    /// ∂p/∂u and ∂p/∂v follow the texture coordinates (a sheared, scaled uv map here), and are
+    /// the triangle's edges without them (Mitsuba's barycentric parameterisation).
+    #[test]
+    fn surface_derivatives_follow_the_parameterisation() {
+        let positions = vec![
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 3.0, 0.0),
+        ];
+        let uvs = vec![Vec2::ZERO, Vec2::new(0.5, 0.25), Vec2::new(0.0, 1.5)];
+        let with_uvs = Mesh::new(&TriangleMesh {
+            positions: positions.clone(),
+            normals: None,
+            uvs: Some(uvs.clone()),
+            indices: vec![[0, 1, 2]],
+        });
+        let ray = Ray::new(Vec3::new(0.4, 0.5, 1.0), -Vec3::Z);
+        let g = with_uvs.hit_geometry(0, &ray, 1.0);
+        // p(u, v) is affine: p(uv_i) = p_i for every vertex.
+        for i in 1..3 {
+            let du = uvs[i] - uvs[0];
+            let p = g.dpdu * du.x + g.dpdv * du.y;
+            assert!(
+                (p - positions[i]).length() < 1e-5,
+                "{p} vs {}",
+                positions[i]
+            );
+        }
+        let without = Mesh::new(&TriangleMesh {
+            positions,
+            normals: None,
+            uvs: None,
+            indices: vec![[0, 1, 2]],
+        });
+        let g = without.hit_geometry(0, &ray, 1.0);
+        assert_eq!(
+            (g.dpdu, g.dpdv),
+            (Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 3.0, 0.0))
+        );
     }
 
     #[test]

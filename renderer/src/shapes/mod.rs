@@ -25,8 +25,11 @@ pub struct HitGeometry {
     pub ng: Vec3,
     /// Unit shading normal (interpolated vertex normal, or `ng`).
     pub ns: Vec3,
-    /// Surface tangent ∂p/∂u (not normalised; may be zero when undefined).
+    /// Surface tangent ∂p/∂u (not normalised; may be zero when undefined), as Mitsuba's
+    /// `dp_du`: its length is what a bump map's height gradient is measured against.
     pub dpdu: Vec3,
+    /// Surface tangent ∂p/∂v (not normalised), as Mitsuba's `dp_dv`.
+    pub dpdv: Vec3,
     /// Texture coordinates.
     pub uv: Vec2,
 }

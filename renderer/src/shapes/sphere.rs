@@ -101,17 +101,27 @@ impl Sphere {
         // uv and ∂p/∂u in the object frame (Mitsuba: φ about local z, θ from local +z).
         let local = self.to_local * dir;
         let uv = direction_to_spherical_uv(local);
+        // Mitsuba's (φ/2π, θ/π) parameterisation: ∂p/∂u = 2π·r·(−y, x, 0) and
+        // ∂p/∂v = π·r·(z cos φ, z sin φ, −sin θ) in the object frame; at the poles ∂p/∂u
+        // vanishes and the tangent falls back to an arbitrary one.
+        let rd = (local.x * local.x + local.y * local.y).sqrt();
         let dpdu = self.rotation * Vec3::new(-local.y, local.x, 0.0);
-        let dpdu = if dpdu.length_squared() > 1e-12 {
-            dpdu
+        let (dpdu, dpdv) = if rd > 1e-6 {
+            let dpdv = Vec3::new(local.z * local.x / rd, local.z * local.y / rd, -rd);
+            (
+                dpdu * (2.0 * PI * self.radius),
+                self.rotation * dpdv * (PI * self.radius),
+            )
         } else {
-            coordinate_system(n).0
+            let (s, t) = coordinate_system(n);
+            (s, t)
         };
         HitGeometry {
             p,
             ng: n,
             ns: n,
             dpdu,
+            dpdv,
             uv,
         }
     }

@@ -3,14 +3,14 @@
 use super::props::Props;
 use super::{ior, Builder, Element, SceneError};
 use crate::bsdf::{
-    Blend, Bsdf, Conductor, ConductorIor, Dielectric, Diffuse, Mask, MicrofacetKind, NormalMap,
+    Blend, Bsdf, BumpMap, Conductor, ConductorIor, Dielectric, Diffuse, Mask, MicrofacetKind, NormalMap,
     Plastic, RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
 };
 use crate::spectrum::{Rgb, SpectrumKind};
 use crate::texture::Texture;
 
 /// The BSDF plugins this importer knows.
-const BSDF_PLUGINS: [&str; 12] = [
+const BSDF_PLUGINS: [&str; 13] = [
     "diffuse",
     "conductor",
     "roughconductor",
@@ -21,6 +21,7 @@ const BSDF_PLUGINS: [&str; 12] = [
     "roughplastic",
     "twosided",
     "normalmap",
+    "bumpmap",
     "blendbsdf",
     "mask",
 ];
@@ -153,6 +154,44 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             Bsdf::NormalMap(NormalMap {
                 normalmap,
                 nested: Box::new(inner),
+                flip_invalid_normals: p.bool_or("flip_invalid_normals", true)?,
+                use_shadowing_function: p.bool_or("use_shadowing_function", true)?,
+            })
+        }
+        "bumpmap" => {
+            // Mitsuba takes the one nested texture and the one nested BSDF, whatever their
+            // names; a `<ref>` counts as what it refers to.
+            let (mut textures, mut nested) = (Vec::new(), Vec::new());
+            for o in p.objects(&["bsdf", "texture", "ref"]) {
+                if b.deref(o)?.tag == "texture" {
+                    textures.push(o);
+                } else {
+                    nested.push(o);
+                }
+            }
+            let [texture] = textures[..] else {
+                return Err(el.error(format!(
+                    "bumpmap needs exactly one nested texture (the height field), got {}",
+                    textures.len()
+                )));
+            };
+            let [inner] = nested[..] else {
+                return Err(el.error(format!(
+                    "bumpmap needs exactly one nested BSDF, got {}",
+                    nested.len()
+                )));
+            };
+            let height = b.texture_value(texture)?;
+            if !matches!(height, Texture::Bitmap { .. }) {
+                return Err(texture.error(
+                    "bumpmap needs a bitmap height field (Mitsuba computes texture gradients \
+                     for bitmaps only)",
+                ));
+            }
+            Bsdf::BumpMap(BumpMap {
+                height,
+                scale: p.float_or("scale", 1.0)? as f32,
+                nested: Box::new(b.bsdf_value(inner)?),
                 flip_invalid_normals: p.bool_or("flip_invalid_normals", true)?,
                 use_shadowing_function: p.bool_or("use_shadowing_function", true)?,
             })

@@ -1609,3 +1609,71 @@ fn alpha_may_be_a_texture_except_for_roughplastic() {
         "needs a constant \"alpha\"",
     );
 }
+
+#[test]
+fn bumpmap_takes_one_bitmap_and_one_bsdf_and_reports_misuse_by_line() {
+    let dir = temp_dir("bumpmap");
+    std::fs::create_dir_all(dir.join("tex")).unwrap();
+    let pixels = [Vec3::splat(0.2), Vec3::splat(0.6)];
+    crate::image_io::write_png_srgb(&dir.join("tex/h.png"), 2, 1, &pixels).unwrap();
+    let body = format!(
+        r#"{SENSOR}
+<texture type="bitmap" id="h"><string name="filename" value="tex/h.png"/><boolean name="raw" value="true"/></texture>
+<bsdf type="roughplastic" id="base"/>
+<bsdf type="bumpmap" id="a">
+  <ref id="base"/>
+  <ref name="arbitrary" id="h"/>
+</bsdf>
+<bsdf type="bumpmap" id="b">
+  <texture type="bitmap"><string name="filename" value="tex/h.png"/></texture>
+  <float name="scale" value="-0.5"/>
+  <boolean name="flip_invalid_normals" value="false"/>
+  <boolean name="use_shadowing_function" value="false"/>
+  <bsdf type="twosided"><bsdf type="diffuse"/></bsdf>
+</bsdf>
+<shape type="sphere"><ref id="a"/></shape>
+<shape type="sphere"><ref id="b"/></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let [Bsdf::RoughPlastic(_), Bsdf::BumpMap(a), Bsdf::BumpMap(b)] = &scene.bsdfs[..] else {
+        panic!("{:?}", scene.bsdfs)
+    };
+    assert!(matches!(a.height, Texture::Bitmap { .. }));
+    assert!(matches!(*a.nested, Bsdf::RoughPlastic(_)));
+    assert!(a.scale == 1.0 && a.flip_invalid_normals && a.use_shadowing_function);
+    assert!(matches!(*b.nested, Bsdf::TwoSided { .. }));
+    assert!(b.scale == -0.5 && !b.flip_invalid_normals && !b.use_shadowing_function);
+    let bitmap = r#"<texture type="bitmap"><string name="filename" value="tex/h.png"/></texture>"#;
+    for (inner, marker, needle) in [
+        (
+            "<bsdf type=\"bumpmap\">\n<bsdf type=\"diffuse\"/></bsdf>".to_owned(),
+            "bumpmap",
+            "exactly one nested texture (the height field), got 0",
+        ),
+        (
+            format!("<bsdf type=\"bumpmap\">{bitmap}</bsdf>"),
+            "bumpmap",
+            "exactly one nested BSDF, got 0",
+        ),
+        (
+            format!("<bsdf type=\"bumpmap\">{bitmap}{bitmap}<bsdf type=\"diffuse\"/></bsdf>"),
+            "bumpmap",
+            "exactly one nested texture (the height field), got 2",
+        ),
+        (
+            "<bsdf type=\"bumpmap\"><bsdf type=\"diffuse\"/>\n<texture type=\"checkerboard\"/></bsdf>"
+                .to_owned(),
+            "checkerboard",
+            "needs a bitmap height field",
+        ),
+        (
+            format!("<bsdf type=\"bumpmap\">{bitmap}<bsdf type=\"diffuse\"/>\n<float name=\"scael\" value=\"2\"/></bsdf>"),
+            "scael",
+            "unknown parameter \"scael\"",
+        ),
+    ] {
+        let body = format!("{SENSOR}\n{inner}\n<shape type=\"sphere\"/>");
+        assert_body_error_at(&dir, "bad.xml", &body, marker, needle);
+    }
+}

@@ -88,7 +88,7 @@ pub fn gather(
     };
     // The common case, a Lambertian surface: f is one constant on one hemisphere, so sum the
     // fluxes and multiply by f at the end (no BSDF evaluation per photon).
-    let factor = match lambertian(bsdf, vp.wo, vp.uv) {
+    let factor = match lambertian(bsdf, vp.wo, vp.sp.uv) {
         Some((f, side)) => {
             if f != Rgb::ZERO {
                 let n = vp.frame.n;
@@ -106,7 +106,7 @@ pub fn gather(
                     return;
                 }
                 let wi = vp.frame.to_local(photon.wi);
-                let f = bsdf.eval(vp.wo, wi, vp.uv, TransportMode::Radiance);
+                let f = bsdf.eval(vp.wo, wi, &vp.sp, TransportMode::Radiance);
                 if f != Rgb::ZERO {
                     add(d2, f * photon.flux);
                 }

@@ -57,7 +57,13 @@ pub fn trace_photon(
         }
         let u_lobe = rng.next_f32();
         let u = rng.next_2d();
-        let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Importance) else {
+        let Some(bs) = bsdf.sample(
+            wo,
+            &si.shading_point(),
+            u_lobe,
+            u,
+            TransportMode::Importance,
+        ) else {
             break;
         };
         let new_flux = flux * bs.weight;

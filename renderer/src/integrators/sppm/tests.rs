@@ -467,7 +467,7 @@ fn gather_matches_brute_force_sum() {
             frame,
             wo_world,
             wo: frame.to_local(wo_world),
-            uv: glam::Vec2::new(0.3, 0.6),
+            sp: crate::bsdf::ShadingPoint::flat(glam::Vec2::new(0.3, 0.6)),
             material,
             beta: Rgb::new(0.9, 0.8, 0.7),
         };
@@ -483,7 +483,12 @@ fn gather_matches_brute_force_sum() {
                 {
                     continue;
                 }
-                let f = bsdf.eval(vp.wo, frame.to_local(ph.wi), vp.uv, TransportMode::Radiance);
+                let f = bsdf.eval(
+                    vp.wo,
+                    frame.to_local(ph.wi),
+                    &vp.sp,
+                    TransportMode::Radiance,
+                );
                 sum += f * ph.flux;
             }
             let want = vp.beta * sum / (n_photons as f32 * std::f32::consts::PI * r * r);

@@ -9,13 +9,13 @@
 //! `mask`, a delta model in a `blendbsdf` — splits the path on one BSDF sample: the delta part
 //! continues it, the diffuse part takes the visible point.
 
-use crate::bsdf::{Bsdf, BsdfSample, Lobe, TransportMode};
+use crate::bsdf::{Bsdf, BsdfSample, Lobe, ShadingPoint, TransportMode};
 use crate::frame::Frame;
 use crate::math::Ray;
 use crate::sampling::{power_heuristic, Pcg32, UniformSource};
 use crate::scene::{EmitterHit, Scene, SurfaceInteraction};
 use crate::spectrum::Rgb;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 
 use super::accumulate::GBufferSample;
 
@@ -32,8 +32,8 @@ pub struct VisiblePoint {
     pub wo_world: Vec3,
     /// Direction towards the viewer, shading frame.
     pub wo: Vec3,
-    /// Texture coordinates.
-    pub uv: Vec2,
+    /// Texture coordinates and local differential geometry (what the BSDF reads).
+    pub sp: ShadingPoint,
     /// Index of the material in [`Scene::bsdfs`].
     pub material: u32,
     /// Path throughput β from the camera to this point.
@@ -107,6 +107,7 @@ fn emission_along(
 fn direct_light(
     scene: &Scene,
     si: &SurfaceInteraction,
+    sp: &ShadingPoint,
     bsdf: &Bsdf,
     wo: Vec3,
     rng: &mut Pcg32,
@@ -117,14 +118,14 @@ fn direct_light(
         return Rgb::ZERO;
     };
     let wi = si.to_local(ls.wi);
-    let f = bsdf.eval(wo, wi, si.uv, TransportMode::Radiance);
+    let f = bsdf.eval(wo, wi, sp, TransportMode::Radiance);
     if f.max_element() <= 0.0 || scene.light_occluded(si.p, si.ng, &ls) {
         return Rgb::ZERO;
     }
     let w = if ls.delta {
         1.0
     } else {
-        power_heuristic(ls.pdf, bsdf.pdf(wo, wi, si.uv))
+        power_heuristic(ls.pdf, bsdf.pdf(wo, wi, sp))
     };
     f * (wi.z.abs() * w) * ls.weight
 }
@@ -146,14 +147,14 @@ fn probe_emission(scene: &Scene, si: &SurfaceInteraction, bs: &BsdfSample) -> Rg
 }
 
 /// The visible point at `si` with path throughput `beta`.
-fn visible_point(si: &SurfaceInteraction, wo: Vec3, beta: Rgb) -> VisiblePoint {
+fn visible_point(si: &SurfaceInteraction, sp: &ShadingPoint, wo: Vec3, beta: Rgb) -> VisiblePoint {
     VisiblePoint {
         p: si.p,
         ng: si.ng,
         frame: si.frame,
         wo_world: si.wo,
         wo,
-        uv: si.uv,
+        sp: *sp,
         material: si.material,
         beta,
     }
@@ -188,12 +189,13 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
         };
         let bsdf = scene.bsdf(&si);
         let wo = si.to_local(si.wo);
+        let sp = si.shading_point();
         let lobe = bsdf.lobe_for(wo);
         if lobe == Lobe::Diffuse {
-            let p_delta = bsdf.delta_probability(wo, si.uv);
+            let p_delta = bsdf.delta_probability(wo, &sp);
             let gbuffer = GBufferSample {
-                albedo: bsdf.albedo(si.uv),
-                normal: si.frame.to_world(bsdf.shading_normal(wo, si.uv)),
+                albedo: bsdf.albedo(&sp),
+                normal: si.frame.to_world(bsdf.shading_normal(wo, &sp)),
                 depth: path_length,
             };
             // The G-buffer describes the first diffuse surface, also when the path goes on
@@ -213,7 +215,7 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                 // NEE and the photons, and the sample serves as the MIS probe.
                 let u_lobe = rng.next_f32();
                 let u = rng.next_2d();
-                let bs = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance);
+                let bs = bsdf.sample(wo, &sp, u_lobe, u, TransportMode::Radiance);
                 if let Some(bs) = bs.filter(|bs| bs.delta) {
                     if depth == max_depth || !scatter(&si, &bs, &mut beta, &mut last, &mut ray) {
                         break;
@@ -225,35 +227,35 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                     break;
                 }
                 let vp_beta = beta / (1.0 - p_delta);
-                out.direct += vp_beta * direct_light(scene, &si, bsdf, wo, rng);
+                out.direct += vp_beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
                 if let Some(bs) = bs {
                     out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
                 }
-                out.vp = Some(visible_point(&si, wo, vp_beta));
+                out.vp = Some(visible_point(&si, &sp, wo, vp_beta));
                 if !gbuffer_set {
                     out.gbuffer = gbuffer;
                 }
                 break;
             }
-            out.direct += beta * direct_light(scene, &si, bsdf, wo, rng);
+            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
             // The BSDF-sampling half of the MIS pair: it only looks for emitters.
             let u_lobe = rng.next_f32();
             let u = rng.next_2d();
-            if let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance) {
+            if let Some(bs) = bsdf.sample(wo, &sp, u_lobe, u, TransportMode::Radiance) {
                 out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
             }
-            out.vp = Some(visible_point(&si, wo, beta));
+            out.vp = Some(visible_point(&si, &sp, wo, beta));
             break;
         }
         if depth == max_depth {
             break;
         }
         if lobe == Lobe::Glossy {
-            out.direct += beta * direct_light(scene, &si, bsdf, wo, rng);
+            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
         }
         let u_lobe = rng.next_f32();
         let u = rng.next_2d();
-        let Some(bs) = bsdf.sample(wo, si.uv, u_lobe, u, TransportMode::Radiance) else {
+        let Some(bs) = bsdf.sample(wo, &sp, u_lobe, u, TransportMode::Radiance) else {
             break;
         };
         if !scatter(&si, &bs, &mut beta, &mut last, &mut ray) {
