@@ -222,6 +222,24 @@ def bumps_normal_pixel(x: int, y: int, size: int = 64):
     return tuple(int(round((c * inv + 1.0) * 0.5 * 255.0)) for c in n)
 
 
+def bump_height_pixel(x: int, y: int, size: int = 64):
+    """A height field for `bumpmap` (grey, 8 bit): a 4x4 grid of domes in the top half,
+    sawtooth ridges along x (slow rise, steep fall) in the bottom-left quarter and a sinusoid
+    along y in the bottom-right one. The one-signed sawtooth slopes show a flipped u axis, the
+    ridges along x against the waves along y a swapped one."""
+    u, v = (x + 0.5) / size, (y + 0.5) / size
+    if v < 0.5:
+        cu, cv = (u * 4) % 1.0 - 0.5, (v * 8) % 1.0 - 0.5
+        h = 0.9 * max(0.0, 1.0 - (cu * cu + cv * cv) / 0.16)
+    elif u < 0.5:
+        t = (u * 8) % 1.0
+        h = 0.8 * (t / 0.75 if t < 0.75 else (1.0 - t) / 0.25)
+    else:
+        h = 0.4 + 0.4 * math.sin(2.0 * math.pi * 4.0 * v)
+    g = int(round(min(1.0, max(0.0, h)) * 255.0))
+    return (g, g, g)
+
+
 def main():
     pos, nrm, uv, faces = torus(0.22, 0.08, 48, 24)
     write_obj(SCENES / "default" / "meshes" / "torus.obj", pos, nrm, uv, faces,
@@ -242,6 +260,8 @@ def main():
                      [("torus", pos, nrm, uv, tris, False), ("octahedron", opos, None, None, otris, True)])
     write_png_rgb8(SCENES / "validation" / "normalmap" / "textures" / "bumps.png", 64, 64,
                    bumps_normal_pixel)
+    write_png_rgb8(SCENES / "validation" / "bumpmap" / "textures" / "heights.png", 64, 64,
+                   bump_height_pixel)
 
 
 if __name__ == "__main__":

@@ -141,3 +141,84 @@ impl Shape {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Mat3, Mat4, Quat};
+
+    /// ∂p/∂u and ∂p/∂v are the derivatives of each analytic shape's parameterisation (what a
+    /// bump map's strength is measured against): stepping the hit point by ε·∂p/∂u (and
+    /// re-hitting the surface through it from the ray origin) moves uv by (ε, 0), and likewise
+    /// for v — on a rotated sphere, a transformed disk and a transformed cylinder, at several
+    /// points.
+    #[test]
+    fn surface_derivatives_are_those_of_the_uv_parameterisation() {
+        let rotation = Mat3::from_quat(Quat::from_euler(glam::EulerRot::XYZ, 0.3, -0.7, 1.1));
+        let transform = Mat4::from_scale_rotation_translation(
+            Vec3::new(0.7, 1.3, 0.9),
+            Quat::from_euler(glam::EulerRot::XYZ, -0.4, 0.2, 0.9),
+            Vec3::new(0.5, -0.2, 0.3),
+        );
+        // A cylinder's cross-section must stay circular: equal x and y scale.
+        let cylinder_transform = Mat4::from_scale_rotation_translation(
+            Vec3::new(0.6, 0.6, 1.7),
+            Quat::from_euler(glam::EulerRot::XYZ, 0.5, 0.1, -0.8),
+            Vec3::new(-0.1, 0.4, 0.2),
+        );
+        let shapes = [
+            (
+                "sphere",
+                Shape::Sphere(
+                    Sphere::new(Vec3::new(0.2, 0.1, -0.3), 0.8, false).with_rotation(rotation),
+                ),
+            ),
+            ("disk", Shape::Disk(Disk::new(transform, false))),
+            (
+                "cylinder",
+                Shape::Cylinder(Cylinder::new(cylinder_transform, false).unwrap()),
+            ),
+        ];
+        let hit = |name: &str, shape: &Shape, o: Vec3, target: Vec3| {
+            let ray = Ray::new(o, (target - o).normalize());
+            let t = match shape {
+                Shape::Sphere(s) => s.intersect(ray.o.into(), ray.d.into(), 0.0, f32::INFINITY),
+                Shape::Disk(d) => d.intersect(ray.o.into(), ray.d.into(), 0.0, f32::INFINITY),
+                Shape::Cylinder(c) => c.intersect(ray.o.into(), ray.d.into(), 0.0, f32::INFINITY),
+                Shape::Mesh(_) => unreachable!(),
+            };
+            assert!(t.is_finite(), "{name}: {o} towards {target}: no hit");
+            shape.hit_geometry(0, &ray, t, Vec2::ZERO)
+        };
+        let eps = 1e-3;
+        let mut checked = 0;
+        for (name, shape) in &shapes {
+            for i in 0..24 {
+                // Points on the surface from area sampling, seen from outside along the normal.
+                // (Inside [0.1, 0.9]²: away from the disk's rim.)
+                let u = Vec2::new(
+                    0.1 + 0.8 * (i as f32 * 0.618_034).fract(),
+                    0.1 + 0.8 * (i as f32 * 0.414_214 + 0.1).fract(),
+                );
+                let s = shape.sample_area(0.0, u);
+                let o = s.p + s.n * 2.0;
+                let g = hit(name, shape, o, s.p);
+                // Keep away from the seams and poles where uv wraps or degenerates.
+                if g.uv.x < 0.05 || g.uv.x > 0.95 || g.uv.y < 0.05 || g.uv.y > 0.95 {
+                    continue;
+                }
+                for (d, step) in [(g.dpdu, Vec2::new(eps, 0.0)), (g.dpdv, Vec2::new(0.0, eps))] {
+                    let moved = hit(name, shape, o, g.p + d * eps);
+                    let duv = moved.uv - g.uv;
+                    assert!(
+                        (duv - step).length() < 0.03 * eps,
+                        "{name} at uv {}: step {step} gave {duv}",
+                        g.uv
+                    );
+                }
+                checked += 1;
+            }
+        }
+        assert!(checked > 30, "{checked}");
+    }
+}

@@ -3,8 +3,8 @@
 use super::props::Props;
 use super::{ior, Builder, Element, SceneError};
 use crate::bsdf::{
-    Blend, Bsdf, BumpMap, Conductor, ConductorIor, Dielectric, Diffuse, Mask, MicrofacetKind, NormalMap,
-    Plastic, RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
+    Blend, Bsdf, BumpMap, Conductor, ConductorIor, Dielectric, Diffuse, Mask, MicrofacetKind,
+    NormalMap, Plastic, RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
 };
 use crate::spectrum::{Rgb, SpectrumKind};
 use crate::texture::Texture;
