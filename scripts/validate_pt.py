@@ -169,9 +169,11 @@ def mitsuba_reference(scene, spp, out_dir, force):
     for k in range(chunks):
         img = np.array(mi.render(sc, integrator=integrator, spp=chunk_spp, seed=9000 + k), dtype=np.float64)[..., :3]
         # The film is $res wide; its height is the scene's (square unless the scene says so).
-        if img.shape[1] != RES or img.shape[0] % DOWN != 0:
+        # A film with a crop window renders the window, whose sides must still divide by DOWN.
+        cropped = "crop_width" in scene.xml.read_text() or "crop_height" in scene.xml.read_text()
+        if (img.shape[1] != RES and not cropped) or img.shape[0] % DOWN or img.shape[1] % DOWN:
             sys.exit(f"{scene.name}: Mitsuba rendered {img.shape[1]}x{img.shape[0]}, expected "
-                     f"width {RES} and a height divisible by {DOWN} (no $res default?)")
+                     f"width {RES} (or a crop window) and sides divisible by {DOWN} (no $res default?)")
         acc = img if acc is None else acc + img
         downs.append(downsample(img))
         print(f"  mitsuba {scene.name}: chunk {k + 1}/{chunks}", file=sys.stderr, flush=True)

@@ -31,8 +31,14 @@ pub struct Camera {
     aperture_radius: f32,
     /// Distance of the plane in focus (along local z).
     focus_distance: f32,
-    /// Film size in pixels.
+    /// Size of the rendered image in pixels: the film's crop window (the whole film without one).
     resolution: UVec2,
+    /// Film size in pixels (the projection spans it, whatever the crop).
+    film_size: Vec2,
+    /// Top-left pixel of the crop window on the film.
+    crop_offset: Vec2,
+    /// The principal point's offset from the film centre, in fractions of the film size.
+    principal_point: Vec2,
     /// The film's reconstruction filter, which places each pixel's samples.
     filter: PixelFilter,
 }
@@ -112,7 +118,12 @@ impl Camera {
             far_clip: desc.far_clip,
             aperture_radius: desc.aperture_radius,
             focus_distance: desc.focus_distance,
-            resolution: UVec2::new(desc.width, desc.height),
+            resolution: desc
+                .crop
+                .map_or(UVec2::new(desc.width, desc.height), |c| c.size),
+            film_size: Vec2::new(desc.width as f32, desc.height as f32),
+            crop_offset: desc.crop.map_or(Vec2::ZERO, |c| c.offset.as_vec2()),
+            principal_point: desc.principal_point,
             filter: PixelFilter::new(desc.filter, desc.sample_border),
         }
     }
@@ -134,7 +145,7 @@ impl Camera {
         }
     }
 
-    /// Film size in pixels.
+    /// Size of the rendered image in pixels: the film's crop window, or the whole film.
     pub fn resolution(&self) -> UVec2 {
         self.resolution
     }
@@ -167,11 +178,13 @@ impl Camera {
         self.ray_at(pixel.as_vec2() + u_film, u_lens)
     }
 
-    /// The primary ray through film position `position` (pixels from the image's top-left
-    /// corner; it may lie outside the image), using `u_lens` as [`Camera::generate_ray`].
+    /// The primary ray through film position `position` (pixels from the rendered image's
+    /// top-left corner — the crop window's, if the film has one; it may lie outside the image),
+    /// using `u_lens` as [`Camera::generate_ray`].
     #[inline]
     pub fn ray_at(&self, position: Vec2, u_lens: Vec2) -> Ray {
-        let s = position / self.resolution.as_vec2();
+        // Relative film position; Mitsuba adds the principal point's offset here.
+        let s = (position + self.crop_offset) / self.film_size + self.principal_point;
         if self.projection == Projection::Orthographic {
             // Parallel rays from the near plane of the view rectangle; the (scaled) to_world
             // sizes it, as in Mitsuba.
@@ -236,7 +249,48 @@ mod tests {
             height: h,
             filter: crate::filter::FilterDesc::Box,
             sample_border: false,
+            crop: None,
+            principal_point: glam::Vec2::ZERO,
         }
+    }
+
+    /// A cropped film renders the window's pixels with the rays the whole film gives them
+    /// (bit for bit, with the box filter), and its image has the window's size.
+    #[test]
+    fn crop_window_renders_the_full_films_rays() {
+        let full = Camera::new(&desc(40, 30, 50.0, FovAxis::X));
+        let mut d = desc(40, 30, 50.0, FovAxis::X);
+        d.crop = Some(crate::description::FilmCrop {
+            offset: UVec2::new(7, 11),
+            size: UVec2::new(16, 9),
+        });
+        let cropped = Camera::new(&d);
+        assert_eq!(cropped.resolution(), UVec2::new(16, 9));
+        for (x, y) in [(0, 0), (15, 8), (5, 3)] {
+            for u in [Vec2::new(0.25, 0.75), Vec2::new(0.9, 0.1)] {
+                let a = cropped.sample_ray(UVec2::new(x, y), u, Vec2::ZERO);
+                let b = full.sample_ray(UVec2::new(x + 7, y + 11), u, Vec2::ZERO);
+                assert_eq!((a.ray.o, a.ray.d, a.weight), (b.ray.o, b.ray.d, b.weight));
+            }
+        }
+    }
+
+    /// A principal point offset (dx, dy) moves the film position that looks straight ahead
+    /// (along local +z) from the centre to ((½ − dx)·width, (½ − dy)·height), in pixels from
+    /// the film's top-left corner (Mitsuba's sign convention).
+    #[test]
+    fn principal_point_offset_shifts_the_view() {
+        let mut d = desc(40, 30, 50.0, FovAxis::X);
+        d.principal_point = Vec2::new(0.1, -0.2);
+        let cam = Camera::new(&d);
+        let ahead = cam.ray_at(Vec2::new(20.0 - 4.0, 15.0 + 6.0), Vec2::ZERO);
+        assert!((ahead.d - Vec3::Z).length() < 1e-6, "{}", ahead.d);
+        // The offset is a shift of the image plane, not a rotation: directions elsewhere
+        // differ from the centred camera's by the same film translation.
+        let centred = Camera::new(&desc(40, 30, 50.0, FovAxis::X));
+        let a = cam.ray_at(Vec2::new(3.0, 7.0), Vec2::ZERO);
+        let b = centred.ray_at(Vec2::new(3.0 + 4.0, 7.0 - 6.0), Vec2::ZERO);
+        assert!((a.d - b.d).length() < 1e-6);
     }
 
     /// Orthographic: parallel rays along the scaled local +z from a rectangle [−1, 1] ×

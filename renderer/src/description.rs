@@ -164,6 +164,21 @@ pub struct CameraDesc {
     pub filter: crate::filter::FilterDesc,
     /// The film's `sample_border`: edge pixels also take samples from outside the image.
     pub sample_border: bool,
+    /// The film's crop window (`crop_offset_x/y`, `crop_width/height`): only these pixels are
+    /// rendered, and the output image has the crop's size; `None` is the whole film.
+    pub crop: Option<FilmCrop>,
+    /// `principal_point_offset_x/y` (perspective only): the principal point's offset from the
+    /// film centre, in fractions of the film's width and height.
+    pub principal_point: glam::Vec2,
+}
+
+/// A film's crop window in pixels; it lies inside the film.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FilmCrop {
+    /// Top-left pixel of the window.
+    pub offset: glam::UVec2,
+    /// Width and height of the window.
+    pub size: glam::UVec2,
 }
 
 /// Integrator settings found in the file (the command line may override them).

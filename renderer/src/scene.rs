@@ -639,6 +639,8 @@ mod tests {
                 height: 4,
                 filter: crate::filter::FilterDesc::Box,
                 sample_border: false,
+                crop: None,
+                principal_point: glam::Vec2::ZERO,
             },
             sample_count: None,
             integrator: None,

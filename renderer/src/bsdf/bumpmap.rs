@@ -175,12 +175,16 @@ mod tests {
     /// `eval_1_grad` is (−0.9, 0.4); `bumpmap`'s `eval` (f·cos) and `pdf` for a diffuse and a
     /// GGX conductor, with and without flip and shadowing, a negative scale, two viewers.
     /// Printed by `bumpmap_reference.py` next to this file.
+    /// Model, scale, flip, shadowing, wo, wi, Mitsuba's eval (f·cos) and pdf.
+    type ProbeCase = (&'static str, f32, bool, bool, [f32; 3], [f32; 3], f32, f32);
+
     #[test]
+    #[allow(clippy::excessive_precision)] // Mitsuba's values as printed, digit for digit
     fn matches_mitsuba_values() {
         let grad = heights().eval_1_grad(point().uv);
         assert!((grad - Vec2::new(-0.9, 0.4)).length() < 1e-5, "{grad}");
         #[rustfmt::skip]
-        let cases: [(&str, f32, bool, bool, [f32; 3], [f32; 3], f32, f32); 30] = [
+        let cases: [ProbeCase; 30] = [
             ("diffuse", 2.5, true, true, [0.2009162, 0.1004581, 0.9744438], [0.0000000, 0.0000000, 1.0000000], 8.6946614e-02, 1.7389323e-01),
             ("diffuse", 2.5, true, true, [0.2009162, 0.1004581, 0.9744438], [0.5184758, -0.2073903, 0.8295614], 1.3720120e-01, 2.8325090e-01),
             ("diffuse", 2.5, true, true, [0.2009162, 0.1004581, 0.9744438], [-0.6000000, 0.0000000, 0.8000000], 1.0452912e-02, 2.1736650e-02),

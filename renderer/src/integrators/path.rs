@@ -208,6 +208,8 @@ mod tests {
             height: res,
             filter: crate::filter::FilterDesc::Box,
             sample_border: false,
+            crop: None,
+            principal_point: glam::Vec2::ZERO,
         }
     }
 

@@ -3,7 +3,7 @@
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
-use crate::description::{CameraDesc, FovAxis, IntegratorDesc, Projection};
+use crate::description::{CameraDesc, FilmCrop, FovAxis, IntegratorDesc, Projection};
 use crate::filter::FilterDesc;
 use glam::Mat4;
 
@@ -29,6 +29,8 @@ pub(super) fn default_camera() -> CameraDesc {
         height: DEFAULT_HEIGHT,
         filter: FilterDesc::MITSUBA_DEFAULT,
         sample_border: false,
+        crop: None,
+        principal_point: glam::Vec2::ZERO,
     }
 }
 
@@ -42,6 +44,8 @@ struct Film {
     filter: FilterDesc,
     /// `sample_border`.
     sample_border: bool,
+    /// `crop_offset_x/y`, `crop_width/height` (`None`: the whole film).
+    crop: Option<FilmCrop>,
 }
 
 /// Builds the camera of a `<sensor>` element (film and sampler included).
@@ -64,6 +68,7 @@ pub(super) fn build_sensor<'a>(
         height: DEFAULT_HEIGHT,
         filter: FilterDesc::MITSUBA_DEFAULT,
         sample_border: false,
+        crop: None,
     };
     for el in p.objects(&["film"]) {
         film = build_film(b, el)?;
@@ -122,6 +127,16 @@ pub(super) fn build_sensor<'a>(
             .element_of("to_world")
             .error("scale factors in the camera's to_world are not allowed"));
     }
+    // Mitsuba's `perspective` only: the principal point's offset from the film centre, in
+    // fractions of the film size.
+    let principal_point = if kind == "perspective" {
+        glam::Vec2::new(
+            p.float_or("principal_point_offset_x", 0.0)? as f32,
+            p.float_or("principal_point_offset_y", 0.0)? as f32,
+        )
+    } else {
+        glam::Vec2::ZERO
+    };
     p.ignore(b, &["shutter_open", "shutter_close"], "no motion blur");
     p.finish(b)?;
     Ok(CameraDesc {
@@ -141,6 +156,8 @@ pub(super) fn build_sensor<'a>(
         height: film.height,
         filter: film.filter,
         sample_border: film.sample_border,
+        crop: film.crop,
+        principal_point,
     })
 }
 
@@ -236,19 +253,50 @@ fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Film, SceneErr
         ],
         "the renderer writes float32 RGB",
     );
-    if p.has("crop_offset_x")
-        || p.has("crop_offset_y")
-        || p.has("crop_width")
-        || p.has("crop_height")
+    let crop = if [
+        "crop_offset_x",
+        "crop_offset_y",
+        "crop_width",
+        "crop_height",
+    ]
+    .iter()
+    .any(|name| p.has(name))
     {
-        return Err(el.error("film cropping (crop_*) is not supported"));
-    }
+        let mut number = |name: &str, default: u32, min: i64| -> Result<u32, SceneError> {
+            let e = p.element_of(name);
+            match p.int(name)? {
+                None => Ok(default),
+                Some(v) if (min..=MAX_FILM_SIDE).contains(&v) => Ok(v as u32),
+                Some(v) => Err(e.error(format!(
+                    "\"{name}\" must be in {min}..={MAX_FILM_SIDE}, got {v}"
+                ))),
+            }
+        };
+        let offset = glam::UVec2::new(
+            number("crop_offset_x", 0, 0)?,
+            number("crop_offset_y", 0, 0)?,
+        );
+        let size = glam::UVec2::new(
+            number("crop_width", width, 1)?,
+            number("crop_height", height, 1)?,
+        );
+        if offset.x + size.x > width || offset.y + size.y > height {
+            return Err(el.error(format!(
+                "the crop window (offset {}, {}, size {}×{}) does not fit inside the {width}×{height} film",
+                offset.x, offset.y, size.x, size.y
+            )));
+        }
+        Some(FilmCrop { offset, size })
+    } else {
+        None
+    };
     p.finish(b)?;
     Ok(Film {
         width,
         height,
         filter,
         sample_border,
+        crop,
     })
 }
 

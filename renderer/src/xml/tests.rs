@@ -1677,3 +1677,88 @@ fn bumpmap_takes_one_bitmap_and_one_bsdf_and_reports_misuse_by_line() {
         assert_body_error_at(&dir, "bad.xml", &body, marker, needle);
     }
 }
+
+#[test]
+fn film_crop_window_and_principal_point() {
+    use crate::description::FilmCrop;
+    use glam::{UVec2, Vec2};
+    let dir = temp_dir("crop");
+    let scene = |kind: &str, sensor_extra: &str, film_extra: &str| {
+        format!(
+            "<sensor type=\"{kind}\"><float name=\"fov\" value=\"40\"/>{sensor_extra}\n\
+             <film type=\"hdrfilm\"><integer name=\"width\" value=\"16\"/><integer name=\"height\" value=\"8\"/>\n\
+             {film_extra}</film></sensor>"
+        )
+    };
+    let camera = |body: &str| load(&write_scene(&dir, "scene.xml", body)).unwrap().camera;
+    let c = camera(&scene("perspective", "", ""));
+    assert_eq!((c.crop, c.principal_point), (None, Vec2::ZERO));
+    let c = camera(&scene(
+        "perspective",
+        r#"<float name="principal_point_offset_x" value="0.1"/><float name="principal_point_offset_y" value="-0.25"/>"#,
+        r#"<integer name="crop_offset_x" value="4"/><integer name="crop_offset_y" value="2"/>
+           <integer name="crop_width" value="12"/><integer name="crop_height" value="3"/>"#,
+    ));
+    assert_eq!(
+        c.crop,
+        Some(FilmCrop {
+            offset: UVec2::new(4, 2),
+            size: UVec2::new(12, 3)
+        })
+    );
+    assert_eq!(c.principal_point, Vec2::new(0.1, -0.25));
+    // The window's size defaults to the film's, so an offset alone must come with a size.
+    let c = camera(&scene(
+        "perspective",
+        "",
+        r#"<integer name="crop_width" value="5"/>"#,
+    ));
+    assert_eq!(
+        c.crop,
+        Some(FilmCrop {
+            offset: UVec2::ZERO,
+            size: UVec2::new(5, 8)
+        })
+    );
+    for (body, marker, needle) in [
+        (
+            scene(
+                "perspective",
+                "",
+                r#"<integer name="crop_offset_x" value="4"/>"#,
+            ),
+            "<film",
+            "does not fit inside the 16×8 film",
+        ),
+        (
+            scene(
+                "perspective",
+                "",
+                r#"<integer name="crop_width" value="0"/>"#,
+            ),
+            "crop_width",
+            "\"crop_width\" must be in 1..=",
+        ),
+        (
+            scene(
+                "perspective",
+                "",
+                r#"<integer name="crop_offset_y" value="-1"/>"#,
+            ),
+            "crop_offset_y",
+            "\"crop_offset_y\" must be in 0..=",
+        ),
+        (
+            scene(
+                "thinlens",
+                r#"<float name="aperture_radius" value="0.1"/>
+<float name="principal_point_offset_x" value="0.1"/>"#,
+                "",
+            ),
+            "principal_point_offset_x",
+            "unknown parameter \"principal_point_offset_x\"",
+        ),
+    ] {
+        assert_body_error_at(&dir, "bad.xml", &body, marker, needle);
+    }
+}

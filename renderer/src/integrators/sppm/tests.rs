@@ -23,6 +23,8 @@ fn camera(origin: Vec3, target: Vec3, fov: f32, res: u32) -> CameraDesc {
         height: res,
         filter: crate::filter::FilterDesc::Box,
         sample_border: false,
+        crop: None,
+        principal_point: glam::Vec2::ZERO,
     }
 }
 
