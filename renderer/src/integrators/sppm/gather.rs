@@ -19,16 +19,25 @@ use super::visible_point::VisiblePoint;
 pub const NORMAL_AGREEMENT_COS: f32 = 0.5;
 
 /// Whether a BSDF transmits light through the surface with a non-delta lobe: then photons on
-/// the other side of the surface contribute legitimately.
+/// the other side of the surface contribute legitimately. (No wildcard arm: a new model must
+/// say whether it transmits.)
 fn transmits(bsdf: &Bsdf) -> bool {
     match bsdf {
         Bsdf::RoughDielectric(_) => true,
+        Bsdf::Diffuse(_)
+        | Bsdf::Conductor(_)
+        | Bsdf::RoughConductor(_)
+        | Bsdf::Plastic(_)
+        | Bsdf::RoughPlastic(_)
+        // Smooth dielectrics transmit by a delta only: no photon density on them.
+        | Bsdf::Dielectric(_)
+        | Bsdf::ThinDielectric(_) => false,
         Bsdf::TwoSided { front, back } => transmits(front) || transmits(back),
         Bsdf::NormalMap(b) => transmits(&b.nested),
+        Bsdf::BumpMap(b) => transmits(&b.nested),
         Bsdf::Blend(b) => b.nested.iter().any(transmits),
         // The pass-through is a delta: photons beyond it are not this surface's.
         Bsdf::Mask(b) => transmits(&b.nested),
-        _ => false,
     }
 }
 
