@@ -169,9 +169,11 @@ impl Texture {
                         let (u, v) = (u - 0.5, v - 0.5);
                         let (x0, y0) = (u.floor(), v.floor());
                         let (fx, fy) = (u - x0, v - y0);
+                        // Saturating: a huge uv (a degenerate `to_uv`) must not overflow.
                         let (x0, y0) = (x0 as i64, y0 as i64);
-                        let a = fetch(x0, y0) * (1.0 - fx) + fetch(x0 + 1, y0) * fx;
-                        let b = fetch(x0, y0 + 1) * (1.0 - fx) + fetch(x0 + 1, y0 + 1) * fx;
+                        let a = fetch(x0, y0) * (1.0 - fx) + fetch(x0.saturating_add(1), y0) * fx;
+                        let b = fetch(x0, y0.saturating_add(1)) * (1.0 - fx)
+                            + fetch(x0.saturating_add(1), y0.saturating_add(1)) * fx;
                         a * (1.0 - fy) + b * fy
                     }
                 }
@@ -203,8 +205,11 @@ impl Texture {
         let (x0, y0) = (u.floor(), v.floor());
         let (fx, fy) = (u - x0, v - y0);
         let (x0, y0) = (x0 as i64, y0 as i64);
-        let (f00, f10) = (fetch(x0, y0), fetch(x0 + 1, y0));
-        let (f01, f11) = (fetch(x0, y0 + 1), fetch(x0 + 1, y0 + 1));
+        let (f00, f10) = (fetch(x0, y0), fetch(x0.saturating_add(1), y0));
+        let (f01, f11) = (
+            fetch(x0, y0.saturating_add(1)),
+            fetch(x0.saturating_add(1), y0.saturating_add(1)),
+        );
         // Per texel along x and y, then per unit of the transformed uv, then back through
         // the affine map's linear part (its transpose). Mitsuba 3.9.1 scales by the resolution
         // after the transpose instead, which differs only for a non-square image under a
