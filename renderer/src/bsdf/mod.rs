@@ -27,6 +27,7 @@ mod mask;
 pub mod microfacet;
 mod normalmap;
 mod plastic;
+mod principled;
 mod roughconductor;
 mod roughdielectric;
 mod roughplastic;
@@ -44,6 +45,7 @@ use glam::{Vec2, Vec3};
 pub use blend::Blend;
 pub use mask::Mask;
 pub use normalmap::NormalMap;
+pub use principled::{Principled, PrincipledIor, PrincipledParams};
 
 /// Roughness below which a rough conductor/dielectric counts as [`Lobe::Glossy`] (the larger of
 /// `alpha_u`, `alpha_v` is compared): SPPM continues eye paths through such surfaces instead of
@@ -236,6 +238,8 @@ pub enum Bsdf {
     Plastic(Plastic),
     /// `roughplastic`
     RoughPlastic(RoughPlastic),
+    /// `principled`: Disney-style layered model (diffuse, metal, rough glass, sheen, clearcoat).
+    Principled(Principled),
     /// `normalmap`: a nested model in a shading frame perturbed by a texture.
     NormalMap(NormalMap),
     /// `blendbsdf`: a linear blend of two models.
@@ -271,6 +275,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::Plastic(b) => b.sample(wo, uv, u_lobe, u),
             Bsdf::RoughPlastic(b) => b.sample(wo, uv, u_lobe, u),
+            Bsdf::Principled(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::NormalMap(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::Blend(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::Mask(b) => b.sample(wo, uv, u_lobe, u, mode),
@@ -301,6 +306,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.eval(wo, wi, uv, mode),
             Bsdf::Plastic(b) => b.eval(wo, wi, uv),
             Bsdf::RoughPlastic(b) => b.eval(wo, wi, uv),
+            Bsdf::Principled(b) => b.eval(wo, wi, uv, mode),
             Bsdf::NormalMap(b) => b.eval(wo, wi, uv, mode),
             Bsdf::Blend(b) => b.eval(wo, wi, uv, mode),
             Bsdf::Mask(b) => b.eval(wo, wi, uv, mode),
@@ -319,7 +325,9 @@ impl Bsdf {
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` through non-delta lobes.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
         // Lobe-selection weights use texture means, not the local value (as Mitsuba); only a
-        // normal map (its frame), a blend (its weight) and a mask (its opacity) read `uv`.
+        // normal map (its frame), a blend (its weight), a mask (its opacity), a textured alpha
+        // and the principled model (whose selection weights Mitsuba reads at the point) read
+        // `uv`.
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
@@ -327,6 +335,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi, uv),
             Bsdf::Plastic(b) => b.pdf(wo, wi),
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
+            Bsdf::Principled(b) => b.pdf(wo, wi, uv),
             Bsdf::NormalMap(b) => b.pdf(wo, wi, uv),
             Bsdf::Blend(b) => b.pdf(wo, wi, uv),
             Bsdf::Mask(b) => b.pdf(wo, wi, uv),
@@ -350,6 +359,7 @@ impl Bsdf {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Lobe::Delta,
             Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
             Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
+            Bsdf::Principled(b) => b.lobe(),
             Bsdf::NormalMap(b) => b.nested.lobe(),
             // The most diffuse of the two: a visible point is stored where either model has a
             // broad lobe (delta parts are split off by the eye path, glossy ones go to photons).
@@ -452,7 +462,8 @@ impl Bsdf {
 
     /// Albedo for the G-buffer: the diffuse reflectance of diffuse and plastic models; for
     /// conductors the specular tint times the normal-incidence Fresnel reflectance (the
-    /// metal's colour); for dielectrics the transmittance tint; `twosided`: the front side.
+    /// metal's colour); for dielectrics the transmittance tint; `principled`: its base colour
+    /// (diffuse and metal colour alike, see [`Principled::albedo`]); `twosided`: the front side.
     pub fn albedo(&self, uv: Vec2) -> Rgb {
         match self {
             Bsdf::Diffuse(b) => b.reflectance.eval(uv),
@@ -467,6 +478,7 @@ impl Bsdf {
             Bsdf::Dielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(uv),
+            Bsdf::Principled(b) => b.albedo(uv),
             Bsdf::NormalMap(b) => b.nested.albedo(uv),
             Bsdf::Mask(b) => b.nested.albedo(uv),
             Bsdf::Blend(b) => {

@@ -23,6 +23,7 @@ pub const NORMAL_AGREEMENT_COS: f32 = 0.5;
 fn transmits(bsdf: &Bsdf) -> bool {
     match bsdf {
         Bsdf::RoughDielectric(_) => true,
+        Bsdf::Principled(b) => b.transmits(),
         Bsdf::TwoSided { front, back } => transmits(front) || transmits(back),
         Bsdf::NormalMap(b) => transmits(&b.nested),
         Bsdf::Blend(b) => b.nested.iter().any(transmits),
