@@ -89,6 +89,11 @@ CASES = [
                      "color1": rgb([0.9, 0.4, 0.6]),
                      "to_uv": mi.ScalarTransform4f().scale([4.0, 2.0, 1.0])}},
      "principled(checkerboard base_color at uv (0.3, 0.3), spec_trans 1, sheen 0.6)", True),
+    ("principled eta 1/1.3 (Schlick from the denser side)",
+     {"type": "principled", "base_color": rgb([0.7, 0.5, 0.9]), "eta": 1.0 / 1.3, "metallic": 0.4,
+      "spec_tint": 0.5, "clearcoat": 0.8, "clearcoat_gloss": 0.5, "spec_trans": 0.5,
+      "roughness": 0.4},
+     "principled(eta 1/1.3, metallic 0.4, spec_tint 0.5, clearcoat 0.8/0.5, spec_trans 0.5)", True),
 ]
 
 # Surface uv of each case's evaluations (cases not listed: (0, 0)).
