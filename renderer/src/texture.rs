@@ -123,6 +123,21 @@ impl Texture {
         scalar_of(self.mean())
     }
 
+    /// The smallest and largest values [`Texture::eval_1`] can return (over the constant, the
+    /// two checkerboard colours, or every texel: interpolation stays within them).
+    pub fn scalar_range(&self) -> (f32, f32) {
+        let fold = |(lo, hi): (f32, f32), c: &Rgb| {
+            let v = scalar_of(*c);
+            (lo.min(v), hi.max(v))
+        };
+        let init = (f32::INFINITY, f32::NEG_INFINITY);
+        match self {
+            Texture::Constant(c) => fold(init, c),
+            Texture::Checkerboard { color0, color1, .. } => fold(fold(init, color0), color1),
+            Texture::Bitmap { image, .. } => image.texels.iter().fold(init, fold),
+        }
+    }
+
     /// Whether the texture is the same everywhere.
     pub fn is_constant(&self) -> bool {
         matches!(self, Texture::Constant(_))

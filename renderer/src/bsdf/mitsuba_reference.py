@@ -62,7 +62,42 @@ CASES = [
      "thin_dielectric(1.5)", True),
     ("conductor Au", {"type": "conductor", "eta": rgb(AU_ETA), "k": rgb(AU_K)},
      "conductor(gold())", False),
+    ("principled default", {"type": "principled"},
+     "principled(PrincipledParams::default())", True),
+    ("principled metallic aniso spec_tint",
+     {"type": "principled", "base_color": rgb([0.9, 0.6, 0.3]), "metallic": 0.8, "roughness": 0.35,
+      "anisotropic": 0.6, "spec_tint": 0.3},
+     "principled(metallic 0.8, roughness 0.35, anisotropic 0.6, spec_tint 0.3)", False),
+    ("principled spec_trans eta 1.4",
+     {"type": "principled", "base_color": rgb([0.8, 0.9, 0.7]), "spec_trans": 0.7, "roughness": 0.3,
+      "eta": 1.4},
+     "principled(spec_trans 0.7, roughness 0.3, eta 1.4)", True),
+    ("principled clearcoat sheen flatness",
+     {"type": "principled", "base_color": rgb([0.2, 0.5, 0.8]), "roughness": 0.6, "sheen": 0.8,
+      "sheen_tint": 0.5, "clearcoat": 0.7, "clearcoat_gloss": 0.6, "flatness": 0.4, "specular": 0.3},
+     "principled(sheen 0.8/0.5, clearcoat 0.7/0.6, flatness 0.4, specular 0.3)", False),
+    ("principled everything, custom rates",
+     {"type": "principled", "base_color": rgb([1.0, 0.8, 0.5]), "metallic": 0.3, "specular": 0.6,
+      "roughness": 0.2, "spec_tint": 0.4, "anisotropic": 0.5, "sheen": 0.3, "sheen_tint": 0.2,
+      "clearcoat": 0.6, "clearcoat_gloss": 0.3, "spec_trans": 0.4,
+      "diffuse_reflectance_sampling_rate": 0.5, "main_specular_sampling_rate": 2.0,
+      "clearcoat_sampling_rate": 0.3},
+     "principled(all parameters, rates 0.5/2/0.3)", True),
+    ("principled checkerboard base_color, spec_trans 1, sheen",
+     {"type": "principled", "spec_trans": 1.0, "sheen": 0.6, "roughness": 0.45,
+      "base_color": {"type": "checkerboard", "color0": rgb([0.1, 0.2, 0.3]),
+                     "color1": rgb([0.9, 0.4, 0.6]),
+                     "to_uv": mi.ScalarTransform4f().scale([4.0, 2.0, 1.0])}},
+     "principled(checkerboard base_color at uv (0.3, 0.3), spec_trans 1, sheen 0.6)", True),
+    ("principled eta 1/1.3 (Schlick from the denser side)",
+     {"type": "principled", "base_color": rgb([0.7, 0.5, 0.9]), "eta": 1.0 / 1.3, "metallic": 0.4,
+      "spec_tint": 0.5, "clearcoat": 0.8, "clearcoat_gloss": 0.5, "spec_trans": 0.5,
+      "roughness": 0.4},
+     "principled(eta 1/1.3, metallic 0.4, spec_tint 0.5, clearcoat 0.8/0.5, spec_trans 0.5)", True),
 ]
+
+# Surface uv of each case's evaluations (cases not listed: (0, 0)).
+CASE_UV = {"principled checkerboard base_color, spec_trans 1, sheen": (0.3, 0.3)}
 
 
 def rand_dirs(rng, n, two_sided):
@@ -97,8 +132,10 @@ def main():
             if rng.uniform() < 0.5 and two_sided:
                 v[2] = -v[2]  # near the transmitted side too
             wi[k] = (v / np.linalg.norm(v)).astype(np.float32)
+        uv = CASE_UV.get(name, (0.0, 0.0))
         si = dr.zeros(mi.SurfaceInteraction3f, n)
         si.wi = vec(wo)
+        si.uv = mi.Point2f(uv[0], uv[1])
         out = {}
         for mode_name, mode in (("rad", mi.TransportMode.Radiance), ("imp", mi.TransportMode.Importance)):
             ctx = mi.BSDFContext(mode)
@@ -119,6 +156,7 @@ def main():
             m = 1_000_000
             si2 = dr.zeros(mi.SurfaceInteraction3f, m)
             si2.wi = mi.Vector3f(float(w[0, 0]), float(w[0, 1]), float(w[0, 2]))
+            si2.uv = mi.Point2f(uv[0], uv[1])
             for mode_name, mode in (("rad", mi.TransportMode.Radiance), ("imp", mi.TransportMode.Importance)):
                 u = rng.random((3, m)).astype(np.float32)
                 bs, weight = bsdf.sample(mi.BSDFContext(mode), si2, mi.Float(u[0]), mi.Point2f(mi.Float(u[1]), mi.Float(u[2])))
@@ -134,6 +172,13 @@ def main():
     print("pub const CASES: &[&str] = &[")
     for name, _, rust, _ in CASES:
         print(f'    "{name}",')
+    print("];")
+    print("")
+    print("/// Surface uv at which each case is evaluated (index = case id).")
+    print("pub const CASE_UVS: &[[f32; 2]] = &[")
+    for name, _, _, _ in CASES:
+        u, v = CASE_UV.get(name, (0.0, 0.0))
+        print(f"    [{f32(u)}, {f32(v)}],")
     print("];")
     print("")
     print("/// (case, wo, wi, f radiance (no cosine), f importance, pdf).")

@@ -29,6 +29,7 @@ pub mod microfacet;
 mod normalmap;
 mod perturbed;
 mod plastic;
+mod principled;
 mod roughconductor;
 mod roughdielectric;
 mod roughplastic;
@@ -47,6 +48,7 @@ pub use blend::Blend;
 pub use bumpmap::BumpMap;
 pub use mask::Mask;
 pub use normalmap::NormalMap;
+pub use principled::{Principled, PrincipledIor, PrincipledParams};
 
 /// Roughness below which a rough conductor/dielectric counts as [`Lobe::Glossy`] (the larger of
 /// `alpha_u`, `alpha_v` is compared): SPPM continues eye paths through such surfaces instead of
@@ -278,6 +280,8 @@ pub enum Bsdf {
     Plastic(Plastic),
     /// `roughplastic`
     RoughPlastic(RoughPlastic),
+    /// `principled`: Disney-style layered model (diffuse, metal, rough glass, sheen, clearcoat).
+    Principled(Principled),
     /// `normalmap`: a nested model in a shading frame perturbed by a texture.
     NormalMap(NormalMap),
     /// `bumpmap`: a nested model in a shading frame tilted by a height field's gradient.
@@ -316,6 +320,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::Plastic(b) => b.sample(wo, uv, u_lobe, u),
             Bsdf::RoughPlastic(b) => b.sample(wo, uv, u_lobe, u),
+            Bsdf::Principled(b) => b.sample(wo, uv, u_lobe, u, mode),
             Bsdf::NormalMap(b) => b.sample(wo, sp, u_lobe, u, mode),
             Bsdf::BumpMap(b) => b.sample(wo, sp, u_lobe, u, mode),
             Bsdf::Blend(b) => b.sample(wo, sp, u_lobe, u, mode),
@@ -348,6 +353,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.eval(wo, wi, uv, mode),
             Bsdf::Plastic(b) => b.eval(wo, wi, uv),
             Bsdf::RoughPlastic(b) => b.eval(wo, wi, uv),
+            Bsdf::Principled(b) => b.eval(wo, wi, uv, mode),
             Bsdf::NormalMap(b) => b.eval(wo, wi, sp, mode),
             Bsdf::BumpMap(b) => b.eval(wo, wi, sp, mode),
             Bsdf::Blend(b) => b.eval(wo, wi, sp, mode),
@@ -368,7 +374,9 @@ impl Bsdf {
     pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
         let uv = sp.uv;
         // Lobe-selection weights use texture means, not the local value (as Mitsuba); only a
-        // normal or bump map (its frame), a blend (its weight) and a mask (its opacity) read `uv`.
+        // normal or bump map (its frame), a blend (its weight), a mask (its opacity), a textured
+        // alpha and the principled model (whose selection weights Mitsuba reads at the point)
+        // read `uv`.
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
@@ -376,6 +384,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.pdf(wo, wi, uv),
             Bsdf::Plastic(b) => b.pdf(wo, wi),
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
+            Bsdf::Principled(b) => b.pdf(wo, wi, uv),
             Bsdf::NormalMap(b) => b.pdf(wo, wi, sp),
             Bsdf::BumpMap(b) => b.pdf(wo, wi, sp),
             Bsdf::Blend(b) => b.pdf(wo, wi, sp),
@@ -400,6 +409,7 @@ impl Bsdf {
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Lobe::Delta,
             Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
             Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
+            Bsdf::Principled(b) => b.lobe(),
             Bsdf::NormalMap(b) => b.nested.lobe(),
             Bsdf::BumpMap(b) => b.nested.lobe(),
             // The most diffuse of the two: a visible point is stored where either model has a
@@ -507,7 +517,8 @@ impl Bsdf {
 
     /// Albedo for the G-buffer: the diffuse reflectance of diffuse and plastic models; for
     /// conductors the specular tint times the normal-incidence Fresnel reflectance (the
-    /// metal's colour); for dielectrics the transmittance tint; `twosided`: the front side.
+    /// metal's colour); for dielectrics the transmittance tint; `principled`: its base colour
+    /// (diffuse and metal colour alike, see [`Principled::albedo`]); `twosided`: the front side.
     pub fn albedo(&self, sp: &ShadingPoint) -> Rgb {
         let uv = sp.uv;
         match self {
@@ -523,6 +534,7 @@ impl Bsdf {
             Bsdf::Dielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(uv),
             Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(uv),
+            Bsdf::Principled(b) => b.albedo(uv),
             Bsdf::NormalMap(b) => b.nested.albedo(sp),
             Bsdf::BumpMap(b) => b.nested.albedo(sp),
             Bsdf::Mask(b) => b.nested.albedo(sp),

@@ -113,6 +113,15 @@ fn conductor(ior: Option<ConductorIor>) -> Bsdf {
     })
 }
 
+fn principled(params: PrincipledParams) -> Bsdf {
+    Bsdf::Principled(Principled::new(params))
+}
+
+/// A principled parameter that switches its lobe on, at a constant value.
+fn on(v: f32) -> Option<Texture> {
+    Some(constant(v))
+}
+
 /// The models of [`mitsuba_reference::CASES`], in the same order.
 fn mitsuba_cases() -> Vec<Bsdf> {
     use MicrofacetKind::{Beckmann, Ggx};
@@ -135,23 +144,106 @@ fn mitsuba_cases() -> Vec<Bsdf> {
         thin_dielectric(1.5),
         conductor(gold()),
     ]
+    .into_iter()
+    .chain(principled_cases())
+    .collect()
+}
+
+/// The principled models of [`mitsuba_reference::CASES`], in the same order.
+fn principled_cases() -> Vec<Bsdf> {
+    let d = PrincipledParams::default;
+    vec![
+        principled(d()),
+        principled(PrincipledParams {
+            base_color: rgb(0.9, 0.6, 0.3),
+            metallic: on(0.8),
+            roughness: constant(0.35),
+            anisotropic: on(0.6),
+            spec_tint: on(0.3),
+            ..d()
+        }),
+        principled(PrincipledParams {
+            base_color: rgb(0.8, 0.9, 0.7),
+            spec_trans: on(0.7),
+            roughness: constant(0.3),
+            ior: PrincipledIor::Eta(1.4),
+            ..d()
+        }),
+        principled(PrincipledParams {
+            base_color: rgb(0.2, 0.5, 0.8),
+            roughness: constant(0.6),
+            sheen: on(0.8),
+            sheen_tint: on(0.5),
+            clearcoat: on(0.7),
+            clearcoat_gloss: constant(0.6),
+            flatness: on(0.4),
+            ior: PrincipledIor::Specular(0.3),
+            ..d()
+        }),
+        principled(everything_principled()),
+        principled(PrincipledParams {
+            spec_trans: on(1.0),
+            sheen: on(0.6),
+            roughness: constant(0.45),
+            base_color: Texture::Checkerboard {
+                color0: Rgb::new(0.1, 0.2, 0.3),
+                color1: Rgb::new(0.9, 0.4, 0.6),
+                to_uv: glam::Mat3::from_scale(Vec2::new(4.0, 2.0)),
+            },
+            ..d()
+        }),
+        principled(PrincipledParams {
+            base_color: rgb(0.7, 0.5, 0.9),
+            ior: PrincipledIor::Eta(1.0 / 1.3),
+            metallic: on(0.4),
+            spec_tint: on(0.5),
+            clearcoat: on(0.8),
+            clearcoat_gloss: constant(0.5),
+            spec_trans: on(0.5),
+            roughness: constant(0.4),
+            ..d()
+        }),
+    ]
+}
+
+/// Every principled parameter at once, with non-default sampling rates.
+fn everything_principled() -> PrincipledParams {
+    PrincipledParams {
+        base_color: rgb(1.0, 0.8, 0.5),
+        metallic: on(0.3),
+        ior: PrincipledIor::Specular(0.6),
+        roughness: constant(0.2),
+        spec_tint: on(0.4),
+        anisotropic: on(0.5),
+        sheen: on(0.3),
+        sheen_tint: on(0.2),
+        clearcoat: on(0.6),
+        clearcoat_gloss: constant(0.3),
+        spec_trans: on(0.4),
+        diffuse_reflectance_sampling_rate: 0.5,
+        main_specular_sampling_rate: 2.0,
+        clearcoat_sampling_rate: 0.3,
+        ..PrincipledParams::default()
+    }
 }
 
 #[test]
 fn eval_and_pdf_match_mitsuba() {
-    use super::mitsuba_reference::{CASES, EVALS};
+    use super::mitsuba_reference::{CASES, CASE_UVS, EVALS};
     let cases = mitsuba_cases();
     assert_eq!(cases.len(), CASES.len());
+    assert_eq!(cases.len(), CASE_UVS.len());
     let mut failures = Vec::new();
     for &(ci, wo, wi, f_rad, f_imp, pdf) in EVALS {
         let (wo, wi) = (Vec3::from(wo), Vec3::from(wi));
         let b = &cases[ci];
+        let uv = Vec2::from(CASE_UVS[ci]);
         for (mode, expect) in [
             (TransportMode::Radiance, f_rad),
             (TransportMode::Importance, f_imp),
         ] {
             let expect = Rgb::from(expect);
-            let got = b.eval(wo, wi, &FLAT, mode);
+            let got = b.eval(wo, wi, &ShadingPoint::flat(uv), mode);
             if (got - expect).abs().max_element() > 2e-3 * expect.max_element() + 1e-6 {
                 failures.push(format!(
                     "{} {mode:?} wo={wo} wi={wi}: f {got} vs Mitsuba {expect}",
@@ -159,7 +251,7 @@ fn eval_and_pdf_match_mitsuba() {
                 ));
             }
         }
-        let got = b.pdf(wo, wi, &FLAT);
+        let got = b.pdf(wo, wi, &ShadingPoint::flat(uv));
         if (got - pdf).abs() > 2e-3 * pdf + 1e-6 {
             failures.push(format!(
                 "{} wo={wo} wi={wi}: pdf {got} vs Mitsuba {pdf}",
@@ -177,7 +269,7 @@ fn eval_and_pdf_match_mitsuba() {
 
 #[test]
 fn directional_albedo_matches_mitsuba() {
-    use super::mitsuba_reference::{ALBEDOS, CASES};
+    use super::mitsuba_reference::{ALBEDOS, CASES, CASE_UVS};
     let cases = mitsuba_cases();
     let mut failures = Vec::new();
     for (k, &(ci, wo, importance, mean, err)) in ALBEDOS.iter().enumerate() {
@@ -186,7 +278,14 @@ fn directional_albedo_matches_mitsuba() {
         } else {
             TransportMode::Radiance
         };
-        let (ours, our_err) = albedo(&cases[ci], Vec3::from(wo), mode, 200_000, 1000 + k as u64);
+        let (ours, our_err) = albedo_at(
+            &cases[ci],
+            Vec3::from(wo),
+            Vec2::from(CASE_UVS[ci]),
+            mode,
+            200_000,
+            1000 + k as u64,
+        );
         let (mean, err) = (Rgb::from(mean), Rgb::from(err));
         let sigma = (err * err + our_err * our_err).powf(0.5);
         let ok = ((ours - mean).abs())
@@ -340,6 +439,109 @@ fn glossy_catalogue() -> Vec<(&'static str, Bsdf, bool)> {
         (
             "bumpmap tilted / roughconductor ggx 0.3",
             bumped(rough_conductor(rough(Ggx, 0.3, 0.3), gold())),
+            false,
+        ),
+    ]
+    .into_iter()
+    .chain(principled_catalogue())
+    .collect()
+}
+
+/// Principled models without sheen or clearcoat (energy conserving as configured), and
+/// whether they transmit.
+fn principled_catalogue() -> Vec<(&'static str, Bsdf, bool)> {
+    let d = PrincipledParams::default;
+    vec![
+        ("principled default", principled(d()), false),
+        (
+            "principled metallic 0.8 aniso 0.6 spec_tint",
+            principled(PrincipledParams {
+                base_color: rgb(0.9, 0.6, 0.3),
+                metallic: on(0.8),
+                roughness: constant(0.35),
+                anisotropic: on(0.6),
+                spec_tint: on(0.3),
+                ..d()
+            }),
+            false,
+        ),
+        (
+            "principled metallic 1 roughness 0.3",
+            principled(PrincipledParams {
+                base_color: rgb(0.95, 0.7, 0.4),
+                metallic: on(1.0),
+                roughness: constant(0.3),
+                ..d()
+            }),
+            false,
+        ),
+        (
+            "principled spec_trans 0.7 eta 1.4",
+            principled(PrincipledParams {
+                base_color: rgb(0.8, 0.9, 0.7),
+                spec_trans: on(0.7),
+                roughness: constant(0.3),
+                ior: PrincipledIor::Eta(1.4),
+                ..d()
+            }),
+            true,
+        ),
+        (
+            "principled spec_trans 1 roughness 0.4 eta 1/1.3",
+            principled(PrincipledParams {
+                base_color: constant(1.0),
+                spec_trans: on(1.0),
+                roughness: constant(0.4),
+                ior: PrincipledIor::Eta(1.0 / 1.3),
+                ..d()
+            }),
+            true,
+        ),
+    ]
+}
+
+/// Principled models with sheen or clearcoat, terms that can make the model reflect more than
+/// it receives, in Mitsuba 3.9.1 as here (its importance-mode albedo of the first reaches
+/// 1.089 in blue at 80°, of the second 1.10 in red, of the third 1.12 in blue: `ALBEDOS`), so
+/// they stay out of the energy test.
+fn principled_energy_gaining() -> Vec<(&'static str, Bsdf, bool)> {
+    let d = PrincipledParams::default;
+    vec![
+        (
+            "principled sheen clearcoat flatness",
+            principled(PrincipledParams {
+                base_color: rgb(0.2, 0.5, 0.8),
+                roughness: constant(0.6),
+                sheen: on(0.8),
+                sheen_tint: on(0.5),
+                clearcoat: on(0.7),
+                clearcoat_gloss: constant(0.6),
+                flatness: on(0.4),
+                ior: PrincipledIor::Specular(0.3),
+                ..d()
+            }),
+            false,
+        ),
+        (
+            "principled everything, custom rates",
+            principled(everything_principled()),
+            true,
+        ),
+        (
+            "principled eta 1/1.3 metallic spec_tint clearcoat spec_trans",
+            principled_cases().pop().expect("the last reference case"),
+            true,
+        ),
+        (
+            "principled clearcoat 1 (gloss 0.3) over rough metal",
+            principled(PrincipledParams {
+                base_color: rgb(0.6, 0.6, 0.65),
+                metallic: on(1.0),
+                roughness: constant(0.5),
+                clearcoat: on(1.0),
+                clearcoat_gloss: constant(0.3),
+                ..d()
+            }),
             false,
         ),
     ]
@@ -624,7 +826,10 @@ fn check_sample_consistency(bsdf: &Bsdf, wo: Vec3, s: &BsdfSample, mode: Transpo
 fn chi2_sampling_matches_pdf_for_every_glossy_bsdf() {
     let mut failures = Vec::new();
     let mut seed = 1;
-    for (name, bsdf, two_sided) in glossy_catalogue() {
+    for (name, bsdf, two_sided) in glossy_catalogue()
+        .into_iter()
+        .chain(principled_energy_gaining())
+    {
         for wo in test_directions(two_sided) {
             for mode in [TransportMode::Radiance, TransportMode::Importance] {
                 seed += 1;
@@ -684,10 +889,28 @@ fn pdf_integrates_to_one_without_lost_directions() {
 /// Mean sample weight (the directional albedo) over `n` samples, and its standard error
 /// (accumulated in f64: an f32 sum of 10⁵ terms is off by ~10⁻³).
 fn albedo(bsdf: &Bsdf, wo: Vec3, mode: TransportMode, n: usize, seed: u64) -> (Rgb, Rgb) {
+    albedo_at(bsdf, wo, Vec2::ZERO, mode, n, seed)
+}
+
+/// [`albedo`] at surface coordinates `uv`.
+fn albedo_at(
+    bsdf: &Bsdf,
+    wo: Vec3,
+    uv: Vec2,
+    mode: TransportMode,
+    n: usize,
+    seed: u64,
+) -> (Rgb, Rgb) {
     let mut r = rng(seed);
     let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
     for _ in 0..n {
-        if let Some(s) = bsdf.sample(wo, &FLAT, uniform(&mut r), uniform2(&mut r), mode) {
+        if let Some(s) = bsdf.sample(
+            wo,
+            &ShadingPoint::flat(uv),
+            uniform(&mut r),
+            uniform2(&mut r),
+            mode,
+        ) {
             for c in 0..3 {
                 let w = s.weight[c] as f64;
                 sum[c] += w;
@@ -895,11 +1118,42 @@ fn thin_dielectric_sums_internal_bounces() {
     assert!((frac - r_total).abs() < 0.005, "{frac} vs {r_total}");
 }
 
+/// The relative IOR of a model's rough transmission, if it has one (the first found).
+fn refraction_eta(bsdf: &Bsdf) -> Option<f32> {
+    match bsdf {
+        Bsdf::RoughDielectric(b) => Some(b.eta),
+        Bsdf::Principled(b) if b.transmits() => Some(b.eta()),
+        Bsdf::Blend(b) => b.nested.iter().find_map(refraction_eta),
+        Bsdf::Mask(b) => refraction_eta(&b.nested),
+        Bsdf::NormalMap(b) => refraction_eta(&b.nested),
+        Bsdf::TwoSided { front, back } => refraction_eta(front).or_else(|| refraction_eta(back)),
+        _ => None,
+    }
+}
+
+/// Whether (wo, wi) is a refraction pair whose outer direction is within 10⁻² (cosine) of
+/// grazing on its microfacet, computed in f64.
+fn near_critical_angle(bsdf: &Bsdf, wo: Vec3, wi: Vec3) -> bool {
+    let Some(eta) = refraction_eta(bsdf) else {
+        return false;
+    };
+    let (wo, wi) = (wo.as_dvec3(), wi.as_dvec3());
+    let (outer, inner) = if wo.z > 0.0 { (wo, wi) } else { (wi, wo) };
+    // The generalised half vector, turned to +z as the models turn it; a pair the models can
+    // refract through has the outer direction in front of it and the inner one behind.
+    let h = (outer + inner * eta as f64).normalize();
+    let h = if h.z < 0.0 { -h } else { h };
+    let cos_outer = outer.dot(h);
+    h.is_finite() && cos_outer > 0.0 && cos_outer < 1e-3 && inner.dot(h) < 0.0
+}
+
 #[test]
 fn eval_is_reciprocal_and_adjoint() {
     // f_radiance(wo, wi) = f_importance(wi, wo) for every model (for reflection that is plain
     // reciprocity; for refraction it is the adjoint BTDF with the 1/η² factor moved).
+    // Sheen and clearcoat are reciprocal too: only their energy is not conserved.
     let mut all = glossy_catalogue();
+    all.extend(principled_energy_gaining());
     all.push((
         "roughdielectric ggx 0.6 2.0",
         rough_dielectric(rough(MicrofacetKind::Ggx, 0.6, 0.6), 2.0),
@@ -936,6 +1190,19 @@ fn eval_is_reciprocal_and_adjoint() {
                 _ => false,
             };
             if flips_differ {
+                continue;
+            }
+            // Within 10⁻³ (cosine) of grazing on the microfacet, 1 − F hangs on the last bits of
+            // cos²θt = 1 − sin²θi·η², which the f32 rounding of the directions alone moves by
+            // tens of percent. On the pair of the principled transmission model below that
+            // threshold (outer cosine 6.3·10⁻⁴) the two modes differ by 33 %, and so does a
+            // roughdielectric of the same η and α on the same pair; Mitsuba's principled differs
+            // by 14 % there. Such pairs of the principled models are skipped; the other models'
+            // pairs are kept as they were (theirs there happen to agree).
+            if name.starts_with("principled")
+                && wo.z * wi.z < 0.0
+                && near_critical_angle(&bsdf, wo, wi)
+            {
                 continue;
             }
             let a = bsdf.eval(wo, wi, &FLAT, TransportMode::Radiance);
@@ -1127,6 +1394,49 @@ fn lobes_and_flags() {
         Lobe::Glossy
     );
     assert_eq!(plastic(1.5, constant(0.5), false).lobe(), Lobe::Diffuse);
+    // Principled: broad while it has a diffuse or sheen weight, else by its main lobe's
+    // α = roughness² (anisotropic: the larger of roughness²/√(1 − 0.9a), roughness²·√…).
+    let d = PrincipledParams::default;
+    let metal = |roughness: f32, anisotropic: Option<Texture>| {
+        principled(PrincipledParams {
+            metallic: on(1.0),
+            roughness: constant(roughness),
+            anisotropic,
+            ..d()
+        })
+    };
+    assert_eq!(principled(d()).lobe(), Lobe::Diffuse);
+    assert_eq!(metal(0.3, None).lobe(), Lobe::Glossy);
+    assert_eq!(metal(0.6, None).lobe(), Lobe::Diffuse);
+    assert_eq!(metal(0.4, None).lobe(), Lobe::Glossy);
+    assert_eq!(metal(0.4, on(0.9)).lobe(), Lobe::Diffuse);
+    let glass = |sheen: Option<Texture>| {
+        principled(PrincipledParams {
+            spec_trans: on(1.0),
+            roughness: constant(0.2),
+            sheen,
+            ..d()
+        })
+    };
+    assert_eq!(glass(None).lobe(), Lobe::Glossy);
+    assert_eq!(glass(on(0.5)).lobe(), Lobe::Diffuse);
+    // A clearcoat (α ≤ 0.1) keeps a smooth metal glossy.
+    let coated = principled(PrincipledParams {
+        metallic: on(1.0),
+        roughness: constant(0.2),
+        clearcoat: on(1.0),
+        ..d()
+    });
+    assert_eq!(coated.lobe(), Lobe::Glossy);
+    assert!(coated.has_non_delta());
+    assert_eq!(coated.delta_probability(Vec3::Z, &FLAT), 0.0);
+    // The G-buffer albedo is the base colour, for a metal too.
+    let gold_like = principled(PrincipledParams {
+        base_color: rgb(0.9, 0.6, 0.2),
+        metallic: on(1.0),
+        ..d()
+    });
+    assert_eq!(gold_like.albedo(&FLAT), Rgb::new(0.9, 0.6, 0.2));
     assert!(!dielectric(1.5).has_non_delta());
     assert!(plastic(1.5, constant(0.5), false).has_non_delta());
     assert_eq!(
@@ -1256,4 +1566,46 @@ fn textured_alpha_is_the_constant_model_at_each_uv() {
             }
         }
     }
+}
+
+#[test]
+fn principled_ior_follows_mitsuba() {
+    let d = PrincipledParams::default;
+    let eta = |ior, spec_trans: Option<Texture>| {
+        Principled::new(PrincipledParams {
+            ior,
+            spec_trans,
+            ..d()
+        })
+        .eta()
+    };
+    // specular 0.5 is η = 1.5: 0.08·0.5 = 0.04 = ((1.5 − 1)/(1.5 + 1))².
+    assert!((eta(PrincipledIor::Specular(0.5), None) - 1.5).abs() < 1e-6);
+    assert_eq!(eta(PrincipledIor::Eta(1.33), None), 1.33);
+    // Index matching is nudged away only when the model transmits (as Mitsuba).
+    assert_eq!(eta(PrincipledIor::Eta(1.0), None), 1.0);
+    assert_eq!(eta(PrincipledIor::Eta(1.0), Some(constant(0.5))), 1.001);
+    assert_eq!(eta(PrincipledIor::Specular(0.0), None), 1.0);
+    let nudged = eta(PrincipledIor::Specular(0.0), Some(constant(0.5)));
+    assert!((nudged - 2.0 / (1.0 - 0.08e-3f32.sqrt()) + 1.0).abs() < 1e-6);
+}
+
+#[test]
+fn principled_lobe_switch_changes_only_the_back_side_sampling() {
+    // spec_trans given at 0 (a lobe switched on at weight 0) against not given: the same
+    // values everywhere, and the same pdf from the front; from inside the switched-on model
+    // also samples transmission by Fresnel (as Mitsuba's), the other only reflection.
+    let d = PrincipledParams::default;
+    let off = principled(d());
+    let zero = principled(PrincipledParams {
+        spec_trans: on(0.0),
+        ..d()
+    });
+    let m = TransportMode::Radiance;
+    let (wo, wi) = (dir(30.0, 20.0), dir(50.0, 190.0));
+    assert_eq!(off.eval(wo, wi, &FLAT, m), zero.eval(wo, wi, &FLAT, m));
+    assert_eq!(off.pdf(wo, wi, &FLAT), zero.pdf(wo, wi, &FLAT));
+    let (below, below2) = (dir(150.0, 20.0), dir(130.0, 190.0));
+    assert!(zero.pdf(below, below2, &FLAT) < off.pdf(below, below2, &FLAT));
+    assert_eq!(off.eval(below, below2, &FLAT, m), Rgb::ZERO);
 }

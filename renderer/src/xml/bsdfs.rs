@@ -4,13 +4,14 @@ use super::props::Props;
 use super::{ior, Builder, Element, SceneError};
 use crate::bsdf::{
     Blend, Bsdf, BumpMap, Conductor, ConductorIor, Dielectric, Diffuse, Mask, MicrofacetKind,
-    NormalMap, Plastic, RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
+    NormalMap, Plastic, Principled, PrincipledIor, PrincipledParams, RoughConductor,
+    RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
 };
 use crate::spectrum::{Rgb, SpectrumKind};
 use crate::texture::Texture;
 
 /// The BSDF plugins this importer knows.
-const BSDF_PLUGINS: [&str; 13] = [
+const BSDF_PLUGINS: [&str; 14] = [
     "diffuse",
     "conductor",
     "roughconductor",
@@ -19,6 +20,7 @@ const BSDF_PLUGINS: [&str; 13] = [
     "roughdielectric",
     "plastic",
     "roughplastic",
+    "principled",
     "twosided",
     "normalmap",
     "bumpmap",
@@ -115,6 +117,7 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             p.texture_or(b, "specular_reflectance", refl, 1.0)?,
             p.bool_or("nonlinear", false)?,
         )),
+        "principled" => Bsdf::Principled(principled(b, &mut p)?),
         "twosided" => {
             let nested = p.objects(&["bsdf", "ref"]);
             let mut sides = Vec::with_capacity(2);
@@ -363,4 +366,110 @@ fn conductor_ior<'a>(
         .constant_color(b, "k", SpectrumKind::Unbounded)?
         .unwrap_or(Rgb::ONE);
     Ok(Some(ConductorIor { eta, k }))
+}
+
+/// `principled`: every parameter of Mitsuba 3's plugin. The artist parameters must lie in
+/// [0, 1] (Mitsuba's documentation: "all of the parameters except sampling rates and eta should
+/// take values between 0.0 and 1.0"; outside it the lobe weights turn negative); `base_color`
+/// may exceed 1 but not be negative, `eta` must be positive, the sampling rates non-negative.
+fn principled<'a>(b: &mut Builder<'a>, p: &mut Props<'a>) -> Result<Principled, SceneError> {
+    let base_el = p.element_of("base_color");
+    let base_color = p.texture_or(b, "base_color", SpectrumKind::Reflectance, 0.5)?;
+    if !base_color.is_finite_non_negative() {
+        return Err(base_el.error("\"base_color\" has negative or non-finite values"));
+    }
+    let roughness = principled_scalar(b, p, "roughness")?.unwrap_or(grey(0.5));
+    let clearcoat_gloss = principled_scalar(b, p, "clearcoat_gloss")?.unwrap_or(grey(0.0));
+    let ior = match (p.has("eta"), p.has("specular")) {
+        (true, true) => {
+            return Err(p
+                .element_of("specular")
+                .error("give either \"eta\" or \"specular\", not both"))
+        }
+        (true, false) => {
+            let eta_el = p.element_of("eta");
+            let eta = p.float("eta")?.unwrap_or(1.5);
+            if !(eta > 0.0 && eta.is_finite()) {
+                return Err(eta_el.error(format!("\"eta\" must be positive, got {eta}")));
+            }
+            PrincipledIor::Eta(eta as f32)
+        }
+        (false, _) => {
+            let specular_el = p.element_of("specular");
+            let specular = p.float("specular")?.unwrap_or(0.5);
+            if !(0.0..=1.0).contains(&specular) {
+                return Err(
+                    specular_el.error(format!("\"specular\" = {specular} is outside [0, 1]"))
+                );
+            }
+            PrincipledIor::Specular(specular as f32)
+        }
+    };
+    let rate = |p: &mut Props<'a>, name: &str| -> Result<f32, SceneError> {
+        let el = p.element_of(name);
+        let v = p.float_or(name, 1.0)?;
+        if v >= 0.0 && v.is_finite() {
+            Ok(v as f32)
+        } else {
+            Err(el.error(format!("\"{name}\" must be non-negative, got {v}")))
+        }
+    };
+    let diffuse_reflectance_sampling_rate = rate(p, "diffuse_reflectance_sampling_rate")?;
+    let main_specular_sampling_rate = rate(p, "main_specular_sampling_rate")?;
+    let clearcoat_sampling_rate = rate(p, "clearcoat_sampling_rate")?;
+    Ok(Principled::new(PrincipledParams {
+        base_color,
+        roughness,
+        anisotropic: principled_lobe(b, p, "anisotropic")?,
+        metallic: principled_lobe(b, p, "metallic")?,
+        spec_trans: principled_lobe(b, p, "spec_trans")?,
+        ior,
+        spec_tint: principled_lobe(b, p, "spec_tint")?,
+        sheen: principled_lobe(b, p, "sheen")?,
+        sheen_tint: principled_lobe(b, p, "sheen_tint")?,
+        flatness: principled_lobe(b, p, "flatness")?,
+        clearcoat: principled_lobe(b, p, "clearcoat")?,
+        clearcoat_gloss,
+        diffuse_reflectance_sampling_rate,
+        main_specular_sampling_rate,
+        clearcoat_sampling_rate,
+    }))
+}
+
+fn grey(v: f32) -> Texture {
+    Texture::Constant(Rgb::splat(v))
+}
+
+/// A scalar principled parameter (float or texture, read by luminance), checked to lie in
+/// [0, 1] everywhere.
+fn principled_scalar<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+    name: &str,
+) -> Result<Option<Texture>, SceneError> {
+    let el = p.element_of(name);
+    let Some(t) = p.texture(b, name, SpectrumKind::Unbounded)? else {
+        return Ok(None);
+    };
+    let (lo, hi) = t.scalar_range();
+    if !(lo >= 0.0 && hi <= 1.0) {
+        return Err(el.error(format!(
+            "\"{name}\" must lie in [0, 1], got values in [{lo}, {hi}]"
+        )));
+    }
+    Ok(Some(t))
+}
+
+/// A principled parameter that switches a lobe on: `None` when absent or given as the float 0,
+/// as Mitsuba's `get_flag` (a zero texture or colour keeps the lobe on).
+fn principled_lobe<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+    name: &str,
+) -> Result<Option<Texture>, SceneError> {
+    let is_float = p.has(name) && p.element_of(name).tag == "float";
+    Ok(match principled_scalar(b, p, name)? {
+        Some(Texture::Constant(c)) if is_float && c == Rgb::ZERO => None,
+        t => t,
+    })
 }

@@ -1762,3 +1762,166 @@ fn film_crop_window_and_principal_point() {
         assert_body_error_at(&dir, "bad.xml", &body, marker, needle);
     }
 }
+
+#[test]
+fn principled_parameters_follow_mitsuba() {
+    use crate::bsdf::{Principled, PrincipledIor};
+    let dir = temp_dir("principled");
+    let body = format!(
+        "{SENSOR}
+<bsdf type=\"principled\"/>
+<bsdf type=\"principled\">
+  <rgb name=\"base_color\" value=\"0.9, 0.6, 0.3\"/>
+  <float name=\"roughness\" value=\"0.2\"/>
+  <float name=\"anisotropic\" value=\"0.5\"/>
+  <float name=\"metallic\" value=\"0.7\"/>
+  <float name=\"spec_trans\" value=\"0.4\"/>
+  <float name=\"eta\" value=\"1.33\"/>
+  <float name=\"spec_tint\" value=\"0.4\"/>
+  <float name=\"sheen\" value=\"0.3\"/>
+  <float name=\"sheen_tint\" value=\"0.2\"/>
+  <float name=\"flatness\" value=\"0.1\"/>
+  <float name=\"clearcoat\" value=\"0.6\"/>
+  <float name=\"clearcoat_gloss\" value=\"0.3\"/>
+  <float name=\"diffuse_reflectance_sampling_rate\" value=\"0.5\"/>
+  <float name=\"main_specular_sampling_rate\" value=\"2\"/>
+  <float name=\"clearcoat_sampling_rate\" value=\"0\"/>
+</bsdf>
+<bsdf type=\"principled\">
+  <float name=\"spec_trans\" value=\"0\"/>
+  <rgb name=\"clearcoat\" value=\"0\"/>
+  <float name=\"specular\" value=\"0\"/>
+  <texture type=\"checkerboard\" name=\"base_color\"/>
+  <texture type=\"checkerboard\" name=\"metallic\"/>
+</bsdf>"
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    let get = |i: usize| -> &Principled {
+        let Bsdf::Principled(p) = &scene.bsdfs[i] else {
+            panic!("{:?}", scene.bsdfs[i])
+        };
+        p
+    };
+    let grey = |t: &Texture| t.mean();
+    // Defaults: base colour and roughness 0.5, specular 0.5 (η = 1.5), every lobe off,
+    // clearcoat_gloss 0, sampling rates 1 (clearcoat's too: the code's default, not the doc's).
+    let d = get(0).params();
+    assert_eq!(grey(&d.base_color), Vec3::splat(0.5));
+    assert_eq!(grey(&d.roughness), Vec3::splat(0.5));
+    assert_eq!(d.ior, PrincipledIor::Specular(0.5));
+    assert!((get(0).eta() - 1.5).abs() < 1e-6);
+    for lobe in [
+        &d.anisotropic,
+        &d.metallic,
+        &d.spec_trans,
+        &d.spec_tint,
+        &d.sheen,
+        &d.sheen_tint,
+        &d.flatness,
+        &d.clearcoat,
+    ] {
+        assert!(lobe.is_none());
+    }
+    assert_eq!(grey(&d.clearcoat_gloss), Vec3::ZERO);
+    assert_eq!(
+        (
+            d.diffuse_reflectance_sampling_rate,
+            d.main_specular_sampling_rate,
+            d.clearcoat_sampling_rate
+        ),
+        (1.0, 1.0, 1.0)
+    );
+    // Everything given.
+    let f = get(1).params();
+    assert_eq!(grey(&f.base_color), Vec3::new(0.9, 0.6, 0.3));
+    assert_eq!(f.ior, PrincipledIor::Eta(1.33));
+    let value = |t: &Option<Texture>| t.as_ref().map(|t| t.mean_1());
+    assert_eq!(value(&f.anisotropic), Some(0.5));
+    assert_eq!(value(&f.metallic), Some(0.7));
+    assert_eq!(value(&f.spec_trans), Some(0.4));
+    assert_eq!(value(&f.spec_tint), Some(0.4));
+    assert_eq!(value(&f.sheen), Some(0.3));
+    assert_eq!(value(&f.sheen_tint), Some(0.2));
+    assert_eq!(value(&f.flatness), Some(0.1));
+    assert_eq!(value(&f.clearcoat), Some(0.6));
+    assert_eq!(f.clearcoat_gloss.mean_1(), 0.3);
+    assert_eq!(grey(&f.roughness), Vec3::splat(0.2));
+    assert_eq!(
+        (
+            f.diffuse_reflectance_sampling_rate,
+            f.main_specular_sampling_rate,
+            f.clearcoat_sampling_rate
+        ),
+        (0.5, 2.0, 0.0)
+    );
+    // A float 0 switches a lobe off (Mitsuba's get_flag), a colour 0 does not; specular 0 with
+    // spec_trans off keeps η = 1; textures are accepted for colour and scalar parameters.
+    let z = get(2).params();
+    assert!(z.spec_trans.is_none());
+    assert!(z.clearcoat.is_some());
+    assert_eq!(z.ior, PrincipledIor::Specular(0.0));
+    assert_eq!(get(2).eta(), 1.0);
+    assert!(matches!(z.base_color, Texture::Checkerboard { .. }));
+    assert!(matches!(z.metallic, Some(Texture::Checkerboard { .. })));
+}
+
+#[test]
+fn principled_bad_values_are_errors_at_their_line() {
+    let dir = temp_dir("principled-errors");
+    let cases = [
+        (
+            "<bsdf type=\"principled\">\n<float name=\"eta\" value=\"1.4\"/>\n<float name=\"specular\" value=\"0.3\"/></bsdf>",
+            "specular",
+            "give either \"eta\" or \"specular\", not both",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<float name=\"roughness\" value=\"-0.1\"/></bsdf>",
+            "roughness",
+            "\"roughness\" must lie in [0, 1]",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<float name=\"metallic\" value=\"1.5\"/></bsdf>",
+            "metallic",
+            "\"metallic\" must lie in [0, 1]",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<texture type=\"checkerboard\" name=\"sheen\"><rgb name=\"color0\" value=\"2\"/></texture></bsdf>",
+            "sheen",
+            "\"sheen\" must lie in [0, 1], got values in [0.2, 2]",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<rgb name=\"base_color\" value=\"0.5, -0.1, 0.5\"/></bsdf>",
+            "base_color",
+            "\"base_color\" has negative or non-finite values",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<float name=\"eta\" value=\"0\"/></bsdf>",
+            "eta",
+            "\"eta\" must be positive",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<float name=\"specular\" value=\"1.2\"/></bsdf>",
+            "specular",
+            "\"specular\" = 1.2 is outside [0, 1]",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<texture type=\"checkerboard\" name=\"eta\"/></bsdf>",
+            "eta",
+            "parameter \"eta\" has the wrong type",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<float name=\"clearcoat_sampling_rate\" value=\"-1\"/></bsdf>",
+            "clearcoat_sampling_rate",
+            "\"clearcoat_sampling_rate\" must be non-negative",
+        ),
+        (
+            "<bsdf type=\"principled\">\n<float name=\"subsurface\" value=\"0.5\"/></bsdf>",
+            "subsurface",
+            "unknown parameter \"subsurface\" of <bsdf type=\"principled\">",
+        ),
+    ];
+    for (k, (bsdf, marker, needle)) in cases.iter().enumerate() {
+        let body = format!("{SENSOR}\n{bsdf}");
+        assert_body_error_at(&dir, &format!("e{k}.xml"), &body, marker, needle);
+    }
+}

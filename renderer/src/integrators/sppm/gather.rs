@@ -24,6 +24,7 @@ pub const NORMAL_AGREEMENT_COS: f32 = 0.5;
 fn transmits(bsdf: &Bsdf) -> bool {
     match bsdf {
         Bsdf::RoughDielectric(_) => true,
+        Bsdf::Principled(b) => b.transmits(),
         Bsdf::Diffuse(_)
         | Bsdf::Conductor(_)
         | Bsdf::RoughConductor(_)
