@@ -1,8 +1,9 @@
 //! Robustness of the whole load → build → render chain against bad values: every validation
-//! scene of the repository, with one attribute value at a time replaced by something hostile
-//! (zero, negative, huge, tiny, NaN, infinity, empty, text, a wrong arity), must either load
-//! and render (path tracer and one multi-level SPPM pass, without a panic and without
-//! non-finite pixels) or fail with an error that names the scene file — never panic.
+//! scene of the repository and the bundled default scene, with one attribute value at a time
+//! replaced by something hostile (zero, negative, huge, tiny, NaN, infinity, empty, text, a
+//! wrong arity), must either load and render (path tracer and one multi-level SPPM pass,
+//! without a panic and without non-finite pixels) or fail with an error that names the scene
+//! file — never panic.
 
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::sppm::{render_sppm, SppmSettings, StopCondition};
@@ -89,6 +90,7 @@ fn mutated_validation_scenes_never_panic() {
         .filter(|p| p.exists())
         .collect();
     scenes.sort();
+    scenes.push(root.join("../default/scene.xml"));
     assert!(scenes.len() >= 20, "{}", scenes.len());
     let (mut refused, mut rendered) = (0, 0);
     let mut state = 20_261_124_u64;
