@@ -47,6 +47,35 @@ impl Blend {
         f
     }
 
+    /// [`Bsdf::eval_split`]: each model's parts, weighted as in [`Blend::eval`].
+    pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
+        let w = self.weight_at(sp.uv);
+        let [a, b] = &*self.nested;
+        let (mut broad, mut sharp) = (Rgb::ZERO, Rgb::ZERO);
+        if w < 1.0 {
+            let (fb, fs) = a.eval_split(wo, wi, sp);
+            broad += fb * (1.0 - w);
+            sharp += fs * (1.0 - w);
+        }
+        if w > 0.0 {
+            let (fb, fs) = b.eval_split(wo, wi, sp);
+            broad += fb * w;
+            sharp += fs * w;
+        }
+        (broad, sharp)
+    }
+
+    /// [`Bsdf::sharp_share`]: the models' shares, weighted like their sampling.
+    pub fn sharp_share(&self, wo: Vec3, sp: &ShadingPoint) -> Option<f32> {
+        let w = self.weight_at(sp.uv);
+        let [a, b] = &*self.nested;
+        let (sa, sb) = (a.sharp_share(wo, sp), b.sharp_share(wo, sp));
+        if sa.is_none() && sb.is_none() {
+            return None;
+        }
+        Some(sa.unwrap_or(0.0) * (1.0 - w) + sb.unwrap_or(0.0) * w)
+    }
+
     /// (1 − w)·p₀ + w·p₁.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
         let w = self.weight_at(sp.uv);

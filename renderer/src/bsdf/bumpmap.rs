@@ -84,6 +84,16 @@ impl BumpMap {
         self.perturbed(wo, sp).eval(wo, wi, mode)
     }
 
+    /// [`Bsdf::eval_split`] through the tilted frame.
+    pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
+        self.perturbed(wo, sp).eval_split(wo, wi)
+    }
+
+    /// [`Bsdf::sharp_share`] through the tilted frame.
+    pub fn sharp_share(&self, wo: Vec3, sp: &ShadingPoint) -> Option<f32> {
+        self.perturbed(wo, sp).sharp_share(wo)
+    }
+
     /// The nested model's density of `wi`, seen through the tilted frame.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
         self.perturbed(wo, sp).pdf(wo, wi)

@@ -42,6 +42,17 @@ impl Mask {
         }
     }
 
+    /// [`Bsdf::eval_split`]: opacity · the nested model's parts.
+    pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
+        let a = self.opacity_at(sp.uv);
+        if a > 0.0 {
+            let (broad, sharp) = self.nested.eval_split(wo, wi, sp);
+            (broad * a, sharp * a)
+        } else {
+            (Rgb::ZERO, Rgb::ZERO)
+        }
+    }
+
     /// opacity · p.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
         let a = self.opacity_at(sp.uv);

@@ -55,6 +55,13 @@ pub use principled::{Principled, PrincipledIor, PrincipledParams};
 /// storing a visible point, because a photon-density estimate on a sharp lobe is very noisy.
 pub const GLOSSY_ALPHA_THRESHOLD: f32 = 0.25;
 
+/// Roughness below which a lobe of a model SPPM classifies [`Lobe::Diffuse`] (because of its
+/// broad parts) counts as *sharp*: the eye path splits it off and follows it
+/// ([`Bsdf::sharp_share`], [`Bsdf::eval_split`]), as it follows a whole glossy surface, so that
+/// photons estimate broad lobes only. The same bound as [`GLOSSY_ALPHA_THRESHOLD`]: one rule
+/// for whole surfaces and for their lobes.
+pub const SHARP_ALPHA_THRESHOLD: f32 = GLOSSY_ALPHA_THRESHOLD;
+
 /// Where a BSDF is evaluated: the texture coordinates and the surface's differential geometry
 /// there, in the local shading frame (what Mitsuba's BSDFs read from their
 /// `SurfaceInteraction`). Only `bumpmap` reads the geometry; every other model reads `uv`.
@@ -471,6 +478,64 @@ impl Bsdf {
         }
     }
 
+    /// The radiance-mode value f(wo, wi) split into its broad and its sharp part (lobes with
+    /// α < [`SHARP_ALPHA_THRESHOLD`]); the two add up to [`Bsdf::eval`]. Models without a
+    /// sharp part return (f, 0).
+    pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
+        let uv = sp.uv;
+        match self {
+            Bsdf::RoughConductor(b) if is_sharp(&b.roughness, &b.alpha_texture, uv) => {
+                (Rgb::ZERO, b.eval(wo, wi, uv))
+            }
+            Bsdf::RoughDielectric(b) if is_sharp(&b.roughness, &b.alpha_texture, uv) => {
+                (Rgb::ZERO, b.eval(wo, wi, uv, TransportMode::Radiance))
+            }
+            Bsdf::RoughPlastic(b) => b.eval_split(wo, wi, uv),
+            Bsdf::Principled(b) => b.eval_split(wo, wi, uv),
+            Bsdf::NormalMap(b) => b.eval_split(wo, wi, sp),
+            Bsdf::BumpMap(b) => b.eval_split(wo, wi, sp),
+            Bsdf::Blend(b) => b.eval_split(wo, wi, sp),
+            Bsdf::Mask(b) => b.eval_split(wo, wi, sp),
+            Bsdf::TwoSided { front, back } => {
+                if wo.z > 0.0 {
+                    front.eval_split(wo, wi, sp)
+                } else if wo.z < 0.0 {
+                    back.eval_split(flip(wo), flip(wi), sp)
+                } else {
+                    (Rgb::ZERO, Rgb::ZERO)
+                }
+            }
+            _ => (self.eval(wo, wi, sp, TransportMode::Radiance), Rgb::ZERO),
+        }
+    }
+
+    /// `None` when the model has no sharp part at this point for viewer `wo` (see
+    /// [`Bsdf::eval_split`]); otherwise `Some(s)`, `s` ∈ [0, 1] the share of its sampling
+    /// that goes to sharp lobes — how often an SPPM eye path should follow them.
+    pub fn sharp_share(&self, wo: Vec3, sp: &ShadingPoint) -> Option<f32> {
+        let uv = sp.uv;
+        match self {
+            Bsdf::RoughConductor(b) if is_sharp(&b.roughness, &b.alpha_texture, uv) => Some(1.0),
+            Bsdf::RoughDielectric(b) if is_sharp(&b.roughness, &b.alpha_texture, uv) => Some(1.0),
+            Bsdf::RoughPlastic(b) => b.sharp_share(wo),
+            Bsdf::Principled(b) => b.sharp_share(wo, uv),
+            Bsdf::NormalMap(b) => b.sharp_share(wo, sp),
+            Bsdf::BumpMap(b) => b.sharp_share(wo, sp),
+            Bsdf::Blend(b) => b.sharp_share(wo, sp),
+            Bsdf::Mask(b) => b.nested.sharp_share(wo, sp),
+            Bsdf::TwoSided { front, back } => {
+                if wo.z > 0.0 {
+                    front.sharp_share(wo, sp)
+                } else if wo.z < 0.0 {
+                    back.sharp_share(flip(wo), sp)
+                } else {
+                    None
+                }
+            }
+            _ => None,
+        }
+    }
+
     /// The shading normal the model works with for viewer `wo`, in the shading frame: +z,
     /// except under a normal or bump map (also inside `twosided`, `mask` or `blendbsdf`: the first
     /// one found), where it is the perturbed normal (Mitsuba's `sh_frame` override). The
@@ -565,6 +630,15 @@ fn distribution_at(
             })
         }
     }
+}
+
+/// Whether a rough model's lobe at `uv` is sharp (α below [`SHARP_ALPHA_THRESHOLD`]).
+fn is_sharp(roughness: &Roughness, alpha_texture: &Option<Texture>, uv: Vec2) -> bool {
+    let alpha = match alpha_texture {
+        None => roughness.alpha_u.max(roughness.alpha_v),
+        Some(t) => t.eval_1(uv),
+    };
+    alpha < SHARP_ALPHA_THRESHOLD
 }
 
 /// Mirror a local direction to the other side of the surface (twosided's back face).

@@ -57,6 +57,24 @@ impl Perturbed<'_> {
         f * (pl.z.abs() / light.z.abs() * self.shadowing(light))
     }
 
+    /// The radiance-mode value split into its broad and sharp parts (see
+    /// [`Bsdf::eval_split`]): the nested model's parts, each scaled as in [`Perturbed::eval`].
+    pub fn eval_split(&self, wo: Vec3, wi: Vec3) -> (Rgb, Rgb) {
+        let (pv, pl) = (self.frame.to_local(wo), self.frame.to_local(wi));
+        if wi.z * pl.z <= 0.0 {
+            return (Rgb::ZERO, Rgb::ZERO);
+        }
+        let (broad, sharp) = self.nested.eval_split(pv, pl, &self.sp);
+        let scale = pl.z.abs() / wi.z.abs() * self.shadowing(wi);
+        (broad * scale, sharp * scale)
+    }
+
+    /// The nested model's sharp share (see [`Bsdf::sharp_share`]), seen from `wo` in the
+    /// tilted frame.
+    pub fn sharp_share(&self, wo: Vec3) -> Option<f32> {
+        self.nested.sharp_share(self.frame.to_local(wo), &self.sp)
+    }
+
     /// f(wo, wi) without the cosine of the shading frame. Radiance: viewer `wo`, light `wi`.
     /// Importance (photons arriving from `wo`, leaving along `wi`): the adjoint, f(wi, wo) —
     /// the adapter is not reciprocal — in the frame `wo` selected (the flip of an invalid

@@ -447,22 +447,86 @@ impl Principled {
     }
 
     pub(super) fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
+        self.eval_parts(wo, wi, uv, mode, false).0
+    }
+
+    /// (broad, sharp) in radiance mode: the main specular lobes and the clearcoat count as
+    /// sharp where their α is below [`super::SHARP_ALPHA_THRESHOLD`] (see `Bsdf::eval_split`).
+    pub(super) fn eval_split(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> (Rgb, Rgb) {
+        self.eval_parts(wo, wi, uv, TransportMode::Radiance, true)
+    }
+
+    /// Whether the main lobes and the clearcoat are sharp at `l`.
+    fn sharp_lobes(&self, l: &Local) -> (bool, bool) {
+        let (alpha_u, alpha_v) = alphas(
+            l.roughness,
+            l.anisotropic,
+            self.params.anisotropic.is_some(),
+        );
+        let main = alpha_u.max(alpha_v) < super::SHARP_ALPHA_THRESHOLD;
+        let clearcoat = self.params.clearcoat.is_some()
+            && l.clearcoat > 0.0
+            && Self::clearcoat_distribution(l).alpha < super::SHARP_ALPHA_THRESHOLD;
+        (main, clearcoat)
+    }
+
+    /// The sampling share of the sharp lobes for viewer `wo` (see `Bsdf::sharp_share`), taken
+    /// at the Fresnel reflectance of the normal; `None` without a sharp lobe.
+    pub(super) fn sharp_share(&self, wo: Vec3, uv: Vec2) -> Option<f32> {
+        if wo.z == 0.0 {
+            return None;
+        }
+        let l = self.at(uv);
+        let (main, clearcoat) = self.sharp_lobes(&l);
+        if !main && !clearcoat {
+            return None;
+        }
+        let f = fresnel_dielectric(wo.z.abs(), self.eta).r;
+        let Some(s) = self.strategies(&l, wo.z > 0.0, f) else {
+            return Some(0.0);
+        };
+        let mut share = 0.0;
+        if main {
+            share += s.reflection + s.transmission;
+        }
+        if clearcoat {
+            share += s.clearcoat;
+        }
+        Some(share)
+    }
+
+    /// The value, its terms summed into (broad, sharp): everything broad unless `split`, else
+    /// the sharp lobes (see [`Principled::sharp_lobes`]) into the second.
+    fn eval_parts(
+        &self,
+        wo: Vec3,
+        wi: Vec3,
+        uv: Vec2,
+        mode: TransportMode,
+        split: bool,
+    ) -> (Rgb, Rgb) {
         let (cos_o, cos_i) = (wo.z, wi.z);
         if cos_o == 0.0 {
-            return Rgb::ZERO;
+            return (Rgb::ZERO, Rgb::ZERO);
         }
         let reflect = cos_o * cos_i > 0.0;
         let refract = cos_o * cos_i < 0.0;
         if !reflect && !refract {
-            return Rgb::ZERO;
+            return (Rgb::ZERO, Rgb::ZERO);
         }
         let l = self.at(uv);
+        let (main_sharp, clearcoat_sharp) = if split {
+            self.sharp_lobes(&l)
+        } else {
+            (false, false)
+        };
+        let mut sharp = Rgb::ZERO;
         let p = &self.params;
         let (brdf, bsdf) = (l.brdf(), l.bsdf());
         let front = cos_o > 0.0;
         let eta_path = if front { self.eta } else { 1.0 / self.eta };
         let Some(wh) = half_vector(wo, wi, if reflect { 1.0 } else { eta_path }) else {
-            return Rgb::ZERO;
+            return (Rgb::ZERO, Rgb::ZERO);
         };
         let fresnel = fresnel_dielectric(wo.dot(wh), self.eta);
         let f_dielectric = fresnel.r;
@@ -475,7 +539,12 @@ impl Principled {
 
         if reflection_ok && f_dielectric > 0.0 {
             let f = self.main_fresnel(&l, f_dielectric, wo.dot(wh), front);
-            value += f * (d * g / (4.0 * (cos_o * cos_i).abs()));
+            let term = f * (d * g / (4.0 * (cos_o * cos_i).abs()));
+            if main_sharp {
+                sharp += term;
+            } else {
+                value += term;
+            }
         }
 
         if refraction_ok && p.spec_trans.is_some() && bsdf > 0.0 && f_dielectric < 1.0 {
@@ -487,14 +556,24 @@ impl Principled {
             let denom = o_h + eta_path * i_h;
             let t = scale * (1.0 - f_dielectric) * d * g * eta_path * eta_path * o_h * i_h
                 / (cos_o * denom * denom);
-            value += sqrt_rgb(l.base_color) * (bsdf * t.abs() / cos_i.abs());
+            let term = sqrt_rgb(l.base_color) * (bsdf * t.abs() / cos_i.abs());
+            if main_sharp {
+                sharp += term;
+            } else {
+                value += term;
+            }
         }
 
         if reflection_ok && front && p.clearcoat.is_some() && l.clearcoat > 0.0 {
             let f_cc = schlick(Rgb::splat(0.04), wo.dot(wh), self.eta).x;
             let d_cc = Self::clearcoat_distribution(&l).eval(wh);
             let g_cc = smith_ggx1(wo, wh, 0.25) * smith_ggx1(wi, wh, 0.25);
-            value += Rgb::splat(l.clearcoat * 0.25 * f_cc * d_cc * g_cc);
+            let term = Rgb::splat(l.clearcoat * 0.25 * f_cc * d_cc * g_cc);
+            if clearcoat_sharp {
+                sharp += term;
+            } else {
+                value += term;
+            }
         }
 
         if reflect && front {
@@ -527,7 +606,7 @@ impl Principled {
                 value += tint * (l.sheen * (1.0 - l.metallic) * f_d);
             }
         }
-        value
+        (value, sharp)
     }
 
     pub(super) fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {

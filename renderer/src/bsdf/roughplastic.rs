@@ -236,8 +236,35 @@ impl RoughPlastic {
     }
 
     pub(super) fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> Rgb {
+        let (specular, diffuse) = self.terms(wo, wi, uv);
+        specular + diffuse
+    }
+
+    /// Whether the coating is a sharp lobe (see [`super::SHARP_ALPHA_THRESHOLD`]).
+    fn sharp_coating(&self) -> bool {
+        self.roughness.alpha_u < super::SHARP_ALPHA_THRESHOLD
+    }
+
+    /// (broad, sharp): the diffuse base and, if it is sharp, the coating's reflection.
+    pub(super) fn eval_split(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> (Rgb, Rgb) {
+        let (specular, diffuse) = self.terms(wo, wi, uv);
+        if self.sharp_coating() {
+            (diffuse, specular)
+        } else {
+            (specular + diffuse, Rgb::ZERO)
+        }
+    }
+
+    /// The coating's sampling probability for viewer `wo` when the coating is sharp.
+    pub(super) fn sharp_share(&self, wo: Vec3) -> Option<f32> {
+        (self.sharp_coating() && wo.z > 0.0)
+            .then(|| self.prob_specular(self.coating.transmittance(wo.z)))
+    }
+
+    /// The coating's specular reflection and the diffuse base's term.
+    fn terms(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> (Rgb, Rgb) {
         if wo.z <= 0.0 || wi.z <= 0.0 {
-            return Rgb::ZERO;
+            return (Rgb::ZERO, Rgb::ZERO);
         }
         let distr = isotropic_distribution(&self.roughness);
         let h = (wo + wi).normalize();
@@ -251,7 +278,7 @@ impl RoughPlastic {
             self.nonlinear,
         );
         let t = self.coating.transmittance(wo.z) * self.coating.transmittance(wi.z);
-        specular + rho * (FRAC_1_PI * t / (self.eta * self.eta))
+        (specular, rho * (FRAC_1_PI * t / (self.eta * self.eta)))
     }
 
     pub(super) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {

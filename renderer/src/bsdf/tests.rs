@@ -1609,3 +1609,140 @@ fn principled_lobe_switch_changes_only_the_back_side_sampling() {
     assert!(zero.pdf(below, below2, &FLAT) < off.pdf(below, below2, &FLAT));
     assert_eq!(off.eval(below, below2, &FLAT, m), Rgb::ZERO);
 }
+
+/// Models with and without sharp (near-mirror) lobes for [`eval_split_adds_up_to_eval`]: name,
+/// model, whether it has a sharp part (for a viewer above the surface), both sides tested.
+fn split_catalogue() -> Vec<(&'static str, Bsdf, bool, bool)> {
+    use MicrofacetKind::Ggx;
+    let d = PrincipledParams::default;
+    let sharp_plastic = || rough_plastic(rough(Ggx, 0.004, 0.004), 1.5, rgb(0.5, 0.3, 0.2), false);
+    vec![
+        ("roughplastic α 0.004", sharp_plastic(), true, false),
+        (
+            "roughplastic α 0.1",
+            rough_plastic(rough(Ggx, 0.1, 0.1), 1.5, rgb(0.5, 0.3, 0.2), false),
+            true,
+            false,
+        ),
+        (
+            "roughplastic α 0.3",
+            rough_plastic(rough(Ggx, 0.3, 0.3), 1.5, rgb(0.5, 0.3, 0.2), false),
+            false,
+            false,
+        ),
+        (
+            "principled roughness 0.05 + clearcoat gloss 1",
+            principled(PrincipledParams {
+                roughness: constant(0.05),
+                clearcoat: on(0.8),
+                clearcoat_gloss: constant(1.0),
+                spec_trans: on(0.3),
+                sheen: on(0.4),
+                ..d()
+            }),
+            true,
+            true,
+        ),
+        (
+            "principled clearcoat gloss 1 only",
+            principled(PrincipledParams {
+                clearcoat: on(0.8),
+                clearcoat_gloss: constant(1.0),
+                ..d()
+            }),
+            true,
+            false,
+        ),
+        ("principled default", principled(d()), false, false),
+        (
+            "blendbsdf diffuse / roughconductor α 0.005",
+            blend(
+                0.4,
+                diffuse(rgb(0.6, 0.5, 0.4)),
+                rough_conductor(rough(Ggx, 0.005, 0.005), gold()),
+            ),
+            true,
+            false,
+        ),
+        (
+            "mask 0.7 / sharp roughplastic",
+            masked(0.7, sharp_plastic()),
+            true,
+            false,
+        ),
+        (
+            "normalmap / sharp roughplastic",
+            normal_mapped(rgb(0.6, 0.45, 0.9), sharp_plastic()),
+            true,
+            false,
+        ),
+        (
+            "bumpmap / sharp roughplastic",
+            bumped(sharp_plastic()),
+            true,
+            false,
+        ),
+        (
+            "twosided diffuse / sharp roughplastic",
+            two_sided(diffuse(constant(0.5)), sharp_plastic()),
+            false, // the front side has none; the back side has one
+            true,
+        ),
+    ]
+}
+
+/// The broad and sharp parts of every model add up to its value, are non-negative, and a
+/// model reports a sharp share exactly where it has a sharp part (a part the SPPM eye path
+/// would never follow would be lost).
+#[test]
+fn eval_split_adds_up_to_eval() {
+    let mut r = rng(91);
+    for (name, bsdf, front_sharp, two_sided) in split_catalogue() {
+        for wo in test_directions(two_sided) {
+            let share = bsdf.sharp_share(wo, &FLAT);
+            let expect_sharp = if wo.z > 0.0 {
+                front_sharp
+            } else {
+                // The back sides in the catalogue: the two-sided model's sharp plastic, the
+                // principled model's transmission.
+                true
+            };
+            assert_eq!(
+                share.is_some(),
+                expect_sharp,
+                "{name} wo={wo}: share {share:?}"
+            );
+            if let Some(s) = share {
+                assert!((0.0..=1.0).contains(&s), "{name} wo={wo}: share {s}");
+            }
+            let mut sharp_seen = 0.0f32;
+            for _ in 0..2000 {
+                let wi = crate::sampling::square_to_uniform_sphere(uniform2(&mut r));
+                let f = bsdf.eval(wo, wi, &FLAT, TransportMode::Radiance);
+                let (broad, sharp) = bsdf.eval_split(wo, wi, &FLAT);
+                assert!(
+                    broad.min_element() >= 0.0 && sharp.min_element() >= 0.0,
+                    "{name} wo={wo} wi={wi}: {broad} {sharp}"
+                );
+                let tol = 1e-5 * f.max_element().max(1.0);
+                assert!(
+                    (broad + sharp - f).abs().max_element() <= tol,
+                    "{name} wo={wo} wi={wi}: {broad} + {sharp} vs {f}"
+                );
+                if share.is_none() {
+                    assert_eq!(sharp, Rgb::ZERO, "{name} wo={wo} wi={wi}");
+                }
+                sharp_seen = sharp_seen.max(sharp.max_element());
+            }
+            // Near the mirror direction the sharp part dominates: sample it there.
+            if share.is_some() && wo.z > 0.0 {
+                let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
+                let (_, sharp) = bsdf.eval_split(wo, mirror, &FLAT);
+                assert!(
+                    sharp.max_element() > 0.0 || sharp_seen > 0.0,
+                    "{name} wo={wo}: no sharp value found"
+                );
+            }
+        }
+    }
+}

@@ -98,6 +98,7 @@ pub fn gather(
     };
     // The common case, a Lambertian surface: f is one constant on one hemisphere, so sum the
     // fluxes and multiply by f at the end (no BSDF evaluation per photon).
+    // (A Lambertian model has no sharp part, so `broad_only` never applies to it.)
     let factor = match lambertian(bsdf, vp.wo, vp.sp.uv) {
         Some((f, side)) => {
             if f != Rgb::ZERO {
@@ -116,7 +117,11 @@ pub fn gather(
                     return;
                 }
                 let wi = vp.frame.to_local(photon.wi);
-                let f = bsdf.eval(vp.wo, wi, &vp.sp, TransportMode::Radiance);
+                let f = if vp.broad_only {
+                    bsdf.eval_split(vp.wo, wi, &vp.sp).0
+                } else {
+                    bsdf.eval(vp.wo, wi, &vp.sp, TransportMode::Radiance)
+                };
                 if f != Rgb::ZERO {
                     add(d2, f * photon.flux);
                 }

@@ -472,6 +472,7 @@ fn gather_matches_brute_force_sum() {
             sp: crate::bsdf::ShadingPoint::flat(glam::Vec2::new(0.3, 0.6)),
             material,
             beta: Rgb::new(0.9, 0.8, 0.7),
+            broad_only: false,
         };
         let bsdf = &scene.bsdfs[material as usize];
         let mut got = [Rgb::ZERO; 4];
@@ -655,4 +656,25 @@ fn assert_disk_in_lit_enclosure_matches_the_path_tracer(material: Bsdf) {
             );
         }
     }
+}
+
+/// A near-mirror coating over a diffuse base (`roughplastic`, α = 0.003) in the lit enclosure:
+/// the coating's lobe is far too narrow for photon density estimation, so the eye path splits
+/// it off (`Bsdf::sharp_share`) and the visible point keeps the broad part; the image matches
+/// the path tracer's. (With the whole model left to the photons the sharpest level came out
+/// 6 % too dark in red here.)
+#[test]
+fn near_mirror_coating_matches_the_path_tracer() {
+    use crate::bsdf::{MicrofacetKind, RoughPlastic, Roughness};
+    assert_disk_in_lit_enclosure_matches_the_path_tracer(Bsdf::RoughPlastic(RoughPlastic::new(
+        Roughness {
+            kind: MicrofacetKind::Ggx,
+            alpha_u: 0.003,
+            alpha_v: 0.003,
+        },
+        1.5,
+        Texture::Constant(Rgb::new(0.2, 0.1, 0.05)),
+        Texture::Constant(Rgb::ONE),
+        false,
+    )));
 }

@@ -38,6 +38,56 @@ pub struct VisiblePoint {
     pub material: u32,
     /// Path throughput β from the camera to this point.
     pub beta: Rgb,
+    /// Whether the photons estimate only the broad part of the BSDF here (the eye path took
+    /// the sharp part on; [`Bsdf::eval_split`]).
+    pub broad_only: bool,
+}
+
+/// Which part of a BSDF an estimate covers at a visible point (see [`Bsdf::eval_split`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Part {
+    /// The whole model.
+    All,
+    /// The broad lobes only (the visible point's share after a sharp split).
+    Broad,
+    /// The sharp lobes only (followed by the eye path).
+    Sharp,
+}
+
+/// The radiance-mode BSDF value of `part`.
+fn eval_part(bsdf: &Bsdf, part: Part, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> Rgb {
+    match part {
+        Part::All => bsdf.eval(wo, wi, sp, TransportMode::Radiance),
+        Part::Broad => bsdf.eval_split(wo, wi, sp).0,
+        Part::Sharp => bsdf.eval_split(wo, wi, sp).1,
+    }
+}
+
+/// `bs`'s weight restricted to `part`: f_part·|cos θi| / pdf (a delta sample has no broad or
+/// sharp part).
+fn part_weight(bsdf: &Bsdf, part: Part, wo: Vec3, sp: &ShadingPoint, bs: &BsdfSample) -> Rgb {
+    match part {
+        Part::All => bs.weight,
+        _ if bs.delta => Rgb::ZERO,
+        _ => eval_part(bsdf, part, wo, bs.wi, sp) * (bs.wi.z.abs() / bs.pdf),
+    }
+}
+
+/// How often an eye path follows the sharp part of a model with one: its sampling share,
+/// kept inside [0.1, 0.9] so that neither part is starved (any value in (0, 1) is unbiased).
+fn sharp_probability(share: f32) -> f32 {
+    share.clamp(0.1, 0.9)
+}
+
+/// The part an eye path takes at a diffuse vertex and the probability of that choice: the
+/// whole model (probability 1) without a sharp part, else the sharp part with probability `q`
+/// and the broad one otherwise (one random number, drawn only then).
+fn choose_part(sharp: Option<f32>, rng: &mut Pcg32) -> (Part, f32) {
+    match sharp {
+        None => (Part::All, 1.0),
+        Some(q) if rng.next_f32() < q => (Part::Sharp, q),
+        Some(q) => (Part::Broad, 1.0 - q),
+    }
 }
 
 /// The result of one eye subpath.
@@ -109,6 +159,7 @@ fn direct_light(
     si: &SurfaceInteraction,
     sp: &ShadingPoint,
     bsdf: &Bsdf,
+    part: Part,
     wo: Vec3,
     rng: &mut Pcg32,
 ) -> Rgb {
@@ -118,7 +169,7 @@ fn direct_light(
         return Rgb::ZERO;
     };
     let wi = si.to_local(ls.wi);
-    let f = bsdf.eval(wo, wi, sp, TransportMode::Radiance);
+    let f = eval_part(bsdf, part, wo, wi, sp);
     if f.max_element() <= 0.0 || scene.light_occluded(si.p, si.ng, &ls) {
         return Rgb::ZERO;
     }
@@ -147,7 +198,13 @@ fn probe_emission(scene: &Scene, si: &SurfaceInteraction, bs: &BsdfSample) -> Rg
 }
 
 /// The visible point at `si` with path throughput `beta`.
-fn visible_point(si: &SurfaceInteraction, sp: &ShadingPoint, wo: Vec3, beta: Rgb) -> VisiblePoint {
+fn visible_point(
+    si: &SurfaceInteraction,
+    sp: &ShadingPoint,
+    wo: Vec3,
+    beta: Rgb,
+    broad_only: bool,
+) -> VisiblePoint {
     VisiblePoint {
         p: si.p,
         ng: si.ng,
@@ -157,6 +214,7 @@ fn visible_point(si: &SurfaceInteraction, sp: &ShadingPoint, wo: Vec3, beta: Rgb
         sp: *sp,
         material: si.material,
         beta,
+        broad_only,
     }
 }
 
@@ -205,6 +263,11 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                 out.gbuffer = gbuffer;
                 gbuffer_set = true;
             }
+            // A model with a sharp (near-mirror) lobe besides its broad ones: the eye path
+            // follows the sharp part with probability q and leaves the broad part to the
+            // visible point otherwise (see `Bsdf::eval_split`). The branch is drawn only for
+            // such models, so every other scene keeps its random streams.
+            let sharp = bsdf.sharp_share(wo, &sp).map(sharp_probability);
             if p_delta > 0.0 {
                 // A diffuse surface with a delta part (the smooth coating of `plastic`, a
                 // mask's pass-through, a delta model in a blend): the photons hold the
@@ -226,32 +289,70 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                     // No diffuse base to store (a black one): the failed sample ends the path.
                     break;
                 }
-                let vp_beta = beta / (1.0 - p_delta);
-                out.direct += vp_beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
-                if let Some(bs) = bs {
-                    out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
+                let nd_beta = beta / (1.0 - p_delta);
+                let (part, share) = choose_part(sharp, rng);
+                if part == Part::Sharp {
+                    out.direct +=
+                        nd_beta / share * direct_light(scene, &si, &sp, bsdf, part, wo, rng);
+                    let Some(bs) = bs else {
+                        break;
+                    };
+                    let cont = BsdfSample {
+                        weight: part_weight(bsdf, part, wo, &sp, &bs) / share,
+                        ..bs
+                    };
+                    if depth == max_depth || !scatter(&si, &cont, &mut beta, &mut last, &mut ray) {
+                        break;
+                    }
+                    continue;
                 }
-                out.vp = Some(visible_point(&si, &sp, wo, vp_beta));
+                let vp_beta = nd_beta / share;
+                out.direct += vp_beta * direct_light(scene, &si, &sp, bsdf, part, wo, rng);
+                if let Some(bs) = bs {
+                    out.direct += beta / share
+                        * part_weight(bsdf, part, wo, &sp, &bs)
+                        * probe_emission(scene, &si, &bs);
+                }
+                out.vp = Some(visible_point(&si, &sp, wo, vp_beta, part == Part::Broad));
                 if !gbuffer_set {
                     out.gbuffer = gbuffer;
                 }
                 break;
             }
-            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
-            // The BSDF-sampling half of the MIS pair: it only looks for emitters.
+            let (part, share) = choose_part(sharp, rng);
+            let part_beta = beta / share;
+            out.direct += part_beta * direct_light(scene, &si, &sp, bsdf, part, wo, rng);
+            // The BSDF-sampling half of the MIS pair: for the visible point it only looks for
+            // emitters; the sharp part continues the path along it.
             let u_lobe = rng.next_f32();
             let u = rng.next_2d();
-            if let Some(bs) = bsdf.sample(wo, &sp, u_lobe, u, TransportMode::Radiance) {
-                out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
+            let bs = bsdf.sample(wo, &sp, u_lobe, u, TransportMode::Radiance);
+            if part == Part::Sharp {
+                let Some(bs) = bs else {
+                    break;
+                };
+                let cont = BsdfSample {
+                    weight: part_weight(bsdf, part, wo, &sp, &bs) / share,
+                    ..bs
+                };
+                if depth == max_depth || !scatter(&si, &cont, &mut beta, &mut last, &mut ray) {
+                    break;
+                }
+                continue;
             }
-            out.vp = Some(visible_point(&si, &sp, wo, beta));
+            if let Some(bs) = bs {
+                out.direct += part_beta
+                    * part_weight(bsdf, part, wo, &sp, &bs)
+                    * probe_emission(scene, &si, &bs);
+            }
+            out.vp = Some(visible_point(&si, &sp, wo, part_beta, part == Part::Broad));
             break;
         }
         if depth == max_depth {
             break;
         }
         if lobe == Lobe::Glossy {
-            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
+            out.direct += beta * direct_light(scene, &si, &sp, bsdf, Part::All, wo, rng);
         }
         let u_lobe = rng.next_f32();
         let u = rng.next_2d();
