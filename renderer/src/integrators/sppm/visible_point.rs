@@ -43,34 +43,41 @@ pub struct VisiblePoint {
     pub broad_only: bool,
 }
 
-/// Which part of a BSDF an estimate covers at a visible point (see [`Bsdf::eval_split`]).
+/// Which part of a BSDF the photons estimate at a visible point (see [`Bsdf::eval_split`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Part {
     /// The whole model.
     All,
-    /// The broad lobes only (the visible point's share after a sharp split).
+    /// The broad lobes only (the eye path may follow the sharp ones instead).
     Broad,
-    /// The sharp lobes only (followed by the eye path).
+    /// The sharp lobes only: the eye path follows them.
     Sharp,
 }
 
-/// The radiance-mode BSDF value of `part`.
-fn eval_part(bsdf: &Bsdf, part: Part, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> Rgb {
-    match part {
-        Part::All => bsdf.eval(wo, wi, sp, TransportMode::Radiance),
-        Part::Broad => bsdf.eval_split(wo, wi, sp).0,
-        Part::Sharp => bsdf.eval_split(wo, wi, sp).1,
-    }
-}
-
-/// `bs`'s weight restricted to `part`: f_part·|cos θi| / pdf (a delta sample has no broad or
-/// sharp part).
-fn part_weight(bsdf: &Bsdf, part: Part, wo: Vec3, sp: &ShadingPoint, bs: &BsdfSample) -> Rgb {
-    match part {
-        Part::All => bs.weight,
-        _ if bs.delta => Rgb::ZERO,
-        _ => eval_part(bsdf, part, wo, bs.wi, sp) * (bs.wi.z.abs() / bs.pdf),
-    }
+/// Continues the eye path at `si` through the sharp part of its model along the (non-delta)
+/// sample `bs` drawn for the MIS probe, chosen with probability `share`: the weight is
+/// f_sharp·|cos θi| / (pdf·share). False when there is no sample or the path ends.
+#[allow(clippy::too_many_arguments)]
+fn follow_sharp(
+    bsdf: &Bsdf,
+    wo: Vec3,
+    sp: &ShadingPoint,
+    bs: Option<BsdfSample>,
+    share: f32,
+    si: &SurfaceInteraction,
+    beta: &mut Rgb,
+    last: &mut LastScatter,
+    ray: &mut Ray,
+) -> bool {
+    let Some(bs) = bs.filter(|bs| !bs.delta) else {
+        return false;
+    };
+    let sharp = bsdf.eval_split(wo, bs.wi, sp).1;
+    let cont = BsdfSample {
+        weight: sharp * (bs.wi.z.abs() / (bs.pdf * share)),
+        ..bs
+    };
+    scatter(si, &cont, beta, last, ray)
 }
 
 /// How often an eye path follows the sharp part of a model with one: its sampling share,
@@ -159,7 +166,6 @@ fn direct_light(
     si: &SurfaceInteraction,
     sp: &ShadingPoint,
     bsdf: &Bsdf,
-    part: Part,
     wo: Vec3,
     rng: &mut Pcg32,
 ) -> Rgb {
@@ -169,7 +175,7 @@ fn direct_light(
         return Rgb::ZERO;
     };
     let wi = si.to_local(ls.wi);
-    let f = eval_part(bsdf, part, wo, wi, sp);
+    let f = bsdf.eval(wo, wi, sp, TransportMode::Radiance);
     if f.max_element() <= 0.0 || scene.light_occluded(si.p, si.ng, &ls) {
         return Rgb::ZERO;
     }
@@ -223,6 +229,9 @@ fn visible_point(
 pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u32) -> EyePath {
     let mut out = EyePath::default();
     let mut gbuffer_set = false;
+    // Set when the path continues from a sharp split: the emission it meets next was already
+    // counted by that vertex's NEE and MIS probe.
+    let mut emission_counted = false;
     let mut beta = Rgb::ONE;
     let mut path_length = 0.0f32;
     let mut last = LastScatter {
@@ -234,7 +243,8 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
     let hide_direct = scene.hide_emitters();
     for depth in 0..=max_depth {
         let hit = scene.intersect(&ray);
-        if !(hide_direct && depth == 0) {
+        let hidden = hide_direct && depth == 0;
+        if !(std::mem::take(&mut emission_counted) || hidden) {
             out.direct += beta * emission_along(scene, &ray, hit.as_ref(), &last);
         }
         let Some(si) = hit else {
@@ -263,10 +273,11 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                 out.gbuffer = gbuffer;
                 gbuffer_set = true;
             }
-            // A model with a sharp (near-mirror) lobe besides its broad ones: the eye path
-            // follows the sharp part with probability q and leaves the broad part to the
-            // visible point otherwise (see `Bsdf::eval_split`). The branch is drawn only for
-            // such models, so every other scene keeps its random streams.
+            // A model with a glossy (sharp) lobe besides its broad ones: direct light is
+            // estimated here for the whole model (NEE and the MIS probe), but of the indirect
+            // light the photons estimate only the broad part: with probability q the eye path
+            // follows the sharp part instead (see `Bsdf::eval_split`). The branch is drawn
+            // only for such models, so every other scene keeps its random streams.
             let sharp = bsdf.sharp_share(wo, &sp).map(sharp_probability);
             if p_delta > 0.0 {
                 // A diffuse surface with a delta part (the smooth coating of `plastic`, a
@@ -289,70 +300,70 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                     // No diffuse base to store (a black one): the failed sample ends the path.
                     break;
                 }
-                let nd_beta = beta / (1.0 - p_delta);
-                let (part, share) = choose_part(sharp, rng);
-                if part == Part::Sharp {
-                    out.direct +=
-                        nd_beta / share * direct_light(scene, &si, &sp, bsdf, part, wo, rng);
-                    let Some(bs) = bs else {
-                        break;
-                    };
-                    let cont = BsdfSample {
-                        weight: part_weight(bsdf, part, wo, &sp, &bs) / share,
-                        ..bs
-                    };
-                    if depth == max_depth || !scatter(&si, &cont, &mut beta, &mut last, &mut ray) {
-                        break;
-                    }
-                    continue;
-                }
-                let vp_beta = nd_beta / share;
-                out.direct += vp_beta * direct_light(scene, &si, &sp, bsdf, part, wo, rng);
+                let vp_beta = beta / (1.0 - p_delta);
+                out.direct += vp_beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
                 if let Some(bs) = bs {
-                    out.direct += beta / share
-                        * part_weight(bsdf, part, wo, &sp, &bs)
-                        * probe_emission(scene, &si, &bs);
+                    out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
                 }
-                out.vp = Some(visible_point(&si, &sp, wo, vp_beta, part == Part::Broad));
                 if !gbuffer_set {
                     out.gbuffer = gbuffer;
+                    gbuffer_set = true;
                 }
+                let (part, share) = choose_part(sharp, rng);
+                if part == Part::Sharp {
+                    if depth == max_depth
+                        || !follow_sharp(
+                            bsdf, wo, &sp, bs, share, &si, &mut beta, &mut last, &mut ray,
+                        )
+                    {
+                        break;
+                    }
+                    emission_counted = true;
+                    continue;
+                }
+                out.vp = Some(visible_point(
+                    &si,
+                    &sp,
+                    wo,
+                    vp_beta / share,
+                    part == Part::Broad,
+                ));
                 break;
             }
-            let (part, share) = choose_part(sharp, rng);
-            let part_beta = beta / share;
-            out.direct += part_beta * direct_light(scene, &si, &sp, bsdf, part, wo, rng);
-            // The BSDF-sampling half of the MIS pair: for the visible point it only looks for
-            // emitters; the sharp part continues the path along it.
+            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
+            // The BSDF-sampling half of the MIS pair: it only looks for emitters.
             let u_lobe = rng.next_f32();
             let u = rng.next_2d();
             let bs = bsdf.sample(wo, &sp, u_lobe, u, TransportMode::Radiance);
+            if let Some(bs) = bs {
+                out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
+            }
+            let (part, share) = choose_part(sharp, rng);
             if part == Part::Sharp {
-                let Some(bs) = bs else {
-                    break;
-                };
-                let cont = BsdfSample {
-                    weight: part_weight(bsdf, part, wo, &sp, &bs) / share,
-                    ..bs
-                };
-                if depth == max_depth || !scatter(&si, &cont, &mut beta, &mut last, &mut ray) {
+                if depth == max_depth
+                    || !follow_sharp(
+                        bsdf, wo, &sp, bs, share, &si, &mut beta, &mut last, &mut ray,
+                    )
+                {
                     break;
                 }
+                emission_counted = true;
                 continue;
             }
-            if let Some(bs) = bs {
-                out.direct += part_beta
-                    * part_weight(bsdf, part, wo, &sp, &bs)
-                    * probe_emission(scene, &si, &bs);
-            }
-            out.vp = Some(visible_point(&si, &sp, wo, part_beta, part == Part::Broad));
+            out.vp = Some(visible_point(
+                &si,
+                &sp,
+                wo,
+                beta / share,
+                part == Part::Broad,
+            ));
             break;
         }
         if depth == max_depth {
             break;
         }
         if lobe == Lobe::Glossy {
-            out.direct += beta * direct_light(scene, &si, &sp, bsdf, Part::All, wo, rng);
+            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
         }
         let u_lobe = rng.next_f32();
         let u = rng.next_2d();
