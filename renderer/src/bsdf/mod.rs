@@ -538,8 +538,9 @@ impl Bsdf {
 
     /// The shading normal the model works with for viewer `wo`, in the shading frame: +z,
     /// except under a normal or bump map (also inside `twosided`, `mask` or `blendbsdf`: the first
-    /// one found), where it is the perturbed normal (Mitsuba's `sh_frame` override). The
-    /// G-buffer records it.
+    /// one found), where it is the perturbed normal (Mitsuba's `sh_frame` override), always
+    /// oriented to the frame's +z side (a `twosided` back side is not flipped). The G-buffer
+    /// records it.
     pub fn shading_normal(&self, wo: Vec3, sp: &ShadingPoint) -> Vec3 {
         match self {
             Bsdf::NormalMap(b) => b.perturbed_normal(wo, sp),
@@ -560,7 +561,10 @@ impl Bsdf {
                 if wo.z >= 0.0 {
                     front.shading_normal(wo, sp)
                 } else {
-                    flip(back.shading_normal(flip(wo), sp))
+                    // The back model's normal is on the back side; the G-buffer reports the
+                    // same line oriented like the surface's own frame (+z for a plain model, as
+                    // the networks were trained with).
+                    -flip(back.shading_normal(flip(wo), sp))
                 }
             }
             _ => Vec3::Z,

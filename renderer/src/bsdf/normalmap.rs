@@ -219,7 +219,8 @@ mod tests {
     }
 
     /// The shading normal the G-buffer records: the perturbed one under a normal map (also
-    /// seen from the back through `twosided`, mirrored), +z for plain models.
+    /// seen from the back through `twosided`: the same line, front-oriented), +z for plain models
+    /// on either side.
     #[test]
     fn shading_normal_is_the_perturbed_one() {
         let nm = Bsdf::NormalMap(diffuse_under(Rgb::new(0.8, 0.5, 0.9)));
@@ -232,8 +233,16 @@ mod tests {
         };
         let below = Vec3::new(wo.x, wo.y, -wo.z);
         let n = two.shading_normal(below, &FLAT);
-        assert!((n - Vec3::new(0.6, 0.0, -0.8)).length() < 1e-6, "{n}");
+        // The same line as the back model's perturbed normal (0.6, 0, −0.8), front-oriented.
+        assert!((n - Vec3::new(-0.6, 0.0, 0.8)).length() < 1e-6, "{n}");
         let plain = diffuse_under(Rgb::new(0.8, 0.5, 0.9)).nested;
         assert_eq!(plain.shading_normal(wo, &FLAT), Vec3::Z);
+        // A plain two-sided model reports its frame's normal from both sides (the networks'
+        // training data has it so; the tenth session's version flipped it on the back side).
+        let plain_two = Bsdf::TwoSided {
+            front: plain.clone(),
+            back: plain,
+        };
+        assert_eq!(plain_two.shading_normal(below, &FLAT), Vec3::Z);
     }
 }
