@@ -56,11 +56,12 @@ pub use principled::{Principled, PrincipledIor, PrincipledParams};
 pub const GLOSSY_ALPHA_THRESHOLD: f32 = 0.25;
 
 /// Roughness below which a lobe of a model SPPM classifies [`Lobe::Diffuse`] (because of its
-/// broad parts) counts as *sharp*: the eye path splits it off and follows it
-/// ([`Bsdf::sharp_share`], [`Bsdf::eval_split`]), as it follows a whole glossy surface, so that
-/// photons estimate broad lobes only. The same bound as [`GLOSSY_ALPHA_THRESHOLD`]: one rule
-/// for whole surfaces and for their lobes.
-pub const SHARP_ALPHA_THRESHOLD: f32 = GLOSSY_ALPHA_THRESHOLD;
+/// broad parts) counts as *sharp* — a near-mirror: the eye path follows it
+/// ([`Bsdf::sharp_share`], [`Bsdf::eval_split`]) because a photon density estimate can hardly
+/// resolve it. Broader glossy lobes stay with the photons: splitting every lobe below
+/// [`GLOSSY_ALPHA_THRESHOLD`] was measured to make the smooth levels of glossy-floored rooms
+/// (α 0.07–0.13) 15–55 % worse (docs/sppm.md).
+pub const SHARP_ALPHA_THRESHOLD: f32 = 0.01;
 
 /// Where a BSDF is evaluated: the texture coordinates and the surface's differential geometry
 /// there, in the local shading frame (what Mitsuba's BSDFs read from their

@@ -1621,12 +1621,6 @@ fn split_catalogue() -> Vec<(&'static str, Bsdf, bool, bool)> {
         (
             "roughplastic α 0.1",
             rough_plastic(rough(Ggx, 0.1, 0.1), 1.5, rgb(0.5, 0.3, 0.2), false),
-            true,
-            false,
-        ),
-        (
-            "roughplastic α 0.3",
-            rough_plastic(rough(Ggx, 0.3, 0.3), 1.5, rgb(0.5, 0.3, 0.2), false),
             false,
             false,
         ),
