@@ -60,7 +60,7 @@ pub const GLOSSY_ALPHA_THRESHOLD: f32 = 0.25;
 /// ([`Bsdf::sharp_share`], [`Bsdf::eval_split`]) because a photon density estimate can hardly
 /// resolve it. Broader glossy lobes stay with the photons: splitting every lobe below
 /// [`GLOSSY_ALPHA_THRESHOLD`] was measured to make the smooth levels of glossy-floored rooms
-/// (α 0.07–0.13) 15–55 % worse (docs/sppm.md).
+/// (α 0.07–0.13) 12–55 % worse (docs/sppm.md).
 pub const SHARP_ALPHA_THRESHOLD: f32 = 0.01;
 
 /// Where a BSDF is evaluated: the texture coordinates and the surface's differential geometry
