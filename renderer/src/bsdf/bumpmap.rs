@@ -18,12 +18,11 @@
 //! the shading frame. That mixes two frames and only changes the tangent about the normal, so
 //! isotropic nested models are unaffected; here the tangent is built in one frame, as intended.
 
-use super::perturbed::{tilted_frame, Perturbed};
-use super::{Bsdf, BsdfSample, ShadingPoint, TransportMode};
+use super::perturbed::{tilted_frame, TiltedModel};
+use super::{Bsdf, ShadingPoint};
 use crate::frame::Frame;
-use crate::spectrum::Rgb;
 use crate::texture::Texture;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 
 /// `bumpmap`: the nested model seen through the frame a height field's gradient tilts.
 #[derive(Debug, Clone)]
@@ -41,8 +40,19 @@ pub struct BumpMap {
 }
 
 impl BumpMap {
-    /// The tilted frame relative to the shading frame at `sp`, for viewer direction `wo`.
-    fn frame(&self, wo: Vec3, sp: &ShadingPoint) -> Frame {
+    /// Whether `flip_invalid_normals` mirrors the tilted normal for a path arriving from `wo`.
+    #[cfg(test)]
+    pub(crate) fn flips(&self, wo: Vec3, sp: &ShadingPoint) -> bool {
+        let unflipped = BumpMap {
+            flip_invalid_normals: false,
+            ..self.clone()
+        };
+        self.tilted(wo, sp).n != unflipped.tilted(wo, sp).n
+    }
+}
+
+impl TiltedModel for BumpMap {
+    fn tilted(&self, wo: Vec3, sp: &ShadingPoint) -> Frame {
         let grad = self.height.eval_1_grad(sp.uv) * self.scale;
         // In the shading frame n = +z, so adding n·(h − n·∂p) replaces the z component by h.
         let dpdu = Vec3::new(sp.dpdu.x, sp.dpdu.y, grad.x);
@@ -57,68 +67,12 @@ impl BumpMap {
         tilted_frame(n, sp.dpdu)
     }
 
-    /// Whether `flip_invalid_normals` mirrors the tilted normal for a path arriving from `wo`.
-    #[cfg(test)]
-    pub(crate) fn flips(&self, wo: Vec3, sp: &ShadingPoint) -> bool {
-        let unflipped = BumpMap {
-            flip_invalid_normals: false,
-            ..self.clone()
-        };
-        self.frame(wo, sp).n != unflipped.frame(wo, sp).n
+    fn nested_model(&self) -> &Bsdf {
+        &self.nested
     }
 
-    /// The nested model in the frame `wo` selects at `sp`.
-    fn perturbed(&self, wo: Vec3, sp: &ShadingPoint) -> Perturbed<'_> {
-        let frame = self.frame(wo, sp);
-        Perturbed {
-            nested: &self.nested,
-            sp: sp.in_frame(&frame),
-            frame,
-            shadowing: self.use_shadowing_function,
-        }
-    }
-
-    /// f(wo, wi) without the cosine of the shading frame (the adjoint in Importance mode; see
-    /// [`Perturbed::eval`]).
-    pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
-        self.perturbed(wo, sp).eval(wo, wi, mode)
-    }
-
-    /// [`Bsdf::eval_split`] through the tilted frame.
-    pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
-        self.perturbed(wo, sp).eval_split(wo, wi)
-    }
-
-    /// [`Bsdf::sharp_share`] through the tilted frame.
-    pub fn sharp_share(&self, wo: Vec3, sp: &ShadingPoint) -> Option<f32> {
-        self.perturbed(wo, sp).sharp_share(wo)
-    }
-
-    /// The nested model's density of `wi`, seen through the tilted frame.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
-        self.perturbed(wo, sp).pdf(wo, wi)
-    }
-
-    /// The tilted shading normal for viewer `wo`, in the shading frame.
-    pub fn perturbed_normal(&self, wo: Vec3, sp: &ShadingPoint) -> Vec3 {
-        self.frame(wo, sp).n
-    }
-
-    /// Probability that the nested model picks a delta lobe, seen from `wo` in the tilted frame.
-    pub fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
-        self.perturbed(wo, sp).delta_probability(wo)
-    }
-
-    /// Samples the nested model in the tilted frame (see [`Perturbed::sample`]).
-    pub fn sample(
-        &self,
-        wo: Vec3,
-        sp: &ShadingPoint,
-        u_lobe: f32,
-        u: Vec2,
-        mode: TransportMode,
-    ) -> Option<BsdfSample> {
-        self.perturbed(wo, sp).sample(wo, u_lobe, u, mode)
+    fn uses_shadowing(&self) -> bool {
+        self.use_shadowing_function
     }
 }
 
@@ -128,7 +82,9 @@ mod tests {
     use crate::bsdf::{
         Diffuse, MicrofacetKind, RoughConductor, Roughness, ShadingPoint, TransportMode,
     };
+    use crate::spectrum::Rgb;
     use crate::texture::{Bitmap, BitmapFilter, BitmapWrap};
+    use glam::Vec2;
     use std::sync::Arc;
 
     /// The 3×2 height field of the Mitsuba probe (rows top to bottom), bilinear, repeating.

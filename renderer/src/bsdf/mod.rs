@@ -48,6 +48,7 @@ pub use blend::Blend;
 pub use bumpmap::BumpMap;
 pub use mask::Mask;
 pub use normalmap::NormalMap;
+pub use perturbed::TiltedModel;
 pub use principled::{Principled, PrincipledIor, PrincipledParams};
 
 /// Roughness below which a rough conductor/dielectric counts as [`Lobe::Glossy`] (the larger of

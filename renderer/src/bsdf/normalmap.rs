@@ -13,12 +13,11 @@
 //! side of the surface differs between the shading frame and the perturbed one contributes
 //! nothing (Mitsuba's check on the sampled/evaluated direction).
 
-use super::perturbed::{tilted_frame, Perturbed};
-use super::{Bsdf, BsdfSample, ShadingPoint, TransportMode};
+use super::perturbed::{tilted_frame, TiltedModel};
+use super::{Bsdf, ShadingPoint};
 use crate::frame::Frame;
-use crate::spectrum::Rgb;
 use crate::texture::Texture;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 
 /// `normalmap`: the nested model seen through a perturbed shading frame.
 #[derive(Debug, Clone)]
@@ -34,9 +33,17 @@ pub struct NormalMap {
 }
 
 impl NormalMap {
-    /// The perturbed frame relative to the shading frame, for viewer direction `wo`.
-    fn frame(&self, wo: Vec3, uv: Vec2) -> Frame {
-        let mut n = self.normalmap.eval(uv) * 2.0 - Vec3::ONE;
+    /// Whether `flip_invalid_normals` mirrors the map's normal for a path arriving from `wo`.
+    #[cfg(test)]
+    pub(crate) fn flips(&self, wo: Vec3, uv: glam::Vec2) -> bool {
+        let n = self.normalmap.eval(uv) * 2.0 - Vec3::ONE;
+        self.flip_invalid_normals && wo.z * wo.dot(n) <= 0.0
+    }
+}
+
+impl TiltedModel for NormalMap {
+    fn tilted(&self, wo: Vec3, sp: &ShadingPoint) -> Frame {
+        let mut n = self.normalmap.eval(sp.uv) * 2.0 - Vec3::ONE;
         if self.flip_invalid_normals && wo.z * wo.dot(n) <= 0.0 {
             n = Vec3::new(-n.x, -n.y, n.z);
         }
@@ -49,66 +56,12 @@ impl NormalMap {
         tilted_frame(n, Vec3::X)
     }
 
-    /// The nested model in the frame `wo` selects at `sp`.
-    fn perturbed(&self, wo: Vec3, sp: &ShadingPoint) -> Perturbed<'_> {
-        let frame = self.frame(wo, sp.uv);
-        Perturbed {
-            nested: &self.nested,
-            sp: sp.in_frame(&frame),
-            frame,
-            shadowing: self.use_shadowing_function,
-        }
+    fn nested_model(&self) -> &Bsdf {
+        &self.nested
     }
 
-    /// Whether `flip_invalid_normals` mirrors the map's normal for a path arriving from `wo`.
-    #[cfg(test)]
-    pub(crate) fn flips(&self, wo: Vec3, uv: Vec2) -> bool {
-        let n = self.normalmap.eval(uv) * 2.0 - Vec3::ONE;
-        self.flip_invalid_normals && wo.z * wo.dot(n) <= 0.0
-    }
-
-    /// f(wo, wi) without the cosine of the shading frame (the adjoint in Importance mode; see
-    /// [`Perturbed::eval`]).
-    pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
-        self.perturbed(wo, sp).eval(wo, wi, mode)
-    }
-
-    /// [`Bsdf::eval_split`] through the perturbed frame.
-    pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
-        self.perturbed(wo, sp).eval_split(wo, wi)
-    }
-
-    /// [`Bsdf::sharp_share`] through the perturbed frame.
-    pub fn sharp_share(&self, wo: Vec3, sp: &ShadingPoint) -> Option<f32> {
-        self.perturbed(wo, sp).sharp_share(wo)
-    }
-
-    /// The nested model's density of `wi`, seen through the perturbed frame.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
-        self.perturbed(wo, sp).pdf(wo, wi)
-    }
-
-    /// The perturbed shading normal for viewer `wo`, in the shading frame.
-    pub fn perturbed_normal(&self, wo: Vec3, sp: &ShadingPoint) -> Vec3 {
-        self.frame(wo, sp.uv).n
-    }
-
-    /// Probability that the nested model picks a delta lobe, seen from `wo` in the perturbed
-    /// frame.
-    pub fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
-        self.perturbed(wo, sp).delta_probability(wo)
-    }
-
-    /// Samples the nested model in the perturbed frame (see [`Perturbed::sample`]).
-    pub fn sample(
-        &self,
-        wo: Vec3,
-        sp: &ShadingPoint,
-        u_lobe: f32,
-        u: Vec2,
-        mode: TransportMode,
-    ) -> Option<BsdfSample> {
-        self.perturbed(wo, sp).sample(wo, u_lobe, u, mode)
+    fn uses_shadowing(&self) -> bool {
+        self.use_shadowing_function
     }
 }
 
@@ -116,6 +69,9 @@ impl NormalMap {
 mod tests {
     use super::*;
     use crate::bsdf::Diffuse;
+    use crate::bsdf::TransportMode;
+    use crate::spectrum::Rgb;
+    use glam::Vec2;
 
     const FLAT: ShadingPoint = ShadingPoint::flat(Vec2::ZERO);
 

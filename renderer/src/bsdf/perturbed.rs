@@ -20,7 +20,7 @@ fn shadow_terminator(n: Vec3, w: Vec3) -> f32 {
 }
 
 /// A nested model seen through a tilted frame at one shading point.
-pub(super) struct Perturbed<'a> {
+struct Perturbed<'a> {
     /// The nested model.
     pub nested: &'a Bsdf,
     /// The tilted frame, in the shading frame.
@@ -132,6 +132,76 @@ impl Perturbed<'_> {
             }
         };
         Some(BsdfSample { wi, weight, ..s })
+    }
+}
+
+/// A model seen through a tilted shading frame (`normalmap`, `bumpmap`): each says how it
+/// tilts the frame; the rest — evaluation, sampling and the SPPM queries — is this trait's and
+/// the same for both.
+pub trait TiltedModel {
+    /// The tilted frame relative to the shading frame at `sp`, for viewer direction `wo`.
+    fn tilted(&self, wo: Vec3, sp: &ShadingPoint) -> Frame;
+    /// The nested model.
+    fn nested_model(&self) -> &Bsdf;
+    /// Whether the shadowing term applies (`use_shadowing_function`).
+    fn uses_shadowing(&self) -> bool;
+
+    /// f(wo, wi) without the cosine of the shading frame (the adjoint in Importance mode; see
+    /// [`Perturbed::eval`]).
+    fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
+        perturbed(self, wo, sp).eval(wo, wi, mode)
+    }
+
+    /// [`Bsdf::eval_split`] through the tilted frame.
+    fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
+        perturbed(self, wo, sp).eval_split(wo, wi)
+    }
+
+    /// [`Bsdf::sharp_share`] through the tilted frame.
+    fn sharp_share(&self, wo: Vec3, sp: &ShadingPoint) -> Option<f32> {
+        perturbed(self, wo, sp).sharp_share(wo)
+    }
+
+    /// The nested model's density of `wi`, seen through the tilted frame.
+    fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
+        perturbed(self, wo, sp).pdf(wo, wi)
+    }
+
+    /// The tilted shading normal for viewer `wo`, in the shading frame.
+    fn perturbed_normal(&self, wo: Vec3, sp: &ShadingPoint) -> Vec3 {
+        self.tilted(wo, sp).n
+    }
+
+    /// Probability that the nested model picks a delta lobe, seen from `wo` in the tilted frame.
+    fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
+        perturbed(self, wo, sp).delta_probability(wo)
+    }
+
+    /// Samples the nested model in the tilted frame (see [`Perturbed::sample`]).
+    fn sample(
+        &self,
+        wo: Vec3,
+        sp: &ShadingPoint,
+        u_lobe: f32,
+        u: Vec2,
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        perturbed(self, wo, sp).sample(wo, u_lobe, u, mode)
+    }
+}
+
+/// `model`'s nested model in the frame `wo` selects at `sp`.
+fn perturbed<'a, M: TiltedModel + ?Sized>(
+    model: &'a M,
+    wo: Vec3,
+    sp: &ShadingPoint,
+) -> Perturbed<'a> {
+    let frame = model.tilted(wo, sp);
+    Perturbed {
+        nested: model.nested_model(),
+        sp: sp.in_frame(&frame),
+        frame,
+        shadowing: model.uses_shadowing(),
     }
 }
 
