@@ -279,7 +279,9 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
             // follows the sharp part instead (see `Bsdf::eval_split`). The branch is drawn
             // only for such models, so every other scene keeps its random streams.
             let sharp = bsdf.sharp_share(wo, &sp).map(sharp_probability);
-            if p_delta > 0.0 {
+            // Direct light for the whole model, the MIS probe's sample `bs`, and the
+            // throughput the visible point's photons get.
+            let (bs, vp_beta) = if p_delta > 0.0 {
                 // A diffuse surface with a delta part (the smooth coating of `plastic`, a
                 // mask's pass-through, a delta model in a blend): the photons hold the
                 // non-delta part only, so one BSDF sample splits the path. A delta sample (with
@@ -302,41 +304,23 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                 }
                 let vp_beta = beta / (1.0 - p_delta);
                 out.direct += vp_beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
-                if let Some(bs) = bs {
-                    out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
-                }
-                if !gbuffer_set {
-                    out.gbuffer = gbuffer;
-                    gbuffer_set = true;
-                }
-                let (part, share) = choose_part(sharp, rng);
-                if part == Part::Sharp {
-                    if depth == max_depth
-                        || !follow_sharp(
-                            bsdf, wo, &sp, bs, share, &si, &mut beta, &mut last, &mut ray,
-                        )
-                    {
-                        break;
-                    }
-                    emission_counted = true;
-                    continue;
-                }
-                out.vp = Some(visible_point(
-                    &si,
-                    &sp,
-                    wo,
-                    vp_beta / share,
-                    part == Part::Broad,
-                ));
-                break;
-            }
-            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
-            // The BSDF-sampling half of the MIS pair: it only looks for emitters.
-            let u_lobe = rng.next_f32();
-            let u = rng.next_2d();
-            let bs = bsdf.sample(wo, &sp, u_lobe, u, TransportMode::Radiance);
+                (bs, vp_beta)
+            } else {
+                out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
+                // The BSDF-sampling half of the MIS pair: it only looks for emitters.
+                let u_lobe = rng.next_f32();
+                let u = rng.next_2d();
+                (
+                    bsdf.sample(wo, &sp, u_lobe, u, TransportMode::Radiance),
+                    beta,
+                )
+            };
             if let Some(bs) = bs {
                 out.direct += beta * bs.weight * probe_emission(scene, &si, &bs);
+            }
+            if !gbuffer_set {
+                out.gbuffer = gbuffer;
+                gbuffer_set = true;
             }
             let (part, share) = choose_part(sharp, rng);
             if part == Part::Sharp {
@@ -354,7 +338,7 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                 &si,
                 &sp,
                 wo,
-                beta / share,
+                vp_beta / share,
                 part == Part::Broad,
             ));
             break;
