@@ -5,8 +5,8 @@
 //! that noise to every method alike and pulls every ratio towards 1 (docs/evaluation.md). The
 //! mean of N runs keeps 1/N of it, and the spread between the runs measures it.
 
-use crate::fsutil::write_atomic;
-use crate::jobs::{RunSpec, SampleRenderer};
+use crate::fsutil::{remove_if_present, write_atomic};
+use crate::jobs::{RunSpec, SampleRenderer, StateSpec};
 use crate::manifest::{to_json, Manifest, SceneEntry};
 use crate::plan::Split;
 use anyhow::{bail, Context, Result};
@@ -39,6 +39,8 @@ pub struct AverageOptions {
     pub out: PathBuf,
     /// Worker threads per render (0 = all cores; results do not depend on it).
     pub threads: usize,
+    /// Seconds of rendering between saves of a run's state (a killed run resumes from it).
+    pub state_interval: f64,
 }
 
 /// The noise of one scene's references, relative to the noise-free limit of the same
@@ -275,12 +277,20 @@ pub fn average_references(
                     passes: vec![scene.reference_passes],
                     max_depth: manifest.config.render.max_depth,
                     threads: options.threads,
+                    // A killed run continues from its state; removed once the image is written.
+                    state: Some(StateSpec {
+                        path: path.with_extension("state"),
+                        interval: options.state_interval,
+                    }),
                 };
                 let image = renderer.reference(&root.join(&scene.xml), &spec, on_pass)?;
                 // The run is averaged as rendered (EXR float32 keeps it exactly), not read back.
                 let image = check_size(image, &path, manifest.width, manifest.height)?;
                 write_rgb_exr_image(&path, &image)
                     .with_context(|| format!("writing {}", path.display()))?;
+                if let Some(state) = &spec.state {
+                    remove_if_present(&state.path)?;
+                }
                 image
             } else {
                 read_checked(&path, manifest.width, manifest.height)?

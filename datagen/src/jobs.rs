@@ -6,7 +6,7 @@
 use crate::config::Config;
 use crate::exr_canon::sort_header_attributes;
 use crate::families::generate;
-use crate::fsutil::{remove_stale_temps, sha256_file, temp_path, write_atomic};
+use crate::fsutil::{remove_if_present, remove_stale_temps, sha256_file, temp_path, write_atomic};
 use crate::manifest::{
     assemble_manifest, config_fingerprint, outputs_intact, read_record, to_json, JobRecord,
     SampleEntry, SceneEntry, MANIFEST_FORMAT,
@@ -16,7 +16,7 @@ use crate::scene::write_scene_files;
 use anyhow::{bail, Context, Result};
 use bundle::{write_bundle, write_rgb_exr_image, Bundle, Image};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// What one render run needs to know.
@@ -34,6 +34,18 @@ pub struct RunSpec {
     pub max_depth: u32,
     /// Worker threads (0 = all cores); results do not depend on it.
     pub threads: usize,
+    /// Where a long run keeps its resumable state, so a killed job continues mid-run (the
+    /// reference jobs give one; a renderer may ignore it).
+    pub state: Option<StateSpec>,
+}
+
+/// Where and how often a run saves its resumable state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateSpec {
+    /// The state file (removed by the caller once the run's output is written).
+    pub path: PathBuf,
+    /// Seconds of rendering between saves.
+    pub interval: f64,
 }
 
 /// Renders references and input bundles of one scene file.
@@ -65,6 +77,9 @@ pub struct RenderOptions {
     pub threads: usize,
     /// Draw progress bars on stderr.
     pub progress: bool,
+    /// Seconds of rendering between saves of a reference run's state (a killed reference job
+    /// resumes from its last save).
+    pub state_interval: f64,
 }
 
 /// Counts of a finished invocation.
@@ -225,6 +240,10 @@ fn run_job(
                 passes: vec![r.reference_passes],
                 max_depth: r.max_depth,
                 threads: options.threads,
+                state: Some(StateSpec {
+                    path: root.join(plan.state_path(job)),
+                    interval: options.state_interval,
+                }),
             };
             let image = renderer.reference(&xml, &spec, on_pass)?;
             if (image.width, image.height) != (config.width as usize, config.height as usize) {
@@ -253,6 +272,10 @@ fn run_job(
                 reference_passes: r.reference_passes,
                 reference_photons: r.reference_photons_per_pass,
             });
+            // The reference is written: its run's state is of no further use.
+            if let Some(state) = &spec.state {
+                remove_if_present(&state.path)?;
+            }
         }
         Job::Inputs { seed_index, .. } => {
             let spec = RunSpec {
@@ -262,6 +285,9 @@ fn run_job(
                 passes: r.passes.clone(),
                 max_depth: r.max_depth,
                 threads: options.threads,
+                // Bundles at every listed pass count come from one run that is short next to
+                // the reference; a killed input job starts over.
+                state: None,
             };
             let mut on_bundle = |mut b: Bundle| -> Result<()> {
                 let passes = b.meta.passes;

@@ -172,6 +172,12 @@ impl Plan {
         }
     }
 
+    /// Path (relative) of the resumable state of a job's run while it renders (removed when
+    /// the job is done; next to its record, so a shard only ever touches its own).
+    pub fn state_path(&self, job: &Job) -> String {
+        self.record_path(job).replace(".json", ".state")
+    }
+
     /// Path (relative) of a job's timing note (wall-clock; not part of the canonical data).
     pub fn timing_path(&self, job: &Job) -> String {
         self.record_path(job).replacen("records/", "timings/", 1)

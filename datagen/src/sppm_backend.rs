@@ -5,8 +5,11 @@
 use crate::jobs::{RunSpec, SampleRenderer};
 use anyhow::{anyhow, Context, Result};
 use bundle::{Bundle, Image};
-use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
+use renderer::integrators::sppm::{
+    render_sppm, render_sppm_resumable, SppmMode, SppmSettings, StopCondition,
+};
 use renderer::scene::Scene;
+use renderer::state_file::{scene_file_fingerprint, StateFile};
 use std::path::Path;
 
 /// Multi-level SPPM from the `renderer` crate.
@@ -46,11 +49,26 @@ impl SampleRenderer for SppmBackend {
             checkpoints: vec![*spec.passes.last().unwrap_or(&1)],
             seconds: None,
         };
+        let state = match &spec.state {
+            Some(s) => {
+                if let Some(dir) = s.path.parent() {
+                    std::fs::create_dir_all(dir)
+                        .with_context(|| format!("creating {}", dir.display()))?;
+                }
+                Some(StateFile {
+                    path: s.path.clone(),
+                    interval: s.interval,
+                    scene_fingerprint: scene_file_fingerprint(xml, &[])?,
+                })
+            }
+            None => None,
+        };
         let mut reference = None;
-        render_sppm(
+        render_sppm_resumable(
             &scene,
             &settings(spec),
             &stop,
+            state.as_ref(),
             |b| {
                 reference = Some(b.levels[0].clone());
                 Ok(())

@@ -71,6 +71,7 @@ fn dataset(name: &str) -> (PathBuf, Manifest) {
         shard: Shard::ALL,
         threads: 1,
         progress: false,
+        state_interval: 60.0,
     };
     render_dataset(&config, &dir, options, &Constant::default()).unwrap();
     let manifest = Manifest::load(&dir).unwrap();
@@ -83,6 +84,7 @@ fn options(manifest: &Manifest, runs: usize) -> AverageOptions {
         runs,
         out: PathBuf::from("avg"),
         threads: 1,
+        state_interval: 60.0,
     }
 }
 

@@ -238,3 +238,75 @@ fn average_references_with_the_real_renderer() {
     assert_same(&references, &snapshot(&data.join("references")));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The state files (`records/<scene>/reference.state`) under `dir` and their saved pass counts.
+fn reference_states(dir: &Path) -> Vec<(PathBuf, u64)> {
+    let Ok(scenes) = std::fs::read_dir(dir.join("records")) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for scene in scenes.flatten() {
+        let path = scene.path().join("reference.state");
+        let Ok(bytes) = std::fs::read(&path) else {
+            continue;
+        };
+        let header = bytes
+            .split(|&b| b == b'\n')
+            .nth(1)
+            .and_then(|l| serde_json::from_slice::<serde_json::Value>(l).ok());
+        if let Some(passes) = header.and_then(|h| h["state"]["passes"].as_u64()) {
+            out.push((path, passes));
+        }
+    }
+    out
+}
+
+#[test]
+fn a_reference_job_killed_mid_run_resumes_from_its_state() {
+    let work = fresh_dir("cli-reference-state");
+    let mut config = test_config(16, &[2], 1, 300);
+    config.render.photons_per_pass = 500;
+    config.render.reference_photons_per_pass = 2000;
+    let config_path = work.join("config.toml");
+    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
+    let whole = work.join("whole");
+    ok(render(&config_path, &whole, &["--threads", "2"])
+        .output()
+        .unwrap());
+    let reference = snapshot(&whole);
+    assert!(reference.keys().all(|k| !k.ends_with(".state")));
+
+    // Killed (SIGKILL) while a reference run has saved its state past pass 5.
+    let dir = work.join("killed");
+    let saving = ["--threads", "1", "--state-interval", "0.0001"];
+    let mut child = render(&config_path, &dir, &saving).spawn().unwrap();
+    let finished = loop {
+        let done = child.try_wait().unwrap().is_some();
+        if done || reference_states(&dir).iter().any(|(_, p)| *p >= 5) {
+            break done;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(!finished, "the run had finished before the kill");
+    let states = reference_states(&dir);
+    let (state, passes) = states.iter().find(|(_, p)| *p >= 5).unwrap().clone();
+    assert!(passes < 300, "saved at pass {passes}");
+
+    // The next run reads that state: a damaged one is named, not silently re-rendered.
+    let good = std::fs::read(&state).unwrap();
+    std::fs::write(&state, &good[..good.len() / 2]).unwrap();
+    let out = render(&config_path, &dir, &saving).output().unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("reference.state") && stderr.contains("truncated"),
+        "{stderr}"
+    );
+    // Intact, it resumes; the dataset equals the uninterrupted one and no state is left.
+    std::fs::write(&state, &good).unwrap();
+    ok(render(&config_path, &dir, &saving).output().unwrap());
+    assert_same(&reference, &snapshot(&dir));
+    std::fs::remove_dir_all(&work).unwrap();
+}

@@ -79,6 +79,7 @@ fn options(shard: Shard) -> RenderOptions {
         shard,
         threads: 1,
         progress: false,
+        state_interval: 60.0,
     }
 }
 

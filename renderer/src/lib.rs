@@ -17,5 +17,6 @@ pub mod sampling;
 pub mod scene;
 pub mod shapes;
 pub mod spectrum;
+pub mod state_file;
 pub mod texture;
 pub mod xml;

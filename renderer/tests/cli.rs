@@ -201,3 +201,193 @@ fn bad_input_names_the_file_and_line_and_fails() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A field of the `state` object in a run-state file's JSON line, if it can be read now.
+fn saved_field(state: &Path, field: &str) -> Option<u64> {
+    let text = std::fs::read(state).ok()?;
+    let line = text.split(|&b| b == b'\n').nth(1)?;
+    let header: serde_json::Value = serde_json::from_slice(line).ok()?;
+    header["state"][field].as_u64()
+}
+
+/// The pass count saved in an SPPM run-state file.
+fn saved_passes(state: &Path) -> Option<u64> {
+    saved_field(state, "passes")
+}
+
+/// Runs `render` with `args`, which must fail (no panic) with every one of `needles` in its
+/// error.
+fn render_fails_naming(args: &[String], needles: &[&str]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_render"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let e = stderr(&out);
+    assert!(needles.iter().all(|n| e.contains(n)), "{e}");
+    assert!(!e.contains("panicked"), "{e}");
+}
+
+/// Starts `render` with `args` and kills it (SIGKILL) as soon as `ready()` holds; the moment is
+/// read from the run's own state file, so it lands mid-run however loaded the machine is.
+fn kill_render_when(args: &[String], ready: impl Fn() -> bool) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_render"))
+        .args(args)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let finished = loop {
+        let done = child.try_wait().unwrap().is_some();
+        if done || ready() {
+            break done;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(!finished, "the render had finished before the kill");
+}
+
+/// Every float of a bundle's layers as bits, and its pass count.
+fn bundle_bits(path: &Path) -> (u32, Vec<u32>) {
+    let b = bundle::read_bundle(path).unwrap();
+    let mut bits = Vec::new();
+    for img in b
+        .levels
+        .iter()
+        .chain([&b.variance, &b.albedo, &b.normal, &b.depth])
+        .chain(b.radius.as_ref())
+    {
+        bits.extend(img.data.iter().map(|x| x.to_bits()));
+    }
+    (b.meta.passes, bits)
+}
+
+#[test]
+fn a_killed_sppm_render_resumes_from_its_state_file_bit_identically() {
+    let dir = temp_dir("resume");
+    let scene = write_scene(&dir);
+    let scene = scene.to_str().unwrap();
+    let args = |prefix: &Path, extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = [
+            scene,
+            "--integrator",
+            "sppm-ml",
+            "--photons",
+            "20000",
+            "--passes",
+            "2,150",
+            "--threads",
+            "1",
+            "--out",
+            prefix.to_str().unwrap(),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let whole = dir.join("whole");
+    let out = Command::new(env!("CARGO_BIN_EXE_render"))
+        .args(args(&whole, &[]))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+
+    // Killed (SIGKILL) once the state has been saved past pass 2's bundle.
+    let state = dir.join("run.state");
+    let killed = dir.join("killed");
+    let with_state = args(
+        &killed,
+        &[
+            "--state",
+            state.to_str().unwrap(),
+            "--state-interval",
+            "0.001",
+        ],
+    );
+    kill_render_when(&with_state, || saved_passes(&state).is_some_and(|p| p >= 4));
+    let at_kill = saved_passes(&state).unwrap();
+    assert!((4..150).contains(&at_kill), "saved at pass {at_kill}");
+    assert!(!dir.join("killed_p0150.exr").exists());
+
+    let out = Command::new(env!("CARGO_BIN_EXE_render"))
+        .args(&with_state)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("resuming from the run state"));
+    for passes in [2, 150] {
+        let name = |p: &str| dir.join(format!("{p}_p{passes:04}.exr"));
+        let (a, b) = (bundle_bits(&name("whole")), bundle_bits(&name("killed")));
+        assert_eq!(a.0, passes);
+        assert!(a == b, "bundle at pass {passes} differs after the resume");
+    }
+    assert_eq!(saved_passes(&state), Some(150));
+
+    // The same state with another seed is refused, naming the file and the setting.
+    let mut other = with_state.clone();
+    other.extend(["--seed".to_string(), "7".to_string()]);
+    render_fails_naming(&other, &["run.state", "seed: 0 in the file, 7 in this run"]);
+}
+
+#[test]
+fn a_killed_path_render_resumes_from_its_finished_rows_bit_identically() {
+    let dir = temp_dir("resume-path");
+    let scene = write_scene(&dir);
+    let scene = scene.to_str().unwrap();
+    let args = |out: &Path, extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = [scene, "-D", "res=24", "--threads", "2"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        a.extend(["--out".to_string(), out.to_str().unwrap().to_string()]);
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let whole = dir.join("whole.exr");
+    let out = Command::new(env!("CARGO_BIN_EXE_render"))
+        .args(args(&whole, &["--spp", "3000"]))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+
+    let state = dir.join("rows.state");
+    let killed = dir.join("killed.exr");
+    let state_args = [
+        "--state",
+        state.to_str().unwrap(),
+        "--state-interval",
+        "0.001",
+    ];
+    let with_state = args(&killed, &[&["--spp", "3000"][..], &state_args].concat());
+    let rows_done = |state: &Path| saved_field(state, "rows_done");
+    kill_render_when(&with_state, || rows_done(&state).is_some_and(|r| r >= 3));
+    assert!(rows_done(&state).is_some_and(|r| r < 24));
+    assert!(!killed.exists());
+
+    let out = Command::new(env!("CARGO_BIN_EXE_render"))
+        .args(&with_state)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("resuming from the run state"));
+    let read = |p: &Path| -> Vec<u32> {
+        let (_, _, pixels) = renderer::image_io::read_rgb_image(p).unwrap();
+        pixels
+            .iter()
+            .flat_map(|v| v.to_array())
+            .map(f32::to_bits)
+            .collect()
+    };
+    assert!(read(&whole) == read(&killed), "the resumed image differs");
+    assert_eq!(rows_done(&state), Some(24));
+
+    // Other samples per pixel with the same state: refused, naming the file and the setting.
+    let other = args(&killed, &[&["--spp", "5"][..], &state_args].concat());
+    render_fails_naming(
+        &other,
+        &["rows.state", "spp: 3000 in the file, 5 in this run"],
+    );
+}

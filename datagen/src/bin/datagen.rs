@@ -51,6 +51,10 @@ enum Command {
         /// Worker threads per render (0 = all cores; output does not depend on it).
         #[arg(long, default_value_t = 0)]
         threads: usize,
+        /// Seconds of rendering between saves of a reference run's state: a killed reference
+        /// job resumes from its last save instead of starting over.
+        #[arg(long, value_name = "SECONDS", default_value_t = 60.0)]
+        state_interval: f64,
         /// No progress bars.
         #[arg(long)]
         quiet: bool,
@@ -90,6 +94,10 @@ enum Command {
         /// Worker threads per render (0 = all cores; output does not depend on it).
         #[arg(long, default_value_t = 0)]
         threads: usize,
+        /// Seconds of rendering between saves of a run's state: a killed run resumes from its
+        /// last save instead of starting over.
+        #[arg(long, value_name = "SECONDS", default_value_t = 60.0)]
+        state_interval: f64,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -120,6 +128,14 @@ fn main() {
     }
 }
 
+/// `--state-interval`, checked.
+fn positive_interval(seconds: f64) -> Result<f64> {
+    if seconds.is_nan() || seconds <= 0.0 {
+        anyhow::bail!("--state-interval must be positive, got {seconds}");
+    }
+    Ok(seconds)
+}
+
 /// Runs a command; returns the exit status.
 fn run(cli: Cli) -> Result<i32> {
     match cli.command {
@@ -139,6 +155,7 @@ fn run(cli: Cli) -> Result<i32> {
             out,
             shard,
             threads,
+            state_interval,
             quiet,
         } => {
             let config = Config::load(&config)?;
@@ -149,6 +166,7 @@ fn run(cli: Cli) -> Result<i32> {
                 shard,
                 threads,
                 progress: !quiet,
+                state_interval: positive_interval(state_interval)?,
             };
             let report = render_dataset(&config, &out, options, &SppmBackend)?;
             eprintln!(
@@ -224,6 +242,7 @@ fn run(cli: Cli) -> Result<i32> {
             runs,
             out,
             threads,
+            state_interval,
             quiet,
         } => {
             // One bar over every extra run's passes (reused runs count as done); every scene of
@@ -252,6 +271,7 @@ fn run(cli: Cli) -> Result<i32> {
                 runs,
                 out: out.clone(),
                 threads,
+                state_interval: positive_interval(state_interval)?,
             };
             let report = average_references(
                 &dir,

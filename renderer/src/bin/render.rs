@@ -8,6 +8,7 @@ use renderer::film::{with_threads, Film};
 use renderer::image_io::{write_png_srgb, write_rgb_exr};
 use renderer::integrators::path::PathTracer;
 use renderer::scene::Scene;
+use renderer::state_file::{scene_file_fingerprint, StateFile};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -56,6 +57,21 @@ struct Cli {
     /// Depth at which Russian roulette starts. Default: the file's, else 5.
     #[arg(long)]
     rr_depth: Option<u32>,
+    /// Keep the run's state in this file and resume from it when it exists: a killed render
+    /// started again with the same arguments continues from its last save (the path tracer's
+    /// finished rows, SPPM's last pass) and writes the same outputs as an uninterrupted run. A
+    /// finished SPPM run continues when given more passes.
+    #[arg(long, value_name = "FILE")]
+    state: Option<PathBuf>,
+    /// Seconds of rendering between saves of --state (also saved with every SPPM bundle and at
+    /// the end).
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        default_value_t = 60.0,
+        requires = "state"
+    )]
+    state_interval: f64,
 
     /// Path tracer: samples per pixel. Default: the file's sampler `sample_count`, else 16.
     #[arg(long, help_heading = "Path tracer")]
@@ -140,6 +156,26 @@ fn write_outputs(film: &Film, exr: &Path, png: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
+/// The run's state file, when `--state` names one.
+fn state_file(cli: &Cli) -> Result<Option<StateFile>> {
+    let Some(path) = &cli.state else {
+        return Ok(None);
+    };
+    let mut defines = cli.define.clone();
+    defines.push(("--lenient".into(), cli.lenient.to_string()));
+    let state = StateFile {
+        path: path.clone(),
+        interval: cli.state_interval,
+        scene_fingerprint: scene_file_fingerprint(&cli.scene, &defines)?,
+    };
+    state.check_interval()?;
+    if path.exists() {
+        eprintln!("resuming from the run state {}", path.display());
+    }
+    state.check_writable()?;
+    Ok(Some(state))
+}
+
 /// The `path` integrator.
 fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
     let spp = cli.spp.or(scene.sample_count).unwrap_or(16);
@@ -151,18 +187,27 @@ fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
     let total = res.x as u64 * res.y as u64 * spp as u64;
     let bar = progress_bar(total, "samples");
     let t = Instant::now();
-    let film = PathTracer {
+    let tracer = PathTracer {
         max_depth,
         rr_depth,
-    }
-    .render(scene, spp, cli.seed, Some(&bar));
+    };
+    // Rows restored from a state file were not rendered now: no throughput for this session.
+    let resumed = cli.state.as_ref().is_some_and(|p| p.exists());
+    let film = match state_file(cli)? {
+        Some(state) => tracer.render_resumable(scene, spp, cli.seed, Some(&bar), &state)?,
+        None => tracer.render(scene, spp, cli.seed, Some(&bar)),
+    };
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
+    let rate = if resumed {
+        "resumed".to_string()
+    } else {
+        format!("{:.2} M samples/s", total as f64 / secs / 1e6)
+    };
     eprintln!(
-        "path: {}x{} at {spp} spp, max_depth {max_depth}, in {secs:.2} s ({:.2} M samples/s); mean RGB {:?}",
+        "path: {}x{} at {spp} spp, max_depth {max_depth}, in {secs:.2} s ({rate}); mean RGB {:?}",
         res.x,
         res.y,
-        total as f64 / secs / 1e6,
         film.mean().to_array()
     );
     write_outputs(&film, &cli.out, cli.png.as_deref())
@@ -177,7 +222,7 @@ fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
 /// writes a bundle `<out>_p<passes>.exr` at each `--passes` checkpoint (or once at `--time`).
 fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
     use renderer::integrators::sppm::{
-        render_sppm, SppmMode, SppmSettings, StopCondition, DEFAULT_MAX_DEPTH,
+        render_sppm_resumable, SppmMode, SppmSettings, StopCondition, DEFAULT_MAX_DEPTH,
     };
     if cli.passes.is_empty() && cli.time.is_none() {
         bail!("SPPM needs --passes N[,N…] and/or --time SECONDS");
@@ -213,6 +258,7 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
         checkpoints: cli.passes.clone(),
         seconds: cli.time,
     };
+    let state = state_file(cli)?;
     let target = cli.passes.iter().copied().max();
     let bar = match target {
         Some(n) => progress_bar(n as u64, "passes"),
@@ -226,10 +272,11 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
     }
     let res = scene.camera.resolution();
     let mut last_bundle = None;
-    let summary = render_sppm(
+    let summary = render_sppm_resumable(
         scene,
         &settings,
         &stop,
+        state.as_ref(),
         |b| {
             let mut name = cli.out.as_os_str().to_owned();
             name.push(format!("_p{:04}.exr", b.meta.passes));

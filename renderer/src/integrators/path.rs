@@ -4,11 +4,12 @@
 //! `max_depth` counted as Mitsuba does (1: emitters seen directly; 2: direct lighting; …).
 
 use crate::bsdf::TransportMode;
-use crate::film::{render_pixels, Film};
+use crate::film::{render_pixels, render_pixels_resumable, Film};
 use crate::math::Ray;
 use crate::sampling::{power_heuristic, rng_for, Pcg32, UniformSource};
 use crate::scene::{EmitterHit, Scene, SurfaceInteraction};
 use crate::spectrum::Rgb;
+use crate::state_file::StateFile;
 use glam::UVec2;
 use indicatif::ProgressBar;
 
@@ -166,6 +167,35 @@ impl PathTracer {
             }
         }
         sum / spp.max(1) as f32
+    }
+
+    /// [`PathTracer::render`] that keeps its finished rows in `state` and resumes from it (see
+    /// [`render_pixels_resumable`]); the image is bit-identical to an uninterrupted run's.
+    pub fn render_resumable(
+        &self,
+        scene: &Scene,
+        spp: u32,
+        seed: u64,
+        progress: Option<&ProgressBar>,
+        state: &StateFile,
+    ) -> anyhow::Result<Film> {
+        let res = scene.camera.resolution();
+        let identity = serde_json::json!({
+            "integrator": "path",
+            "spp": spp,
+            "seed": seed,
+            "max_depth": self.max_depth,
+            "rr_depth": self.rr_depth,
+        });
+        render_pixels_resumable(
+            res.x,
+            res.y,
+            progress,
+            spp as u64,
+            |x, y| self.pixel(scene, x, y, spp, seed, 0),
+            state,
+            &identity,
+        )
     }
 
     /// Renders the whole image with `spp` samples per pixel in the current rayon pool.

@@ -22,6 +22,7 @@ pub mod gather;
 pub mod photon_map;
 pub mod photon_trace;
 pub mod radius;
+pub mod run_state;
 pub mod visible_point;
 
 #[cfg(test)]
@@ -39,9 +40,11 @@ use crate::sampling::{rng_for, UniformSource};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 
+use crate::state_file::StateFile;
 use accumulate::{GBufferSum, Welford};
 use photon_map::PhotonGrid;
 use radius::{nested_radii, shrink_factor, LEVELS};
+use run_state::{RunState, StateStore};
 use visible_point::{trace_eye_path, EyePath};
 
 /// Default cap on the initial radius as a fraction of the scene's bounding-box diagonal
@@ -416,6 +419,23 @@ pub fn render_sppm(
     scene: &Scene,
     settings: &SppmSettings,
     stop: &StopCondition,
+    on_checkpoint: impl FnMut(Bundle) -> Result<()> + Send,
+    progress: impl FnMut(&PassProgress) + Send,
+) -> Result<RenderSummary> {
+    render_sppm_resumable(scene, settings, stop, None, on_checkpoint, progress)
+}
+
+/// [`render_sppm`] that keeps its state in `state` (when given): a run whose state file exists
+/// continues from the saved pass — its bundles and the final state are bit-identical to an
+/// uninterrupted run's, except the wall-clock `seconds` — and the state is saved every
+/// `state.interval` seconds, with every bundle, and at the end. A checkpoint at exactly the
+/// saved pass gets its bundle again (from the saved state); time limits count the seconds of
+/// every session of the run.
+pub fn render_sppm_resumable(
+    scene: &Scene,
+    settings: &SppmSettings,
+    stop: &StopCondition,
+    state: Option<&StateFile>,
     mut on_checkpoint: impl FnMut(Bundle) -> Result<()> + Send,
     mut progress: impl FnMut(&PassProgress) + Send,
 ) -> Result<RenderSummary> {
@@ -445,19 +465,68 @@ pub fn render_sppm(
         Some(r) => bail!("max radius must be positive, got {r}"),
         None => (scene.diagonal() * DEFAULT_MAX_RADIUS_FRACTION).max(1e-6),
     };
+    if let Some(f) = state {
+        f.check_interval()?;
+    }
     let res = scene.camera.resolution();
     let pixel_count = res.x as usize * res.y as usize;
     let target = checkpoints.last().copied();
+    let store = state.map(|f| StateStore::new(f, settings, res.x, res.y, max_radius));
+    let saved = match &store {
+        Some(store) => store.load()?,
+        None => None,
+    };
+    if let (Some(saved), Some(target)) = (&saved, target) {
+        if saved.passes > target {
+            bail!(
+                "{}: the saved run is at pass {}, past the last requested pass {target}; ask for                  more passes, or give --state a new file name",
+                store.as_ref().map_or(String::new(), |s| s.file.path.display().to_string()),
+                saved.passes
+            );
+        }
+    }
 
     with_threads(settings.threads, move || -> Result<RenderSummary> {
         let start = Instant::now();
-        let mut states = vec![PixelState::default(); pixel_count];
+        let (mut states, mut summary, mut pass) = match saved {
+            Some(s) => (s.pixels, s.summary, s.passes),
+            None => (
+                vec![PixelState::default(); pixel_count],
+                RenderSummary::default(),
+                0,
+            ),
+        };
+        // Seconds of earlier sessions of this run; the time limit and the bundles count them.
+        let earlier_seconds = summary.seconds;
+        let seconds_so_far = || earlier_seconds + start.elapsed().as_secs_f64();
+        let mut next_checkpoint = checkpoints.partition_point(|&c| c <= pass);
+        let save = |states: &Vec<PixelState>, summary: &RenderSummary, pass: u32| match &store {
+            Some(store) => store.save(&RunState {
+                passes: pass,
+                summary: RenderSummary {
+                    seconds: seconds_so_far(),
+                    ..*summary
+                },
+                pixels: states.clone(),
+            }),
+            None => Ok(()),
+        };
+        if pass > 0 {
+            // Resumed: the bundle of a checkpoint at the saved pass may not have been written
+            // before the stop, and a time limit may already be spent.
+            let at_checkpoint = checkpoints.contains(&pass);
+            let timed_out = stop.seconds.is_some_and(|s| earlier_seconds >= s);
+            if at_checkpoint || timed_out {
+                on_checkpoint(make_bundle(scene, settings, &states, pass, earlier_seconds))?;
+            }
+            if timed_out || (target.is_some() && next_checkpoint == checkpoints.len()) {
+                return Ok(summary);
+            }
+        }
+        let mut last_save = Instant::now();
         // Photon buffers and grid, reused across passes (no page faults on fresh memory).
         let mut chunks: Vec<Vec<photon_map::Photon>> = Vec::new();
         let mut grid = PhotonGrid::default();
-        let mut summary = RenderSummary::default();
-        let mut next_checkpoint = 0;
-        let mut pass = 0u32;
         loop {
             pass += 1;
             let t0 = Instant::now();
@@ -495,7 +564,7 @@ pub fn render_sppm(
             summary.photons_emitted += settings.photons_per_pass;
             summary.photons_stored += stored;
             summary.visible_points += visible_points;
-            let elapsed = start.elapsed().as_secs_f64();
+            let elapsed = seconds_so_far();
             progress(&PassProgress {
                 pass,
                 target_passes: target,
@@ -512,11 +581,22 @@ pub fn render_sppm(
             if at_checkpoint || timed_out {
                 on_checkpoint(make_bundle(scene, settings, &states, pass, elapsed))?;
             }
-            if timed_out || (target.is_some() && next_checkpoint == checkpoints.len()) {
+            let done = timed_out || (target.is_some() && next_checkpoint == checkpoints.len());
+            // The bundle first, then the state: a stop in between redoes a few passes and
+            // rewrites the same bundle, instead of resuming past a bundle never written.
+            if store.is_some()
+                && (done
+                    || at_checkpoint
+                    || last_save.elapsed().as_secs_f64() >= state.map_or(0.0, |f| f.interval))
+            {
+                save(&states, &summary, pass)?;
+                last_save = Instant::now();
+            }
+            if done {
                 break;
             }
         }
-        summary.seconds = start.elapsed().as_secs_f64();
+        summary.seconds = seconds_so_far();
         Ok(summary)
     })?
 }

@@ -322,18 +322,7 @@ fn bundles_are_bit_identical_for_one_and_two_threads() {
         let mut two = render(&scene, &s, 3);
         one.meta.seconds = 0.0;
         two.meta.seconds = 0.0;
-        let bits = |b: &Bundle| -> Vec<u32> {
-            let mut v: Vec<u32> = Vec::new();
-            for img in b
-                .levels
-                .iter()
-                .chain([&b.variance, &b.albedo, &b.normal, &b.depth])
-            {
-                v.extend(img.data.iter().map(|x| x.to_bits()));
-            }
-            v.extend(b.radius.as_ref().unwrap().data.iter().map(|x| x.to_bits()));
-            v
-        };
+        let bits = bundle_bits;
         assert_eq!(one.meta, two.meta);
         assert!(
             bits(&one) == bits(&two),
@@ -685,4 +674,209 @@ fn near_mirror_coating_matches_the_path_tracer() {
         false,
     ));
     assert_disk_in_lit_enclosure_matches_the_path_tracer_after(coating, 1024);
+}
+
+/// Every float of a bundle's layers, as bits.
+fn bundle_bits(b: &Bundle) -> Vec<u32> {
+    let mut v: Vec<u32> = Vec::new();
+    for img in b
+        .levels
+        .iter()
+        .chain([&b.variance, &b.albedo, &b.normal, &b.depth])
+    {
+        v.extend(img.data.iter().map(|x| x.to_bits()));
+    }
+    v.extend(b.radius.as_ref().unwrap().data.iter().map(|x| x.to_bits()));
+    v
+}
+
+/// A scratch state-file path unique to this test process and `name`.
+fn state_path(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("sppm-state-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join("run.state")
+}
+
+/// Runs with `file` as its state; from pass `abort_at` on, the next bundle fails to be delivered
+/// and the run stops with an error, as a kill would (the state of that pass is not saved).
+/// Returns the bundles delivered.
+fn run_with_state(
+    scene: &Scene,
+    s: &SppmSettings,
+    checkpoints: &[u32],
+    file: &StateFile,
+    abort_at: Option<u32>,
+) -> Result<Vec<Bundle>> {
+    let mut got = Vec::new();
+    let stop = StopCondition {
+        checkpoints: checkpoints.to_vec(),
+        seconds: None,
+    };
+    let aborted = std::sync::atomic::AtomicBool::new(false);
+    let result = render_sppm_resumable(
+        scene,
+        s,
+        &stop,
+        Some(file),
+        |b| {
+            if aborted.load(std::sync::atomic::Ordering::Relaxed) {
+                anyhow::bail!("killed");
+            }
+            got.push(b);
+            Ok(())
+        },
+        |p| {
+            if abort_at == Some(p.pass) {
+                aborted.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+        },
+    );
+    result.map(|_| got)
+}
+
+#[test]
+fn a_resumed_run_is_bit_identical_to_an_uninterrupted_one() {
+    let scene = lit_box(8);
+    for mode in [SppmMode::MultiLevel, SppmMode::Single] {
+        let s = settings(mode, 2_000, 5);
+        let whole = {
+            let mut got = Vec::new();
+            let stop = StopCondition {
+                checkpoints: vec![3, 7],
+                seconds: None,
+            };
+            render_sppm(
+                &scene,
+                &s,
+                &stop,
+                |b| {
+                    got.push(b);
+                    Ok(())
+                },
+                |_| {},
+            )
+            .unwrap();
+            got
+        };
+        let file = StateFile {
+            path: state_path(&format!("resume-{}", mode.name())),
+            // Saved after every pass.
+            interval: 1e-12,
+            scene_fingerprint: "lit box".into(),
+        };
+        // Stopped at pass 3's bundle: the state holds pass 2.
+        assert!(run_with_state(&scene, &s, &[3, 7], &file, Some(3)).is_err());
+        assert!(file.path.exists(), "state saved before the stop");
+        // Resumed from pass 2 and stopped at pass 7's bundle: the state holds pass 6.
+        let first = run_with_state(&scene, &s, &[3, 7], &file, Some(5));
+        assert!(first.is_err());
+        let resumed = run_with_state(&scene, &s, &[3, 7], &file, None).unwrap();
+        assert_eq!(
+            resumed.len(),
+            1,
+            "{mode:?}: only the bundle at pass 7 is left to write"
+        );
+        assert_eq!(resumed[0].meta.passes, 7);
+        assert!(
+            bundle_bits(&resumed[0]) == bundle_bits(&whole[1]),
+            "{mode:?}: the resumed run's bundle differs from the uninterrupted run's"
+        );
+        // The bundle at pass 3 of the second session, resumed from pass 2, is the same too.
+        let from_two = {
+            let f = StateFile {
+                path: state_path(&format!("resume-3-{}", mode.name())),
+                ..file.clone()
+            };
+            assert!(run_with_state(&scene, &s, &[3], &f, Some(3)).is_err());
+            let got = run_with_state(&scene, &s, &[3], &f, None).unwrap();
+            let _ = std::fs::remove_dir_all(f.path.parent().unwrap());
+            got
+        };
+        assert!(bundle_bits(&from_two[0]) == bundle_bits(&whole[0]));
+        // Finished: running again re-delivers the last bundle from the state, renders nothing.
+        let again = run_with_state(&scene, &s, &[3, 7], &file, None).unwrap();
+        assert_eq!(again.len(), 1);
+        assert!(bundle_bits(&again[0]) == bundle_bits(&whole[1]));
+        // More passes continue the run (the saved pass's bundle is delivered again first):
+        // pass 9 equals an uninterrupted run to 9.
+        let more = run_with_state(&scene, &s, &[3, 7, 9], &file, None).unwrap();
+        assert_eq!(
+            more.iter().map(|b| b.meta.passes).collect::<Vec<_>>(),
+            [7, 9]
+        );
+        let direct = render(&scene, &s, 9);
+        assert!(bundle_bits(&more[0]) == bundle_bits(&whole[1]));
+        assert!(bundle_bits(&more[1]) == bundle_bits(&direct));
+        let _ = std::fs::remove_dir_all(file.path.parent().unwrap());
+    }
+}
+
+#[test]
+fn a_state_file_from_another_run_or_damaged_is_refused() {
+    let scene = lit_box(6);
+    let s = settings(SppmMode::MultiLevel, 1_000, 2);
+    let file = StateFile {
+        path: state_path("refused"),
+        interval: 60.0,
+        scene_fingerprint: "lit box".into(),
+    };
+    run_with_state(&scene, &s, &[2], &file, None).unwrap();
+    let good = std::fs::read(&file.path).unwrap();
+    let error = |s: &SppmSettings, file: &StateFile, checkpoints: &[u32]| -> String {
+        format!(
+            "{:#}",
+            run_with_state(&scene, s, checkpoints, file, None).unwrap_err()
+        )
+    };
+    let name = file.path.display().to_string();
+    // Other settings, another scene, the other mode.
+    let other_seed = SppmSettings {
+        seed: 3,
+        ..s.clone()
+    };
+    let e = error(&other_seed, &file, &[4]);
+    assert!(
+        e.contains(&name) && e.contains("seed: 2 in the file, 3 in this run"),
+        "{e}"
+    );
+    let other_scene = StateFile {
+        scene_fingerprint: "another".into(),
+        ..file.clone()
+    };
+    let e = error(&s, &other_scene, &[4]);
+    assert!(e.contains("scene"), "{e}");
+    let single = settings(SppmMode::Single, 1_000, 2);
+    let e = error(&single, &file, &[4]);
+    assert!(
+        e.contains(r#"integrator: "sppm-ml" in the file, "sppm" in this run"#),
+        "{e}"
+    );
+    // Asking for fewer passes than the file holds.
+    let e = error(&s, &file, &[1]);
+    assert!(e.contains("past the last requested pass 1"), "{e}");
+    // Damage: truncated, a flipped byte in the pixels, a foreign file, a broken header.
+    let damaged = |bytes: &[u8]| -> String {
+        std::fs::write(&file.path, bytes).unwrap();
+        error(&s, &file, &[4])
+    };
+    let e = damaged(&good[..good.len() - 10]);
+    assert!(e.contains(&name) && e.contains("truncated"), "{e}");
+    let mut flipped = good.clone();
+    let last = flipped.len() - 100;
+    flipped[last] ^= 0x40;
+    let e = damaged(&flipped);
+    assert!(e.contains("checksum"), "{e}");
+    let e = damaged(b"P6\n16 16\n255\n");
+    assert!(e.contains(&name) && e.contains("not a run state"), "{e}");
+    let mut broken = good.clone();
+    let header_at = good.iter().position(|&b| b == b'\n').unwrap() + 3;
+    broken[header_at] = b'#';
+    let e = damaged(&broken);
+    assert!(e.contains(&name) && e.contains("line 2"), "{e}");
+    // The intact file still resumes.
+    std::fs::write(&file.path, &good).unwrap();
+    let more = run_with_state(&scene, &s, &[4], &file, None).unwrap();
+    assert_eq!(more.len(), 1);
+    let _ = std::fs::remove_dir_all(file.path.parent().unwrap());
 }
