@@ -257,6 +257,52 @@ fn evaluates_explicit_and_dataset_scenes() {
     assert_eq!(summary["scenes"], 2);
     assert_eq!(summary["failed"], 0);
     assert_eq!(summary["passes"], 4);
+
+    // `--resume` takes every finished scene from `out/scenes/`, with the same numbers.
+    let resume = |config: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_evaluate"))
+            .arg("--config")
+            .arg(config)
+            .arg("--resume")
+            .output()
+            .unwrap()
+    };
+    let evals = |out: &Path| -> Vec<serde_json::Value> {
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap())
+                .unwrap();
+        r["scenes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s["eval"].clone())
+            .collect()
+    };
+    let first = evals(&out);
+    let again = resume(&config);
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("taken from").count(), 2, "{stderr}");
+    assert_eq!(evals(&out), first);
+    // A changed reference makes its scene evaluated again; the other is still taken.
+    let mut changed = bundle::read_rgb_exr_image(&data.join("references/001-box.exr")).unwrap();
+    changed.data[0] += 0.5;
+    bundle::write_rgb_exr_image(&data.join("references/001-box.exr"), &changed).unwrap();
+    let partly = resume(&config);
+    let stderr = String::from_utf8_lossy(&partly.stderr);
+    assert!(partly.status.success(), "{stderr}");
+    assert_eq!(stderr.matches("taken from").count(), 1, "{stderr}");
+    assert!(stderr.contains("reference changed"), "{stderr}");
+    let now = evals(&out);
+    assert_eq!(now[0], first[0]);
+    assert_ne!(now[1], first[1]);
+    // A damaged per-scene file is an error naming it, not silently replaced.
+    let saved = out.join("scenes/explicit-box.json");
+    std::fs::write(&saved, "{ not json").unwrap();
+    let damaged = resume(&config);
+    let stderr = String::from_utf8_lossy(&damaged.stderr);
+    assert!(!damaged.status.success());
+    assert!(stderr.contains("explicit-box.json"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -25,6 +25,11 @@ struct Cli {
     /// Evaluate only the first N scenes.
     #[arg(long)]
     limit: Option<usize>,
+    /// Continue an evaluation that was stopped: scenes finished by an earlier run with the same
+    /// settings, model, scene file and reference (saved in `<output>/scenes/`) are taken from
+    /// there; the rest are evaluated. Their timings come from the earlier run.
+    #[arg(long)]
+    resume: bool,
 }
 
 fn main() -> ExitCode {
@@ -52,7 +57,7 @@ fn run(cli: &Cli) -> Result<bool> {
         config.limit = cli.limit;
     }
     config.validate()?;
-    let results = infer::evaluate::run(&config)?;
+    let results = infer::evaluate::run(&config, cli.resume)?;
     let s = &results.summary;
     println!(
         "{} scene(s), {} failed; at {} passes ours beats standard SPPM at equal time on {} (median ratio {})",

@@ -1,10 +1,10 @@
 //! Equal-time arithmetic: standard SPPM's error at an arbitrary wall time, interpolated
 //! log-log between its checkpoints, and the summary statistics of a comparison.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One point of a convergence curve.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CurvePoint {
     /// Passes rendered.
     pub passes: u32,
@@ -15,7 +15,7 @@ pub struct CurvePoint {
 }
 
 /// The error of a curve at `seconds`, and whether it had to be extrapolated.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Interpolated {
     /// Estimated relMSE at that time.
     pub relmse: f64,

@@ -8,6 +8,7 @@ pub mod config;
 pub mod html;
 pub mod images;
 pub mod plot;
+pub mod resume;
 pub mod runs;
 pub mod scene;
 
@@ -15,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use model::ModelConfig;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use self::ablation::{Ablation, AblationModel};
 use self::compare::{geometric_mean, median};
@@ -36,7 +37,7 @@ and error computation at checkpoints), so the dense checkpoints do not slow the 
 Overhead = multi-level render seconds / single-level render seconds at the same pass count − 1.";
 
 /// The outcome of one scene.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SceneResult {
     /// Scene name.
     pub name: String,
@@ -118,7 +119,10 @@ pub struct EvalResults {
 
 /// Runs the evaluation described by `config`, writing everything into `config.output`.
 /// Scene failures are recorded (and the run goes on); configuration errors stop it early.
-pub fn run(config: &EvalConfig) -> Result<EvalResults> {
+/// Every finished scene is also saved on its own (`<output>/scenes/<name>.json`); with
+/// `resume`, a scene saved by a run with the same settings, model, scene and reference is
+/// taken from there instead of being evaluated again (a killed evaluation continues).
+pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
     let scenes = config.resolve_scenes()?;
     let backend = model::backend::Backend::parse(&config.backend).map_err(anyhow::Error::msg)?;
     let device = backend.device().map_err(anyhow::Error::msg)?;
@@ -151,7 +155,33 @@ pub fn run(config: &EvalConfig) -> Result<EvalResults> {
             engine: config.engine.unwrap_or(crate::Engine::default_for(backend)),
             device: &device,
         };
-        let r = evaluate_one(config, s, &settings, &passes, &model, &variants, &inference);
+        // A scene whose files cannot be read has no fingerprint: it is evaluated (and its
+        // failure recorded in the report) but neither reused nor saved.
+        let fingerprint = resume::scene_fingerprint(config, s).ok();
+        let saved = resume::result_path(&config.output, &file_stem(&s.name));
+        let reused = match (&fingerprint, resume) {
+            (Some(f), true) => match resume::load(&saved, f, &config.output)? {
+                Ok(r) => Some(r),
+                Err(why) => {
+                    eprintln!("  evaluating ({why})");
+                    None
+                }
+            },
+            _ => None,
+        };
+        let r = match reused {
+            Some(r) => {
+                eprintln!("  taken from {}", saved.display());
+                r
+            }
+            None => {
+                let r = evaluate_one(config, s, &settings, &passes, &model, &variants, &inference);
+                if let Some(f) = &fingerprint {
+                    resume::save(&saved, f, &r)?;
+                }
+                r
+            }
+        };
         match &r.error {
             Some(e) => eprintln!("  FAILED: {e}"),
             None => {

@@ -9,7 +9,7 @@ use bundle::read_rgb_exr_image;
 use model::features::{pack, planar_reference};
 use model::metrics::relmse_planar;
 use renderer::integrators::sppm::{SppmMode, StopCondition};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::compare::{dense_checkpoints, relmse_at_time, CurvePoint, Interpolated};
 use super::config::EvalScene;
@@ -21,7 +21,7 @@ use crate::{ErrorReport, Inference, TrainedModel};
 const STANDARD_PASS_CAP_FACTOR: u32 = 64;
 
 /// Results at one multi-level checkpoint.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Checkpoint {
     /// Passes of the multi-level run.
     pub passes: u32,
@@ -54,7 +54,7 @@ pub struct Checkpoint {
 }
 
 /// Everything measured on one scene.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SceneEval {
     /// Width in pixels.
     pub width: usize,

@@ -1,0 +1,137 @@
+//! Per-scene results on disk, so that `evaluate --resume` continues a killed evaluation: every
+//! finished scene is written to `<output>/scenes/<name>.json` with a fingerprint of what its
+//! numbers depend on (the settings, the model files, the scene file and the reference), and a
+//! resumed run takes a scene from there when the fingerprint matches and its pictures are on
+//! disk; anything else is evaluated again.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::config::{EvalConfig, EvalScene};
+use super::SceneResult;
+
+/// Format tag of a per-scene result file.
+const FORMAT: &str = "sppm-ml-eval-scene/1";
+
+/// A per-scene result file.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SavedScene {
+    /// [`FORMAT`].
+    format: String,
+    /// [`scene_fingerprint`] of the run that wrote it.
+    fingerprint: String,
+    /// The scene's result.
+    result: SceneResult,
+}
+
+/// Where a scene's result is kept.
+pub fn result_path(output: &Path, stem: &str) -> PathBuf {
+    output.join("scenes").join(format!("{stem}.json"))
+}
+
+/// Adds `path`'s length and bytes to `h` (an error names the file).
+fn hash_file(h: &mut Sha256, path: &Path) -> Result<()> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    h.update((bytes.len() as u64).to_le_bytes());
+    h.update(&bytes);
+    Ok(())
+}
+
+/// SHA-256 over what one scene's measurements depend on: the settings that reach the renders
+/// and the reconstruction (photons, passes, seed, threads, tile, backend, engine, depth), every
+/// file of the model directories (main and ablation), the scene's name, XML and reference.
+/// Files the XML references (meshes, textures) and the toolkit's own code are not hashed: do
+/// not resume across an edit of those.
+pub fn scene_fingerprint(config: &EvalConfig, scene: &EvalScene) -> Result<String> {
+    let settings = serde_json::json!({
+        "photons_per_pass": config.photons_per_pass,
+        "passes": config.pass_counts(),
+        "seed": config.seed,
+        "threads": config.threads,
+        "tile": config.tile,
+        "backend": config.backend,
+        "engine": config.engine,
+        "max_depth": config.max_depth,
+        "scene": scene.name,
+    });
+    let mut h = Sha256::new();
+    h.update(settings.to_string().as_bytes());
+    let models =
+        std::iter::once(&config.model).chain(config.ablation.iter().flat_map(|a| &a.dual_models));
+    for dir in models {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+            .with_context(|| format!("reading {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_file())
+            .collect();
+        files.sort();
+        for f in files {
+            h.update(f.file_name().unwrap_or_default().as_encoded_bytes());
+            hash_file(&mut h, &f)?;
+        }
+    }
+    hash_file(&mut h, &scene.xml)?;
+    hash_file(&mut h, &scene.reference)?;
+    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// Writes a scene's result atomically.
+pub fn save(path: &Path, fingerprint: &str, result: &SceneResult) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let saved = SavedScene {
+        format: FORMAT.into(),
+        fingerprint: fingerprint.into(),
+        result: result.clone(),
+    };
+    let json = serde_json::to_string_pretty(&saved)?;
+    super::images::write_atomic(path, json.as_bytes())
+}
+
+/// The saved result of a scene if it can be reused: written by a run with the same
+/// `fingerprint`, successful, with its pictures in `output`. `Err` only for a file that exists
+/// but cannot be read or parsed (named); a mismatch is `Ok(None)` with the reason.
+pub fn load(
+    path: &Path,
+    fingerprint: &str,
+    output: &Path,
+) -> Result<std::result::Result<SceneResult, String>> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Ok(Err("not evaluated yet".into()))
+        }
+        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+    };
+    let saved: SavedScene = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a per-scene result of evaluate", path.display()))?;
+    if saved.format != FORMAT {
+        return Ok(Err(format!("format {} (expected {FORMAT})", saved.format)));
+    }
+    if saved.fingerprint != fingerprint {
+        return Ok(Err(
+            "settings, model, scene or reference changed since it was saved".into(),
+        ));
+    }
+    let r = saved.result;
+    if r.error.is_some() || r.eval.is_none() {
+        return Ok(Err("it failed last time".into()));
+    }
+    let pictures = [&r.plot, &r.comparison, &r.inputs];
+    if let Some(missing) = pictures
+        .iter()
+        .map(|p| p.as_ref().map(|p| output.join(p)))
+        .find(|p| !p.as_ref().is_some_and(|p| p.is_file()))
+    {
+        return Ok(Err(format!(
+            "picture {} is missing",
+            missing.map_or_else(|| "(none)".into(), |p| p.display().to_string())
+        )));
+    }
+    Ok(Ok(r))
+}
