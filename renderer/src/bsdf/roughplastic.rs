@@ -46,14 +46,18 @@ impl CoatingTables {
     /// Computes the tables: each μ entry on its own rayon task (the entries are independent and
     /// each sums in a fixed order, so the result does not depend on the thread count).
     fn compute(distr: &MicrofacetDistribution, eta: f32) -> Self {
+        // The quadrature nodes, once for all 64 entries (finding them is an O(n²) Newton
+        // iteration per node set: computed per entry it was a tenth of a table's time).
+        let outside = gauss_legendre(quadrature_order(eta));
+        let inside = gauss_legendre(quadrature_order(1.0 / eta));
         let entries: Vec<(f32, f32)> = (0..TABLE_RES)
             .into_par_iter()
             .map(|j| {
                 let mu = (j as f32 / (TABLE_RES - 1) as f32).max(1e-6);
                 let wi = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
                 (
-                    coating_transmittance(distr, wi, eta),
-                    coating_reflectance(distr, wi, 1.0 / eta) * wi.z,
+                    coating_transmittance(distr, wi, eta, &outside),
+                    coating_reflectance(distr, wi, 1.0 / eta, &inside) * wi.z,
                 )
             })
             .collect();
@@ -131,19 +135,28 @@ fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
     out
 }
 
-/// Integrates `f(m)` over normals visible from `wi` by tensor Gauss–Legendre quadrature on the
-/// sample square (the visible-normal warp turns it into an expectation).
+/// Gauss–Legendre order per axis of the coating integrals at relative index `eta` (Mitsuba's:
+/// light entering a denser coating is smooth in m, total internal reflection inside is not).
+fn quadrature_order(eta: f32) -> usize {
+    if eta > 1.0 {
+        32
+    } else {
+        128
+    }
+}
+
+/// Integrates `f(m)` over normals visible from `wi` by tensor Gauss–Legendre quadrature with
+/// `nodes` on each axis of the sample square (the visible-normal warp turns it into an
+/// expectation).
 fn visible_normal_quadrature(
     distr: &MicrofacetDistribution,
     wi: Vec3,
-    eta: f32,
+    nodes: &[(f64, f64)],
     f: impl Fn(Vec3) -> f32,
 ) -> f32 {
-    let n = if eta > 1.0 { 32 } else { 128 };
-    let nodes = gauss_legendre(n);
     let mut sum = 0.0f32;
-    for &(y, wy) in &nodes {
-        for &(x, wx) in &nodes {
+    for &(y, wy) in nodes {
+        for &(x, wx) in nodes {
             let u = Vec2::new((x * 0.5 + 0.5) as f32, (y * 0.5 + 0.5) as f32);
             let (m, _) = distr.sample(wi, u);
             sum += f(m) * (wx * wy * 0.25) as f32;
@@ -154,8 +167,13 @@ fn visible_normal_quadrature(
 
 /// Fraction of light arriving from `wi` that is refracted into the coating (Fresnel and
 /// masking of the refracted direction included).
-fn coating_transmittance(distr: &MicrofacetDistribution, wi: Vec3, eta: f32) -> f32 {
-    visible_normal_quadrature(distr, wi, eta, |m| {
+fn coating_transmittance(
+    distr: &MicrofacetDistribution,
+    wi: Vec3,
+    eta: f32,
+    nodes: &[(f64, f64)],
+) -> f32 {
+    visible_normal_quadrature(distr, wi, nodes, |m| {
         let f = fresnel_dielectric(wi.dot(m), eta);
         let wo = refract_about(wi, m, f.cos_theta_t, f.eta_ti);
         if wo.z * wi.z >= 0.0 {
@@ -167,8 +185,13 @@ fn coating_transmittance(distr: &MicrofacetDistribution, wi: Vec3, eta: f32) -> 
 }
 
 /// Single-scattering microfacet reflectance for light arriving from `wi`.
-fn coating_reflectance(distr: &MicrofacetDistribution, wi: Vec3, eta: f32) -> f32 {
-    visible_normal_quadrature(distr, wi, eta, |m| {
+fn coating_reflectance(
+    distr: &MicrofacetDistribution,
+    wi: Vec3,
+    eta: f32,
+    nodes: &[(f64, f64)],
+) -> f32 {
+    visible_normal_quadrature(distr, wi, nodes, |m| {
         let wo = reflect_about(wi, m);
         if wo.z <= 0.0 || wi.z <= 0.0 {
             0.0
