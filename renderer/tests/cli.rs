@@ -189,6 +189,22 @@ fn bad_input_names_the_file_and_line_and_fails() {
         assert!(located, "{name}: no line number in {err}");
         assert!(!dir.join("x.exr").exists(), "{name}: no image on failure");
     }
+    // A resolution whose SPPM state cannot fit in any machine's memory (1.5 TB): an error
+    // saying so before anything is allocated, not an abort.
+    let scene = write_scene(&dir);
+    let huge = [
+        scene.to_str().unwrap(),
+        "--integrator",
+        "sppm-ml",
+        "--passes",
+        "1",
+        "-D",
+        "res=60000",
+        "--out",
+        dir.join("huge").to_str().unwrap(),
+    ]
+    .map(String::from);
+    render_fails_naming(&huge, &["needs", "GB of memory"]);
     let missing = run(
         env!("CARGO_BIN_EXE_bundle_info"),
         &[dir.join("none.exr").to_str().unwrap()],

@@ -184,6 +184,13 @@ fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
     }
     let (max_depth, rr_depth) = depths(cli, scene);
     let res = scene.camera.resolution();
+    // The film, its copy for the EXR writer and the PNG (12 + 12 + 4 bytes per pixel); a state
+    // file adds its encoded copy.
+    let per_pixel = if cli.state.is_some() { 40 } else { 28 };
+    renderer::memory::check_fits(
+        &format!("a {}x{} image", res.x, res.y),
+        res.x as u64 * res.y as u64 * per_pixel,
+    )?;
     let total = res.x as u64 * res.y as u64 * spp as u64;
     let bar = progress_bar(total, "samples");
     let t = Instant::now();

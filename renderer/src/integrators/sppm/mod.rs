@@ -479,19 +479,35 @@ pub fn render_sppm_resumable(
     if let (Some(saved), Some(target)) = (&saved, target) {
         if saved.passes > target {
             bail!(
-                "{}: the saved run is at pass {}, past the last requested pass {target}; ask for                  more passes, or give --state a new file name",
-                store.as_ref().map_or(String::new(), |s| s.file.path.display().to_string()),
+                "{}: the saved run is at pass {}, past the last requested pass {target}; ask for \
+                 more passes, or give --state a new file name",
+                store
+                    .as_ref()
+                    .map_or(String::new(), |s| s.file.path.display().to_string()),
                 saved.passes
             );
         }
     }
+
+    // Per pixel: the state, and the bundle assembled at checkpoints (f32 layers).
+    let pixel_bytes = std::mem::size_of::<PixelState>() as u64 + 4 * 31;
+    let state_bytes = pixel_count as u64 * pixel_bytes;
+    crate::memory::check_fits(&format!("SPPM on a {}x{} image", res.x, res.y), state_bytes)?;
+    // What memory is left bounds the photons a pass may store.
+    let max_stored = crate::memory::available_bytes().map_or(u64::MAX, |a| {
+        a.saturating_sub(state_bytes) / photon_trace::BYTES_PER_STORED_PHOTON
+    });
 
     with_threads(settings.threads, move || -> Result<RenderSummary> {
         let start = Instant::now();
         let (mut states, mut summary, mut pass) = match saved {
             Some(s) => (s.pixels, s.summary, s.passes),
             None => (
-                vec![PixelState::default(); pixel_count],
+                crate::memory::try_filled_vec(
+                    pixel_count,
+                    PixelState::default(),
+                    "the SPPM pixel state",
+                )?,
                 RenderSummary::default(),
                 0,
             ),
@@ -536,8 +552,9 @@ pub fn render_sppm_resumable(
                 pass as u64,
                 settings.photons_per_pass,
                 settings.max_depth,
+                max_stored,
                 &mut chunks,
-            );
+            )?;
             let stored = chunks.iter().map(|c| c.len() as u64).sum();
             let t_traced = Instant::now();
             let cell = grid_cell_size(&states, settings.mode, max_radius);

@@ -9,6 +9,7 @@ use crate::bsdf::{Lobe, TransportMode};
 use crate::sampling::{rng_for, UniformSource};
 use crate::scene::Scene;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::photon_map::Photon;
 
@@ -85,26 +86,46 @@ pub fn trace_photon(
     }
 }
 
+/// Memory a stored photon takes during a pass: its record in the trace chunks, and in the
+/// grid its sorted copy, position arrays and sort keys (with scratch).
+pub const BYTES_PER_STORED_PHOTON: u64 = 2 * std::mem::size_of::<Photon>() as u64 + 12 + 32;
+
 /// Traces `count` photons of pass `pass` in parallel (current rayon pool) into `chunks`:
 /// chunk `c` receives the deposits of photons `c·CHUNK..(c+1)·CHUNK` in photon order, so the
 /// concatenation of the chunks is the deposit list in photon-index order whatever the thread
-/// count. The chunks' allocations are reused from the previous pass.
+/// count. The chunks' allocations are reused from the previous pass. More than `max_stored`
+/// deposits (what memory allows) stop the pass with an error instead of exhausting memory.
 pub fn trace_photons(
     scene: &Scene,
     seed: u64,
     pass: u64,
     count: u64,
     max_depth: u32,
+    max_stored: u64,
     chunks: &mut Vec<Vec<Photon>>,
-) {
+) -> anyhow::Result<()> {
     let n = count.div_ceil(CHUNK) as usize;
     chunks.truncate(n);
     chunks.resize_with(n, Vec::new);
+    let stored = AtomicU64::new(0);
     chunks.par_iter_mut().enumerate().for_each(|(c, out)| {
         out.clear();
+        if stored.load(Ordering::Relaxed) > max_stored {
+            return;
+        }
         let c = c as u64;
         for index in c * CHUNK..((c + 1) * CHUNK).min(count) {
             trace_photon(scene, seed, pass, index, max_depth, out);
         }
+        stored.fetch_add(out.len() as u64, Ordering::Relaxed);
     });
+    let stored = stored.into_inner();
+    if stored > max_stored {
+        anyhow::bail!(
+            "pass {pass}: {count} photons stored more than {max_stored} deposits, more than the \
+             available memory holds ({} bytes per deposit); use fewer photons per pass",
+            BYTES_PER_STORED_PHOTON
+        );
+    }
+    Ok(())
 }
