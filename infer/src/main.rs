@@ -69,6 +69,25 @@ struct Cli {
     /// `--scene`: override a `<default name=… value=…>` of the scene, e.g. `-D res=128`.
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = renderer::xml::parse_define, help_heading = "Rendering (--scene)")]
     define: Vec<(String, String)>,
+    /// `--scene`: keep the render's state in this file and resume from it when it exists (a
+    /// killed run started again continues from its last save, bit-identically; see `render
+    /// --state`).
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "scene",
+        help_heading = "Rendering (--scene)"
+    )]
+    state: Option<PathBuf>,
+    /// `--scene`: seconds of rendering between saves of --state.
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        default_value_t = 60.0,
+        requires = "state",
+        help_heading = "Rendering (--scene)"
+    )]
+    state_interval: f64,
 }
 
 fn main() -> ExitCode {
@@ -215,7 +234,10 @@ fn run(cli: &Cli) -> Result<()> {
 
 /// Renders `scene` with multi-level SPPM for `--passes` passes and returns the bundle.
 fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
-    use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
+    use renderer::integrators::sppm::{
+        render_sppm_resumable, SppmMode, SppmSettings, StopCondition,
+    };
+    use renderer::state_file::StateFile;
     if cli.passes == 0 {
         bail!("--passes must be at least 1");
     }
@@ -249,11 +271,28 @@ fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
         .expect("valid template")
         .progress_chars("=> "),
     );
+    let state = match &cli.state {
+        Some(path) => {
+            if path.exists() {
+                eprintln!("resuming from the run state {}", path.display());
+            }
+            let interval = cli.state_interval;
+            Some(StateFile::for_scene(
+                path,
+                interval,
+                scene_path,
+                &cli.define,
+                false,
+            )?)
+        }
+        None => None,
+    };
     let mut result = None;
-    render_sppm(
+    render_sppm_resumable(
         &scene,
         &settings,
         &stop,
+        state.as_ref(),
         |b| {
             result = Some(b);
             Ok(())

@@ -25,6 +25,28 @@ pub struct StateFile {
 }
 
 impl StateFile {
+    /// The state file `path` of a render of the scene file `xml` with its `-D` overrides
+    /// `defines` and leniency, saved every `interval` seconds; checked: a positive interval and
+    /// a location where the state can be written.
+    pub fn for_scene(
+        path: &Path,
+        interval: f64,
+        xml: &Path,
+        defines: &[(String, String)],
+        lenient: bool,
+    ) -> Result<Self> {
+        let mut identity = defines.to_vec();
+        identity.push(("--lenient".into(), lenient.to_string()));
+        let state = StateFile {
+            path: path.to_owned(),
+            interval,
+            scene_fingerprint: scene_file_fingerprint(xml, &identity)?,
+        };
+        state.check_interval()?;
+        state.check_writable()?;
+        Ok(state)
+    }
+
     /// Checks that the saving interval is a positive number of seconds.
     pub fn check_interval(&self) -> Result<()> {
         if self.interval.is_nan() || self.interval <= 0.0 {

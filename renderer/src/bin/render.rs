@@ -8,7 +8,7 @@ use renderer::film::{with_threads, Film};
 use renderer::image_io::{write_png_srgb, write_rgb_exr};
 use renderer::integrators::path::PathTracer;
 use renderer::scene::Scene;
-use renderer::state_file::{scene_file_fingerprint, StateFile};
+use renderer::state_file::StateFile;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -161,19 +161,11 @@ fn state_file(cli: &Cli) -> Result<Option<StateFile>> {
     let Some(path) = &cli.state else {
         return Ok(None);
     };
-    let mut defines = cli.define.clone();
-    defines.push(("--lenient".into(), cli.lenient.to_string()));
-    let state = StateFile {
-        path: path.clone(),
-        interval: cli.state_interval,
-        scene_fingerprint: scene_file_fingerprint(&cli.scene, &defines)?,
-    };
-    state.check_interval()?;
     if path.exists() {
         eprintln!("resuming from the run state {}", path.display());
     }
-    state.check_writable()?;
-    Ok(Some(state))
+    let (interval, lenient) = (cli.state_interval, cli.lenient);
+    StateFile::for_scene(path, interval, &cli.scene, &cli.define, lenient).map(Some)
 }
 
 /// The `path` integrator.
