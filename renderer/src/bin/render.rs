@@ -217,6 +217,13 @@ fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
 // parsed command line (--photons, --passes, --time, --seed, --out, --png, depths) and the scene.
 // ---------------------------------------------------------------------------------------------
 
+/// The bundle file of `passes` passes for the output prefix `out`: `<out>_p<passes>.exr`.
+fn bundle_path(out: &Path, passes: u32) -> PathBuf {
+    let mut name = out.as_os_str().to_owned();
+    name.push(format!("_p{passes:04}.exr"));
+    PathBuf::from(name)
+}
+
 /// The `sppm` (single-level) and `sppm-ml` (multi-level) integrators: one continuing run that
 /// writes a bundle `<out>_p<passes>.exr` at each `--passes` checkpoint (or once at `--time`).
 fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
@@ -277,9 +284,7 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
         &stop,
         state.as_ref(),
         |b| {
-            let mut name = cli.out.as_os_str().to_owned();
-            name.push(format!("_p{:04}.exr", b.meta.passes));
-            let path = PathBuf::from(name);
+            let path = bundle_path(&cli.out, b.meta.passes);
             bundle::write_bundle(&path, &b)?;
             bar.println(format!(
                 "pass {:5}: wrote {} ({:.1} s)",
@@ -300,6 +305,21 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
         },
     )?;
     bar.finish_and_clear();
+    if summary.resumed_from > 0 {
+        eprintln!("resumed at pass {}", summary.resumed_from);
+        // Bundles of checkpoints before the saved pass come from the earlier sessions only.
+        for &c in cli.passes.iter().filter(|&&c| c < summary.resumed_from) {
+            let path = bundle_path(&cli.out, c);
+            if !path.exists() {
+                eprintln!(
+                    "warning: no bundle {}: pass {c} lies before the saved pass {}, and the \
+                     earlier sessions of this run did not write it",
+                    path.display(),
+                    summary.resumed_from
+                );
+            }
+        }
+    }
     let secs = summary.seconds.max(1e-9);
     eprintln!(
         "{}: {}x{}, {} passes x {} photons in {secs:.2} s: {:.3} passes/s, {:.3} M photons/s \

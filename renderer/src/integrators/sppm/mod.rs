@@ -183,6 +183,9 @@ pub struct RenderSummary {
     pub photons_stored: u64,
     /// Visible points found.
     pub visible_points: u64,
+    /// The pass a resumed run continued from (0: it started afresh). The totals above count
+    /// every session of the run.
+    pub resumed_from: u32,
 }
 
 /// The per-pixel state carried across passes.
@@ -501,7 +504,13 @@ pub fn render_sppm_resumable(
     with_threads(settings.threads, move || -> Result<RenderSummary> {
         let start = Instant::now();
         let (mut states, mut summary, mut pass) = match saved {
-            Some(s) => (s.pixels, s.summary, s.passes),
+            Some(s) => {
+                let summary = RenderSummary {
+                    resumed_from: s.passes,
+                    ..s.summary
+                };
+                (s.pixels, summary, s.passes)
+            }
             None => (
                 crate::memory::try_filled_vec(
                     pixel_count,

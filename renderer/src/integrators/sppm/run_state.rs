@@ -229,6 +229,7 @@ impl<'a> StateStore<'a> {
                 photons_emitted: header.photons_emitted,
                 photons_stored: header.photons_stored,
                 visible_points: header.visible_points,
+                resumed_from: 0,
             },
             pixels: decode_pixels(&body, self.levels),
         }))
