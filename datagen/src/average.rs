@@ -258,6 +258,16 @@ pub fn average_references(
             scenes: BTreeMap::new(),
         },
     };
+    // The `-D` overrides of scenes the user brought, by scene id (the plan numbers them).
+    let plan = crate::plan::Plan::new(&manifest.config);
+    let defines_of = |id: &str| -> Vec<(String, String)> {
+        plan.scenes
+            .iter()
+            .find(|s| s.id == id)
+            .and_then(|s| manifest.config.external_scene(s.index))
+            .map(|e| e.define_pairs())
+            .unwrap_or_default()
+    };
     for scene in scenes {
         let mut seeds = vec![scene.reference_seed];
         let mut images = vec![read_checked(
@@ -282,6 +292,8 @@ pub fn average_references(
                         path: path.with_extension("state"),
                         interval: options.state_interval,
                     }),
+                    defines: defines_of(&scene.id),
+                    size: (manifest.width, manifest.height),
                 };
                 let image = renderer.reference(&root.join(&scene.xml), &spec, on_pass)?;
                 // The run is averaged as rendered (EXR float32 keeps it exactly), not read back.

@@ -55,6 +55,13 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
             report
                 .problems
                 .push(format!("{}: scene file missing", s.xml));
+        } else if let Some(expected) = &s.xml_sha256 {
+            // A scene the user brought: the file must still be the one that was rendered.
+            if let Some(problem) = checksum_problem(root, &s.xml, expected) {
+                report.problems.push(format!(
+                    "{problem} (the scene changed since the dataset was rendered)"
+                ));
+            }
         }
         done += 1;
         on_file(done, total);

@@ -2,8 +2,10 @@
 //! fractions and, per scene family, the scene count and every parameter range. Parsing denies
 //! unknown fields so typos are errors naming the field.
 
+use crate::plan::Split;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 /// A whole dataset configuration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -69,6 +71,76 @@ pub struct Families {
     pub metal: Option<MetalConfig>,
     /// Depth-of-field shelves.
     pub shelf: Option<ShelfConfig>,
+    /// Scenes the user brings (Mitsuba 3 XML files), rendered like the generated ones.
+    /// (Left out of the serialised config when absent, so the fingerprints of configs
+    /// without it, and of the datasets made with them, are what they were.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub external: Option<ExternalConfig>,
+}
+
+/// `[families.external]`: the user's own scenes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExternalConfig {
+    /// The scenes, in the order they get their ids.
+    pub scenes: Vec<ExternalScene>,
+}
+
+/// One scene the user brings (`[[families.external.scenes]]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExternalScene {
+    /// The Mitsuba 3 XML file, relative to the directory `datagen` runs in (or absolute). Its
+    /// film must be the dataset's `width` × `height` (after `defines`).
+    pub xml: PathBuf,
+    /// Name in the scene id `NNN-<name>` (letters, digits, `-`, `_`); default: the name of
+    /// the XML's folder.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Split of this scene; absent: assigned with the generated scenes by the split fractions.
+    #[serde(default)]
+    pub split: Option<Split>,
+    /// `<default>` overrides of the scene file, as `render -D name=value`.
+    #[serde(default)]
+    pub defines: BTreeMap<String, String>,
+}
+
+impl ExternalScene {
+    /// The name used in the scene id.
+    pub fn id_name(&self) -> String {
+        self.name.clone().unwrap_or_else(|| {
+            let folder = self
+                .xml
+                .parent()
+                .and_then(|p| p.file_name())
+                .or_else(|| self.xml.file_stem())
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let safe: String = folder
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
+                .collect();
+            if safe.is_empty() {
+                "external".into()
+            } else {
+                safe
+            }
+        })
+    }
+
+    /// The `defines` as `render -D` pairs (in name order).
+    pub fn define_pairs(&self) -> Vec<(String, String)> {
+        self.defines
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect()
+    }
 }
 
 /// A compact light used by several families.
@@ -406,6 +478,27 @@ impl Config {
             empty("metal.materials", c.materials.len())?;
             empty("metal.lights", c.lights.len())?;
         }
+        if let Some(c) = &f.external {
+            if c.scenes.is_empty() {
+                return Err("families.external.scenes must not be empty".into());
+            }
+            for (i, s) in c.scenes.iter().enumerate() {
+                let name = s.id_name();
+                if name.is_empty()
+                    || !name
+                        .chars()
+                        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+                {
+                    return Err(format!(
+                        "families.external.scenes[{i}].name `{name}`: use letters, digits, `-` \
+                         and `_` only"
+                    ));
+                }
+                if s.xml.as_os_str().is_empty() {
+                    return Err(format!("families.external.scenes[{i}].xml is empty"));
+                }
+            }
+        }
         if self.scene_count() == 0 {
             return Err("no scenes: give at least one family a positive count".into());
         }
@@ -420,5 +513,21 @@ impl Config {
             + f.water.as_ref().map_or(0, |c| c.count)
             + f.metal.as_ref().map_or(0, |c| c.count)
             + f.shelf.as_ref().map_or(0, |c| c.count)
+            + f.external.as_ref().map_or(0, |c| c.scenes.len() as u32)
+    }
+
+    /// The external scene of scene index `index`, if that scene is one (scenes are numbered
+    /// over the families in order, the external ones last).
+    pub fn external_scene(&self, index: usize) -> Option<&ExternalScene> {
+        let generated = (self.scene_count()
+            - self
+                .families
+                .external
+                .as_ref()
+                .map_or(0, |c| c.scenes.len() as u32)) as usize;
+        let external = self.families.external.as_ref()?;
+        index
+            .checked_sub(generated)
+            .and_then(|k| external.scenes.get(k))
     }
 }

@@ -37,6 +37,10 @@ pub struct RunSpec {
     /// Where a long run keeps its resumable state, so a killed job continues mid-run (the
     /// reference jobs give one; a renderer may ignore it).
     pub state: Option<StateSpec>,
+    /// `<default>` overrides of the scene file (scenes the user brings).
+    pub defines: Vec<(String, String)>,
+    /// The dataset's image size: a scene whose film differs is an error before rendering.
+    pub size: (u32, u32),
 }
 
 /// Where and how often a run saves its resumable state.
@@ -152,11 +156,15 @@ pub fn render_dataset(
     let mut files_done = 0;
     let mut work_done = 0u64;
     overall.set_message(format!("{files_done}/{total_files} samples"));
+    // The user's scene files, hashed up front: a missing one stops the run before any render,
+    // and a job of a scene whose file changed since its record is redone.
+    let external = external_hashes(config, &plan, &mine)?;
     for &j in &mine {
         let job = plan.jobs[j];
         let work = job_work(config, &job);
         let existing = read_record(root, &plan, &job, &fingerprint);
-        if existing.is_some_and(|r| outputs_intact(root, &r)) {
+        let scene_hash = external.get(&job.scene()).cloned();
+        if existing.is_some_and(|r| r.scene_xml_sha256 == scene_hash && outputs_intact(root, &r)) {
             report.skipped += 1;
         } else {
             let passes = match job {
@@ -184,6 +192,7 @@ pub fn render_dataset(
                 &plan,
                 &job,
                 &fingerprint,
+                scene_hash,
                 options,
                 renderer,
                 &mut on_pass,
@@ -208,6 +217,55 @@ pub fn render_dataset(
     Ok(report)
 }
 
+/// SHA-256 of the scene file of every external scene among `jobs` (by scene index); an error
+/// naming the file when one cannot be read.
+fn external_hashes(
+    config: &Config,
+    plan: &Plan,
+    jobs: &[usize],
+) -> Result<std::collections::BTreeMap<usize, String>> {
+    let mut out = std::collections::BTreeMap::new();
+    for &j in jobs {
+        let scene = plan.jobs[j].scene();
+        if let (Some(s), false) = (config.external_scene(scene), out.contains_key(&scene)) {
+            let hash = sha256_file(&s.xml).with_context(|| {
+                format!(
+                    "scene {} (families.external): reading {}",
+                    plan.scenes[scene].id,
+                    s.xml.display()
+                )
+            })?;
+            out.insert(scene, hash);
+        }
+    }
+    Ok(out)
+}
+
+/// `path` as the manifest records it: relative to the dataset `root` (both made absolute), so
+/// readers find it with `root.join(..)` wherever the two are moved together; absolute when no
+/// relative path exists.
+fn path_from_root(root: &Path, path: &Path) -> String {
+    let (Ok(root), Ok(path)) = (root.canonicalize(), path.canonicalize()) else {
+        return path.display().to_string();
+    };
+    let common = root
+        .components()
+        .zip(path.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    if common == 0 {
+        return path.display().to_string();
+    }
+    let mut rel = PathBuf::new();
+    for _ in root.components().skip(common) {
+        rel.push("..");
+    }
+    for c in path.components().skip(common) {
+        rel.push(c);
+    }
+    rel.to_string_lossy().replace('\\', "/")
+}
+
 /// Renders one job and writes its outputs; returns its record (not yet written).
 #[allow(clippy::too_many_arguments)]
 fn run_job(
@@ -216,13 +274,27 @@ fn run_job(
     plan: &Plan,
     job: &Job,
     fingerprint: &str,
+    scene_hash: Option<String>,
     options: RenderOptions,
     renderer: &dyn SampleRenderer,
     on_pass: &mut (dyn FnMut(u32) + Send),
 ) -> Result<JobRecord> {
     let sp = &plan.scenes[job.scene()];
-    let scene = generate(config, sp.index);
-    let xml = write_scene_files(&scene, &root.join(sp.scene_dir()))?;
+    // A generated scene is written into the dataset; the user's file is rendered where it is.
+    let (xml, manifest_xml, defines) =
+        match (generate(config, sp.index), config.external_scene(sp.index)) {
+            (Some(scene), _) => (
+                write_scene_files(&scene, &root.join(sp.scene_dir()))?,
+                sp.scene_xml(),
+                Vec::new(),
+            ),
+            (None, Some(external)) => (
+                external.xml.clone(),
+                path_from_root(root, &external.xml),
+                external.define_pairs(),
+            ),
+            (None, None) => bail!("scene {} is neither generated nor external", sp.id),
+        };
     let r = &config.render;
     let seed = plan.render_seed(job);
     let mut record = JobRecord {
@@ -230,6 +302,7 @@ fn run_job(
         config_sha256: fingerprint.to_owned(),
         scene: None,
         samples: Vec::new(),
+        scene_xml_sha256: scene_hash.clone(),
     };
     match *job {
         Job::Reference { .. } => {
@@ -244,6 +317,8 @@ fn run_job(
                     path: root.join(plan.state_path(job)),
                     interval: options.state_interval,
                 }),
+                defines: defines.clone(),
+                size: (config.width, config.height),
             };
             let image = renderer.reference(&xml, &spec, on_pass)?;
             if (image.width, image.height) != (config.width as usize, config.height as usize) {
@@ -265,12 +340,14 @@ fn run_job(
                 id: sp.id.clone(),
                 family: sp.family,
                 split: sp.split,
-                xml: sp.scene_xml(),
+                xml: manifest_xml,
                 reference: rel,
                 reference_sha256: sha256_file(&path)?,
                 reference_seed: seed,
                 reference_passes: r.reference_passes,
                 reference_photons: r.reference_photons_per_pass,
+                xml_sha256: scene_hash,
+                defines: defines.iter().cloned().collect(),
             });
             // The reference is written: its run's state is of no further use.
             if let Some(state) = &spec.state {
@@ -288,6 +365,8 @@ fn run_job(
                 // Bundles at every listed pass count come from one run that is short next to
                 // the reference; a killed input job starts over.
                 state: None,
+                defines,
+                size: (config.width, config.height),
             };
             let mut on_bundle = |mut b: Bundle| -> Result<()> {
                 let passes = b.meta.passes;

@@ -64,6 +64,13 @@ pub struct SceneEntry {
     pub reference_passes: u32,
     /// Photons per pass of the reference run.
     pub reference_photons: u64,
+    /// Lower-case hex SHA-256 of the scene file, for scenes the user brings (`external`;
+    /// generated scenes are a function of the config).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub xml_sha256: Option<String>,
+    /// `<default>` overrides the scene is rendered with (scenes the user brings).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub defines: std::collections::BTreeMap<String, String>,
 }
 
 /// What a finished job produced (`records/<scene>/<job>.json`).
@@ -78,6 +85,10 @@ pub struct JobRecord {
     pub scene: Option<SceneEntry>,
     /// The sample entries (input jobs), ascending passes.
     pub samples: Vec<SampleEntry>,
+    /// SHA-256 of the scene file the job rendered, for scenes the user brings: the job is
+    /// redone when the file changes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene_xml_sha256: Option<String>,
 }
 
 impl JobRecord {

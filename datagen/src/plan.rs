@@ -267,7 +267,12 @@ impl Shard {
 /// as far as counts allow. Counts are the rounded fractions (at least one scene for a positive
 /// fraction when there are at least three scenes).
 fn assign_splits(config: &Config, list: &[(String, Family)]) -> Vec<Split> {
-    let n = list.len();
+    // External scenes with a fixed split keep it; the fractions apply to the other scenes.
+    let fixed: Vec<Option<Split>> = (0..list.len())
+        .map(|i| config.external_scene(i).and_then(|s| s.split))
+        .collect();
+    let free: Vec<usize> = (0..list.len()).filter(|&i| fixed[i].is_none()).collect();
+    let n = free.len();
     let count_for = |f: f32| {
         let k = (f * n as f32).round() as usize;
         if f > 0.0 && k == 0 && n >= 3 {
@@ -281,7 +286,7 @@ fn assign_splits(config: &Config, list: &[(String, Family)]) -> Vec<Split> {
     let mut rng = Rng::new(hash_seq(&[config.seed, hash_str("split")]));
     let mut per_family: Vec<Vec<usize>> = Family::ALL
         .iter()
-        .map(|f| (0..n).filter(|&i| list[i].1 == *f).collect())
+        .map(|f| free.iter().copied().filter(|&i| list[i].1 == *f).collect())
         .collect();
     for v in &mut per_family {
         rng.shuffle(v);
@@ -296,7 +301,7 @@ fn assign_splits(config: &Config, list: &[(String, Family)]) -> Vec<Split> {
             }
         }
     }
-    let mut splits = vec![Split::Train; n];
+    let mut splits: Vec<Split> = fixed.iter().map(|f| f.unwrap_or(Split::Train)).collect();
     for (rank, &i) in order.iter().enumerate() {
         if rank < n_test {
             splits[i] = Split::Test;

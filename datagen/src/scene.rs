@@ -22,16 +22,19 @@ pub enum Family {
     Metal,
     /// Depth-of-field shelves.
     Shelf,
+    /// Scenes the user brings (`[families.external]`), not generated.
+    External,
 }
 
 impl Family {
     /// All families in generation order.
-    pub const ALL: [Family; 5] = [
+    pub const ALL: [Family; 6] = [
         Family::Room,
         Family::Glass,
         Family::Water,
         Family::Metal,
         Family::Shelf,
+        Family::External,
     ];
 
     /// Lower-case name used in ids, the manifest and the config.
@@ -42,6 +45,7 @@ impl Family {
             Family::Water => "water",
             Family::Metal => "metal",
             Family::Shelf => "shelf",
+            Family::External => "external",
         }
     }
 }

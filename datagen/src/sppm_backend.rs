@@ -3,7 +3,7 @@
 //! one long multi-level run; inputs are bundles of one continuing run at each pass count.
 
 use crate::jobs::{RunSpec, SampleRenderer};
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use bundle::{Bundle, Image};
 use renderer::integrators::sppm::{
     render_sppm, render_sppm_resumable, SppmMode, SppmSettings, StopCondition,
@@ -16,12 +16,26 @@ use std::path::Path;
 #[derive(Debug, Clone, Copy, Default)]
 pub struct SppmBackend;
 
-/// Loads and builds a scene (strict import: every generated file must be fully supported).
-fn load(xml: &Path) -> Result<Scene> {
-    let desc = renderer::xml::load_scene(xml, &[], false)
+/// Loads and builds a scene with the run's `-D` overrides (strict import: every file must be
+/// fully supported) and checks that it renders at the dataset's size.
+fn load(xml: &Path, spec: &RunSpec) -> Result<Scene> {
+    let desc = renderer::xml::load_scene(xml, &spec.defines, false)
         .map_err(|e| anyhow!("{e}"))
         .with_context(|| format!("loading {}", xml.display()))?;
-    Scene::build(&desc).with_context(|| format!("building {}", xml.display()))
+    let scene = Scene::build(&desc).with_context(|| format!("building {}", xml.display()))?;
+    let res = scene.camera.resolution();
+    if (res.x, res.y) != spec.size {
+        bail!(
+            "{}: the scene renders {}x{}, the dataset is {}x{}; set the film's width and height \
+             (or give `defines` that do)",
+            xml.display(),
+            res.x,
+            res.y,
+            spec.size.0,
+            spec.size.1
+        );
+    }
+    Ok(scene)
 }
 
 /// SPPM settings of a run.
@@ -44,7 +58,7 @@ impl SampleRenderer for SppmBackend {
         spec: &RunSpec,
         on_pass: &mut (dyn FnMut(u32) + Send),
     ) -> Result<Image> {
-        let scene = load(xml)?;
+        let scene = load(xml, spec)?;
         let stop = StopCondition {
             checkpoints: vec![*spec.passes.last().unwrap_or(&1)],
             seconds: None,
@@ -58,7 +72,7 @@ impl SampleRenderer for SppmBackend {
                 Some(StateFile {
                     path: s.path.clone(),
                     interval: s.interval,
-                    scene_fingerprint: scene_file_fingerprint(xml, &[])?,
+                    scene_fingerprint: scene_file_fingerprint(xml, &spec.defines)?,
                 })
             }
             None => None,
@@ -85,7 +99,7 @@ impl SampleRenderer for SppmBackend {
         on_bundle: &mut (dyn FnMut(Bundle) -> Result<()> + Send),
         on_pass: &mut (dyn FnMut(u32) + Send),
     ) -> Result<()> {
-        let scene = load(xml)?;
+        let scene = load(xml, spec)?;
         let stop = StopCondition {
             checkpoints: spec.passes.clone(),
             seconds: None,

@@ -310,3 +310,172 @@ fn a_reference_job_killed_mid_run_resumes_from_its_state() {
     assert_same(&reference, &snapshot(&dir));
     std::fs::remove_dir_all(&work).unwrap();
 }
+
+/// A small lit floor as a user might bring it: a Mitsuba 3 scene whose film is `$res` square
+/// (default 32) and whose light has radiance `radiance`.
+fn user_scene(dir: &Path, radiance: f32) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let path = dir.join("scene.xml");
+    std::fs::write(
+        &path,
+        format!(
+            r#"<scene version="3.0.0">
+    <default name="res" value="32"/>
+    <sensor type="perspective">
+        <float name="fov" value="45"/>
+        <transform name="to_world"><lookat origin="0, 3, 3" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm">
+            <integer name="width" value="$res"/><integer name="height" value="$res"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate x="1" angle="-90"/><scale value="2"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+    </shape>
+    <shape type="sphere">
+        <float name="radius" value="0.4"/>
+        <point name="center" x="0" y="0.4" z="0"/>
+        <bsdf type="dielectric"/>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><rotate x="1" angle="90"/><scale value="0.3"/><translate y="2"/></transform>
+        <emitter type="area"><rgb name="radiance" value="{radiance}, {radiance}, {radiance}"/></emitter>
+    </shape>
+</scene>
+"#
+        ),
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn external_scenes_are_rendered_checked_and_redone_when_edited() {
+    use datagen::config::{ExternalConfig, ExternalScene};
+    use datagen::plan::Split;
+    let work = fresh_dir("cli-external");
+    let floor = user_scene(&work.join("mine/floor"), 20.0);
+    let lamp = user_scene(&work.join("mine/lamp"), 40.0);
+    let mut config = test_config(16, &[2], 1, 16);
+    config.render.photons_per_pass = 500;
+    config.render.reference_photons_per_pass = 1000;
+    let at_16 = |xml: &Path, split: Option<Split>, name: Option<&str>| ExternalScene {
+        xml: xml.to_owned(),
+        name: name.map(String::from),
+        split,
+        defines: [("res".to_string(), "16".to_string())].into(),
+    };
+    config.families.external = Some(ExternalConfig {
+        scenes: vec![
+            at_16(&floor, Some(Split::Test), None),
+            at_16(&lamp, None, Some("bright-lamp")),
+        ],
+    });
+    let config_path = work.join("config.toml");
+    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
+    let data = work.join("data");
+    let out = ok(render(&config_path, &data, &["--threads", "2"])
+        .output()
+        .unwrap());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("manifest complete"));
+
+    let manifest = Manifest::load(&data).unwrap();
+    let ids: Vec<&str> = manifest.scenes.iter().map(|s| s.id.as_str()).collect();
+    assert_eq!(ids.len(), 7, "{ids:?}");
+    assert_eq!(&ids[5..], ["005-floor", "006-bright-lamp"]);
+    let floor_entry = &manifest.scenes[5];
+    assert_eq!(floor_entry.split, Split::Test, "the fixed split is kept");
+    assert_eq!(floor_entry.family.name(), "external");
+    // The manifest finds the user's file from the dataset root, and records its checksum.
+    assert_eq!(floor_entry.xml, "../mine/floor/scene.xml");
+    assert!(data.join(&floor_entry.xml).is_file());
+    assert!(floor_entry.xml_sha256.is_some());
+    // … and the overrides it was rendered with, for `evaluate` to render it the same way.
+    assert_eq!(
+        floor_entry.defines.get("res").map(String::as_str),
+        Some("16")
+    );
+    assert_eq!(
+        manifest
+            .samples
+            .iter()
+            .filter(|s| s.scene == "006-bright-lamp")
+            .count(),
+        1
+    );
+    // Generated scenes are written into the dataset; the user's are not copied.
+    assert!(!data.join("scenes/005-floor").exists());
+    let check = |expect_ok: bool| {
+        let out = datagen(&["check", data.to_str().unwrap(), "--quiet"])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.success(), expect_ok, "{out:?}");
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    check(true);
+
+    // A rerun does nothing; after an edit of one scene, `check` names it and a rerun redoes
+    // that scene's jobs only.
+    let out = ok(render(&config_path, &data, &[]).output().unwrap());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("0 jobs rendered"),
+        "{out:?}"
+    );
+    let before = snapshot(&data);
+    user_scene(&work.join("mine/lamp"), 25.0);
+    let report = check(false);
+    assert!(
+        report.contains("mine/lamp/scene.xml") && report.contains("scene changed"),
+        "{report}"
+    );
+    let out = ok(render(&config_path, &data, &[]).output().unwrap());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("2 jobs rendered"),
+        "{out:?}"
+    );
+    let after = snapshot(&data);
+    let changed: Vec<&String> = before
+        .keys()
+        .filter(|k| before.get(*k) != after.get(*k))
+        .collect();
+    assert!(
+        changed
+            .iter()
+            .all(|k| k.contains("006-bright-lamp") || *k == "manifest.json"),
+        "{changed:?}"
+    );
+    assert!(changed.iter().any(|k| k.starts_with("references/006")));
+    check(true);
+
+    // A scene whose film is not the dataset's size, and a missing scene file: errors naming
+    // the file, the second before anything is rendered.
+    let mut wrong = config.clone();
+    wrong.families.external.as_mut().unwrap().scenes[1]
+        .defines
+        .clear();
+    std::fs::write(&config_path, toml::to_string(&wrong).unwrap()).unwrap();
+    let out = render(&config_path, &work.join("wrong"), &[])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("lamp/scene.xml") && stderr.contains("renders 32x32, the dataset is 16x16"),
+        "{stderr}"
+    );
+    let mut missing = config.clone();
+    missing.families.external.as_mut().unwrap().scenes[0].xml = work.join("nowhere.xml");
+    std::fs::write(&config_path, toml::to_string(&missing).unwrap()).unwrap();
+    let out = render(&config_path, &work.join("missing"), &[])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("nowhere.xml"), "{stderr}");
+    assert!(
+        !work.join("missing/references").exists(),
+        "nothing rendered"
+    );
+    std::fs::remove_dir_all(&work).unwrap();
+}

@@ -11,16 +11,18 @@ use model::{ModelConfig, Preset};
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
 
 /// A diffuse box open towards the camera (a small Cornell box) with an area light under the
-/// ceiling.
+/// ceiling; its film is `$res` square, 24 by default, rendered here at 16 (`-D res=16`, the
+/// `defines` of the configs and manifests below).
 const BOX_XML: &str = r#"<scene version="3.0.0">
+    <default name="res" value="24"/>
     <sensor type="perspective">
         <float name="fov" value="40"/>
         <transform name="to_world">
             <lookat origin="0, 0, 3.9" target="0, 0, 0" up="0, 1, 0"/>
         </transform>
         <film type="hdrfilm">
-            <integer name="width" value="16"/>
-            <integer name="height" value="16"/>
+            <integer name="width" value="$res"/>
+            <integer name="height" value="$res"/>
             <rfilter type="box"/>
         </film>
     </sensor>
@@ -76,7 +78,8 @@ fn box_scene(dir: &Path) -> (PathBuf, PathBuf) {
     std::fs::create_dir_all(dir).unwrap();
     let xml = dir.join("scene.xml");
     std::fs::write(&xml, BOX_XML).unwrap();
-    let desc = renderer::xml::load_scene(&xml, &[], false).unwrap();
+    let at_16 = [("res".to_string(), "16".to_string())];
+    let desc = renderer::xml::load_scene(&xml, &at_16, false).unwrap();
     let scene = renderer::scene::Scene::build(&desc).unwrap();
     let settings = SppmSettings {
         photons_per_pass: 4000,
@@ -156,9 +159,9 @@ fn evaluates_explicit_and_dataset_scenes() {
         "format": "sppm-ml-dataset/1",
         "scenes": [
             {"id": "000-box", "split": "train", "xml": "scenes/000-box/scene.xml",
-             "reference": "references/000-box.exr"},
+             "reference": "references/000-box.exr", "defines": {"res": "16"}},
             {"id": "001-box", "split": "test", "xml": "scenes/001-box/scene.xml",
-             "reference": "references/001-box.exr"}
+             "reference": "references/001-box.exr", "defines": {"res": "16"}}
         ],
         "samples": []
     });
@@ -171,7 +174,8 @@ fn evaluates_explicit_and_dataset_scenes() {
         format!(
             "model = {}\noutput = {}\nphotons_per_pass = 2000\npasses = [2, 4]\nseed = 5\n\
              tile = 8\nthreads = 1\n\n[[scenes]]\nname = \"explicit-box\"\nxml = {}\n\
-             reference = {}\n\n[dataset]\ndir = {}\nsplit = \"test\"\n",
+             reference = {}\ndefines = {{ res = \"16\" }}\n\n[dataset]\ndir = {}\n\
+             split = \"test\"\n",
             toml_path(&dir.join("model")),
             toml_path(&out),
             toml_path(&xml),

@@ -142,12 +142,22 @@ fn run(cli: Cli) -> Result<i32> {
         Command::Scenes { config, out } => {
             let config = Config::load(&config)?;
             let list = scene_list(&config);
+            let mut written = 0;
             for (index, (id, _)) in list.iter().enumerate() {
-                let scene = generate(&config, index);
-                write_scene_files(&scene, &out.join(id))
-                    .with_context(|| format!("writing scene {id}"))?;
+                // The user's own scenes (`[families.external]`) stay where they are.
+                if let Some(scene) = generate(&config, index) {
+                    write_scene_files(&scene, &out.join(id))
+                        .with_context(|| format!("writing scene {id}"))?;
+                    written += 1;
+                }
             }
-            eprintln!("wrote {} scenes to {}", list.len(), out.display());
+            eprintln!("wrote {written} scenes to {}", out.display());
+            if written < list.len() {
+                eprintln!(
+                    "({} external scenes are rendered from their own files)",
+                    list.len() - written
+                );
+            }
             Ok(0)
         }
         Command::Render {

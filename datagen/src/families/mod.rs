@@ -29,20 +29,27 @@ pub fn scene_list(config: &Config) -> Vec<(String, Family)> {
             out.push((id, family));
         }
     }
+    // The user's scenes last, named after their folders (or `name`).
+    for s in f.external.iter().flat_map(|c| &c.scenes) {
+        let id = format!("{:03}-{}", out.len(), s.id_name());
+        out.push((id, Family::External));
+    }
     out
 }
 
 /// Generates scene number `index` (see [`scene_list`]); deterministic in (config, index).
-pub fn generate(config: &Config, index: usize) -> GeneratedScene {
+/// `None` for an external scene (the user's file is rendered as it is).
+pub fn generate(config: &Config, index: usize) -> Option<GeneratedScene> {
     let (id, family) = scene_list(config)[index].clone();
     let mut rng = Rng::new(hash_seq(&[config.seed, hash_str("scene"), index as u64]));
     let f = &config.families;
     // The family tables exist for every listed family (scene_list only lists those).
-    match family {
+    Some(match family {
         Family::Room => room::generate(config, f.room.as_ref().unwrap(), &mut rng, id),
         Family::Glass => glass::generate(config, f.glass.as_ref().unwrap(), &mut rng, id),
         Family::Water => water::generate(config, f.water.as_ref().unwrap(), &mut rng, id),
         Family::Metal => metal::generate(config, f.metal.as_ref().unwrap(), &mut rng, id),
         Family::Shelf => shelf::generate(config, f.shelf.as_ref().unwrap(), &mut rng, id),
-    }
+        Family::External => return None,
+    })
 }

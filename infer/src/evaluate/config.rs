@@ -1,6 +1,7 @@
 //! The `evaluate` configuration file (TOML) and the list of scenes it resolves to: explicit
 //! XML + reference pairs and/or the scenes of one split of a `datagen` dataset.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
@@ -71,6 +72,9 @@ pub struct SceneEntry {
     pub xml: PathBuf,
     /// Reference RGB EXR of the same resolution.
     pub reference: PathBuf,
+    /// `<default>` overrides of the scene file, as `render -D name=value`.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub defines: BTreeMap<String, String>,
 }
 
 /// The scenes of one split of a dataset written by `datagen`.
@@ -112,6 +116,8 @@ pub struct EvalScene {
     pub xml: PathBuf,
     /// Reference RGB EXR.
     pub reference: PathBuf,
+    /// `<default>` overrides of the scene file (`-D name=value`).
+    pub defines: Vec<(String, String)>,
 }
 
 /// The part of a dataset manifest `evaluate` reads (the manifest has more keys).
@@ -126,6 +132,9 @@ struct ManifestScene {
     split: String,
     xml: PathBuf,
     reference: PathBuf,
+    /// Overrides of a scene the user brought to the dataset (absent for generated scenes).
+    #[serde(default)]
+    defines: BTreeMap<String, String>,
 }
 
 impl EvalConfig {
@@ -184,6 +193,7 @@ impl EvalConfig {
                 name,
                 xml: s.xml.clone(),
                 reference: s.reference.clone(),
+                defines: s.defines.clone().into_iter().collect(),
             });
         }
         if let Some(d) = &self.dataset {
@@ -203,6 +213,7 @@ impl EvalConfig {
                     },
                     name: s.id,
                     xml: d.dir.join(s.xml),
+                    defines: s.defines.into_iter().collect(),
                 })
                 .collect();
             if chosen.is_empty() {

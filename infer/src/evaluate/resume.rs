@@ -57,6 +57,7 @@ pub fn scene_fingerprint(config: &EvalConfig, scene: &EvalScene) -> Result<Strin
         "engine": config.engine,
         "max_depth": config.max_depth,
         "scene": scene.name,
+        "defines": scene.defines,
     });
     let mut h = Sha256::new();
     h.update(settings.to_string().as_bytes());

@@ -120,8 +120,8 @@ pub fn run_timed<T: Send>(
 }
 
 /// Loads and builds a Mitsuba XML scene, printing the loader's warnings.
-pub fn load_scene(xml: &std::path::Path) -> Result<Scene> {
-    let desc = renderer::xml::load_scene(xml, &[], false)
+pub fn load_scene(xml: &std::path::Path, defines: &[(String, String)]) -> Result<Scene> {
+    let desc = renderer::xml::load_scene(xml, defines, false)
         .with_context(|| format!("loading {}", xml.display()))?;
     for w in &desc.warnings {
         eprintln!("warning: {}: {w}", xml.display());

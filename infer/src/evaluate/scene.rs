@@ -90,7 +90,7 @@ pub fn evaluate_scene(
     variants: &[TrainedModel],
     inference: &Inference,
 ) -> Result<(SceneEval, SceneImages)> {
-    let built = load_scene(&scene.xml)?;
+    let built = load_scene(&scene.xml, &scene.defines)?;
     let res = built.camera.resolution();
     let (width, height) = (res.x as usize, res.y as usize);
     let reference = read_rgb_exr_image(&scene.reference)?;
