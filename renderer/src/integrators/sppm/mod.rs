@@ -44,7 +44,7 @@ use crate::state_file::StateFile;
 use accumulate::{GBufferSum, Welford};
 use photon_map::PhotonGrid;
 use radius::{nested_radii, shrink_factor, LEVELS};
-use run_state::{RunState, StateStore};
+use run_state::StateStore;
 use visible_point::{trace_eye_path, EyePath};
 
 /// Default cap on the initial radius as a fraction of the scene's bounding-box diagonal
@@ -525,15 +525,14 @@ pub fn render_sppm_resumable(
         let earlier_seconds = summary.seconds;
         let seconds_so_far = || earlier_seconds + start.elapsed().as_secs_f64();
         let mut next_checkpoint = checkpoints.partition_point(|&c| c <= pass);
-        let save = |states: &Vec<PixelState>, summary: &RenderSummary, pass: u32| match &store {
-            Some(store) => store.save(&RunState {
-                passes: pass,
-                summary: RenderSummary {
+        let save = |states: &[PixelState], summary: &RenderSummary, pass: u32| match &store {
+            Some(store) => {
+                let summary = RenderSummary {
                     seconds: seconds_so_far(),
                     ..*summary
-                },
-                pixels: states.clone(),
-            }),
+                };
+                store.save(pass, &summary, states)
+            }
             None => Ok(()),
         };
         if pass > 0 {

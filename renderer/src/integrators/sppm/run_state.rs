@@ -181,12 +181,11 @@ impl<'a> StateStore<'a> {
         }
     }
 
-    /// Writes `state` atomically.
-    pub fn save(&self, state: &RunState) -> Result<()> {
-        let s = &state.summary;
+    /// Writes the state after `passes` passes atomically: the totals `s` and the `pixels`.
+    pub fn save(&self, passes: u32, s: &RenderSummary, pixels: &[PixelState]) -> Result<()> {
         let header = StateHeader {
             run: self.run.clone(),
-            passes: state.passes,
+            passes,
             seconds: s.seconds,
             photon_seconds: s.photon_seconds,
             grid_seconds: s.grid_seconds,
@@ -195,7 +194,7 @@ impl<'a> StateStore<'a> {
             photons_stored: s.photons_stored,
             visible_points: s.visible_points,
         };
-        let body = encode_pixels(&state.pixels, self.levels);
+        let body = encode_pixels(pixels, self.levels);
         state_file::save(&self.file.path, MAGIC, &header, &body)
     }
 
