@@ -23,6 +23,12 @@ fn load(xml: &Path, spec: &RunSpec) -> Result<Scene> {
         .map_err(|e| anyhow!("{e}"))
         .with_context(|| format!("loading {}", xml.display()))?;
     let scene = Scene::build(&desc).with_context(|| format!("building {}", xml.display()))?;
+    // Bundles of one dataset share the box filter (the generated scenes name it): another
+    // filter spreads each sample over neighbouring pixels and smooths the inputs unlike the
+    // rest of the data.
+    if let Some(why) = renderer::integrators::sppm::filter_warning(scene.camera.filter().desc()) {
+        bail!("{}: {why}", xml.display());
+    }
     let res = scene.camera.resolution();
     if (res.x, res.y) != spec.size {
         bail!(

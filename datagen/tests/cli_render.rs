@@ -464,6 +464,23 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
         stderr.contains("lamp/scene.xml") && stderr.contains("renders 32x32, the dataset is 16x16"),
         "{stderr}"
     );
+    // A scene without `<rfilter type="box"/>` (Mitsuba's default is a Gaussian) is refused.
+    let soft = work.join("mine/soft/scene.xml");
+    std::fs::create_dir_all(soft.parent().unwrap()).unwrap();
+    let text = std::fs::read_to_string(&floor).unwrap();
+    std::fs::write(&soft, text.replace("<rfilter type=\"box\"/>", "")).unwrap();
+    let mut gaussian = config.clone();
+    gaussian.families.external.as_mut().unwrap().scenes[0].xml = soft;
+    std::fs::write(&config_path, toml::to_string(&gaussian).unwrap()).unwrap();
+    let out = render(&config_path, &work.join("soft"), &[])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("soft/scene.xml") && stderr.contains("<rfilter type=\"box\"/>"),
+        "{stderr}"
+    );
     let mut missing = config.clone();
     missing.families.external.as_mut().unwrap().scenes[0].xml = work.join("nowhere.xml");
     std::fs::write(&config_path, toml::to_string(&missing).unwrap()).unwrap();
