@@ -1483,7 +1483,7 @@ fn blendbsdf_mixes_two_bsdfs_in_file_order() {
     let Bsdf::Blend(a) = &b.nested[1] else {
         panic!("{:?}", b.nested[1])
     };
-    assert_eq!(a.weight_at(Vec2::ZERO), 0.25);
+    assert_eq!(a.weight_at(Vec2::ZERO.into()), 0.25);
     assert!(matches!(a.nested[0], Bsdf::Diffuse(_)));
     assert!(matches!(a.nested[1], Bsdf::Conductor(_)));
     for (inner, needle) in [
@@ -1522,7 +1522,7 @@ fn mask_wraps_one_bsdf_with_an_opacity() {
     assert!(matches!(a.opacity, Texture::Checkerboard { .. }));
     assert!(matches!(*a.nested, Bsdf::TwoSided { .. }));
     // Mitsuba's default opacity.
-    assert_eq!(b.opacity_at(Vec2::ZERO), 0.5);
+    assert_eq!(b.opacity_at(Vec2::ZERO.into()), 0.5);
     for (inner, needle) in [
         (
             "<bsdf type=\"mask\">\n<float name=\"opacity\" value=\"0.3\"/></bsdf>",
