@@ -76,11 +76,7 @@ impl SurfaceInteraction {
     /// Where textures are looked up at this hit (uv, triangle, barycentrics).
     #[inline]
     pub fn tex(&self) -> TexPoint {
-        TexPoint {
-            uv: self.uv,
-            prim: self.prim,
-            bary: self.bary,
-        }
+        TexPoint::new(self.uv, self.prim, self.bary)
     }
 
     /// World vector → shading frame.

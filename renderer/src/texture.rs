@@ -23,11 +23,13 @@ impl TexPoint {
     /// A point known by its uv only (analytic shapes, tests): triangle 0, barycentrics zero.
     #[inline]
     pub const fn at_uv(uv: Vec2) -> Self {
-        TexPoint {
-            uv,
-            prim: 0,
-            bary: Vec2::ZERO,
-        }
+        TexPoint::new(uv, 0, Vec2::ZERO)
+    }
+
+    /// The point at `uv`, barycentrics `bary` in triangle `prim`.
+    #[inline]
+    pub const fn new(uv: Vec2, prim: u32, bary: Vec2) -> Self {
+        TexPoint { uv, prim, bary }
     }
 }
 

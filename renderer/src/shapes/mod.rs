@@ -60,11 +60,7 @@ impl AreaSample {
     /// Where textures are looked up at the sampled point (an emitter's radiance texture).
     #[inline]
     pub fn tex(&self) -> TexPoint {
-        TexPoint {
-            uv: self.uv,
-            prim: self.prim,
-            bary: self.bary,
-        }
+        TexPoint::new(self.uv, self.prim, self.bary)
     }
 }
 

@@ -1955,6 +1955,19 @@ end_header
 4 0 1 2 3 65535 32768 0 0.75
 ";
 
+/// A `ply` shape reading quad.ply, with `inner` (its BSDF) on lines of its own.
+fn quad_ply_shape(inner: &str) -> String {
+    format!(
+        "<shape type=\"ply\">\n<string name=\"filename\" value=\"quad.ply\"/>\n{inner}\n</shape>"
+    )
+}
+
+/// A `mesh_attribute` texture for parameter `param` reading attribute `name`, its `name`
+/// parameter on a line of its own, then `extra`.
+fn mesh_attribute_xml(param: &str, name: &str, extra: &str) -> String {
+    format!("<texture type=\"mesh_attribute\" name=\"{param}\">\n<string name=\"name\" value=\"{name}\"/>{extra}\n</texture>")
+}
+
 /// The texture of parameter `name` in the BSDF of shape `shape`.
 fn mesh_attribute_of(
     scene: &SceneDescription,
@@ -1980,59 +1993,42 @@ fn mesh_attribute_textures_read_ply_properties_at_ray_hits() {
     use crate::texture::TexPoint;
     let dir = temp_dir("mesh-attribute");
     std::fs::write(dir.join("quad.ply"), ATTRIBUTE_PLY).unwrap();
-    let shape = |bsdf: &str| {
-        format!("<shape type=\"ply\"><string name=\"filename\" value=\"quad.ply\"/>{bsdf}</shape>")
+    let scale = "<float name=\"scale\" value=\"2\"/>";
+    let shape = |bsdf: &str, param: &str, name: &str, rest: &str| {
+        let texture = mesh_attribute_xml(param, name, scale);
+        quad_ply_shape(&format!("<bsdf type=\"{bsdf}\">{texture}{rest}</bsdf>"))
     };
-    let attr = |name: &str, param: &str| {
-        format!("<texture type=\"mesh_attribute\" name=\"{param}\"><string name=\"name\" value=\"{name}\"/><float name=\"scale\" value=\"2\"/></texture>")
-    };
+    let nested = "<bsdf type=\"diffuse\"/><bsdf type=\"conductor\"/>";
     let body = [
         SENSOR.to_string(),
-        shape(&format!(
-            "<bsdf type=\"diffuse\">{}</bsdf>",
-            attr("vertex_color", "reflectance")
-        )),
-        shape(&format!(
-            "<bsdf type=\"diffuse\">{}</bsdf>",
-            attr("face_tint_color", "reflectance")
-        )),
-        shape(&format!(
-            "<bsdf type=\"blendbsdf\">{}<bsdf type=\"diffuse\"/><bsdf type=\"conductor\"/></bsdf>",
-            attr("face_w", "weight")
-        )),
-        shape(&format!(
-            "<bsdf type=\"roughconductor\">{}</bsdf>",
-            attr("vertex_rough", "alpha")
-        )),
-        shape(&format!(
-            "<bsdf type=\"diffuse\">{}</bsdf>",
-            attr("vertex_q", "reflectance")
-        )),
+        shape("diffuse", "reflectance", "vertex_color", ""),
+        shape("diffuse", "reflectance", "face_tint_color", ""),
+        shape("blendbsdf", "weight", "face_w", nested),
+        shape("roughconductor", "alpha", "vertex_rough", ""),
+        shape("diffuse", "reflectance", "vertex_q", ""),
     ]
     .join("\n");
     let desc = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
 
-    // The ray hits triangle 1 = (v0, v2, v3) at p = (0.25, 0.5): b1 = 0.25 (v2), b2 = 0.25 (v3).
+    // The ray hits triangle 1 = (v0, v2, v3) at p = (0.2, 0.7): b0 = 0.3, b1 = 0.2 (v2),
+    // b2 = 0.5 (v3); unequal weights, so a swapped corner would show.
     let scene = crate::scene::Scene::build(&desc).unwrap();
-    let ray = crate::math::Ray::new(Vec3::new(0.25, 0.5, 1.0), -Vec3::Z);
+    let ray = crate::math::Ray::new(Vec3::new(0.2, 0.7, 1.0), -Vec3::Z);
     let si = scene.intersect(&ray).expect("hit");
     assert_eq!(si.prim, 1);
     assert!(
-        (si.bary - Vec2::new(0.25, 0.25)).length() < 1e-6,
+        (si.bary - Vec2::new(0.2, 0.5)).length() < 1e-6,
         "{}",
         si.bary
     );
-    let at = TexPoint {
-        prim: 1,
-        ..si.tex()
-    };
+    let at: TexPoint = si.tex();
     let eval = |shape: usize| {
         let (values, scale) = mesh_attribute_of(&desc, shape);
         Texture::MeshAttribute { values, scale }.eval(at)
     };
     let close = |a: Rgb, b: Rgb| (a - b).abs().max_element() < 1e-5;
-    // 0.5·(1, 0, 0) + 0.25·(0, 0, 1) + 0.25·(1, 1, 1), times scale 2.
-    assert!(close(eval(0), Rgb::new(1.5, 0.5, 1.0)), "{}", eval(0));
+    // 0.3·(1, 0, 0) + 0.2·(0, 0, 1) + 0.5·(1, 1, 1), times scale 2.
+    assert!(close(eval(0), Rgb::new(1.6, 1.0, 1.4)), "{}", eval(0));
     // ushort 65535 → 1, 32768 → 0.500008 sRGB-decoded = 0.2140481, 0 → 0; times 2, on both triangles.
     assert!(
         close(eval(1), 2.0 * Rgb::new(1.0, 0.214_048_1, 0.0)),
@@ -2042,16 +2038,17 @@ fn mesh_attribute_textures_read_ply_properties_at_ray_hits() {
     let (tint, _) = mesh_attribute_of(&desc, 1);
     assert_eq!(tint.values[..3], tint.values[3..]);
     assert!(close(eval(2), Rgb::splat(1.5)));
-    // 0.5·0.1 + 0.25·0.3 + 0.25·0.4 = 0.225, times 2; read as one number.
+    // 0.3·0.1 + 0.2·0.3 + 0.5·0.4 = 0.29, times 2; read as one number.
     let (rough, scale) = mesh_attribute_of(&desc, 3);
     let alpha = Texture::MeshAttribute {
         values: rough,
         scale,
     }
     .eval_1(at);
-    assert!((alpha - 0.45).abs() < 1e-6, "{alpha}");
-    // uchar stays 0–255: 0.5·0 + 0.25·200 + 0.25·255, times 2.
-    assert!(close(eval(4), Rgb::splat(227.5)), "{}", eval(4));
+    assert!((alpha - 0.58).abs() < 1e-6, "{alpha}");
+    // uchar stays 0–255: 0.3·0 + 0.2·200 + 0.5·255, times 2.
+    let q = eval(4);
+    assert!((q - Rgb::splat(335.0)).abs().max_element() < 1e-3, "{q}");
 }
 
 /// A BSDF with an id that reads a mesh attribute is bound separately to each shape using it.
@@ -2079,12 +2076,8 @@ fn a_shared_bsdf_reads_each_shapes_own_attribute() {
 fn error_mesh_attribute_cases_name_file_and_line() {
     let dir = temp_dir("mesh-attribute-errors");
     std::fs::write(dir.join("quad.ply"), ATTRIBUTE_PLY).unwrap();
-    let ply = |inner: &str| {
-        format!("{SENSOR}\n<shape type=\"ply\">\n<string name=\"filename\" value=\"quad.ply\"/>\n{inner}\n</shape>")
-    };
-    let tex = |param: &str, name: &str| {
-        format!("<texture type=\"mesh_attribute\" name=\"{param}\">\n<string name=\"name\" value=\"{name}\"/>\n</texture>")
-    };
+    let ply = |inner: &str| format!("{SENSOR}\n{}", quad_ply_shape(inner));
+    let tex = |param: &str, name: &str| mesh_attribute_xml(param, name, "");
     let diffuse = |name: &str| {
         format!(
             "<bsdf type=\"diffuse\">\n{}\n</bsdf>",
