@@ -6,6 +6,8 @@
 //! when present, otherwise angle-weighted smooth vertex normals computed in world space unless
 //! `face_normals` is true; OBJ texture coordinates stored as (u, 1 − v) (`flip_tex_coords`,
 //! default true for OBJ, false for PLY); `flip_normals` reverses the winding and the normals.
+//! Extra PLY properties become mesh attributes (`mesh_attributes.rs`), which the `mesh_attribute`
+//! textures of the shape's BSDF and area emitter read.
 
 use super::emitters::area_radiance;
 use super::mesh_attributes::{
@@ -699,6 +701,7 @@ fn load_serialized(path: &Path, index: usize) -> Result<RawMesh, String> {
 
 /// Reads a PLY (ASCII or binary) with `vertex` (x, y, z, optional nx/ny/nz and u/v, s/t or
 /// texture_u/texture_v) and `face` (`vertex_indices` or `vertex_index`) elements.
+/// Other vertex and face properties become attributes as Mitsuba 3.9.1 groups them.
 fn load_ply(path: &Path) -> Result<RawMesh, String> {
     use ply_rs_bw::parser::Parser;
     use ply_rs_bw::ply::{DefaultElement, Property};
