@@ -15,7 +15,7 @@ use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
 use crate::sampling::Distribution1D;
 use crate::shapes::Shape;
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use anyhow::{bail, Result};
 use glam::{Vec2, Vec3};
 
@@ -53,6 +53,8 @@ pub struct SurfaceInteraction {
     pub shape: u32,
     /// Primitive (triangle) index within the shape.
     pub prim: u32,
+    /// Barycentrics (b1, b2) of the hit in triangle `prim` (zero on analytic shapes).
+    pub bary: Vec2,
     /// Index of the shape's material in [`Scene::bsdfs`].
     pub material: u32,
     /// Index of the shape's area light in [`Scene::lights`], if it emits.
@@ -64,11 +66,17 @@ impl SurfaceInteraction {
     #[inline]
     pub fn shading_point(&self) -> ShadingPoint {
         ShadingPoint {
-            uv: self.uv,
+            tex: self.tex(),
             dpdu: self.frame.to_local(self.dpdu),
             dpdv: self.frame.to_local(self.dpdv),
             ng: self.frame.to_local(self.ng),
         }
+    }
+
+    /// Where textures are looked up at this hit (uv, triangle, barycentrics).
+    #[inline]
+    pub fn tex(&self) -> TexPoint {
+        TexPoint::new(self.uv, self.prim, self.bary)
     }
 
     /// World vector → shading frame.
@@ -454,6 +462,7 @@ impl Scene {
             wo: -ray.d,
             shape: hit.shape,
             prim: hit.prim,
+            bary: g.bary,
             material: info.material,
             light: info.light,
         }
@@ -489,7 +498,7 @@ impl Scene {
     pub fn emitted(&self, si: &SurfaceInteraction, w: Vec3) -> Rgb {
         match si.light {
             Some(l) => match &self.lights[l as usize] {
-                Light::Area(a) => a.eval(si.frame.n, w, si.uv),
+                Light::Area(a) => a.eval(si.frame.n, w, si.tex()),
                 _ => Rgb::ZERO,
             },
             None => Rgb::ZERO,

@@ -1,8 +1,98 @@
-//! Textures: values varying over a surface's (u, v) coordinates.
+//! Textures: values varying over a surface, looked up at a [`TexPoint`] (the surface's (u, v)
+//! coordinates, plus the hit triangle and its barycentrics for Mitsuba's `mesh_attribute`).
 
 use crate::spectrum::Rgb;
 use glam::{Mat3, Vec2};
 use std::sync::Arc;
+
+/// Where a texture is looked up: the texture coordinates and, on a triangle mesh, the hit
+/// triangle and its barycentrics. `mesh_attribute` reads the latter; every other texture reads
+/// `uv` only. Kept `Copy` and small (20 bytes) because every BSDF evaluation passes it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TexPoint {
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Index of the hit triangle within its mesh (0 on analytic shapes).
+    pub prim: u32,
+    /// Barycentric coordinates (b1, b2) of the hit in that triangle (weights of its second and
+    /// third corners; zero on analytic shapes).
+    pub bary: Vec2,
+}
+
+impl TexPoint {
+    /// A point known by its uv only (analytic shapes, tests): triangle 0, barycentrics zero.
+    #[inline]
+    pub const fn at_uv(uv: Vec2) -> Self {
+        TexPoint::new(uv, 0, Vec2::ZERO)
+    }
+
+    /// The point at `uv`, barycentrics `bary` in triangle `prim`.
+    #[inline]
+    pub const fn new(uv: Vec2, prim: u32, bary: Vec2) -> Self {
+        TexPoint { uv, prim, bary }
+    }
+}
+
+impl From<Vec2> for TexPoint {
+    /// [`TexPoint::at_uv`].
+    #[inline]
+    fn from(uv: Vec2) -> Self {
+        TexPoint::at_uv(uv)
+    }
+}
+
+/// One mesh attribute (Mitsuba's `vertex_*` / `face_*`) bound to the mesh of one shape, laid
+/// out per triangle so that a lookup needs only the hit's triangle index: a vertex attribute is
+/// stored as the values at each triangle's three corners (in winding order), a face attribute as
+/// one value per triangle (polygons fan-triangulated on load repeat their value).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AttributeValues {
+    /// The attribute's name (`vertex_color`, `face_weight`, …), for messages.
+    pub name: String,
+    /// Values per element: 1 (a grey value) or 3 (a colour).
+    pub channels: usize,
+    /// Constant over each triangle (`face_*`) rather than interpolated (`vertex_*`).
+    pub per_face: bool,
+    /// `channels` numbers per triangle (per face) or 3·`channels` per triangle (per vertex).
+    pub values: Vec<f32>,
+}
+
+impl AttributeValues {
+    /// The colour at `tp` (unscaled): the triangle's value, or the barycentric blend of its
+    /// corners' values; a 1-channel attribute reads as a grey colour (Mitsuba's `eval`).
+    #[inline]
+    fn eval(&self, tp: TexPoint) -> Rgb {
+        let ch = self.channels;
+        let at = |i: usize| {
+            if ch == 1 {
+                Rgb::splat(self.values[i])
+            } else {
+                Rgb::new(self.values[i], self.values[i + 1], self.values[i + 2])
+            }
+        };
+        let prim = tp.prim as usize;
+        if self.per_face {
+            at(prim * ch)
+        } else {
+            let i = prim * 3 * ch;
+            let b0 = 1.0 - tp.bary.x - tp.bary.y;
+            // Mitsuba: fmadd(v0, b0, fmadd(v1, b1, v2·b2)).
+            at(i) * b0 + (at(i + ch) * tp.bary.x + at(i + 2 * ch) * tp.bary.y)
+        }
+    }
+
+    /// Every stored value as a colour (a vertex attribute's corners, a face attribute's faces):
+    /// interpolation stays within them, so their range bounds every lookup.
+    fn elements(&self) -> impl Iterator<Item = Rgb> + '_ {
+        self.values.chunks_exact(self.channels).map(|c| {
+            if c.len() == 1 {
+                Rgb::splat(c[0])
+            } else {
+                Rgb::new(c[0], c[1], c[2])
+            }
+        })
+    }
+}
 
 /// A linear-RGB image sampled by [`Texture::Bitmap`] (row 0 is the top row, as in files).
 #[derive(Debug, Clone)]
@@ -98,6 +188,14 @@ pub enum Texture {
         /// Affine uv transform (Mitsuba's `to_uv`).
         to_uv: Mat3,
     },
+    /// Mitsuba's `mesh_attribute`: a per-vertex (interpolated) or per-face attribute of the
+    /// mesh the texture is bound to, times `scale`. The importer binds one copy per shape.
+    MeshAttribute {
+        /// The attribute, laid out per triangle of the shape's mesh.
+        values: Arc<AttributeValues>,
+        /// Factor applied to every value (Mitsuba's `scale`).
+        scale: f32,
+    },
 }
 
 impl Texture {
@@ -109,13 +207,17 @@ impl Texture {
             Texture::Constant(c) => ok(c),
             Texture::Checkerboard { color0, color1, .. } => ok(color0) && ok(color1),
             Texture::Bitmap { image, .. } => image.texels.iter().all(ok),
+            Texture::MeshAttribute { values, scale } => {
+                values.elements().all(|c| ok(&(c * *scale)))
+            }
         }
     }
 
-    /// The texture as one number at `uv`, as Mitsuba's `eval_1`: a grey value as it is, a
+    /// The texture as one number at `at`, as Mitsuba's `eval_1`: a grey value as it is, a
     /// colour by its luminance; NaN reads as 0.
-    pub fn eval_1(&self, uv: Vec2) -> f32 {
-        scalar_of(self.eval(uv))
+    #[inline]
+    pub fn eval_1(&self, at: impl Into<TexPoint>) -> f32 {
+        scalar_of(self.eval(at))
     }
 
     /// The mean colour ([`Texture::mean`]) as one number, read as [`Texture::eval_1`] reads.
@@ -135,6 +237,10 @@ impl Texture {
             Texture::Constant(c) => fold(init, c),
             Texture::Checkerboard { color0, color1, .. } => fold(fold(init, color0), color1),
             Texture::Bitmap { image, .. } => image.texels.iter().fold(init, fold),
+            Texture::MeshAttribute { values, scale } => values
+                .elements()
+                .map(|c| c * *scale)
+                .fold(init, |acc, c| fold(acc, &c)),
         }
     }
 
@@ -143,8 +249,12 @@ impl Texture {
         matches!(self, Texture::Constant(_))
     }
 
-    /// The colour at texture coordinates `uv`.
-    pub fn eval(&self, uv: Vec2) -> Rgb {
+    /// The colour at `at` (texture coordinates, or a point of a mesh: a bare `Vec2` uv
+    /// converts).
+    #[inline]
+    pub fn eval(&self, at: impl Into<TexPoint>) -> Rgb {
+        let tp = at.into();
+        let uv = tp.uv;
         match self {
             Texture::Constant(c) => *c,
             Texture::Checkerboard {
@@ -193,6 +303,7 @@ impl Texture {
                     }
                 }
             }
+            Texture::MeshAttribute { values, scale } => values.eval(tp) * *scale,
         }
     }
 
@@ -201,6 +312,8 @@ impl Texture {
     /// luminance, through `to_uv`; zero where the texture is piecewise constant (constants,
     /// checkerboards, nearest-neighbour bitmaps — Mitsuba implements it for bitmaps only).
     pub fn eval_1_grad(&self, uv: Vec2) -> Vec2 {
+        // `mesh_attribute` has no gradient (Mitsuba: not implemented); the importer refuses
+        // it as a bump map's height, so it reads as flat here like the other non-bitmaps.
         let Texture::Bitmap {
             image,
             filter: BitmapFilter::Bilinear,
@@ -256,7 +369,8 @@ impl Texture {
         }
     }
 
-    /// The mean colour (used for albedo estimates and light power).
+    /// The mean colour (used for albedo estimates and light power; for a mesh attribute the
+    /// unweighted mean of its stored values — triangle corners or faces — times `scale`).
     pub fn mean(&self) -> Rgb {
         match self {
             Texture::Constant(c) => *c,
@@ -264,6 +378,10 @@ impl Texture {
             Texture::Bitmap { image, .. } => {
                 let n = image.texels.len().max(1) as f32;
                 image.texels.iter().copied().sum::<Rgb>() / n
+            }
+            Texture::MeshAttribute { values, scale } => {
+                let n = (values.values.len() / values.channels).max(1) as f32;
+                values.elements().sum::<Rgb>() / n * *scale
             }
         }
     }

@@ -14,7 +14,7 @@
 
 use super::{Bsdf, BsdfSample, ShadingPoint, TransportMode};
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
 
 /// `blendbsdf`: two models mixed by a weight.
@@ -27,15 +27,15 @@ pub struct Blend {
 }
 
 impl Blend {
-    /// The blend weight at `uv`, clamped to [0, 1] (grey values as they are, colours by
+    /// The blend weight at `tp`, clamped to [0, 1] (grey values as they are, colours by
     /// luminance, as Mitsuba's `eval_1`).
-    pub fn weight_at(&self, uv: Vec2) -> f32 {
-        self.weight.eval_1(uv).clamp(0.0, 1.0)
+    pub fn weight_at(&self, tp: TexPoint) -> f32 {
+        self.weight.eval_1(tp).clamp(0.0, 1.0)
     }
 
     /// (1 − w)·f₀ + w·f₁.
     pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
-        let w = self.weight_at(sp.uv);
+        let w = self.weight_at(sp.tex);
         let [a, b] = &*self.nested;
         let mut f = Rgb::ZERO;
         if w < 1.0 {
@@ -49,7 +49,7 @@ impl Blend {
 
     /// [`Bsdf::eval_split`]: each model's parts, weighted as in [`Blend::eval`].
     pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
-        let w = self.weight_at(sp.uv);
+        let w = self.weight_at(sp.tex);
         let [a, b] = &*self.nested;
         let (mut broad, mut sharp) = (Rgb::ZERO, Rgb::ZERO);
         if w < 1.0 {
@@ -67,7 +67,7 @@ impl Blend {
 
     /// [`Bsdf::sharp_share`]: the models' shares, weighted like their sampling.
     pub fn sharp_share(&self, wo: Vec3, sp: &ShadingPoint) -> Option<f32> {
-        let w = self.weight_at(sp.uv);
+        let w = self.weight_at(sp.tex);
         let [a, b] = &*self.nested;
         let (sa, sb) = (a.sharp_share(wo, sp), b.sharp_share(wo, sp));
         if sa.is_none() && sb.is_none() {
@@ -78,7 +78,7 @@ impl Blend {
 
     /// (1 − w)·p₀ + w·p₁.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
-        let w = self.weight_at(sp.uv);
+        let w = self.weight_at(sp.tex);
         let [a, b] = &*self.nested;
         let mut p = 0.0;
         if w < 1.0 {
@@ -100,7 +100,7 @@ impl Blend {
         u: Vec2,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
-        let w = self.weight_at(sp.uv);
+        let w = self.weight_at(sp.tex);
         let [a, b] = &*self.nested;
         let (chosen, p_choice, u_lobe) = if u_lobe < w {
             (b, w, u_lobe / w)
@@ -128,7 +128,7 @@ impl Blend {
 
     /// Probability of a delta sample: (1 − w)·d₀ + w·d₁.
     pub fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
-        let w = self.weight_at(sp.uv);
+        let w = self.weight_at(sp.tex);
         let [a, b] = &*self.nested;
         a.delta_probability(wo, sp) * (1.0 - w) + b.delta_probability(wo, sp) * w
     }

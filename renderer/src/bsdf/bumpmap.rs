@@ -53,7 +53,7 @@ impl BumpMap {
 
 impl TiltedModel for BumpMap {
     fn tilted(&self, wo: Vec3, sp: &ShadingPoint) -> Frame {
-        let grad = self.height.eval_1_grad(sp.uv) * self.scale;
+        let grad = self.height.eval_1_grad(sp.tex.uv) * self.scale;
         // In the shading frame n = +z, so adding n·(h − n·∂p) replaces the z component by h.
         let dpdu = Vec3::new(sp.dpdu.x, sp.dpdu.y, grad.x);
         let dpdv = Vec3::new(sp.dpdv.x, sp.dpdv.y, grad.y);
@@ -105,7 +105,7 @@ mod tests {
     /// ∂p/∂v = (0.5, 1.5, 0), geometric normal = shading normal = +z.
     fn point() -> ShadingPoint {
         ShadingPoint {
-            uv: Vec2::new(0.3, 0.7),
+            tex: Vec2::new(0.3, 0.7).into(),
             dpdu: Vec3::new(2.0, 0.0, 0.0),
             dpdv: Vec3::new(0.5, 1.5, 0.0),
             ng: Vec3::Z,
@@ -147,7 +147,7 @@ mod tests {
     #[test]
     #[allow(clippy::excessive_precision)] // Mitsuba's values as printed, digit for digit
     fn matches_mitsuba_values() {
-        let grad = heights().eval_1_grad(point().uv);
+        let grad = heights().eval_1_grad(point().tex.uv);
         assert!((grad - Vec2::new(-0.9, 0.4)).length() < 1e-5, "{grad}");
         #[rustfmt::skip]
         let cases: [ProbeCase; 30] = [

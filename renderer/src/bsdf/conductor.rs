@@ -3,7 +3,8 @@
 use super::fresnel::{fresnel_conductor, reflect};
 use super::{BsdfSample, Conductor, ConductorIor};
 use crate::spectrum::Rgb;
-use glam::{Vec2, Vec3};
+use crate::texture::TexPoint;
+use glam::Vec3;
 
 /// Conductor Fresnel reflectance; `None` (Mitsuba's `material="none"`) reflects everything.
 pub(super) fn conductor_reflectance(ior: &Option<ConductorIor>, cos_theta_i: f32) -> Rgb {
@@ -14,11 +15,11 @@ pub(super) fn conductor_reflectance(ior: &Option<ConductorIor>, cos_theta_i: f32
 }
 
 impl Conductor {
-    pub(super) fn sample(&self, wo: Vec3, uv: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, wo: Vec3, tp: TexPoint) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
-        let weight = self.specular_reflectance.eval(uv) * conductor_reflectance(&self.ior, wo.z);
+        let weight = self.specular_reflectance.eval(tp) * conductor_reflectance(&self.ior, wo.z);
         Some(BsdfSample {
             wi: reflect(wo),
             weight,

@@ -3,20 +3,21 @@
 
 use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::{BsdfSample, Dielectric, TransportMode};
-use glam::{Vec2, Vec3};
+use crate::texture::TexPoint;
+use glam::Vec3;
 
 impl Dielectric {
     pub(super) fn sample(
         &self,
         wo: Vec3,
-        uv: Vec2,
+        tp: TexPoint,
         u_lobe: f32,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
         let f = fresnel_dielectric(wo.z, self.eta);
         if u_lobe <= f.r {
             // Weight: R (throughput) / R (probability) times the tint.
-            let weight = self.specular_reflectance.eval(uv);
+            let weight = self.specular_reflectance.eval(tp);
             Some(BsdfSample {
                 wi: reflect(wo),
                 weight,
@@ -25,7 +26,7 @@ impl Dielectric {
                 eta: 1.0,
             })
         } else {
-            let mut weight = self.specular_transmittance.eval(uv);
+            let mut weight = self.specular_transmittance.eval(tp);
             if mode == TransportMode::Radiance {
                 // Solid-angle compression when crossing the interface.
                 weight *= f.eta_ti * f.eta_ti;

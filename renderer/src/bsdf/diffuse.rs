@@ -3,11 +3,12 @@
 use super::{BsdfSample, Diffuse};
 use crate::sampling::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 use crate::spectrum::Rgb;
+use crate::texture::TexPoint;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
 impl Diffuse {
-    pub(super) fn sample(&self, wo: Vec3, uv: Vec2, u: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, wo: Vec3, tp: TexPoint, u: Vec2) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -19,18 +20,18 @@ impl Diffuse {
         // f·cos/pdf = (ρ/π)·cos / (cos/π) = ρ.
         Some(BsdfSample {
             wi,
-            weight: self.reflectance.eval(uv),
+            weight: self.reflectance.eval(tp),
             pdf,
             delta: false,
             eta: 1.0,
         })
     }
 
-    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> Rgb {
+    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, tp: TexPoint) -> Rgb {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Rgb::ZERO;
         }
-        self.reflectance.eval(uv) * FRAC_1_PI
+        self.reflectance.eval(tp) * FRAC_1_PI
     }
 
     pub(super) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {

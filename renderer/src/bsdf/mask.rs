@@ -14,7 +14,7 @@
 
 use super::{Bsdf, BsdfSample, ShadingPoint, TransportMode};
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
 
 /// `mask`: a nested model seen through an opacity.
@@ -27,14 +27,14 @@ pub struct Mask {
 }
 
 impl Mask {
-    /// The opacity at `uv`.
-    pub fn opacity_at(&self, uv: Vec2) -> f32 {
-        self.opacity.eval_1(uv).clamp(0.0, 1.0)
+    /// The opacity at `tp`.
+    pub fn opacity_at(&self, tp: TexPoint) -> f32 {
+        self.opacity.eval_1(tp).clamp(0.0, 1.0)
     }
 
     /// opacity · f (the pass-through is a delta: no value).
     pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
-        let a = self.opacity_at(sp.uv);
+        let a = self.opacity_at(sp.tex);
         if a > 0.0 {
             self.nested.eval(wo, wi, sp, mode) * a
         } else {
@@ -44,7 +44,7 @@ impl Mask {
 
     /// [`Bsdf::eval_split`]: opacity · the nested model's parts.
     pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
-        let a = self.opacity_at(sp.uv);
+        let a = self.opacity_at(sp.tex);
         if a > 0.0 {
             let (broad, sharp) = self.nested.eval_split(wo, wi, sp);
             (broad * a, sharp * a)
@@ -55,7 +55,7 @@ impl Mask {
 
     /// opacity · p.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
-        let a = self.opacity_at(sp.uv);
+        let a = self.opacity_at(sp.tex);
         if a > 0.0 {
             self.nested.pdf(wo, wi, sp) * a
         } else {
@@ -72,7 +72,7 @@ impl Mask {
         u: Vec2,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
-        let a = self.opacity_at(sp.uv);
+        let a = self.opacity_at(sp.tex);
         if u_lobe < a {
             let u_nested = (u_lobe / a).min(1.0 - f32::EPSILON / 2.0);
             let s = self.nested.sample(wo, sp, u_nested, u, mode)?;
@@ -92,7 +92,7 @@ impl Mask {
 
     /// Probability of a delta sample: the pass-through plus the nested model's delta share.
     pub fn delta_probability(&self, wo: Vec3, sp: &ShadingPoint) -> f32 {
-        let a = self.opacity_at(sp.uv);
+        let a = self.opacity_at(sp.tex);
         (1.0 - a) + a * self.nested.delta_probability(wo, sp)
     }
 }

@@ -41,7 +41,7 @@ mod mitsuba_reference;
 mod tests;
 
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
 
 pub use blend::Blend;
@@ -66,11 +66,12 @@ pub const SHARP_ALPHA_THRESHOLD: f32 = 0.01;
 
 /// Where a BSDF is evaluated: the texture coordinates and the surface's differential geometry
 /// there, in the local shading frame (what Mitsuba's BSDFs read from their
-/// `SurfaceInteraction`). Only `bumpmap` reads the geometry; every other model reads `uv`.
+/// `SurfaceInteraction`). Only `bumpmap` reads the geometry; every other model reads `tex`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ShadingPoint {
-    /// Texture coordinates.
-    pub uv: Vec2,
+    /// Where textures are looked up: uv, and the triangle and barycentrics that
+    /// `mesh_attribute` textures interpolate.
+    pub tex: TexPoint,
     /// ∂p/∂u in the shading frame (world length per unit of u; Mitsuba's `dp_du`).
     pub dpdu: Vec3,
     /// ∂p/∂v in the shading frame (Mitsuba's `dp_dv`).
@@ -84,7 +85,7 @@ impl ShadingPoint {
     /// ∂p/∂u = +x, ∂p/∂v = +y, geometric normal +z.
     pub const fn flat(uv: Vec2) -> Self {
         Self {
-            uv,
+            tex: TexPoint::at_uv(uv),
             dpdu: Vec3::X,
             dpdv: Vec3::Y,
             ng: Vec3::Z,
@@ -95,7 +96,7 @@ impl ShadingPoint {
     /// what a model nested in a normal or bump map reads.
     pub fn in_frame(&self, frame: &crate::frame::Frame) -> Self {
         Self {
-            uv: self.uv,
+            tex: self.tex,
             dpdu: frame.to_local(self.dpdu),
             dpdv: frame.to_local(self.dpdv),
             ng: frame.to_local(self.ng),
@@ -319,17 +320,17 @@ impl Bsdf {
         u: Vec2,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
-        let uv = sp.uv;
+        let tp = sp.tex;
         let s = match self {
-            Bsdf::Diffuse(b) => b.sample(wo, uv, u),
-            Bsdf::Conductor(b) => b.sample(wo, uv),
-            Bsdf::RoughConductor(b) => b.sample(wo, uv, u),
-            Bsdf::Dielectric(b) => b.sample(wo, uv, u_lobe, mode),
-            Bsdf::ThinDielectric(b) => b.sample(wo, uv, u_lobe),
-            Bsdf::RoughDielectric(b) => b.sample(wo, uv, u_lobe, u, mode),
-            Bsdf::Plastic(b) => b.sample(wo, uv, u_lobe, u),
-            Bsdf::RoughPlastic(b) => b.sample(wo, uv, u_lobe, u),
-            Bsdf::Principled(b) => b.sample(wo, uv, u_lobe, u, mode),
+            Bsdf::Diffuse(b) => b.sample(wo, tp, u),
+            Bsdf::Conductor(b) => b.sample(wo, tp),
+            Bsdf::RoughConductor(b) => b.sample(wo, tp, u),
+            Bsdf::Dielectric(b) => b.sample(wo, tp, u_lobe, mode),
+            Bsdf::ThinDielectric(b) => b.sample(wo, tp, u_lobe),
+            Bsdf::RoughDielectric(b) => b.sample(wo, tp, u_lobe, u, mode),
+            Bsdf::Plastic(b) => b.sample(wo, tp, u_lobe, u),
+            Bsdf::RoughPlastic(b) => b.sample(wo, tp, u_lobe, u),
+            Bsdf::Principled(b) => b.sample(wo, tp, u_lobe, u, mode),
             Bsdf::NormalMap(b) => b.sample(wo, sp, u_lobe, u, mode),
             Bsdf::BumpMap(b) => b.sample(wo, sp, u_lobe, u, mode),
             Bsdf::Blend(b) => b.sample(wo, sp, u_lobe, u, mode),
@@ -354,15 +355,15 @@ impl Bsdf {
 
     /// BSDF value f(wo, wi) without the cosine; zero for delta components.
     pub fn eval(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint, mode: TransportMode) -> Rgb {
-        let uv = sp.uv;
+        let tp = sp.tex;
         match self {
-            Bsdf::Diffuse(b) => b.eval(wo, wi, uv),
+            Bsdf::Diffuse(b) => b.eval(wo, wi, tp),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => Rgb::ZERO,
-            Bsdf::RoughConductor(b) => b.eval(wo, wi, uv),
-            Bsdf::RoughDielectric(b) => b.eval(wo, wi, uv, mode),
-            Bsdf::Plastic(b) => b.eval(wo, wi, uv),
-            Bsdf::RoughPlastic(b) => b.eval(wo, wi, uv),
-            Bsdf::Principled(b) => b.eval(wo, wi, uv, mode),
+            Bsdf::RoughConductor(b) => b.eval(wo, wi, tp),
+            Bsdf::RoughDielectric(b) => b.eval(wo, wi, tp, mode),
+            Bsdf::Plastic(b) => b.eval(wo, wi, tp),
+            Bsdf::RoughPlastic(b) => b.eval(wo, wi, tp),
+            Bsdf::Principled(b) => b.eval(wo, wi, tp, mode),
             Bsdf::NormalMap(b) => b.eval(wo, wi, sp, mode),
             Bsdf::BumpMap(b) => b.eval(wo, wi, sp, mode),
             Bsdf::Blend(b) => b.eval(wo, wi, sp, mode),
@@ -381,7 +382,7 @@ impl Bsdf {
 
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` through non-delta lobes.
     pub fn pdf(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> f32 {
-        let uv = sp.uv;
+        let tp = sp.tex;
         // Lobe-selection weights use texture means, not the local value (as Mitsuba); only a
         // normal or bump map (its frame), a blend (its weight), a mask (its opacity), a textured
         // alpha and the principled model (whose selection weights Mitsuba reads at the point)
@@ -389,11 +390,11 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wo, wi),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) => 0.0,
-            Bsdf::RoughConductor(b) => b.pdf(wo, wi, uv),
-            Bsdf::RoughDielectric(b) => b.pdf(wo, wi, uv),
+            Bsdf::RoughConductor(b) => b.pdf(wo, wi, tp),
+            Bsdf::RoughDielectric(b) => b.pdf(wo, wi, tp),
             Bsdf::Plastic(b) => b.pdf(wo, wi),
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
-            Bsdf::Principled(b) => b.pdf(wo, wi, uv),
+            Bsdf::Principled(b) => b.pdf(wo, wi, tp),
             Bsdf::NormalMap(b) => b.pdf(wo, wi, sp),
             Bsdf::BumpMap(b) => b.pdf(wo, wi, sp),
             Bsdf::Blend(b) => b.pdf(wo, wi, sp),
@@ -484,16 +485,16 @@ impl Bsdf {
     /// α < [`SHARP_ALPHA_THRESHOLD`]); the two add up to [`Bsdf::eval`]. Models without a
     /// sharp part return (f, 0).
     pub fn eval_split(&self, wo: Vec3, wi: Vec3, sp: &ShadingPoint) -> (Rgb, Rgb) {
-        let uv = sp.uv;
+        let tp = sp.tex;
         match self {
-            Bsdf::RoughConductor(b) if is_sharp(&b.roughness, &b.alpha_texture, uv) => {
-                (Rgb::ZERO, b.eval(wo, wi, uv))
+            Bsdf::RoughConductor(b) if is_sharp(&b.roughness, &b.alpha_texture, tp) => {
+                (Rgb::ZERO, b.eval(wo, wi, tp))
             }
-            Bsdf::RoughDielectric(b) if is_sharp(&b.roughness, &b.alpha_texture, uv) => {
-                (Rgb::ZERO, b.eval(wo, wi, uv, TransportMode::Radiance))
+            Bsdf::RoughDielectric(b) if is_sharp(&b.roughness, &b.alpha_texture, tp) => {
+                (Rgb::ZERO, b.eval(wo, wi, tp, TransportMode::Radiance))
             }
-            Bsdf::RoughPlastic(b) => b.eval_split(wo, wi, uv),
-            Bsdf::Principled(b) => b.eval_split(wo, wi, uv),
+            Bsdf::RoughPlastic(b) => b.eval_split(wo, wi, tp),
+            Bsdf::Principled(b) => b.eval_split(wo, wi, tp),
             Bsdf::NormalMap(b) => b.eval_split(wo, wi, sp),
             Bsdf::BumpMap(b) => b.eval_split(wo, wi, sp),
             Bsdf::Blend(b) => b.eval_split(wo, wi, sp),
@@ -515,12 +516,12 @@ impl Bsdf {
     /// [`Bsdf::eval_split`]); otherwise `Some(s)`, `s` ∈ [0, 1] the share of its sampling
     /// that goes to sharp lobes — how often an SPPM eye path should follow them.
     pub fn sharp_share(&self, wo: Vec3, sp: &ShadingPoint) -> Option<f32> {
-        let uv = sp.uv;
+        let tp = sp.tex;
         match self {
-            Bsdf::RoughConductor(b) if is_sharp(&b.roughness, &b.alpha_texture, uv) => Some(1.0),
-            Bsdf::RoughDielectric(b) if is_sharp(&b.roughness, &b.alpha_texture, uv) => Some(1.0),
+            Bsdf::RoughConductor(b) if is_sharp(&b.roughness, &b.alpha_texture, tp) => Some(1.0),
+            Bsdf::RoughDielectric(b) if is_sharp(&b.roughness, &b.alpha_texture, tp) => Some(1.0),
             Bsdf::RoughPlastic(b) => b.sharp_share(wo),
-            Bsdf::Principled(b) => b.sharp_share(wo, uv),
+            Bsdf::Principled(b) => b.sharp_share(wo, tp),
             Bsdf::NormalMap(b) => b.sharp_share(wo, sp),
             Bsdf::BumpMap(b) => b.sharp_share(wo, sp),
             Bsdf::Blend(b) => b.sharp_share(wo, sp),
@@ -591,26 +592,26 @@ impl Bsdf {
     /// metal's colour); for dielectrics the transmittance tint; `principled`: its base colour
     /// (diffuse and metal colour alike, see [`Principled::albedo`]); `twosided`: the front side.
     pub fn albedo(&self, sp: &ShadingPoint) -> Rgb {
-        let uv = sp.uv;
+        let tp = sp.tex;
         match self {
-            Bsdf::Diffuse(b) => b.reflectance.eval(uv),
-            Bsdf::Plastic(b) => b.diffuse_reflectance.eval(uv),
-            Bsdf::RoughPlastic(b) => b.diffuse_reflectance.eval(uv),
+            Bsdf::Diffuse(b) => b.reflectance.eval(tp),
+            Bsdf::Plastic(b) => b.diffuse_reflectance.eval(tp),
+            Bsdf::RoughPlastic(b) => b.diffuse_reflectance.eval(tp),
             Bsdf::Conductor(b) => {
-                b.specular_reflectance.eval(uv) * conductor::conductor_reflectance(&b.ior, 1.0)
+                b.specular_reflectance.eval(tp) * conductor::conductor_reflectance(&b.ior, 1.0)
             }
             Bsdf::RoughConductor(b) => {
-                b.specular_reflectance.eval(uv) * conductor::conductor_reflectance(&b.ior, 1.0)
+                b.specular_reflectance.eval(tp) * conductor::conductor_reflectance(&b.ior, 1.0)
             }
-            Bsdf::Dielectric(b) => b.specular_transmittance.eval(uv),
-            Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(uv),
-            Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(uv),
-            Bsdf::Principled(b) => b.albedo(uv),
+            Bsdf::Dielectric(b) => b.specular_transmittance.eval(tp),
+            Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(tp),
+            Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(tp),
+            Bsdf::Principled(b) => b.albedo(tp),
             Bsdf::NormalMap(b) => b.nested.albedo(sp),
             Bsdf::BumpMap(b) => b.nested.albedo(sp),
             Bsdf::Mask(b) => b.nested.albedo(sp),
             Bsdf::Blend(b) => {
-                let w = b.weight_at(uv);
+                let w = b.weight_at(tp);
                 b.nested[0].albedo(sp) * (1.0 - w) + b.nested[1].albedo(sp) * w
             }
             Bsdf::TwoSided { front, .. } => front.albedo(sp),
@@ -618,17 +619,17 @@ impl Bsdf {
     }
 }
 
-/// The microfacet distribution at `uv`: `roughness`, or the isotropic alpha an `alpha`
+/// The microfacet distribution at `tp`: `roughness`, or the isotropic alpha an `alpha`
 /// texture gives there (Mitsuba's `eval_1`).
 fn distribution_at(
     roughness: &Roughness,
     alpha_texture: &Option<Texture>,
-    uv: Vec2,
+    tp: TexPoint,
 ) -> microfacet::MicrofacetDistribution {
     match alpha_texture {
         None => microfacet::MicrofacetDistribution::new(roughness),
         Some(t) => {
-            let a = t.eval_1(uv);
+            let a = t.eval_1(tp);
             microfacet::MicrofacetDistribution::new(&Roughness {
                 kind: roughness.kind,
                 alpha_u: a,
@@ -638,11 +639,11 @@ fn distribution_at(
     }
 }
 
-/// Whether a rough model's lobe at `uv` is sharp (α below [`SHARP_ALPHA_THRESHOLD`]).
-fn is_sharp(roughness: &Roughness, alpha_texture: &Option<Texture>, uv: Vec2) -> bool {
+/// Whether a rough model's lobe at `tp` is sharp (α below [`SHARP_ALPHA_THRESHOLD`]).
+fn is_sharp(roughness: &Roughness, alpha_texture: &Option<Texture>, tp: TexPoint) -> bool {
     let alpha = match alpha_texture {
         None => roughness.alpha_u.max(roughness.alpha_v),
-        Some(t) => t.eval_1(uv),
+        Some(t) => t.eval_1(tp),
     };
     alpha < SHARP_ALPHA_THRESHOLD
 }

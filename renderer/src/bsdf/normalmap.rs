@@ -43,7 +43,7 @@ impl NormalMap {
 
 impl TiltedModel for NormalMap {
     fn tilted(&self, wo: Vec3, sp: &ShadingPoint) -> Frame {
-        let mut n = self.normalmap.eval(sp.uv) * 2.0 - Vec3::ONE;
+        let mut n = self.normalmap.eval(sp.tex) * 2.0 - Vec3::ONE;
         if self.flip_invalid_normals && wo.z * wo.dot(n) <= 0.0 {
             n = Vec3::new(-n.x, -n.y, n.z);
         }

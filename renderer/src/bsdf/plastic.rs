@@ -6,7 +6,7 @@ use super::fresnel::{fresnel_dielectric, fresnel_diffuse_reflectance, reflect};
 use super::{BsdfSample, Plastic};
 use crate::sampling::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
@@ -53,20 +53,26 @@ impl Plastic {
         self.prob_specular(fresnel_dielectric(wo.z, self.eta).r)
     }
 
-    fn diffuse_value(&self, uv: Vec2, f_o: f32, f_i: f32) -> Rgb {
+    fn diffuse_value(&self, tp: TexPoint, f_o: f32, f_i: f32) -> Rgb {
         let fdr_int = fresnel_diffuse_reflectance(1.0 / self.eta);
-        let rho = internal_scattering(self.diffuse_reflectance.eval(uv), fdr_int, self.nonlinear);
+        let rho = internal_scattering(self.diffuse_reflectance.eval(tp), fdr_int, self.nonlinear);
         rho * ((1.0 - f_o) * (1.0 - f_i) / (self.eta * self.eta))
     }
 
-    pub(super) fn sample(&self, wo: Vec3, uv: Vec2, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(
+        &self,
+        wo: Vec3,
+        tp: TexPoint,
+        u_lobe: f32,
+        u: Vec2,
+    ) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
         let f_o = fresnel_dielectric(wo.z, self.eta).r;
         let p_spec = self.prob_specular(f_o);
         if u_lobe < p_spec {
-            let weight = self.specular_reflectance.eval(uv) * (f_o / p_spec);
+            let weight = self.specular_reflectance.eval(tp) * (f_o / p_spec);
             Some(BsdfSample {
                 wi: reflect(wo),
                 weight,
@@ -82,7 +88,7 @@ impl Plastic {
                 return None;
             }
             let f_i = fresnel_dielectric(wi.z, self.eta).r;
-            let weight = self.diffuse_value(uv, f_o, f_i) / p_diff;
+            let weight = self.diffuse_value(tp, f_o, f_i) / p_diff;
             Some(BsdfSample {
                 wi,
                 weight,
@@ -93,13 +99,13 @@ impl Plastic {
         }
     }
 
-    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> Rgb {
+    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, tp: TexPoint) -> Rgb {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Rgb::ZERO;
         }
         let f_o = fresnel_dielectric(wo.z, self.eta).r;
         let f_i = fresnel_dielectric(wi.z, self.eta).r;
-        self.diffuse_value(uv, f_o, f_i) * FRAC_1_PI
+        self.diffuse_value(tp, f_o, f_i) * FRAC_1_PI
     }
 
     pub(super) fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {

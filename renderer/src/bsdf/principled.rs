@@ -60,7 +60,7 @@ use super::microfacet::MicrofacetDistribution;
 use super::{BsdfSample, Lobe, MicrofacetKind, Roughness, TransportMode};
 use crate::sampling::square_to_cosine_hemisphere;
 use crate::spectrum::{luminance, Rgb};
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -279,9 +279,9 @@ pub fn eta_from_specular(specular: f32) -> f32 {
     2.0 / (1.0 - (0.08 * specular).sqrt()) - 1.0
 }
 
-/// Reads a lobe parameter at `uv`, 0 when the lobe is off.
-fn scalar_at(t: &Option<Texture>, uv: Vec2) -> f32 {
-    t.as_ref().map_or(0.0, |t| t.eval_1(uv))
+/// Reads a lobe parameter at `tp`, 0 when the lobe is off.
+fn scalar_at(t: &Option<Texture>, tp: TexPoint) -> f32 {
+    t.as_ref().map_or(0.0, |t| t.eval_1(tp))
 }
 
 /// A lobe parameter's mean (for the SPPM class), 0 when the lobe is off.
@@ -344,24 +344,24 @@ impl Principled {
     /// The G-buffer albedo: `base_color`. It is the diffuse colour and equally the metal's
     /// colour at normal incidence (Schlick F₀ = base_color), so no rule depends on `metallic`;
     /// Mitsuba's `eval_diffuse_reflectance` returns the same.
-    pub fn albedo(&self, uv: Vec2) -> Rgb {
-        self.params.base_color.eval(uv)
+    pub fn albedo(&self, tp: TexPoint) -> Rgb {
+        self.params.base_color.eval(tp)
     }
 
-    fn at(&self, uv: Vec2) -> Local {
+    fn at(&self, tp: TexPoint) -> Local {
         let p = &self.params;
         Local {
-            base_color: p.base_color.eval(uv),
-            roughness: p.roughness.eval_1(uv),
-            anisotropic: scalar_at(&p.anisotropic, uv),
-            metallic: scalar_at(&p.metallic, uv),
-            spec_trans: scalar_at(&p.spec_trans, uv),
-            spec_tint: scalar_at(&p.spec_tint, uv),
-            sheen: scalar_at(&p.sheen, uv),
-            sheen_tint: scalar_at(&p.sheen_tint, uv),
-            flatness: scalar_at(&p.flatness, uv),
-            clearcoat: scalar_at(&p.clearcoat, uv),
-            clearcoat_gloss: p.clearcoat_gloss.eval_1(uv),
+            base_color: p.base_color.eval(tp),
+            roughness: p.roughness.eval_1(tp),
+            anisotropic: scalar_at(&p.anisotropic, tp),
+            metallic: scalar_at(&p.metallic, tp),
+            spec_trans: scalar_at(&p.spec_trans, tp),
+            spec_tint: scalar_at(&p.spec_tint, tp),
+            sheen: scalar_at(&p.sheen, tp),
+            sheen_tint: scalar_at(&p.sheen_tint, tp),
+            flatness: scalar_at(&p.flatness, tp),
+            clearcoat: scalar_at(&p.clearcoat, tp),
+            clearcoat_gloss: p.clearcoat_gloss.eval_1(tp),
         }
     }
 
@@ -446,14 +446,14 @@ impl Principled {
         f
     }
 
-    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
-        self.eval_parts(wo, wi, uv, mode, false).0
+    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, tp: TexPoint, mode: TransportMode) -> Rgb {
+        self.eval_parts(wo, wi, tp, mode, false).0
     }
 
     /// (broad, sharp) in radiance mode: the main specular lobes and the clearcoat count as
     /// sharp where their α is below [`super::SHARP_ALPHA_THRESHOLD`] (see `Bsdf::eval_split`).
-    pub(super) fn eval_split(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> (Rgb, Rgb) {
-        self.eval_parts(wo, wi, uv, TransportMode::Radiance, true)
+    pub(super) fn eval_split(&self, wo: Vec3, wi: Vec3, tp: TexPoint) -> (Rgb, Rgb) {
+        self.eval_parts(wo, wi, tp, TransportMode::Radiance, true)
     }
 
     /// Whether the main lobes and the clearcoat are sharp at `l`.
@@ -472,11 +472,11 @@ impl Principled {
 
     /// The sampling share of the sharp lobes for viewer `wo` (see `Bsdf::sharp_share`), taken
     /// at the Fresnel reflectance of the normal; `None` without a sharp lobe.
-    pub(super) fn sharp_share(&self, wo: Vec3, uv: Vec2) -> Option<f32> {
+    pub(super) fn sharp_share(&self, wo: Vec3, tp: TexPoint) -> Option<f32> {
         if wo.z == 0.0 {
             return None;
         }
-        let l = self.at(uv);
+        let l = self.at(tp);
         let (main, clearcoat) = self.sharp_lobes(&l);
         if !main && !clearcoat {
             return None;
@@ -501,7 +501,7 @@ impl Principled {
         &self,
         wo: Vec3,
         wi: Vec3,
-        uv: Vec2,
+        tp: TexPoint,
         mode: TransportMode,
         split: bool,
     ) -> (Rgb, Rgb) {
@@ -514,7 +514,7 @@ impl Principled {
         if !reflect && !refract {
             return (Rgb::ZERO, Rgb::ZERO);
         }
-        let l = self.at(uv);
+        let l = self.at(tp);
         let (main_sharp, clearcoat_sharp) = if split {
             self.sharp_lobes(&l)
         } else {
@@ -609,7 +609,7 @@ impl Principled {
         (value, sharp)
     }
 
-    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
+    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3, tp: TexPoint) -> f32 {
         let (cos_o, cos_i) = (wo.z, wi.z);
         if cos_o == 0.0 {
             return 0.0;
@@ -619,7 +619,7 @@ impl Principled {
         if !reflect && !refract {
             return 0.0;
         }
-        let l = self.at(uv);
+        let l = self.at(tp);
         let p = &self.params;
         let front = cos_o > 0.0;
         let eta_path = if front { self.eta } else { 1.0 / self.eta };
@@ -662,7 +662,7 @@ impl Principled {
     pub(super) fn sample(
         &self,
         wo: Vec3,
-        uv: Vec2,
+        tp: TexPoint,
         u_lobe: f32,
         u: Vec2,
         mode: TransportMode,
@@ -671,7 +671,7 @@ impl Principled {
         if cos_o == 0.0 {
             return None;
         }
-        let l = self.at(uv);
+        let l = self.at(tp);
         let front = cos_o > 0.0;
         // From inside only transmission-capable models scatter.
         if !front && l.bsdf() <= 0.0 {
@@ -707,11 +707,11 @@ impl Principled {
             }
             (wi, 1.0)
         };
-        let pdf = self.pdf(wo, wi, uv);
+        let pdf = self.pdf(wo, wi, tp);
         if pdf.is_nan() || pdf <= 0.0 {
             return None;
         }
-        let weight = self.eval(wo, wi, uv, mode) * (wi.z.abs() / pdf);
+        let weight = self.eval(wo, wi, tp, mode) * (wi.z.abs() / pdf);
         Some(BsdfSample {
             wi,
             weight,

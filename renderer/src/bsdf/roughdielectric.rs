@@ -4,13 +4,14 @@
 use super::fresnel::{fresnel_dielectric, reflect_about, refract_about};
 use super::{BsdfSample, RoughDielectric, TransportMode};
 use crate::spectrum::Rgb;
+use crate::texture::TexPoint;
 use glam::{Vec2, Vec3};
 
 impl RoughDielectric {
     pub(super) fn sample(
         &self,
         wo: Vec3,
-        uv: Vec2,
+        tp: TexPoint,
         u_lobe: f32,
         u: Vec2,
         mode: TransportMode,
@@ -19,7 +20,7 @@ impl RoughDielectric {
         if cos_o == 0.0 {
             return None;
         }
-        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, tp);
         // Sample a normal visible from the side `wo` is on (the distribution is symmetric).
         let (m, pdf_m) = distr.sample(wo * cos_o.signum(), u);
         if pdf_m.is_nan() || pdf_m <= 0.0 {
@@ -30,14 +31,14 @@ impl RoughDielectric {
             let wi = reflect_about(wo, m);
             (
                 wi,
-                self.specular_reflectance.eval(uv),
+                self.specular_reflectance.eval(tp),
                 f.r,
                 1.0,
                 1.0 / (4.0 * wi.dot(m)),
             )
         } else {
             let wi = refract_about(wo, m, f.cos_theta_t, f.eta_ti);
-            let mut w = self.specular_transmittance.eval(uv);
+            let mut w = self.specular_transmittance.eval(tp);
             if mode == TransportMode::Radiance {
                 w *= f.eta_ti * f.eta_ti;
             }
@@ -74,7 +75,7 @@ impl RoughDielectric {
         Some((if m.z < 0.0 { -m } else { m }, eta))
     }
 
-    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2, mode: TransportMode) -> Rgb {
+    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, tp: TexPoint, mode: TransportMode) -> Rgb {
         let (cos_o, cos_i) = (wo.z, wi.z);
         if cos_o == 0.0 || cos_i == 0.0 {
             return Rgb::ZERO;
@@ -83,7 +84,7 @@ impl RoughDielectric {
         let Some((m, eta)) = self.half_vector(wo, wi, reflect) else {
             return Rgb::ZERO;
         };
-        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, tp);
         let d = distr.eval(m);
         if d == 0.0 {
             return Rgb::ZERO;
@@ -91,7 +92,7 @@ impl RoughDielectric {
         let f = fresnel_dielectric(wo.dot(m), self.eta).r;
         let g = distr.g(wo, wi, m);
         if reflect {
-            self.specular_reflectance.eval(uv) * (f * d * g / (4.0 * (cos_o * cos_i).abs()))
+            self.specular_reflectance.eval(tp) * (f * d * g / (4.0 * (cos_o * cos_i).abs()))
         } else {
             let scale = if mode == TransportMode::Radiance {
                 1.0 / (eta * eta)
@@ -101,11 +102,11 @@ impl RoughDielectric {
             let denom = wo.dot(m) + eta * wi.dot(m);
             let value = scale * (1.0 - f) * d * g * eta * eta * wo.dot(m) * wi.dot(m)
                 / (cos_o * cos_i * denom * denom);
-            self.specular_transmittance.eval(uv) * value.abs()
+            self.specular_transmittance.eval(tp) * value.abs()
         }
     }
 
-    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> f32 {
+    pub(super) fn pdf(&self, wo: Vec3, wi: Vec3, tp: TexPoint) -> f32 {
         let (cos_o, cos_i) = (wo.z, wi.z);
         if cos_o == 0.0 || cos_i == 0.0 {
             return 0.0;
@@ -124,7 +125,7 @@ impl RoughDielectric {
             let denom = wo.dot(m) + eta * wi.dot(m);
             eta * eta * wi.dot(m) / (denom * denom)
         };
-        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, uv);
+        let distr = super::distribution_at(&self.roughness, &self.alpha_texture, tp);
         let f = fresnel_dielectric(wo.dot(m), self.eta).r;
         let prob = distr.pdf(wo * cos_o.signum(), m) * if reflect { f } else { 1.0 - f };
         let pdf = prob * dwh_dwi.abs();

@@ -12,7 +12,7 @@ use super::plastic::{internal_scattering, specular_sampling_weight};
 use super::{BsdfSample, RoughPlastic, Roughness};
 use crate::sampling::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -233,7 +233,13 @@ impl RoughPlastic {
         }
     }
 
-    pub(super) fn sample(&self, wo: Vec3, uv: Vec2, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(
+        &self,
+        wo: Vec3,
+        tp: TexPoint,
+        u_lobe: f32,
+        u: Vec2,
+    ) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -248,7 +254,7 @@ impl RoughPlastic {
         if pdf.is_nan() || pdf <= 0.0 {
             return None;
         }
-        let f = self.eval(wo, wi, uv);
+        let f = self.eval(wo, wi, tp);
         Some(BsdfSample {
             wi,
             weight: f * (wi.z / pdf),
@@ -258,8 +264,8 @@ impl RoughPlastic {
         })
     }
 
-    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> Rgb {
-        let (specular, diffuse) = self.terms(wo, wi, uv);
+    pub(super) fn eval(&self, wo: Vec3, wi: Vec3, tp: TexPoint) -> Rgb {
+        let (specular, diffuse) = self.terms(wo, wi, tp);
         specular + diffuse
     }
 
@@ -269,8 +275,8 @@ impl RoughPlastic {
     }
 
     /// (broad, sharp): the diffuse base and, if it is sharp, the coating's reflection.
-    pub(super) fn eval_split(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> (Rgb, Rgb) {
-        let (specular, diffuse) = self.terms(wo, wi, uv);
+    pub(super) fn eval_split(&self, wo: Vec3, wi: Vec3, tp: TexPoint) -> (Rgb, Rgb) {
+        let (specular, diffuse) = self.terms(wo, wi, tp);
         if self.sharp_coating() {
             (diffuse, specular)
         } else {
@@ -285,7 +291,7 @@ impl RoughPlastic {
     }
 
     /// The coating's specular reflection and the diffuse base's term.
-    fn terms(&self, wo: Vec3, wi: Vec3, uv: Vec2) -> (Rgb, Rgb) {
+    fn terms(&self, wo: Vec3, wi: Vec3, tp: TexPoint) -> (Rgb, Rgb) {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return (Rgb::ZERO, Rgb::ZERO);
         }
@@ -294,9 +300,9 @@ impl RoughPlastic {
         let d = distr.eval(h);
         let f = fresnel_dielectric(wo.dot(h), self.eta).r;
         let g = distr.g(wo, wi, h);
-        let specular = self.specular_reflectance.eval(uv) * (f * d * g / (4.0 * wo.z * wi.z));
+        let specular = self.specular_reflectance.eval(tp) * (f * d * g / (4.0 * wo.z * wi.z));
         let rho = internal_scattering(
-            self.diffuse_reflectance.eval(uv),
+            self.diffuse_reflectance.eval(tp),
             self.coating.internal_reflectance,
             self.nonlinear,
         );

@@ -3,7 +3,8 @@
 
 use super::fresnel::{fresnel_dielectric, reflect};
 use super::{BsdfSample, ThinDielectric};
-use glam::{Vec2, Vec3};
+use crate::texture::TexPoint;
+use glam::Vec3;
 
 impl ThinDielectric {
     /// Total reflectance of the slab: R + T²R/(1 − R²) = 2R/(1 + R) for a single-interface
@@ -13,10 +14,10 @@ impl ThinDielectric {
         r * 2.0 / (1.0 + r)
     }
 
-    pub(super) fn sample(&self, wo: Vec3, uv: Vec2, u_lobe: f32) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, wo: Vec3, tp: TexPoint, u_lobe: f32) -> Option<BsdfSample> {
         let r = self.slab_reflectance(wo.z);
         if u_lobe <= r {
-            let weight = self.specular_reflectance.eval(uv);
+            let weight = self.specular_reflectance.eval(tp);
             Some(BsdfSample {
                 wi: reflect(wo),
                 weight,
@@ -25,7 +26,7 @@ impl ThinDielectric {
                 eta: 1.0,
             })
         } else {
-            let weight = self.specular_transmittance.eval(uv);
+            let weight = self.specular_transmittance.eval(tp);
             Some(BsdfSample {
                 wi: -wo,
                 weight,

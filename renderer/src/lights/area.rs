@@ -7,7 +7,7 @@ use crate::math::{coordinate_system, spawn_ray};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_uniform_cone, uniform_cone_pdf};
 use crate::shapes::{Shape, Sphere};
 use crate::spectrum::Rgb;
-use crate::texture::Texture;
+use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -21,12 +21,12 @@ pub struct AreaLight {
 }
 
 impl AreaLight {
-    /// Radiance leaving the surface with normal `n` at texture coordinates `uv` in direction
-    /// `w` (front side only).
+    /// Radiance leaving the surface with normal `n` at texture point `tp` in direction `w`
+    /// (front side only).
     #[inline]
-    pub fn eval(&self, n: Vec3, w: Vec3, uv: Vec2) -> Rgb {
+    pub fn eval(&self, n: Vec3, w: Vec3, tp: TexPoint) -> Rgb {
         if n.dot(w) > 0.0 {
-            self.radiance.eval(uv)
+            self.radiance.eval(tp)
         } else {
             Rgb::ZERO
         }
@@ -82,7 +82,7 @@ impl AreaLight {
             wi,
             p: s.p,
             dist,
-            weight: self.radiance.eval(s.uv) / pdf,
+            weight: self.radiance.eval(s.tex()) / pdf,
             pdf,
             delta: false,
             infinite: false,
@@ -127,7 +127,7 @@ impl AreaLight {
         let d = (t * local.x + b * local.y + s.n * local.z).normalize();
         EmissionSample {
             ray: spawn_ray(s.p, s.n, d),
-            flux: self.radiance.eval(s.uv) * (PI / s.pdf),
+            flux: self.radiance.eval(s.tex()) * (PI / s.pdf),
             light: 0,
         }
     }

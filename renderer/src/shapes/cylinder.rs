@@ -150,6 +150,7 @@ impl Cylinder {
                 .transform_vector3(Vec3::new(-q.y, q.x, 0.0) * (2.0 * PI)),
             dpdv: self.to_world.transform_vector3(Vec3::Z),
             uv: Self::local_uv(q),
+            bary: Vec2::ZERO,
         }
     }
 
@@ -161,6 +162,8 @@ impl Cylinder {
             p: self.to_world.transform_point3(q),
             n: self.normal_at(q),
             uv: Self::local_uv(q),
+            prim: 0,
+            bary: Vec2::ZERO,
             pdf: 1.0 / self.area,
         }
     }

@@ -106,6 +106,7 @@ impl Disk {
             dpdu,
             dpdv,
             uv: Self::local_uv(q),
+            bary: Vec2::ZERO,
         }
     }
 
@@ -117,6 +118,8 @@ impl Disk {
             p: self.to_world.transform_point3(q),
             n: self.normal,
             uv: Self::local_uv(q),
+            prim: 0,
+            bary: Vec2::ZERO,
             pdf: 1.0 / self.area,
         }
     }

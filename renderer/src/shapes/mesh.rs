@@ -205,6 +205,7 @@ impl Mesh {
             dpdu,
             dpdv,
             uv,
+            bary: b,
         }
     }
 
@@ -232,6 +233,8 @@ impl Mesh {
             p,
             n,
             uv,
+            prim: tri as u32,
+            bary: b,
             pdf: 1.0 / self.area,
         }
     }

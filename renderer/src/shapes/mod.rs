@@ -14,6 +14,7 @@ pub use sphere::Sphere;
 
 use crate::description::Geometry;
 use crate::math::Ray;
+use crate::texture::TexPoint;
 use glam::{Vec2, Vec3, Vec3A};
 
 /// Local geometry at a ray hit, before materials and lights are attached.
@@ -32,6 +33,9 @@ pub struct HitGeometry {
     pub dpdv: Vec3,
     /// Texture coordinates.
     pub uv: Vec2,
+    /// Barycentrics (b1, b2) of the hit in its triangle, clamped into it (zero on analytic
+    /// shapes): what `mesh_attribute` textures interpolate with.
+    pub bary: Vec2,
 }
 
 /// A point sampled on a surface.
@@ -44,8 +48,20 @@ pub struct AreaSample {
     pub n: Vec3,
     /// Texture coordinates.
     pub uv: Vec2,
+    /// Triangle the point lies in (meshes; 0 on analytic shapes).
+    pub prim: u32,
+    /// Barycentrics (b1, b2) of the point in that triangle (zero on analytic shapes).
+    pub bary: Vec2,
     /// Density with respect to surface area.
     pub pdf: f32,
+}
+
+impl AreaSample {
+    /// Where textures are looked up at the sampled point (an emitter's radiance texture).
+    #[inline]
+    pub fn tex(&self) -> TexPoint {
+        TexPoint::new(self.uv, self.prim, self.bary)
+    }
 }
 
 /// One shape of the scene.

@@ -123,6 +123,7 @@ impl Sphere {
             dpdu,
             dpdv,
             uv,
+            bary: Vec2::ZERO,
         }
     }
 
@@ -140,6 +141,8 @@ impl Sphere {
             p: self.center + dir * self.radius,
             n,
             uv: direction_to_spherical_uv(local),
+            prim: 0,
+            bary: Vec2::ZERO,
             pdf: 1.0 / self.area(),
         }
     }

@@ -95,8 +95,20 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
         }
         "plastic" => Bsdf::Plastic(Plastic {
             eta: relative_ior(&mut p, "polypropylene")?,
-            diffuse_reflectance: p.texture_or(b, "diffuse_reflectance", refl, 0.5)?,
-            specular_reflectance: p.texture_or(b, "specular_reflectance", refl, 1.0)?,
+            diffuse_reflectance: texture_read_as(
+                b,
+                &mut p,
+                "diffuse_reflectance",
+                0.5,
+                Read::Mean,
+            )?,
+            specular_reflectance: texture_read_as(
+                b,
+                &mut p,
+                "specular_reflectance",
+                1.0,
+                Read::Mean,
+            )?,
             nonlinear: p.bool_or("nonlinear", false)?,
         }),
         "roughplastic" => Bsdf::RoughPlastic(RoughPlastic::new(
@@ -113,8 +125,8 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
                 }
             },
             relative_ior(&mut p, "polypropylene")?,
-            p.texture_or(b, "diffuse_reflectance", refl, 0.5)?,
-            p.texture_or(b, "specular_reflectance", refl, 1.0)?,
+            texture_read_as(b, &mut p, "diffuse_reflectance", 0.5, Read::Mean)?,
+            texture_read_as(b, &mut p, "specular_reflectance", 1.0, Read::Mean)?,
             p.bool_or("nonlinear", false)?,
         )),
         "principled" => Bsdf::Principled(principled(b, &mut p)?),
@@ -150,9 +162,11 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             }
         }
         "normalmap" => {
+            let normalmap_el = p.element_of("normalmap");
             let Some(normalmap) = p.texture(b, "normalmap", SpectrumKind::Unbounded)? else {
                 return Err(el.error("missing parameter \"normalmap\" (a texture)"));
             };
+            check_read(normalmap_el, "normalmap", &normalmap, Read::ThreeChannels)?;
             let [inner] = nested_bsdfs(b, &mut p, el, "one")?;
             Bsdf::NormalMap(NormalMap {
                 normalmap,
@@ -200,14 +214,14 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             })
         }
         "blendbsdf" => {
-            let weight = p.texture_or(b, "weight", SpectrumKind::Unbounded, 0.5)?;
+            let weight = texture_read_as(b, &mut p, "weight", 0.5, Read::OneChannel)?;
             Bsdf::Blend(Blend {
                 weight,
                 nested: Box::new(nested_bsdfs(b, &mut p, el, "two")?),
             })
         }
         "mask" => {
-            let opacity = p.texture_or(b, "opacity", SpectrumKind::Unbounded, 0.5)?;
+            let opacity = texture_read_as(b, &mut p, "opacity", 0.5, Read::OneChannel)?;
             let [inner] = nested_bsdfs(b, &mut p, el, "one")?;
             Bsdf::Mask(Mask {
                 opacity,
@@ -297,6 +311,7 @@ fn roughness<'a>(
             }
             Some(t) => {
                 let alpha_el = p.element_of("alpha");
+                check_read(alpha_el, "alpha", &t, Read::OneChannel)?;
                 if !t.is_finite_non_negative() {
                     return Err(alpha_el
                         .error("roughness texture \"alpha\" has negative or non-finite values"));
@@ -451,6 +466,7 @@ fn principled_scalar<'a>(
     let Some(t) = p.texture(b, name, SpectrumKind::Unbounded)? else {
         return Ok(None);
     };
+    check_read(el, name, &t, Read::OneChannel)?;
     let (lo, hi) = t.scalar_range();
     if !(lo >= 0.0 && hi <= 1.0) {
         return Err(el.error(format!(
@@ -472,4 +488,58 @@ fn principled_lobe<'a>(
         Some(Texture::Constant(c)) if is_float && c == Rgb::ZERO => None,
         t => t,
     })
+}
+
+/// How a BSDF reads a texture parameter (Mitsuba's `eval_1`, `eval_3` or `mean`), which decides
+/// whether a `mesh_attribute` texture fits it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Read {
+    /// As one number (`eval_1`): a 1-channel attribute only.
+    OneChannel,
+    /// As a colour through `eval_3` (normal maps): a 3-channel attribute only.
+    ThreeChannels,
+    /// Its mean is taken on load (plastics' sampling weights): no attribute at all, since
+    /// Mitsuba 3.9.1's `mesh_attribute` has no mean.
+    Mean,
+}
+
+/// Refuses a `mesh_attribute` texture `t` in parameter `name` where Mitsuba 3.9.1 cannot read
+/// it (scalar variants raise an error; JIT variants give zero or fail on load).
+fn check_read(el: &Element, name: &str, t: &Texture, read: Read) -> Result<(), SceneError> {
+    let Texture::MeshAttribute { values, .. } = t else {
+        return Ok(());
+    };
+    let (attr, ch) = (&values.name, values.channels);
+    let problem = match read {
+        Read::OneChannel if ch != 1 => format!(
+            "is read as one number (Mitsuba's eval_1), but mesh attribute \"{attr}\" has {ch} channels"
+        ),
+        Read::ThreeChannels if ch != 3 => format!(
+            "is read as a 3-channel colour (Mitsuba's eval_3), but mesh attribute \"{attr}\" has {ch} channel"
+        ),
+        Read::Mean => format!(
+            "cannot be a mesh_attribute texture (\"{attr}\"): the model takes the texture's mean on \
+             load, which Mitsuba 3.9.1 does not implement for mesh_attribute"
+        ),
+        _ => return Ok(()),
+    };
+    Err(el.error(format!("\"{name}\" {problem}")))
+}
+
+/// A colour or number parameter with a grey default, checked by [`check_read`].
+fn texture_read_as<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+    name: &str,
+    default: f32,
+    read: Read,
+) -> Result<Texture, SceneError> {
+    let el = p.element_of(name);
+    let kind = match read {
+        Read::Mean => SpectrumKind::Reflectance,
+        _ => SpectrumKind::Unbounded,
+    };
+    let t = p.texture_or(b, name, kind, default)?;
+    check_read(el, name, &t, read)?;
+    Ok(t)
 }

@@ -17,6 +17,7 @@ mod bsdfs;
 mod emitters;
 pub mod error;
 pub mod ior;
+mod mesh_attributes;
 mod props;
 mod sensors;
 mod shapes;
@@ -392,6 +393,17 @@ pub(crate) struct Builder<'a> {
     pub integrator: Option<IntegratorDesc>,
     /// While the shapes of a `shapegroup` are built for an `instance`: its `to_world` and name.
     pub instance: Option<(glam::Mat4, String)>,
+    /// While a shape's BSDF and emitter are built: the shape, whose mesh attributes its
+    /// `mesh_attribute` textures read.
+    pub mesh_scope: Option<MeshScope<'a>>,
+}
+
+/// The shape whose BSDF and emitter are being built, for `mesh_attribute` textures.
+pub(crate) struct MeshScope<'a> {
+    /// The `<shape>` element (for messages).
+    pub shape: &'a Element,
+    /// Its mesh's attributes; `None` for analytic shapes (sphere, disk, cylinder).
+    pub attributes: Option<mesh_attributes::MeshAttributes>,
 }
 
 impl<'a> Builder<'a> {
@@ -430,6 +442,7 @@ impl<'a> Builder<'a> {
             sample_count: None,
             integrator: None,
             instance: None,
+            mesh_scope: None,
         })
     }
 
@@ -470,8 +483,54 @@ impl<'a> Builder<'a> {
         }
     }
 
+    /// Whether `el` (following references) contains a `mesh_attribute` texture: such a BSDF
+    /// or texture is built anew for every shape that uses it, bound to that shape's mesh.
+    fn reads_mesh_attributes(&self, el: &Element) -> bool {
+        fn walk(b: &Builder, el: &Element, depth: usize) -> bool {
+            // The depth bound stops reference cycles (reported when the element is built).
+            if depth > 64 {
+                return false;
+            }
+            let el = match el.tag.as_str() {
+                "ref" => match el.attr("id").and_then(|id| b.ids.get(id)) {
+                    Some(target) => *target,
+                    None => return false,
+                },
+                _ => el,
+            };
+            (el.tag == "texture" && el.attr("type") == Some("mesh_attribute"))
+                || el.children.iter().any(|c| walk(b, c, depth + 1))
+        }
+        walk(self, el, 0)
+    }
+
+    /// The values of mesh attribute `name` for a `mesh_attribute` texture `el`, laid out per
+    /// triangle of the shape being built; an error naming the texture and the shape when that
+    /// shape is not a mesh or its mesh lacks the attribute.
+    pub fn bind_mesh_attribute(
+        &self,
+        el: &Element,
+        name: &str,
+    ) -> Result<Arc<crate::texture::AttributeValues>, SceneError> {
+        let Some(scope) = &self.mesh_scope else {
+            return Err(el.error(
+                "a mesh_attribute texture can only be used by a shape's BSDF or area emitter",
+            ));
+        };
+        let shape = format!("{} at {}", scope.shape.describe(), scope.shape.location);
+        let Some(attributes) = &scope.attributes else {
+            // Mitsuba 3.9.1: an error in scalar variants, silently zero in JIT variants.
+            return Err(el.error(format!(
+                "used by {shape}, which is not a triangle mesh: only meshes have attributes"
+            )));
+        };
+        attributes
+            .bind(name)
+            .map_err(|m| el.error(format!("used by {shape}: {m}")))
+    }
+
     /// The index in `bsdfs` of the BSDF declared by `el` (a `<bsdf>` or a `<ref>` to one);
-    /// a BSDF with an id is built once.
+    /// a BSDF with an id is built once, unless it reads mesh attributes (then once per shape).
     pub fn bsdf_index(&mut self, el: &'a Element) -> Result<usize, SceneError> {
         let target = self.deref(el)?;
         if target.tag != "bsdf" {
@@ -479,6 +538,13 @@ impl<'a> Builder<'a> {
                 "expected a <bsdf>, but this refers to {}",
                 target.describe()
             )));
+        }
+        if self.reads_mesh_attributes(target) {
+            let guard = self.enter(target)?;
+            let built = bsdfs::build_bsdf(self, target);
+            self.leave(guard);
+            self.bsdfs.push(built?);
+            return Ok(self.bsdfs.len() - 1);
         }
         if let Some(id) = target.attr("id") {
             if let Some(&i) = self.bsdf_ids.get(id) {
@@ -532,6 +598,7 @@ impl<'a> Builder<'a> {
                 target.describe()
             )));
         }
+        let per_shape = self.reads_mesh_attributes(target);
         if let Some(t) = target.attr("id").and_then(|id| self.texture_ids.get(id)) {
             return Ok(t.clone());
         }
@@ -539,6 +606,9 @@ impl<'a> Builder<'a> {
         let built = textures::build_texture(self, target);
         self.leave(guard);
         let t = built?;
+        if per_shape {
+            return Ok(t);
+        }
         if let Some(id) = target.attr("id") {
             self.texture_ids.insert(id.to_owned(), t.clone());
         }
@@ -549,6 +619,8 @@ impl<'a> Builder<'a> {
     fn build_scene(&mut self, root: &'a Element) -> Result<(), SceneError> {
         for el in &root.children {
             match el.tag.as_str() {
+                // Reading mesh attributes: built for each shape that refers to it.
+                "bsdf" | "texture" if self.reads_mesh_attributes(el) => {}
                 "bsdf" => {
                     self.bsdf_index(el)?;
                 }

@@ -6,11 +6,17 @@
 //! when present, otherwise angle-weighted smooth vertex normals computed in world space unless
 //! `face_normals` is true; OBJ texture coordinates stored as (u, 1 − v) (`flip_tex_coords`,
 //! default true for OBJ, false for PLY); `flip_normals` reverses the winding and the normals.
+//! Extra PLY properties become mesh attributes (`mesh_attributes.rs`), which the `mesh_attribute`
+//! textures of the shape's BSDF and area emitter read.
 
 use super::emitters::area_radiance;
+use super::mesh_attributes::{
+    attribute_value, group_attributes, AttributeSource, MeshAttributes, PlyField, RawAttribute,
+};
 use super::props::Props;
-use super::{Builder, Element, SceneError};
+use super::{Builder, Element, MeshScope, SceneError};
 use crate::description::{Geometry, ShapeDesc, TriangleMesh};
+use crate::texture::Texture;
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::path::Path;
 
@@ -53,6 +59,8 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
     };
     let flip_normals = p.bool_or("flip_normals", false)?;
 
+    // The attributes a PLY file carries (read by the shape's `mesh_attribute` textures).
+    let mut file_attributes = None;
     let geometry = match kind {
         "rectangle" => Geometry::Mesh(rectangle(to_world, flip_normals)),
         "cube" => Geometry::Mesh(cube(to_world, flip_normals)),
@@ -133,16 +141,64 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
                 "ply" => load_ply(&path),
                 _ => load_serialized(&path, shape_index),
             };
-            let raw = raw.map_err(|m| {
+            let mut raw = raw.map_err(|m| {
                 file_el.error(format!("cannot load mesh \"{}\": {m}", path.display()))
             })?;
-            let mesh = finish_mesh(raw, to_world, face_normals, flip_normals, flip_tex)
-                .map_err(|m| file_el.error(format!("mesh \"{}\": {m}", path.display())))?;
+            let loaded = std::mem::take(&mut raw.attributes);
+            let (mesh, polygon_of) =
+                finish_mesh(raw, to_world, face_normals, flip_normals, flip_tex)
+                    .map_err(|m| file_el.error(format!("mesh \"{}\": {m}", path.display())))?;
+            if !loaded.is_empty() {
+                file_attributes = Some(MeshAttributes {
+                    attributes: loaded,
+                    triangles: mesh.indices.clone(),
+                    polygon_of,
+                });
+            }
             Geometry::Mesh(mesh)
         }
     };
 
-    // Nested or referenced BSDF and area emitter.
+    // Nested or referenced BSDF and area emitter, built in the scope of this shape's mesh
+    // attributes (`None` on analytic shapes, which have none).
+    let attributes = match &geometry {
+        Geometry::Mesh(_) => Some(file_attributes.unwrap_or_default()),
+        _ => None,
+    };
+    let outer = b.mesh_scope.replace(MeshScope {
+        shape: el,
+        attributes,
+    });
+    let built = shape_bsdf_and_emission(b, &mut p);
+    b.mesh_scope = outer;
+    let (bsdf, emission) = built?;
+    p.finish(b)?;
+    let bsdf = match bsdf {
+        Some(i) => i,
+        None => b.default_bsdf(emission.is_some()),
+    };
+    let name = el
+        .attr("id")
+        .map(str::to_owned)
+        .unwrap_or_else(|| format!("{kind}#{}", b.shapes.len()));
+    let name = match &b.instance {
+        Some((_, instance)) => format!("{instance}/{name}"),
+        None => name,
+    };
+    b.shapes.push(ShapeDesc {
+        name,
+        geometry,
+        bsdf,
+        emission,
+    });
+    Ok(())
+}
+
+/// A shape's nested or referenced BSDF (its index) and area emitter (its radiance).
+fn shape_bsdf_and_emission<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+) -> Result<(Option<usize>, Option<Texture>), SceneError> {
     let mut bsdf = None;
     let mut emission = None;
     // Named or not (`<bsdf name="bsdf">` is common in exported scenes).
@@ -170,26 +226,7 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
             }
         }
     }
-    p.finish(b)?;
-    let bsdf = match bsdf {
-        Some(i) => i,
-        None => b.default_bsdf(emission.is_some()),
-    };
-    let name = el
-        .attr("id")
-        .map(str::to_owned)
-        .unwrap_or_else(|| format!("{kind}#{}", b.shapes.len()));
-    let name = match &b.instance {
-        Some((_, instance)) => format!("{instance}/{name}"),
-        None => name,
-    };
-    b.shapes.push(ShapeDesc {
-        name,
-        geometry,
-        bsdf,
-        emission,
-    });
-    Ok(())
+    Ok((bsdf, emission))
 }
 
 /// A `shapegroup` at the top level: nothing is built (its shapes appear through instances),
@@ -337,22 +374,26 @@ struct RawMesh {
     uvs: Option<Vec<Vec2>>,
     /// Polygons (any corner count ≥ 3), indices into the vertex arrays.
     polygons: Vec<Vec<u32>>,
+    /// Extra per-vertex and per-polygon properties (PLY only), for `mesh_attribute`.
+    attributes: Vec<RawAttribute>,
 }
 
-/// Triangulates, transforms and settles the normals of a loaded mesh.
+/// Triangulates, transforms and settles the normals of a loaded mesh; also returns, for each
+/// triangle, the polygon it was cut from (what per-face attributes are indexed by).
 fn finish_mesh(
     raw: RawMesh,
     to_world: Mat4,
     face_normals: bool,
     flip_normals: bool,
     flip_tex: bool,
-) -> Result<TriangleMesh, String> {
+) -> Result<(TriangleMesh, Vec<u32>), String> {
     let n = raw.positions.len();
     if raw.positions.iter().any(|p| !p.is_finite()) {
         return Err("vertex positions are not finite".into());
     }
     let mut indices = Vec::with_capacity(raw.polygons.len());
-    for poly in &raw.polygons {
+    let mut polygon_of = Vec::with_capacity(raw.polygons.len());
+    for (f, poly) in raw.polygons.iter().enumerate() {
         if let Some(bad) = poly.iter().find(|&&i| i as usize >= n) {
             return Err(format!(
                 "face refers to vertex {bad}, but there are only {n} vertices"
@@ -361,6 +402,7 @@ fn finish_mesh(
         // Fan around the first corner (Mitsuba: quads split along corners 0–2).
         for k in 1..poly.len().saturating_sub(1) {
             indices.push([poly[0], poly[k], poly[k + 1]]);
+            polygon_of.push(f as u32);
         }
     }
     if indices.is_empty() {
@@ -393,7 +435,7 @@ fn finish_mesh(
     if flip_normals {
         flip(&mut mesh);
     }
-    Ok(mesh)
+    Ok((mesh, polygon_of))
 }
 
 /// Moves a mesh to world space: positions by `m`, normals by its inverse transpose (normals are
@@ -653,11 +695,13 @@ fn load_serialized(path: &Path, index: usize) -> Result<RawMesh, String> {
         normals,
         uvs,
         polygons,
+        attributes: Vec::new(),
     })
 }
 
 /// Reads a PLY (ASCII or binary) with `vertex` (x, y, z, optional nx/ny/nz and u/v, s/t or
 /// texture_u/texture_v) and `face` (`vertex_indices` or `vertex_index`) elements.
+/// Other vertex and face properties become attributes as Mitsuba 3.9.1 groups them.
 fn load_ply(path: &Path) -> Result<RawMesh, String> {
     use ply_rs_bw::parser::Parser;
     use ply_rs_bw::ply::{DefaultElement, Property};
@@ -681,10 +725,25 @@ fn load_ply(path: &Path) -> Result<RawMesh, String> {
     ]
     .into_iter()
     .find(|(u, v)| has(u) && has(v));
+    // Mitsuba reserves x, y, z, nx, ny, nz and the uv pair it reads (renamed u, v).
+    let mut reserved = vec!["x", "y", "z", "nx", "ny", "nz", "u", "v"];
+    reserved.extend(uv_keys.iter().flat_map(|(u, v)| [*u, *v]));
+    let fields = |name: &str| {
+        ply.header
+            .elements
+            .get(name)
+            .map(PlyField::of)
+            .unwrap_or_default()
+    };
+    let vertex_sources = group_attributes("vertex_", &fields("vertex"), &reserved);
+    let face_sources = group_attributes("face_", &fields("face"), &[]);
+    let mut vertex_attributes = new_attributes(&vertex_sources);
+    let mut face_attributes = new_attributes(&face_sources);
     let mut normals = Vec::new();
     let mut uvs = Vec::new();
     for v in vertices {
         let get = |k: &str| scalar(v, k).ok_or_else(|| format!("vertex without numeric \"{k}\""));
+        read_attributes(v, &vertex_sources, &mut vertex_attributes)?;
         raw.positions
             .push(Vec3::new(get("x")?, get("y")?, get("z")?));
         if has_normals {
@@ -711,6 +770,7 @@ fn load_ply(path: &Path) -> Result<RawMesh, String> {
         if idx.len() < 3 {
             continue;
         }
+        read_attributes(f, &face_sources, &mut face_attributes)?;
         if let Some(bad) = idx.iter().find(|&&i| i < 0 || i > i64::from(u32::MAX)) {
             return Err(format!("invalid vertex index {bad}"));
         }
@@ -723,5 +783,45 @@ fn load_ply(path: &Path) -> Result<RawMesh, String> {
     if uv_keys.is_some() {
         raw.uvs = Some(uvs);
     }
+    raw.attributes = vertex_attributes;
+    raw.attributes.extend(face_attributes);
+    let mut names = std::collections::HashSet::new();
+    if let Some(a) = raw.attributes.iter().find(|a| !names.insert(&a.name)) {
+        // Mitsuba: "add_attribute(): attribute … already exists".
+        return Err(format!(
+            "two property groups both make attribute \"{}\"",
+            a.name
+        ));
+    }
     Ok(raw)
+}
+
+/// Empty attributes for the groups `sources` found in a PLY element.
+fn new_attributes(sources: &[AttributeSource]) -> Vec<RawAttribute> {
+    sources
+        .iter()
+        .map(|s| RawAttribute {
+            name: s.name.clone(),
+            channels: s.properties.len(),
+            values: Vec::new(),
+        })
+        .collect()
+}
+
+/// Appends one PLY element's values of each attribute (converted as Mitsuba stores them).
+fn read_attributes(
+    e: &ply_rs_bw::ply::DefaultElement,
+    sources: &[AttributeSource],
+    out: &mut [RawAttribute],
+) -> Result<(), String> {
+    for (s, a) in sources.iter().zip(out) {
+        for k in &s.properties {
+            let v = e
+                .get(k)
+                .and_then(attribute_value)
+                .ok_or_else(|| format!("attribute \"{}\": no numeric property \"{k}\"", s.name))?;
+            a.values.push(v);
+        }
+    }
+    Ok(())
 }

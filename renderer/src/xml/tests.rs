@@ -1483,7 +1483,7 @@ fn blendbsdf_mixes_two_bsdfs_in_file_order() {
     let Bsdf::Blend(a) = &b.nested[1] else {
         panic!("{:?}", b.nested[1])
     };
-    assert_eq!(a.weight_at(Vec2::ZERO), 0.25);
+    assert_eq!(a.weight_at(Vec2::ZERO.into()), 0.25);
     assert!(matches!(a.nested[0], Bsdf::Diffuse(_)));
     assert!(matches!(a.nested[1], Bsdf::Conductor(_)));
     for (inner, needle) in [
@@ -1522,7 +1522,7 @@ fn mask_wraps_one_bsdf_with_an_opacity() {
     assert!(matches!(a.opacity, Texture::Checkerboard { .. }));
     assert!(matches!(*a.nested, Bsdf::TwoSided { .. }));
     // Mitsuba's default opacity.
-    assert_eq!(b.opacity_at(Vec2::ZERO), 0.5);
+    assert_eq!(b.opacity_at(Vec2::ZERO.into()), 0.5);
     for (inner, needle) in [
         (
             "<bsdf type=\"mask\">\n<float name=\"opacity\" value=\"0.3\"/></bsdf>",
@@ -1923,5 +1923,279 @@ fn principled_bad_values_are_errors_at_their_line() {
     for (k, (bsdf, marker, needle)) in cases.iter().enumerate() {
         let body = format!("{SENSOR}\n{bsdf}");
         assert_body_error_at(&dir, &format!("e{k}.xml"), &body, marker, needle);
+    }
+}
+
+/// A unit quad in z = 0 as one PLY polygon (fan-triangulated into (0, 1, 2) and (0, 2, 3)),
+/// with float vertex colours, a 1-channel float vertex attribute, uchar vertex properties
+/// (kept unnormalised, as Mitsuba 3.9.1 does), a ushort face colour (normalised and
+/// sRGB-decoded) and a 1-channel float face attribute.
+const ATTRIBUTE_PLY: &str = "ply
+format ascii 1.0
+element vertex 4
+property float x
+property float y
+property float z
+property float r
+property float g
+property float b
+property float rough_x
+property uchar q_x
+element face 1
+property list uchar int vertex_indices
+property ushort tint_r
+property ushort tint_g
+property ushort tint_b
+property float w_0
+end_header
+0 0 0 1 0 0 0.1 0
+1 0 0 0 1 0 0.2 100
+1 1 0 0 0 1 0.3 200
+0 1 0 1 1 1 0.4 255
+4 0 1 2 3 65535 32768 0 0.75
+";
+
+/// A `ply` shape reading quad.ply, with `inner` (its BSDF) on lines of its own.
+fn quad_ply_shape(inner: &str) -> String {
+    format!(
+        "<shape type=\"ply\">\n<string name=\"filename\" value=\"quad.ply\"/>\n{inner}\n</shape>"
+    )
+}
+
+/// A `mesh_attribute` texture for parameter `param` reading attribute `name`, its `name`
+/// parameter on a line of its own, then `extra`.
+fn mesh_attribute_xml(param: &str, name: &str, extra: &str) -> String {
+    format!("<texture type=\"mesh_attribute\" name=\"{param}\">\n<string name=\"name\" value=\"{name}\"/>{extra}\n</texture>")
+}
+
+/// The texture of parameter `name` in the BSDF of shape `shape`.
+fn mesh_attribute_of(
+    scene: &SceneDescription,
+    shape: usize,
+) -> (Arc<crate::texture::AttributeValues>, f32) {
+    let t = match &scene.bsdfs[scene.shapes[shape].bsdf] {
+        Bsdf::Diffuse(d) => d.reflectance.clone(),
+        Bsdf::Blend(b) => b.weight.clone(),
+        Bsdf::RoughConductor(c) => c.alpha_texture.clone().expect("textured alpha"),
+        other => panic!("unexpected BSDF {other:?}"),
+    };
+    match t {
+        Texture::MeshAttribute { values, scale } => (values, scale),
+        other => panic!("mesh_attribute expected, got {other:?}"),
+    }
+}
+
+/// Vertex attributes interpolate barycentrically and face attributes stay constant per
+/// triangle, through the whole chain: PLY properties → grouping and conversion → binding to
+/// the shape → a ray hit's triangle and barycentrics → the texture value.
+#[test]
+fn mesh_attribute_textures_read_ply_properties_at_ray_hits() {
+    use crate::texture::TexPoint;
+    let dir = temp_dir("mesh-attribute");
+    std::fs::write(dir.join("quad.ply"), ATTRIBUTE_PLY).unwrap();
+    let scale = "<float name=\"scale\" value=\"2\"/>";
+    let shape = |bsdf: &str, param: &str, name: &str, rest: &str| {
+        let texture = mesh_attribute_xml(param, name, scale);
+        quad_ply_shape(&format!("<bsdf type=\"{bsdf}\">{texture}{rest}</bsdf>"))
+    };
+    let nested = "<bsdf type=\"diffuse\"/><bsdf type=\"conductor\"/>";
+    let body = [
+        SENSOR.to_string(),
+        shape("diffuse", "reflectance", "vertex_color", ""),
+        shape("diffuse", "reflectance", "face_tint_color", ""),
+        shape("blendbsdf", "weight", "face_w", nested),
+        shape("roughconductor", "alpha", "vertex_rough", ""),
+        shape("diffuse", "reflectance", "vertex_q", ""),
+    ]
+    .join("\n");
+    let desc = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+
+    // The ray hits triangle 1 = (v0, v2, v3) at p = (0.2, 0.7): b0 = 0.3, b1 = 0.2 (v2),
+    // b2 = 0.5 (v3); unequal weights, so a swapped corner would show.
+    let scene = crate::scene::Scene::build(&desc).unwrap();
+    let ray = crate::math::Ray::new(Vec3::new(0.2, 0.7, 1.0), -Vec3::Z);
+    let si = scene.intersect(&ray).expect("hit");
+    assert_eq!(si.prim, 1);
+    assert!(
+        (si.bary - Vec2::new(0.2, 0.5)).length() < 1e-6,
+        "{}",
+        si.bary
+    );
+    let at: TexPoint = si.tex();
+    let eval = |shape: usize| {
+        let (values, scale) = mesh_attribute_of(&desc, shape);
+        Texture::MeshAttribute { values, scale }.eval(at)
+    };
+    let close = |a: Rgb, b: Rgb| (a - b).abs().max_element() < 1e-5;
+    // 0.3·(1, 0, 0) + 0.2·(0, 0, 1) + 0.5·(1, 1, 1), times scale 2.
+    assert!(close(eval(0), Rgb::new(1.6, 1.0, 1.4)), "{}", eval(0));
+    // ushort 65535 → 1, 32768 → 0.500008 sRGB-decoded = 0.2140481, 0 → 0; times 2, on both triangles.
+    assert!(
+        close(eval(1), 2.0 * Rgb::new(1.0, 0.214_048_1, 0.0)),
+        "{}",
+        eval(1)
+    );
+    let (tint, _) = mesh_attribute_of(&desc, 1);
+    assert_eq!(tint.values[..3], tint.values[3..]);
+    assert!(close(eval(2), Rgb::splat(1.5)));
+    // 0.3·0.1 + 0.2·0.3 + 0.5·0.4 = 0.29, times 2; read as one number.
+    let (rough, scale) = mesh_attribute_of(&desc, 3);
+    let alpha = Texture::MeshAttribute {
+        values: rough,
+        scale,
+    }
+    .eval_1(at);
+    assert!((alpha - 0.58).abs() < 1e-6, "{alpha}");
+    // uchar stays 0–255: 0.3·0 + 0.2·200 + 0.5·255, times 2.
+    let q = eval(4);
+    assert!((q - Rgb::splat(335.0)).abs().max_element() < 1e-3, "{q}");
+}
+
+/// A BSDF with an id that reads a mesh attribute is bound separately to each shape using it.
+#[test]
+fn a_shared_bsdf_reads_each_shapes_own_attribute() {
+    let dir = temp_dir("mesh-attribute-shared");
+    std::fs::write(dir.join("a.ply"), ATTRIBUTE_PLY).unwrap();
+    std::fs::write(dir.join("b.ply"), ATTRIBUTE_PLY.replace("0.75\n", "0.5\n")).unwrap();
+    let body = format!(
+        "{SENSOR}
+<texture type=\"mesh_attribute\" id=\"w\"><string name=\"name\" value=\"face_w\"/></texture>
+<bsdf type=\"blendbsdf\" id=\"mix\"><ref name=\"weight\" id=\"w\"/><bsdf type=\"diffuse\"/><bsdf type=\"conductor\"/></bsdf>
+<shape type=\"ply\"><string name=\"filename\" value=\"a.ply\"/><ref id=\"mix\"/></shape>
+<shape type=\"ply\"><string name=\"filename\" value=\"b.ply\"/><ref id=\"mix\"/></shape>"
+    );
+    let desc = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert_ne!(desc.shapes[0].bsdf, desc.shapes[1].bsdf);
+    assert_eq!(mesh_attribute_of(&desc, 0).0.values, [0.75, 0.75]);
+    assert_eq!(mesh_attribute_of(&desc, 1).0.values, [0.5, 0.5]);
+}
+
+/// Mesh attributes that cannot be read are errors naming the file, line and element (Mitsuba
+/// 3.9.1 raises them in scalar variants; its JIT variants render zero instead).
+#[test]
+fn error_mesh_attribute_cases_name_file_and_line() {
+    let dir = temp_dir("mesh-attribute-errors");
+    std::fs::write(dir.join("quad.ply"), ATTRIBUTE_PLY).unwrap();
+    let ply = |inner: &str| format!("{SENSOR}\n{}", quad_ply_shape(inner));
+    let tex = |param: &str, name: &str| mesh_attribute_xml(param, name, "");
+    let diffuse = |name: &str| {
+        format!(
+            "<bsdf type=\"diffuse\">\n{}\n</bsdf>",
+            tex("reflectance", name)
+        )
+    };
+    // Bad prefix: the `name` parameter's line.
+    let body = ply(&diffuse("color"));
+    assert_body_error_at(
+        &dir,
+        "prefix.xml",
+        &body,
+        "value=\"color\"",
+        "must start with \"vertex_\" or \"face_\"",
+    );
+    // Missing attribute: the texture's line; the shape and the attributes it has are named.
+    let body = ply(&diffuse("vertex_uv"));
+    let err = assert_body_error_at(
+        &dir,
+        "missing.xml",
+        &body,
+        "mesh_attribute",
+        "no attribute \"vertex_uv\"",
+    );
+    let msg = err.to_string();
+    let shape_line = line_of(&body, "<shape");
+    assert!(
+        msg.contains(&format!(
+            "<shape type=\"ply\"> at {}",
+            dir.join("missing.xml").display()
+        )),
+        "{msg}"
+    );
+    assert!(msg.contains(&format!("missing.xml:{shape_line}:")), "{msg}");
+    assert!(
+        msg.contains("vertex_color, vertex_rough, vertex_q, face_tint_color, face_w"),
+        "{msg}"
+    );
+    // Not a mesh.
+    let body = format!(
+        "{SENSOR}\n<shape type=\"sphere\">\n{}\n</shape>",
+        diffuse("vertex_color")
+    );
+    assert_body_error_at(
+        &dir,
+        "sphere.xml",
+        &body,
+        "mesh_attribute",
+        "not a triangle mesh",
+    );
+    // A 3-channel attribute read as one number.
+    let body = ply(&format!(
+        "<bsdf type=\"roughconductor\">\n{}\n</bsdf>",
+        tex("alpha", "vertex_color")
+    ));
+    assert_body_error_at(&dir, "alpha.xml", &body, "mesh_attribute", "eval_1");
+    // Plastics take the texture's mean on load, which Mitsuba does not implement.
+    let body = ply(&format!(
+        "<bsdf type=\"plastic\">\n{}\n</bsdf>",
+        tex("diffuse_reflectance", "vertex_color")
+    ));
+    assert_body_error_at(&dir, "plastic.xml", &body, "mesh_attribute", "mean");
+    // Outside any shape.
+    let body = format!(
+        "{SENSOR}\n<emitter type=\"area\">\n{}\n</emitter>",
+        tex("radiance", "vertex_color")
+    );
+    let path = write_scene(&dir, "loose.xml", &body);
+    assert!(load(&path).is_err());
+}
+
+/// An area light whose radiance is a vertex attribute: light samples (next-event estimation)
+/// read it at the sampled point's triangle and barycentrics, and a ray hitting the light reads
+/// the same value there (Mitsuba 3.9.1 reads triangle 0 for light samples, see
+/// docs/validation.md, `mesh-attribute`).
+#[test]
+fn mesh_attribute_radiance_is_read_where_the_light_is_sampled() {
+    let dir = temp_dir("mesh-attribute-light");
+    std::fs::write(dir.join("quad.ply"), ATTRIBUTE_PLY).unwrap();
+    let emitter = format!(
+        "<emitter type=\"area\">{}</emitter>",
+        mesh_attribute_xml("radiance", "vertex_rough", "")
+    );
+    let body = format!("{SENSOR}\n{}", quad_ply_shape(&emitter));
+    let desc = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    let scene = crate::scene::Scene::build(&desc).unwrap();
+    // vertex_rough is 0.1, 0.2, 0.3, 0.4 at (0, 0), (1, 0), (1, 1), (0, 1); triangles (0, 1, 2)
+    // below the diagonal and (0, 2, 3) above it.
+    let expected = |x: f32, y: f32| {
+        if y <= x {
+            0.1 * (1.0 - x) + 0.2 * (x - y) + 0.3 * y
+        } else {
+            0.1 * (1.0 - y) + 0.3 * x + 0.4 * (y - x)
+        }
+    };
+    let from = Vec3::new(0.5, 0.5, 1.0);
+    for (i, u) in [(0.1, 0.2), (0.7, 0.3), (0.35, 0.9), (0.9, 0.95)]
+        .into_iter()
+        .enumerate()
+    {
+        let ls = scene
+            .sample_li(from, (i as f32 + 0.5) / 4.0, Vec2::new(u.0, u.1))
+            .expect("a light sample");
+        let radiance = ls.weight * ls.pdf;
+        let want = expected(ls.p.x, ls.p.y);
+        assert!(
+            (radiance - Rgb::splat(want)).abs().max_element() < 1e-5,
+            "{radiance} vs {want} at {}",
+            ls.p
+        );
+        // The ray towards the sample hits the light where it reads the same radiance.
+        let si = scene
+            .intersect(&crate::math::Ray::new(from, ls.wi))
+            .expect("hit");
+        let seen = scene.emitted(&si, -ls.wi);
+        assert!(
+            (seen - radiance).abs().max_element() < 1e-4,
+            "{seen} vs {radiance}"
+        );
     }
 }

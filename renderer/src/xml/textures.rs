@@ -1,4 +1,5 @@
-//! `<texture>` plugins: `checkerboard` and `bitmap` (PNG or EXR, paths relative to the XML file).
+//! `<texture>` plugins: `checkerboard`, `bitmap` (PNG or EXR, paths relative to the XML file)
+//! and `mesh_attribute` (bound to the mesh of the shape being built).
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
@@ -67,9 +68,29 @@ pub(super) fn build_texture<'a>(
                 to_uv,
             }
         }
+        "mesh_attribute" => {
+            let name_el = p.element_of("name");
+            let Some(name) = p.string("name")? else {
+                return Err(el.error("missing parameter \"name\" (e.g. \"vertex_color\")"));
+            };
+            // Mitsuba only checks that the name contains one of the prefixes; attribute names
+            // always start with them, so any other name would find nothing.
+            if !(name.starts_with("vertex_") || name.starts_with("face_")) {
+                return Err(name_el.error(format!(
+                    "invalid mesh attribute name \"{name}\": it must start with \"vertex_\" or \"face_\""
+                )));
+            }
+            let scale_el = p.element_of("scale");
+            let scale = p.float_or("scale", 1.0)? as f32;
+            if !scale.is_finite() {
+                return Err(scale_el.error("\"scale\" must be finite"));
+            }
+            let values = b.bind_mesh_attribute(el, name)?;
+            Texture::MeshAttribute { values, scale }
+        }
         other => {
             let err = el.error(format!(
-                "unknown plugin \"{other}\" (supported textures: checkerboard, bitmap)"
+                "unknown plugin \"{other}\" (supported textures: checkerboard, bitmap, mesh_attribute)"
             ));
             b.diag.unknown(err)?;
             return Ok(Texture::Constant(glam::Vec3::splat(0.5)));

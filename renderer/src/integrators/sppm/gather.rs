@@ -6,7 +6,8 @@
 use crate::bsdf::{Bsdf, TransportMode};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
-use glam::{Vec2, Vec3};
+use crate::texture::TexPoint;
+use glam::Vec3;
 use std::f32::consts::{FRAC_1_PI, PI};
 
 use super::photon_map::{Photon, PhotonGrid};
@@ -45,11 +46,11 @@ fn transmits(bsdf: &Bsdf) -> bool {
 /// The visible point's BSDF when it is Lambertian on the viewer's side: a photon arriving from
 /// direction `wi` (shading frame) contributes `f` when `side · wi.z > 0` and nothing otherwise,
 /// so the gather can sum fluxes and apply `f` once. `None` for any other BSDF.
-fn lambertian(bsdf: &Bsdf, wo: Vec3, uv: Vec2) -> Option<(Rgb, f32)> {
+fn lambertian(bsdf: &Bsdf, wo: Vec3, tex: TexPoint) -> Option<(Rgb, f32)> {
     // Mirrors `Diffuse::eval` (ρ/π on the upper hemisphere, both directions above the surface)
     // and `Bsdf::TwoSided` (the back model with both directions flipped).
     let diffuse = |b: &Bsdf| match b {
-        Bsdf::Diffuse(d) => Some(d.reflectance.eval(uv) * FRAC_1_PI),
+        Bsdf::Diffuse(d) => Some(d.reflectance.eval(tex) * FRAC_1_PI),
         _ => None,
     };
     match bsdf {
@@ -99,7 +100,7 @@ pub fn gather(
     // The common case, a Lambertian surface: f is one constant on one hemisphere, so sum the
     // fluxes and multiply by f at the end (no BSDF evaluation per photon).
     // (A Lambertian model has no sharp part, so `broad_only` never applies to it.)
-    let factor = match lambertian(bsdf, vp.wo, vp.sp.uv) {
+    let factor = match lambertian(bsdf, vp.wo, vp.sp.tex) {
         Some((f, side)) => {
             if f != Rgb::ZERO {
                 let n = vp.frame.n;
