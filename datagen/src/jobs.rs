@@ -217,6 +217,28 @@ pub fn render_dataset(
     Ok(report)
 }
 
+/// Removes state files a killed run of this job left under another config (their names carry
+/// that config's fingerprint): they can never be resumed, and would only litter the dataset.
+fn remove_stale_states(root: &Path, plan: &Plan, job: &Job, fingerprint: &str) -> Result<()> {
+    let current = root.join(plan.state_path(job, fingerprint));
+    let record = root.join(plan.record_path(job));
+    let (Some(dir), Some(stem)) = (record.parent(), record.file_stem()) else {
+        return Ok(());
+    };
+    let prefix = format!("{}.", stem.to_string_lossy());
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let path = e.path();
+        if name.starts_with(&prefix) && name.ends_with(".state") && path != current {
+            remove_if_present(&path)?;
+        }
+    }
+    Ok(())
+}
+
 /// SHA-256 of the scene file of every external scene among `jobs` (by scene index); an error
 /// naming the file when one cannot be read.
 fn external_hashes(
@@ -297,6 +319,7 @@ fn run_job(
         };
     let r = &config.render;
     let seed = plan.render_seed(job);
+    remove_stale_states(root, plan, job, fingerprint)?;
     let mut record = JobRecord {
         format: MANIFEST_FORMAT.into(),
         config_sha256: fingerprint.to_owned(),
@@ -314,7 +337,7 @@ fn run_job(
                 max_depth: r.max_depth,
                 threads: options.threads,
                 state: Some(StateSpec {
-                    path: root.join(plan.state_path(job)),
+                    path: root.join(plan.state_path(job, fingerprint)),
                     interval: options.state_interval,
                 }),
                 defines: defines.clone(),

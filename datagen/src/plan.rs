@@ -172,10 +172,14 @@ impl Plan {
         }
     }
 
-    /// Path (relative) of the resumable state of a job's run while it renders (removed when
-    /// the job is done; next to its record, so a shard only ever touches its own).
-    pub fn state_path(&self, job: &Job) -> String {
-        self.record_path(job).replace(".json", ".state")
+    /// Path (relative) of the resumable state of a job's run under the config with fingerprint
+    /// `fingerprint` while it renders (removed when the job is done; next to its record, so a
+    /// shard only ever touches its own). The fingerprint is in the name so that a state left by
+    /// a killed run of an earlier config is never resumed under a changed one.
+    pub fn state_path(&self, job: &Job, fingerprint: &str) -> String {
+        let tag = &fingerprint[..fingerprint.len().min(16)];
+        self.record_path(job)
+            .replace(".json", &format!(".{tag}.state"))
     }
 
     /// Path (relative) of a job's timing note (wall-clock; not part of the canonical data).

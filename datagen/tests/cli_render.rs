@@ -239,14 +239,22 @@ fn average_references_with_the_real_renderer() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The state files (`records/<scene>/reference.state`) under `dir` and their saved pass counts.
+/// The state files (`records/<scene>/reference.<config>.state`) under `dir` and their saved
+/// pass counts.
 fn reference_states(dir: &Path) -> Vec<(PathBuf, u64)> {
     let Ok(scenes) = std::fs::read_dir(dir.join("records")) else {
         return Vec::new();
     };
     let mut out = Vec::new();
     for scene in scenes.flatten() {
-        let path = scene.path().join("reference.state");
+        let Some(path) = std::fs::read_dir(scene.path()).ok().and_then(|files| {
+            files
+                .flatten()
+                .map(|f| f.path())
+                .find(|p| p.to_string_lossy().ends_with(".state"))
+        }) else {
+            continue;
+        };
         let Ok(bytes) = std::fs::read(&path) else {
             continue;
         };
@@ -301,13 +309,40 @@ fn a_reference_job_killed_mid_run_resumes_from_its_state() {
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        stderr.contains("reference.state") && stderr.contains("truncated"),
+        stderr.contains("reference.") && stderr.contains(".state") && stderr.contains("truncated"),
         "{stderr}"
     );
     // Intact, it resumes; the dataset equals the uninterrupted one and no state is left.
     std::fs::write(&state, &good).unwrap();
     ok(render(&config_path, &dir, &saving).output().unwrap());
     assert_same(&reference, &snapshot(&dir));
+
+    // Killed again mid-reference, then run under a changed config: the old state is not
+    // resumed (it is another run) but removed, and the new config's dataset is complete.
+    std::fs::remove_dir_all(dir.join("records")).unwrap();
+    let mut child = render(&config_path, &dir, &saving).spawn().unwrap();
+    let finished = loop {
+        let done = child.try_wait().unwrap().is_some();
+        if done || reference_states(&dir).iter().any(|(_, p)| *p >= 5) {
+            break done;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(!finished, "the second run had finished before the kill");
+    assert!(!reference_states(&dir).is_empty());
+    config.render.reference_photons_per_pass = 1500;
+    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
+    ok(render(&config_path, &dir, &saving).output().unwrap());
+    assert!(
+        reference_states(&dir).is_empty(),
+        "a state file was left behind"
+    );
+    let out = ok(datagen(&["check", dir.to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap());
+    assert!(String::from_utf8_lossy(&out.stdout).starts_with("ok:"));
     std::fs::remove_dir_all(&work).unwrap();
 }
 
