@@ -14,7 +14,7 @@ use crate::manifest::{
 use crate::plan::{Job, Plan, Shard};
 use crate::scene::write_scene_files;
 use anyhow::{bail, Context, Result};
-use bundle::{write_bundle, write_rgb_exr_image, Bundle, Image};
+use bundle::{read_bundle, write_bundle, write_rgb_exr_image, Bundle, Image};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -385,9 +385,10 @@ fn run_job(
                 passes: r.passes.clone(),
                 max_depth: r.max_depth,
                 threads: options.threads,
-                // Bundles at every listed pass count come from one run that is short next to
-                // the reference; a killed input job starts over.
-                state: None,
+                state: Some(StateSpec {
+                    path: root.join(plan.state_path(job, fingerprint)),
+                    interval: options.state_interval,
+                }),
                 defines,
                 size: (config.width, config.height),
             };
@@ -423,6 +424,41 @@ fn run_job(
                 Ok(())
             };
             renderer.inputs(&xml, &spec, &mut on_bundle, on_pass)?;
+            // A run resumed from its state delivers the bundles from the saved pass on; the
+            // earlier ones were written by the session that saved it (before the state).
+            for &passes in &r.passes {
+                if record.samples.iter().any(|s| s.passes == passes) {
+                    continue;
+                }
+                let rel = plan.bundle_path(sp.index, seed_index, passes);
+                let path = root.join(&rel);
+                let earlier = read_bundle(&path).with_context(|| {
+                    format!("the resumed run expects the earlier session's bundle {rel}")
+                })?;
+                if (earlier.meta.passes, earlier.meta.seed) != (passes, seed) {
+                    bail!(
+                        "{rel}: holds pass {} of seed {}, expected pass {passes} of seed {seed}",
+                        earlier.meta.passes,
+                        earlier.meta.seed
+                    );
+                }
+                record.samples.push(SampleEntry {
+                    bundle: rel,
+                    scene: sp.id.clone(),
+                    family: sp.family,
+                    split: sp.split,
+                    seed,
+                    seed_index,
+                    passes,
+                    photons: r.photons_per_pass,
+                    reference: sp.reference(),
+                    sha256: sha256_file(&path)?,
+                });
+            }
+            record.samples.sort_by_key(|s| s.passes);
+            if let Some(state) = &spec.state {
+                remove_if_present(&state.path)?;
+            }
             let got: Vec<u32> = record.samples.iter().map(|s| s.passes).collect();
             if got != r.passes {
                 bail!(

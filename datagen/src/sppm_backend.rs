@@ -5,9 +5,7 @@
 use crate::jobs::{RunSpec, SampleRenderer};
 use anyhow::{anyhow, bail, Context, Result};
 use bundle::{Bundle, Image};
-use renderer::integrators::sppm::{
-    render_sppm, render_sppm_resumable, SppmMode, SppmSettings, StopCondition,
-};
+use renderer::integrators::sppm::{render_sppm_resumable, SppmMode, SppmSettings, StopCondition};
 use renderer::scene::Scene;
 use renderer::state_file::{scene_file_fingerprint, StateFile};
 use std::path::Path;
@@ -44,6 +42,21 @@ fn load(xml: &Path, spec: &RunSpec) -> Result<Scene> {
     Ok(scene)
 }
 
+/// The run's state file, when the job gives one (its folder is created).
+fn state_file(xml: &Path, spec: &RunSpec) -> Result<Option<StateFile>> {
+    let Some(s) = &spec.state else {
+        return Ok(None);
+    };
+    if let Some(dir) = s.path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    Ok(Some(StateFile {
+        path: s.path.clone(),
+        interval: s.interval,
+        scene_fingerprint: scene_file_fingerprint(xml, &spec.defines)?,
+    }))
+}
+
 /// SPPM settings of a run.
 fn settings(spec: &RunSpec) -> SppmSettings {
     SppmSettings {
@@ -69,20 +82,7 @@ impl SampleRenderer for SppmBackend {
             checkpoints: vec![*spec.passes.last().unwrap_or(&1)],
             seconds: None,
         };
-        let state = match &spec.state {
-            Some(s) => {
-                if let Some(dir) = s.path.parent() {
-                    std::fs::create_dir_all(dir)
-                        .with_context(|| format!("creating {}", dir.display()))?;
-                }
-                Some(StateFile {
-                    path: s.path.clone(),
-                    interval: s.interval,
-                    scene_fingerprint: scene_file_fingerprint(xml, &spec.defines)?,
-                })
-            }
-            None => None,
-        };
+        let state = state_file(xml, spec)?;
         let mut reference = None;
         render_sppm_resumable(
             &scene,
@@ -110,9 +110,15 @@ impl SampleRenderer for SppmBackend {
             checkpoints: spec.passes.clone(),
             seconds: None,
         };
-        render_sppm(&scene, &settings(spec), &stop, on_bundle, |p| {
-            on_pass(p.pass)
-        })?;
+        let state = state_file(xml, spec)?;
+        render_sppm_resumable(
+            &scene,
+            &settings(spec),
+            &stop,
+            state.as_ref(),
+            on_bundle,
+            |p| on_pass(p.pass),
+        )?;
         Ok(())
     }
 }

@@ -242,16 +242,21 @@ fn average_references_with_the_real_renderer() {
 /// The state files (`records/<scene>/reference.<config>.state`) under `dir` and their saved
 /// pass counts.
 fn reference_states(dir: &Path) -> Vec<(PathBuf, u64)> {
+    run_states(dir, "reference.")
+}
+
+/// The state files `records/<scene>/<prefix>…state` under `dir` and their saved pass counts.
+fn run_states(dir: &Path, prefix: &str) -> Vec<(PathBuf, u64)> {
     let Ok(scenes) = std::fs::read_dir(dir.join("records")) else {
         return Vec::new();
     };
     let mut out = Vec::new();
     for scene in scenes.flatten() {
         let Some(path) = std::fs::read_dir(scene.path()).ok().and_then(|files| {
-            files
-                .flatten()
-                .map(|f| f.path())
-                .find(|p| p.to_string_lossy().ends_with(".state"))
+            files.flatten().map(|f| f.path()).find(|p| {
+                let name = p.file_name().unwrap_or_default().to_string_lossy();
+                name.starts_with(prefix) && name.ends_with(".state")
+            })
         }) else {
             continue;
         };
@@ -529,5 +534,42 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
         !work.join("missing/references").exists(),
         "nothing rendered"
     );
+    std::fs::remove_dir_all(&work).unwrap();
+}
+
+#[test]
+fn an_input_job_killed_between_its_bundles_resumes_from_its_state() {
+    let work = fresh_dir("cli-input-state");
+    let mut config = test_config(16, &[2, 60], 1, 4);
+    config.render.photons_per_pass = 2000;
+    config.render.reference_photons_per_pass = 500;
+    let config_path = work.join("config.toml");
+    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
+    let whole = work.join("whole");
+    ok(render(&config_path, &whole, &["--threads", "2"])
+        .output()
+        .unwrap());
+    let reference = snapshot(&whole);
+
+    // Killed once an input run has saved its state past pass 5: its bundle at pass 2 is on
+    // disk, the one at pass 60 is not. The resumed run takes the first from the disk.
+    let dir = work.join("killed");
+    let saving = ["--threads", "1", "--state-interval", "0.0001"];
+    let mut child = render(&config_path, &dir, &saving).spawn().unwrap();
+    let finished = loop {
+        let done = child.try_wait().unwrap().is_some();
+        if done || run_states(&dir, "s00.").iter().any(|(_, p)| *p >= 5) {
+            break done;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(!finished, "the run had finished before the kill");
+    let states = run_states(&dir, "s00.");
+    let (_, passes) = states.iter().find(|(_, p)| *p >= 5).unwrap();
+    assert!(*passes < 60, "saved at pass {passes}");
+    ok(render(&config_path, &dir, &saving).output().unwrap());
+    assert_same(&reference, &snapshot(&dir));
     std::fs::remove_dir_all(&work).unwrap();
 }
