@@ -392,6 +392,21 @@ fn run_job(
                 defines,
                 size: (config.width, config.height),
             };
+            // The manifest entry of the bundle of `passes` passes at `rel` (= `path`).
+            let sample_entry = |rel: String, passes: u32, path: &Path| -> Result<SampleEntry> {
+                Ok(SampleEntry {
+                    bundle: rel,
+                    scene: sp.id.clone(),
+                    family: sp.family,
+                    split: sp.split,
+                    seed,
+                    seed_index,
+                    passes,
+                    photons: r.photons_per_pass,
+                    reference: sp.reference(),
+                    sha256: sha256_file(path)?,
+                })
+            };
             let mut on_bundle = |mut b: Bundle| -> Result<()> {
                 let passes = b.meta.passes;
                 if !r.passes.contains(&passes) {
@@ -409,18 +424,7 @@ fn run_job(
                     std::fs::write(tmp, &bytes)?;
                     Ok(())
                 })?;
-                record.samples.push(SampleEntry {
-                    bundle: rel,
-                    scene: sp.id.clone(),
-                    family: sp.family,
-                    split: sp.split,
-                    seed,
-                    seed_index,
-                    passes,
-                    photons: r.photons_per_pass,
-                    reference: sp.reference(),
-                    sha256: sha256_file(&path)?,
-                });
+                record.samples.push(sample_entry(rel, passes, &path)?);
                 Ok(())
             };
             renderer.inputs(&xml, &spec, &mut on_bundle, on_pass)?;
@@ -442,18 +446,7 @@ fn run_job(
                         earlier.meta.seed
                     );
                 }
-                record.samples.push(SampleEntry {
-                    bundle: rel,
-                    scene: sp.id.clone(),
-                    family: sp.family,
-                    split: sp.split,
-                    seed,
-                    seed_index,
-                    passes,
-                    photons: r.photons_per_pass,
-                    reference: sp.reference(),
-                    sha256: sha256_file(&path)?,
-                });
+                record.samples.push(sample_entry(rel, passes, &path)?);
             }
             record.samples.sort_by_key(|s| s.passes);
             if let Some(state) = &spec.state {

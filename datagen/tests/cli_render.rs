@@ -239,6 +239,23 @@ fn average_references_with_the_real_renderer() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Starts `cmd` and kills it (SIGKILL) as soon as `ready()` holds, reading the moment from the
+/// run's own files so that it lands mid-run however loaded the machine is; asserts that the
+/// run had not finished by then.
+fn kill_when(mut cmd: Command, ready: impl Fn() -> bool) {
+    let mut child = cmd.spawn().unwrap();
+    let finished = loop {
+        let done = child.try_wait().unwrap().is_some();
+        if done || ready() {
+            break done;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(!finished, "the run had finished before the kill");
+}
+
 /// The state files (`records/<scene>/reference.<config>.state`) under `dir` and their saved
 /// pass counts.
 fn reference_states(dir: &Path) -> Vec<(PathBuf, u64)> {
@@ -292,17 +309,9 @@ fn a_reference_job_killed_mid_run_resumes_from_its_state() {
     // Killed (SIGKILL) while a reference run has saved its state past pass 5.
     let dir = work.join("killed");
     let saving = ["--threads", "1", "--state-interval", "0.0001"];
-    let mut child = render(&config_path, &dir, &saving).spawn().unwrap();
-    let finished = loop {
-        let done = child.try_wait().unwrap().is_some();
-        if done || reference_states(&dir).iter().any(|(_, p)| *p >= 5) {
-            break done;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    };
-    let _ = child.kill();
-    let _ = child.wait();
-    assert!(!finished, "the run had finished before the kill");
+    kill_when(render(&config_path, &dir, &saving), || {
+        reference_states(&dir).iter().any(|(_, p)| *p >= 5)
+    });
     let states = reference_states(&dir);
     let (state, passes) = states.iter().find(|(_, p)| *p >= 5).unwrap().clone();
     assert!(passes < 300, "saved at pass {passes}");
@@ -325,17 +334,9 @@ fn a_reference_job_killed_mid_run_resumes_from_its_state() {
     // Killed again mid-reference, then run under a changed config: the old state is not
     // resumed (it is another run) but removed, and the new config's dataset is complete.
     std::fs::remove_dir_all(dir.join("records")).unwrap();
-    let mut child = render(&config_path, &dir, &saving).spawn().unwrap();
-    let finished = loop {
-        let done = child.try_wait().unwrap().is_some();
-        if done || reference_states(&dir).iter().any(|(_, p)| *p >= 5) {
-            break done;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    };
-    let _ = child.kill();
-    let _ = child.wait();
-    assert!(!finished, "the second run had finished before the kill");
+    kill_when(render(&config_path, &dir, &saving), || {
+        reference_states(&dir).iter().any(|(_, p)| *p >= 5)
+    });
     assert!(!reference_states(&dir).is_empty());
     config.render.reference_photons_per_pass = 1500;
     std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
@@ -555,17 +556,9 @@ fn an_input_job_killed_between_its_bundles_resumes_from_its_state() {
     // disk, the one at pass 60 is not. The resumed run takes the first from the disk.
     let dir = work.join("killed");
     let saving = ["--threads", "1", "--state-interval", "0.0001"];
-    let mut child = render(&config_path, &dir, &saving).spawn().unwrap();
-    let finished = loop {
-        let done = child.try_wait().unwrap().is_some();
-        if done || run_states(&dir, "s00.").iter().any(|(_, p)| *p >= 5) {
-            break done;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    };
-    let _ = child.kill();
-    let _ = child.wait();
-    assert!(!finished, "the run had finished before the kill");
+    kill_when(render(&config_path, &dir, &saving), || {
+        run_states(&dir, "s00.").iter().any(|(_, p)| *p >= 5)
+    });
     let states = run_states(&dir, "s00.");
     let (_, passes) = states.iter().find(|(_, p)| *p >= 5).unwrap();
     assert!(*passes < 60, "saved at pass {passes}");
