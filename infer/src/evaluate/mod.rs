@@ -140,6 +140,8 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
     std::fs::create_dir_all(&config.output)
         .with_context(|| format!("creating {}", config.output.display()))?;
     let passes = config.pass_counts();
+    // The settings and model files, hashed once for every scene's saved result.
+    let run_fingerprint = resume::run_fingerprint(config)?;
     let mut results = Vec::new();
     for (i, s) in scenes.iter().enumerate() {
         eprintln!("[{}/{}] {}", i + 1, scenes.len(), s.name);
@@ -157,7 +159,7 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
         };
         // A scene whose files cannot be read has no fingerprint: it is evaluated (and its
         // failure recorded in the report) but neither reused nor saved.
-        let fingerprint = resume::scene_fingerprint(config, s).ok();
+        let fingerprint = resume::scene_fingerprint(&run_fingerprint, s).ok();
         let saved = resume::result_path(&config.output, &file_stem(&s.name));
         let reused = match (&fingerprint, resume) {
             (Some(f), true) => match resume::load(&saved, f, &config.output)? {

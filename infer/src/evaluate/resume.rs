@@ -41,12 +41,10 @@ fn hash_file(h: &mut Sha256, path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// SHA-256 over what one scene's measurements depend on: the settings that reach the renders
-/// and the reconstruction (photons, passes, seed, threads, tile, backend, engine, depth), every
-/// file of the model directories (main and ablation), the scene's name, XML and reference.
-/// Files the XML references (meshes, textures) and the toolkit's own code are not hashed: do
-/// not resume across an edit of those.
-pub fn scene_fingerprint(config: &EvalConfig, scene: &EvalScene) -> Result<String> {
+/// SHA-256 over what every scene's measurements depend on: the settings that reach the renders
+/// and the reconstruction (photons, passes, seed, threads, tile, backend, engine, depth) and
+/// every file of the model directories (main and ablation). Computed once per evaluation.
+pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
     let settings = serde_json::json!({
         "photons_per_pass": config.photons_per_pass,
         "passes": config.pass_counts(),
@@ -56,8 +54,6 @@ pub fn scene_fingerprint(config: &EvalConfig, scene: &EvalScene) -> Result<Strin
         "backend": config.backend,
         "engine": config.engine,
         "max_depth": config.max_depth,
-        "scene": scene.name,
-        "defines": scene.defines,
     });
     let mut h = Sha256::new();
     h.update(settings.to_string().as_bytes());
@@ -75,9 +71,25 @@ pub fn scene_fingerprint(config: &EvalConfig, scene: &EvalScene) -> Result<Strin
             hash_file(&mut h, &f)?;
         }
     }
+    Ok(hex(h))
+}
+
+/// SHA-256 over what one scene's measurements depend on: the evaluation's [`run_fingerprint`]
+/// `run`, and the scene's name, defines, XML and reference. Files the XML references (meshes,
+/// textures) and the toolkit's own code are not hashed: do not resume across an edit of those.
+pub fn scene_fingerprint(run: &str, scene: &EvalScene) -> Result<String> {
+    let mut h = Sha256::new();
+    h.update(run.as_bytes());
+    let identity = serde_json::json!({ "scene": scene.name, "defines": scene.defines });
+    h.update(identity.to_string().as_bytes());
     hash_file(&mut h, &scene.xml)?;
     hash_file(&mut h, &scene.reference)?;
-    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+    Ok(hex(h))
+}
+
+/// The digest as lower-case hex.
+fn hex(h: Sha256) -> String {
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Writes a scene's result atomically.
