@@ -239,6 +239,21 @@ fn average_references_with_the_real_renderer() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Writes `config` to `work/config.toml`, renders it uninterrupted into `work/whole` and returns
+/// the config's path and the dataset's snapshot (what an interrupted run must end with).
+fn render_uninterrupted(
+    work: &Path,
+    config: &datagen::config::Config,
+) -> (PathBuf, std::collections::BTreeMap<String, Vec<u8>>) {
+    let config_path = work.join("config.toml");
+    std::fs::write(&config_path, toml::to_string(config).unwrap()).unwrap();
+    let whole = work.join("whole");
+    ok(render(&config_path, &whole, &["--threads", "2"])
+        .output()
+        .unwrap());
+    (config_path, snapshot(&whole))
+}
+
 /// Starts `cmd` and kills it (SIGKILL) as soon as `ready()` holds, reading the moment from the
 /// run's own files so that it lands mid-run however loaded the machine is; asserts that the
 /// run had not finished by then.
@@ -297,13 +312,7 @@ fn a_reference_job_killed_mid_run_resumes_from_its_state() {
     let mut config = test_config(16, &[2], 1, 300);
     config.render.photons_per_pass = 500;
     config.render.reference_photons_per_pass = 2000;
-    let config_path = work.join("config.toml");
-    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
-    let whole = work.join("whole");
-    ok(render(&config_path, &whole, &["--threads", "2"])
-        .output()
-        .unwrap());
-    let reference = snapshot(&whole);
+    let (config_path, reference) = render_uninterrupted(&work, &config);
     assert!(reference.keys().all(|k| !k.ends_with(".state")));
 
     // Killed (SIGKILL) while a reference run has saved its state past pass 5.
@@ -544,13 +553,7 @@ fn an_input_job_killed_between_its_bundles_resumes_from_its_state() {
     let mut config = test_config(16, &[2, 60], 1, 4);
     config.render.photons_per_pass = 2000;
     config.render.reference_photons_per_pass = 500;
-    let config_path = work.join("config.toml");
-    std::fs::write(&config_path, toml::to_string(&config).unwrap()).unwrap();
-    let whole = work.join("whole");
-    ok(render(&config_path, &whole, &["--threads", "2"])
-        .output()
-        .unwrap());
-    let reference = snapshot(&whole);
+    let (config_path, reference) = render_uninterrupted(&work, &config);
 
     // Killed once an input run has saved its state past pass 5: its bundle at pass 2 is on
     // disk, the one at pass 60 is not. The resumed run takes the first from the disk.
