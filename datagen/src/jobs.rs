@@ -327,6 +327,11 @@ fn run_job(
         samples: Vec::new(),
         scene_xml_sha256: scene_hash.clone(),
     };
+    // Both kinds of job resume from this state; it is removed once their outputs are written.
+    let state = StateSpec {
+        path: root.join(plan.state_path(job, fingerprint)),
+        interval: options.state_interval,
+    };
     match *job {
         Job::Reference { .. } => {
             let spec = RunSpec {
@@ -336,10 +341,7 @@ fn run_job(
                 passes: vec![r.reference_passes],
                 max_depth: r.max_depth,
                 threads: options.threads,
-                state: Some(StateSpec {
-                    path: root.join(plan.state_path(job, fingerprint)),
-                    interval: options.state_interval,
-                }),
+                state: Some(state.clone()),
                 defines: defines.clone(),
                 size: (config.width, config.height),
             };
@@ -372,10 +374,6 @@ fn run_job(
                 xml_sha256: scene_hash,
                 defines: defines.iter().cloned().collect(),
             });
-            // The reference is written: its run's state is of no further use.
-            if let Some(state) = &spec.state {
-                remove_if_present(&state.path)?;
-            }
         }
         Job::Inputs { seed_index, .. } => {
             let spec = RunSpec {
@@ -385,10 +383,7 @@ fn run_job(
                 passes: r.passes.clone(),
                 max_depth: r.max_depth,
                 threads: options.threads,
-                state: Some(StateSpec {
-                    path: root.join(plan.state_path(job, fingerprint)),
-                    interval: options.state_interval,
-                }),
+                state: Some(state.clone()),
                 defines,
                 size: (config.width, config.height),
             };
@@ -449,9 +444,6 @@ fn run_job(
                 record.samples.push(sample_entry(rel, passes, &path)?);
             }
             record.samples.sort_by_key(|s| s.passes);
-            if let Some(state) = &spec.state {
-                remove_if_present(&state.path)?;
-            }
             let got: Vec<u32> = record.samples.iter().map(|s| s.passes).collect();
             if got != r.passes {
                 bail!(
@@ -461,6 +453,8 @@ fn run_job(
             }
         }
     }
+    // The outputs are written: the run's state is of no further use.
+    remove_if_present(&state.path)?;
     Ok(record)
 }
 
