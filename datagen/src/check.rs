@@ -5,6 +5,7 @@
 use crate::fsutil::sha256_file;
 use crate::manifest::{config_fingerprint, Manifest, MANIFEST_FILE, MANIFEST_FORMAT};
 use bundle::{read_bundle, read_rgb_exr_image};
+use renderer::state_file::scene_fingerprint;
 use std::path::Path;
 
 /// The outcome of a check: files looked at and problems found (each names its file).
@@ -55,12 +56,32 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
             report
                 .problems
                 .push(format!("{}: scene file missing", s.xml));
-        } else if let Some(expected) = &s.xml_sha256 {
-            // A scene the user brought: the file must still be the one that was rendered.
-            if let Some(problem) = checksum_problem(root, &s.xml, expected) {
-                report.problems.push(format!(
-                    "{problem} (the scene changed since the dataset was rendered)"
-                ));
+        } else if let Some(expected) = &s.scene_sha256 {
+            // A scene the user brought: it and every file it reads must still be the ones
+            // that were rendered.
+            let defines: Vec<(String, String)> = s
+                .defines
+                .iter()
+                .map(|(k, v)| (k.clone(), v.clone()))
+                .collect();
+            match scene_fingerprint(&root.join(&s.xml), &defines) {
+                Err(e) => report.problems.push(format!("{}: {e:#}", s.xml)),
+                // Datasets of the twelfth session recorded the scene file's hash alone.
+                Ok(_) if sha256_file(&root.join(&s.xml)).is_ok_and(|x| x == *expected) => {
+                    report.problems.push(format!(
+                        "{}: its manifest entry records the scene file's hash alone (written \
+                         by an older datagen), which cannot vouch for the files the scene reads; \
+                         `datagen render` redoes its jobs once",
+                        s.xml
+                    ))
+                }
+                Ok(found) if found != *expected => report.problems.push(format!(
+                    "{}: the scene or a file it reads (include, mesh, texture) changed since \
+                     the dataset was rendered (fingerprint {found}, manifest {expected}); \
+                     `datagen render` redoes its jobs",
+                    s.xml
+                )),
+                Ok(_) => {}
             }
         }
         done += 1;

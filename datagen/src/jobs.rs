@@ -16,6 +16,7 @@ use crate::scene::write_scene_files;
 use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, write_bundle, write_rgb_exr_image, Bundle, Image};
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use renderer::state_file::scene_fingerprint;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -164,7 +165,7 @@ pub fn render_dataset(
         let work = job_work(config, &job);
         let existing = read_record(root, &plan, &job, &fingerprint);
         let scene_hash = external.get(&job.scene()).cloned();
-        if existing.is_some_and(|r| r.scene_xml_sha256 == scene_hash && outputs_intact(root, &r)) {
+        if existing.is_some_and(|r| r.scene_sha256 == scene_hash && outputs_intact(root, &r)) {
             report.skipped += 1;
         } else {
             let passes = match job {
@@ -239,8 +240,9 @@ fn remove_stale_states(root: &Path, plan: &Plan, job: &Job, fingerprint: &str) -
     Ok(())
 }
 
-/// SHA-256 of the scene file of every external scene among `jobs` (by scene index); an error
-/// naming the file when one cannot be read.
+/// Fingerprint ([`scene_fingerprint`]: the scene file, every file it reads, its `defines`) of
+/// every external scene among `jobs` (by scene index); an error naming the file when the scene
+/// file cannot be read.
 fn external_hashes(
     config: &Config,
     plan: &Plan,
@@ -250,7 +252,7 @@ fn external_hashes(
     for &j in jobs {
         let scene = plan.jobs[j].scene();
         if let (Some(s), false) = (config.external_scene(scene), out.contains_key(&scene)) {
-            let hash = sha256_file(&s.xml).with_context(|| {
+            let hash = scene_fingerprint(&s.xml, &s.define_pairs()).with_context(|| {
                 format!(
                     "scene {} (families.external): reading {}",
                     plan.scenes[scene].id,
@@ -325,7 +327,7 @@ fn run_job(
         config_sha256: fingerprint.to_owned(),
         scene: None,
         samples: Vec::new(),
-        scene_xml_sha256: scene_hash.clone(),
+        scene_sha256: scene_hash.clone(),
     };
     // Both kinds of job resume from this state; it is removed once their outputs are written.
     let state = StateSpec {
@@ -371,7 +373,7 @@ fn run_job(
                 reference_seed: seed,
                 reference_passes: r.reference_passes,
                 reference_photons: r.reference_photons_per_pass,
-                xml_sha256: scene_hash,
+                scene_sha256: scene_hash,
                 defines: defines.iter().cloned().collect(),
             });
         }

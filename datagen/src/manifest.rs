@@ -64,10 +64,12 @@ pub struct SceneEntry {
     pub reference_passes: u32,
     /// Photons per pass of the reference run.
     pub reference_photons: u64,
-    /// Lower-case hex SHA-256 of the scene file, for scenes the user brings (`external`;
-    /// generated scenes are a function of the config).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub xml_sha256: Option<String>,
+    /// Fingerprint of the scene as rendered, for scenes the user brings (`external`; generated
+    /// scenes are a function of the config): lower-case hex SHA-256 over its `defines` and the
+    /// contents of the scene file and every file it reads (`renderer::state_file::scene_fingerprint`).
+    /// Datasets of the twelfth session wrote the scene file's hash alone, as `xml_sha256`.
+    #[serde(default, alias = "xml_sha256", skip_serializing_if = "Option::is_none")]
+    pub scene_sha256: Option<String>,
     /// `<default>` overrides the scene is rendered with (scenes the user brings).
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub defines: std::collections::BTreeMap<String, String>,
@@ -85,10 +87,15 @@ pub struct JobRecord {
     pub scene: Option<SceneEntry>,
     /// The sample entries (input jobs), ascending passes.
     pub samples: Vec<SampleEntry>,
-    /// SHA-256 of the scene file the job rendered, for scenes the user brings: the job is
-    /// redone when the file changes.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub scene_xml_sha256: Option<String>,
+    /// Fingerprint of the scene the job rendered, for scenes the user brings (as
+    /// [`SceneEntry::scene_sha256`]): the job is redone when the scene file or a file it reads
+    /// changes.
+    #[serde(
+        default,
+        alias = "scene_xml_sha256",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub scene_sha256: Option<String>,
 }
 
 impl JobRecord {

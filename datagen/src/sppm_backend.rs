@@ -7,7 +7,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use bundle::{Bundle, Image};
 use renderer::integrators::sppm::{render_sppm_resumable, SppmMode, SppmSettings, StopCondition};
 use renderer::scene::Scene;
-use renderer::state_file::{scene_file_fingerprint, StateFile};
+use renderer::state_file::{scene_fingerprint, StateFile};
 use std::path::Path;
 
 /// Multi-level SPPM from the `renderer` crate.
@@ -53,7 +53,7 @@ fn state_file(xml: &Path, spec: &RunSpec) -> Result<Option<StateFile>> {
     Ok(Some(StateFile {
         path: s.path.clone(),
         interval: s.interval,
-        scene_fingerprint: scene_file_fingerprint(xml, &spec.defines)?,
+        scene_fingerprint: scene_fingerprint(xml, &spec.defines)?,
     }))
 }
 

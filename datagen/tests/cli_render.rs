@@ -361,10 +361,21 @@ fn a_reference_job_killed_mid_run_resumes_from_its_state() {
     std::fs::remove_dir_all(&work).unwrap();
 }
 
+/// Writes the floor mesh of a [`user_scene`]: a square of half-size `half` at y = 0, facing up.
+fn write_floor(dir: &Path, half: f32) {
+    let h = half;
+    std::fs::write(
+        dir.join("floor.obj"),
+        format!("v -{h} 0 -{h}\nv -{h} 0 {h}\nv {h} 0 {h}\nv {h} 0 -{h}\nf 1 2 3\nf 1 3 4\n"),
+    )
+    .unwrap();
+}
+
 /// A small lit floor as a user might bring it: a Mitsuba 3 scene whose film is `$res` square
-/// (default 32) and whose light has radiance `radiance`.
+/// (default 32), whose floor is an OBJ mesh and whose light has radiance `radiance`.
 fn user_scene(dir: &Path, radiance: f32) -> PathBuf {
     std::fs::create_dir_all(dir).unwrap();
+    write_floor(dir, 2.0);
     let path = dir.join("scene.xml");
     std::fs::write(
         &path,
@@ -379,8 +390,8 @@ fn user_scene(dir: &Path, radiance: f32) -> PathBuf {
             <rfilter type="box"/>
         </film>
     </sensor>
-    <shape type="rectangle">
-        <transform name="to_world"><rotate x="1" angle="-90"/><scale value="2"/></transform>
+    <shape type="obj">
+        <string name="filename" value="floor.obj"/>
         <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
     </shape>
     <shape type="sphere">
@@ -440,7 +451,7 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
     // The manifest finds the user's file from the dataset root, and records its checksum.
     assert_eq!(floor_entry.xml, "../mine/floor/scene.xml");
     assert!(data.join(&floor_entry.xml).is_file());
-    assert!(floor_entry.xml_sha256.is_some());
+    assert!(floor_entry.scene_sha256.is_some());
     // … and the overrides it was rendered with, for `evaluate` to render it the same way.
     assert_eq!(
         floor_entry.defines.get("res").map(String::as_str),
@@ -472,31 +483,48 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
         String::from_utf8_lossy(&out.stderr).contains("0 jobs rendered"),
         "{out:?}"
     );
-    let before = snapshot(&data);
-    user_scene(&work.join("mine/lamp"), 25.0);
-    let report = check(false);
-    assert!(
-        report.contains("mine/lamp/scene.xml") && report.contains("scene changed"),
-        "{report}"
-    );
-    let out = ok(render(&config_path, &data, &[]).output().unwrap());
-    assert!(
-        String::from_utf8_lossy(&out.stderr).contains("2 jobs rendered"),
-        "{out:?}"
-    );
-    let after = snapshot(&data);
-    let changed: Vec<&String> = before
-        .keys()
-        .filter(|k| before.get(*k) != after.get(*k))
-        .collect();
-    assert!(
-        changed
+    // `edit` changes the scene `dir` (under `mine/`), whose jobs are those of `id`.
+    let redone_after = |edit: &dyn Fn(), dir: &str, id: &str| {
+        let before = snapshot(&data);
+        edit();
+        let report = check(false);
+        assert!(
+            report.contains(&format!("mine/{dir}/scene.xml"))
+                && report.contains("the scene or a file it reads"),
+            "{report}"
+        );
+        let out = ok(render(&config_path, &data, &[]).output().unwrap());
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("2 jobs rendered"),
+            "{out:?}"
+        );
+        let after = snapshot(&data);
+        let changed: Vec<&String> = before
+            .keys()
+            .filter(|k| before.get(*k) != after.get(*k))
+            .collect();
+        assert!(
+            changed
+                .iter()
+                .all(|k| k.contains(id) || *k == "manifest.json"),
+            "{changed:?}"
+        );
+        assert!(changed
             .iter()
-            .all(|k| k.contains("006-bright-lamp") || *k == "manifest.json"),
-        "{changed:?}"
+            .any(|k| k.starts_with(&format!("references/{id}"))));
+        check(true);
+    };
+    redone_after(
+        &|| drop(user_scene(&work.join("mine/lamp"), 25.0)),
+        "lamp",
+        "006-bright-lamp",
     );
-    assert!(changed.iter().any(|k| k.starts_with("references/006")));
-    check(true);
+    // The same for a file the scene reads: an edited mesh, with the XML untouched.
+    redone_after(
+        &|| write_floor(&work.join("mine/floor"), 1.5),
+        "floor",
+        "005-floor",
+    );
 
     // A scene whose film is not the dataset's size, and a missing scene file: errors naming
     // the file, the second before anything is rendered.
@@ -517,6 +545,7 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
     // A scene without `<rfilter type="box"/>` (Mitsuba's default is a Gaussian) is refused.
     let soft = work.join("mine/soft/scene.xml");
     std::fs::create_dir_all(soft.parent().unwrap()).unwrap();
+    write_floor(soft.parent().unwrap(), 2.0);
     let text = std::fs::read_to_string(&floor).unwrap();
     std::fs::write(&soft, text.replace("<rfilter type=\"box\"/>", "")).unwrap();
     let mut gaussian = config.clone();

@@ -19,7 +19,7 @@ pub struct StateFile {
     pub path: PathBuf,
     /// Seconds of rendering between saves (a run also saves at its bundles and at its end).
     pub interval: f64,
-    /// Identifies the scene (e.g. [`scene_file_fingerprint`]): a state saved for another scene
+    /// Identifies the scene (e.g. [`scene_fingerprint`]): a state saved for another scene
     /// is refused.
     pub scene_fingerprint: String,
 }
@@ -40,7 +40,7 @@ impl StateFile {
         let state = StateFile {
             path: path.to_owned(),
             interval,
-            scene_fingerprint: scene_file_fingerprint(xml, &identity)?,
+            scene_fingerprint: scene_fingerprint(xml, &identity)?,
         };
         state.check_interval()?;
         state.check_writable()?;
@@ -182,7 +182,8 @@ pub fn check_identity<I: Serialize>(path: &Path, saved: &I, here: &I) -> Result<
         let old = a.get(key).unwrap_or(&serde_json::Value::Null);
         if old != value {
             let hint = if key == "scene_fingerprint" {
-                " (the scene file or its -D overrides changed)"
+                " (the scene file, a file it reads — include, mesh, texture — or its -D overrides \
+                 changed)"
             } else {
                 ""
             };
@@ -197,19 +198,29 @@ pub fn check_identity<I: Serialize>(path: &Path, saved: &I, here: &I) -> Result<
     Ok(())
 }
 
-/// A fingerprint of a scene file as a run sees it: SHA-256 over the file's bytes and the `-D`
-/// overrides (in order). Files it references (meshes, textures, includes) are not read: a state
-/// resumed after editing those would mix two scenes.
-pub fn scene_file_fingerprint(xml: &Path, defines: &[(String, String)]) -> Result<String> {
+/// SHA-256 (lower-case hex) over what a render of the scene file `xml` with the `-D`
+/// overrides `defines` depends on: the overrides, and the contents of every file the scene
+/// reads ([`crate::xml::scene_files`]: the XML, its includes, meshes, textures, spectra), in
+/// document order. A file that cannot be read counts as missing (the scene's load names it).
+pub fn scene_fingerprint(xml: &Path, defines: &[(String, String)]) -> Result<String> {
     use sha2::{Digest, Sha256};
-    let bytes = std::fs::read(xml).with_context(|| format!("reading {}", xml.display()))?;
+    let files = crate::xml::scene_files(xml, defines)?;
     let mut h = Sha256::new();
-    h.update((bytes.len() as u64).to_le_bytes());
-    h.update(&bytes);
     for (name, value) in defines {
         for part in [name, value] {
             h.update((part.len() as u64).to_le_bytes());
             h.update(part.as_bytes());
+        }
+    }
+    for file in &files {
+        // The file's order in the list identifies it (a renamed file with the same contents
+        // renders the same); its length frames its bytes.
+        match std::fs::read(file) {
+            Ok(bytes) => {
+                h.update((bytes.len() as u64).to_le_bytes());
+                h.update(&bytes);
+            }
+            Err(_) => h.update(u64::MAX.to_le_bytes()),
         }
     }
     Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
@@ -256,5 +267,45 @@ impl<'a> Cursor<'a> {
     /// The next three f64.
     pub fn dvec3(&mut self) -> glam::DVec3 {
         glam::DVec3::new(self.f64(), self.f64(), self.f64())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_scene_fingerprint_changes_with_any_file_the_scene_reads() {
+        let dir = std::env::temp_dir().join(format!("state-fingerprint-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("meshes")).unwrap();
+        let xml = dir.join("scene.xml");
+        std::fs::write(
+            &xml,
+            "<scene version=\"3.0.0\">\n<default name=\"m\" value=\"tri\"/>\n\
+             <shape type=\"obj\"><string name=\"filename\" value=\"meshes/$m.obj\"/></shape>\n</scene>\n",
+        )
+        .unwrap();
+        let mesh = dir.join("meshes/tri.obj");
+        let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+        std::fs::write(&mesh, tri).unwrap();
+        let fingerprint = |defines: &[(String, String)]| scene_fingerprint(&xml, defines).unwrap();
+        let original = fingerprint(&[]);
+        assert_eq!(fingerprint(&[]), original, "deterministic");
+        // An edited mesh is another scene, even with the XML untouched …
+        std::fs::write(&mesh, tri.replace("v 0 1 0", "v 0 2 0")).unwrap();
+        assert_ne!(fingerprint(&[]), original);
+        // … and the same one again once restored.
+        std::fs::write(&mesh, tri).unwrap();
+        assert_eq!(fingerprint(&[]), original);
+        // A define that names another file, and a missing mesh, are other scenes too (the
+        // missing file is left for the scene's load to report).
+        let other = fingerprint(&[("m".into(), "quad".into())]);
+        assert_ne!(other, original);
+        std::fs::remove_file(&mesh).unwrap();
+        assert_ne!(fingerprint(&[]), original);
+        // The XML itself is read: a missing scene file is an error naming it.
+        let err = scene_fingerprint(&dir.join("none.xml"), &[]).unwrap_err();
+        assert!(format!("{err:#}").contains("none.xml"), "{err:#}");
     }
 }

@@ -407,3 +407,49 @@ fn a_killed_path_render_resumes_from_its_finished_rows_bit_identically() {
         &["rows.state", "spp: 3000 in the file, 5 in this run"],
     );
 }
+
+#[test]
+fn a_state_file_is_refused_once_a_mesh_the_scene_reads_changed() {
+    let dir = temp_dir("resume-mesh");
+    let xml = write_scene(&dir);
+    let text = std::fs::read_to_string(&xml).unwrap().replace(
+        "</scene>",
+        "<shape type=\"obj\"><string name=\"filename\" value=\"box.obj\"/></shape>\n</scene>",
+    );
+    std::fs::write(&xml, text).unwrap();
+    let mesh = dir.join("box.obj");
+    let triangle = "v -0.5 0.2 0\nv 0.5 0.2 0\nv 0 1 0\nf 1 2 3\n";
+    std::fs::write(&mesh, triangle).unwrap();
+    let state = dir.join("run.state");
+    let args: Vec<String> = [
+        xml.to_str().unwrap(),
+        "--spp",
+        "2",
+        "--out",
+        dir.join("img.exr").to_str().unwrap(),
+        "--state",
+        state.to_str().unwrap(),
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let render = || {
+        Command::new(env!("CARGO_BIN_EXE_render"))
+            .args(&args)
+            .output()
+            .unwrap()
+    };
+    let out = render();
+    assert!(out.status.success(), "{}", stderr(&out));
+    // The same scene resumes (here: a finished run, written again) …
+    let out = render();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("resuming from the run state"));
+    // … but after an edit of the mesh alone, with the XML untouched, the state is another
+    // scene's: refused, naming the state file and what changed.
+    std::fs::write(&mesh, triangle.replace("v 0 1 0", "v 0 1.5 0")).unwrap();
+    render_fails_naming(
+        &args,
+        &["run.state", "scene_fingerprint", "a file it reads"],
+    );
+}

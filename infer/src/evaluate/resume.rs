@@ -1,6 +1,6 @@
 //! Per-scene results on disk, so that `evaluate --resume` continues a killed evaluation: every
 //! finished scene is written to `<output>/scenes/<name>.json` with a fingerprint of what its
-//! numbers depend on (the settings, the model files, the scene file and the reference), and a
+//! numbers depend on (the settings, the model files, the scene's files and the reference), and a
 //! resumed run takes a scene from there when the fingerprint matches and its pictures are on
 //! disk; anything else is evaluated again.
 
@@ -75,14 +75,20 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
 }
 
 /// SHA-256 over what one scene's measurements depend on: the evaluation's [`run_fingerprint`]
-/// `run`, and the scene's name, defines, XML and reference. Files the XML references (meshes,
-/// textures) and the toolkit's own code are not hashed: do not resume across an edit of those.
+/// `run`, the scene's name and reference, and its scene fingerprint (its defines and the
+/// contents of the scene file and every file it reads: includes, meshes, textures). The
+/// toolkit's own code is not hashed: do not resume across an update of the toolkit.
 pub fn scene_fingerprint(run: &str, scene: &EvalScene) -> Result<String> {
     let mut h = Sha256::new();
     h.update(run.as_bytes());
-    let identity = serde_json::json!({ "scene": scene.name, "defines": scene.defines });
-    h.update(identity.to_string().as_bytes());
-    hash_file(&mut h, &scene.xml)?;
+    h.update(
+        serde_json::json!({ "scene": scene.name })
+            .to_string()
+            .as_bytes(),
+    );
+    let files = renderer::state_file::scene_fingerprint(&scene.xml, &scene.defines)
+        .with_context(|| format!("scene {}", scene.name))?;
+    h.update(files.as_bytes());
     hash_file(&mut h, &scene.reference)?;
     Ok(hex(h))
 }

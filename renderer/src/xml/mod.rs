@@ -124,6 +124,8 @@ pub(crate) struct Diagnostics {
     pub lenient: bool,
     /// Non-fatal messages, each prefixed with its location.
     pub warnings: Vec<String>,
+    /// Every XML file read so far (the scene file, then its includes in reading order).
+    pub files_read: Vec<PathBuf>,
 }
 
 impl Diagnostics {
@@ -165,6 +167,7 @@ pub fn load_scene(
     let mut diag = Diagnostics {
         lenient,
         warnings: Vec::new(),
+        files_read: Vec::new(),
     };
     let mut params: HashMap<String, String> = defaults.iter().cloned().collect();
     let root = read_file(path, &mut params, 0, &mut diag)?;
@@ -185,6 +188,43 @@ pub fn load_scene(
     builder.finish(&root)
 }
 
+/// Every file the scene `path` reads with the `-D` overrides `defaults`, in document order
+/// without repeats: the scene file, its `<include>`d files, and each file named by a
+/// `filename` parameter or attribute (meshes, bitmaps, environment maps, spectrum files). These
+/// are the files whose contents decide the image; resumable runs and datasets fingerprint them.
+/// Only the XML is read: a named file that does not exist is listed, not reported (the scene's
+/// load reports it with its line).
+pub fn scene_files(path: &Path, defaults: &[(String, String)]) -> Result<Vec<PathBuf>, SceneError> {
+    let mut diag = Diagnostics {
+        lenient: true,
+        warnings: Vec::new(),
+        files_read: Vec::new(),
+    };
+    let mut params: HashMap<String, String> = defaults.iter().cloned().collect();
+    let root = read_file(path, &mut params, 0, &mut diag)?;
+    let mut files = std::mem::take(&mut diag.files_read);
+    collect_named_files(&root, &mut files);
+    let mut seen = std::collections::HashSet::new();
+    files.retain(|f| seen.insert(f.clone()));
+    Ok(files)
+}
+
+/// Appends the files named in `el` and its descendants: `<string name="filename">` values and
+/// `<spectrum filename>` attributes, resolved against the file each element is written in.
+fn collect_named_files(el: &Element, out: &mut Vec<PathBuf>) {
+    let named = match el.tag.as_str() {
+        "string" if el.attr("name") == Some("filename") => el.attr("value"),
+        "spectrum" => el.attr("filename"),
+        _ => None,
+    };
+    if let Some(value) = named {
+        out.push(el.resolve_path(value));
+    }
+    for child in &el.children {
+        collect_named_files(child, out);
+    }
+}
+
 /// Reads and parses one XML file, substituting parameters and expanding includes.
 pub(crate) fn read_file(
     path: &Path,
@@ -196,6 +236,7 @@ pub(crate) fn read_file(
         file: path.to_owned(),
         error,
     })?;
+    diag.files_read.push(path.to_owned());
     let file: Arc<Path> = Arc::from(path);
     let options = roxmltree::ParsingOptions {
         allow_dtd: true,

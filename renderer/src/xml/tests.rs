@@ -626,15 +626,20 @@ fn ply_ascii_and_binary_with_and_without_normals() {
     assert!(err.contains("vertex 7") && err.contains("bad.ply"), "{err}");
 }
 
-#[test]
-fn include_and_references_across_files() {
-    let dir = temp_dir("include");
+/// Writes the triangle mesh `parts/meshes/tri.obj` under `dir`.
+fn write_part_triangle(dir: &Path) {
     std::fs::create_dir_all(dir.join("parts/meshes")).unwrap();
     std::fs::write(
         dir.join("parts/meshes/tri.obj"),
         "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
     )
     .unwrap();
+}
+
+#[test]
+fn include_and_references_across_files() {
+    let dir = temp_dir("include");
+    write_part_triangle(&dir);
     // The included file's relative paths resolve against its own folder.
     std::fs::write(
         dir.join("parts/materials.xml"),
@@ -675,6 +680,53 @@ fn include_and_references_across_files() {
         .unwrap_err()
         .to_string()
         .contains("nested deeper"));
+}
+
+#[test]
+fn scene_files_lists_the_xml_its_includes_and_every_named_file() {
+    let dir = temp_dir("scene-files");
+    write_part_triangle(&dir);
+    // An included file with nothing but a <default> still decides the image.
+    std::fs::write(
+        dir.join("parts/defaults.xml"),
+        "<scene version=\"3.0.0\">\n<default name=\"mesh\" value=\"tri\"/>\n</scene>\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("parts/shapes.xml"),
+        "<scene version=\"3.0.0\">\n<shape type=\"obj\"><string name=\"filename\" value=\"meshes/$mesh.obj\"/></shape>\n</scene>\n",
+    )
+    .unwrap();
+    let body = format!(
+        "{SENSOR}\n<include filename=\"parts/defaults.xml\"/>\n<include filename=\"parts/shapes.xml\"/>\n\
+         <bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\"><string name=\"filename\" value=\"wood.png\"/></texture></bsdf>\n\
+         <bsdf type=\"diffuse\"><spectrum name=\"reflectance\" filename=\"paint.spd\"/></bsdf>\n\
+         <shape type=\"obj\"><string name=\"filename\" value=\"parts/meshes/tri.obj\"/></shape>"
+    );
+    let xml = write_scene(&dir, "scene.xml", &body);
+    let files = scene_files(&xml, &[]).unwrap();
+    let expected: Vec<PathBuf> = [
+        "scene.xml",
+        "parts/defaults.xml",
+        "parts/shapes.xml",
+        // Resolved against the file that names it; the second mention is not repeated.
+        "parts/meshes/tri.obj",
+        // Named files that do not exist are listed all the same.
+        "wood.png",
+        "paint.spd",
+    ]
+    .iter()
+    .map(|f| dir.join(f))
+    .collect();
+    assert_eq!(files, expected);
+    // `-D` overrides reach the names.
+    let files = scene_files(&xml, &[("mesh".into(), "quad".into())]).unwrap();
+    assert_eq!(files[3], dir.join("parts/meshes/quad.obj"));
+    // An unreadable scene file is an error naming it.
+    let err = scene_files(&dir.join("nope.xml"), &[])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("nope.xml"), "{err}");
 }
 
 #[test]
