@@ -54,9 +54,19 @@ struct Cli {
     #[arg(long, default_value_t = 512)]
     tile: usize,
 
-    /// `--scene`: SPPM passes to render.
-    #[arg(long, default_value_t = 64, help_heading = "Rendering (--scene)")]
-    passes: u32,
+    /// `--scene`: SPPM passes to render [default: 64, or no pass limit with --time].
+    #[arg(long, help_heading = "Rendering (--scene)")]
+    passes: Option<u32>,
+    /// `--scene`: render for this many seconds instead: the render stops after the first pass
+    /// that ends past it (the reconstruction's time comes on top). With --passes too, whichever
+    /// comes first.
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        requires = "scene",
+        help_heading = "Rendering (--scene)"
+    )]
+    time: Option<f64>,
     /// `--scene`: photons traced per pass.
     #[arg(long, default_value_t = 100_000, help_heading = "Rendering (--scene)")]
     photons: u64,
@@ -232,14 +242,26 @@ fn run(cli: &Cli) -> Result<()> {
     Ok(())
 }
 
-/// Renders `scene` with multi-level SPPM for `--passes` passes and returns the bundle.
+/// Passes `infer --scene` renders when given neither `--passes` nor `--time`.
+const DEFAULT_PASSES: u32 = 64;
+
+/// Renders `scene` with multi-level SPPM for `--passes` passes (and/or `--time` seconds) and
+/// returns the bundle.
 fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
     use renderer::integrators::sppm::{
         render_sppm_resumable, SppmMode, SppmSettings, StopCondition,
     };
     use renderer::state_file::StateFile;
-    if cli.passes == 0 {
-        bail!("--passes must be at least 1");
+    let passes = match (cli.passes, cli.time) {
+        (Some(0), _) => bail!("--passes must be at least 1"),
+        (Some(n), _) => Some(n),
+        (None, Some(_)) => None,
+        (None, None) => Some(DEFAULT_PASSES),
+    };
+    if let Some(t) = cli.time {
+        if !t.is_finite() || t <= 0.0 {
+            bail!("--time must be a positive, finite number of seconds, got {t}");
+        }
     }
     let desc = renderer::xml::load_scene(scene_path, &cli.define, false)
         .with_context(|| format!("loading {}", scene_path.display()))?;
@@ -260,17 +282,31 @@ fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
         ..SppmSettings::default()
     };
     let stop = StopCondition {
-        checkpoints: vec![cli.passes],
-        seconds: None,
+        checkpoints: passes.into_iter().collect(),
+        seconds: cli.time,
     };
-    let bar = ProgressBar::new(cli.passes as u64);
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{wide_bar}] {pos}/{len} passes ({msg}, ETA {eta})",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
+    let bar = match passes {
+        Some(n) => {
+            let bar = ProgressBar::new(n as u64);
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{elapsed_precise} [{wide_bar}] {pos}/{len} passes ({msg}, ETA {eta})",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            bar
+        }
+        // Time-bounded: the pass count is not known in advance.
+        None => {
+            let bar = ProgressBar::new_spinner();
+            bar.set_style(
+                ProgressStyle::with_template("{elapsed_precise} {spinner} pass {pos} ({msg})")
+                    .expect("valid template"),
+            );
+            bar
+        }
+    };
     let state = match &cli.state {
         Some(path) => {
             if path.exists() {
@@ -293,6 +329,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
         &settings,
         &stop,
         state.as_ref(),
+        // One bundle: at the pass count or at the time limit, whichever came first.
         |b| {
             result = Some(b);
             Ok(())

@@ -1,7 +1,8 @@
 //! Tiled reconstruction equals the untiled one; model directories round-trip; the `infer`
-//! binary reports bad input with the file name and a non-zero exit.
+//! binary renders and reconstructs a scene by passes or by time, and reports bad input with the
+//! file name and a non-zero exit.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use burn::tensor::Device;
@@ -177,9 +178,8 @@ fn missing_or_broken_model_files_are_named() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-#[test]
-fn cli_names_a_missing_bundle_and_exits_non_zero() {
-    let dir = temp_dir("cli");
+/// Writes a model directory (`model.json` + `model.bpk`) of a random tiny network into `dir`.
+fn write_tiny_model(dir: &Path) {
     let m = model(Preset::Tiny, Weighting::Relu, 5);
     save_burnpack(&m.network, &dir.join("model.bpk")).unwrap();
     std::fs::write(
@@ -187,6 +187,12 @@ fn cli_names_a_missing_bundle_and_exits_non_zero() {
         serde_json::to_string(&m.config).unwrap(),
     )
     .unwrap();
+}
+
+#[test]
+fn cli_names_a_missing_bundle_and_exits_non_zero() {
+    let dir = temp_dir("cli");
+    write_tiny_model(&dir);
     let out = Command::new(env!("CARGO_BIN_EXE_infer"))
         .arg("--model")
         .arg(&dir)
@@ -201,5 +207,74 @@ fn cli_names_a_missing_bundle_and_exits_non_zero() {
     assert!(stderr.contains("nope.exr"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(!dir.join("out.exr").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn cli_renders_a_scene_by_passes_or_by_time_then_reconstructs() {
+    let dir = temp_dir("cli-scene");
+    write_tiny_model(&dir);
+    // The repository's diffuse Cornell box at 16×16.
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes/validation/cornell-diffuse/scene.xml");
+    let infer = |name: &str, extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_infer"))
+            .arg("--model")
+            .arg(&dir)
+            .arg("--scene")
+            .arg(&scene)
+            .args([
+                "-D",
+                "res=16",
+                "--photons",
+                "2000",
+                "--threads",
+                "2",
+                "--output",
+            ])
+            .arg(dir.join(format!("{name}.exr")))
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let passes_of = |name: &str| {
+        bundle::read_bundle(&dir.join(format!("{name}_bundle.exr")))
+            .unwrap()
+            .meta
+            .passes
+    };
+    // By passes: exactly that many.
+    let out = infer("passes", &["--passes", "3"]);
+    assert!(out.status.success(), "{out:?}");
+    assert_eq!(passes_of("passes"), 3);
+    assert!(dir.join("passes.exr").is_file());
+    // By time: the render goes on past the limit's first pass end, with no pass limit.
+    let out = infer("timed", &["--time", "0.05"]);
+    assert!(out.status.success(), "{out:?}");
+    let bundle = bundle::read_bundle(&dir.join("timed_bundle.exr")).unwrap();
+    assert!(bundle.meta.passes >= 1);
+    assert!(bundle.meta.seconds >= 0.05, "{}", bundle.meta.seconds);
+    assert!(dir.join("timed.exr").is_file());
+    // Both: the pass count comes first here.
+    let out = infer("both", &["--passes", "2", "--time", "600"]);
+    assert!(out.status.success(), "{out:?}");
+    assert_eq!(passes_of("both"), 2);
+    // Bad limits are named, and nothing is written.
+    for (args, needle) in [
+        (
+            &["--time", "0"][..],
+            "--time must be a positive, finite number of seconds, got 0",
+        ),
+        (&["--time", "inf"][..], "got inf"),
+        (&["--time", "nan"][..], "got NaN"),
+        (&["--passes", "0"][..], "--passes must be at least 1"),
+    ] {
+        let out = infer("bad", args);
+        assert!(!out.status.success(), "{args:?}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(!dir.join("bad.exr").exists());
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -205,6 +205,18 @@ fn bad_input_names_the_file_and_line_and_fails() {
     ]
     .map(String::from);
     render_fails_naming(&huge, &["needs", "GB of memory"]);
+    // An infinite time limit would never end a run without checkpoints.
+    let endless = [
+        scene.to_str().unwrap(),
+        "--integrator",
+        "sppm",
+        "--time",
+        "inf",
+        "--out",
+        dir.join("endless").to_str().unwrap(),
+    ]
+    .map(String::from);
+    render_fails_naming(&endless, &["time limit", "finite", "got inf"]);
     let missing = run(
         env!("CARGO_BIN_EXE_bundle_info"),
         &[dir.join("none.exr").to_str().unwrap()],

@@ -459,8 +459,9 @@ pub fn render_sppm_resumable(
         bail!("no stop condition: give pass checkpoints and/or a time limit");
     }
     if let Some(s) = stop.seconds {
-        if s.is_nan() || s <= 0.0 {
-            bail!("time limit must be positive, got {s}");
+        // An infinite limit would never stop a run without checkpoints, nor write its bundle.
+        if !s.is_finite() || s <= 0.0 {
+            bail!("time limit must be a positive, finite number of seconds, got {s}");
         }
     }
     let max_radius = match settings.max_radius {
