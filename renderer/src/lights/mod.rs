@@ -102,19 +102,20 @@ pub enum Light {
 }
 
 impl Light {
+    /// Whether the light is at infinity (directional, constant, environment map): its power is
+    /// measured through the whole scene's bounding disk.
+    pub fn is_infinite(&self) -> bool {
+        matches!(
+            self,
+            Light::Directional(_) | Light::Constant(_) | Light::Envmap(_)
+        )
+    }
+
     /// Whether the light is a delta light (cannot be hit by rays).
     pub fn is_delta(&self) -> bool {
         matches!(
             self,
             Light::Point(_) | Light::Spot(_) | Light::Directional(_)
-        )
-    }
-
-    /// Whether the light is at infinity.
-    pub fn is_infinite(&self) -> bool {
-        matches!(
-            self,
-            Light::Directional(_) | Light::Constant(_) | Light::Envmap(_)
         )
     }
 }

@@ -1,0 +1,287 @@
+#!/usr/bin/env python3
+"""Differential test of the path tracer against Mitsuba 3 on random scenes.
+
+Where `validate_pt.py` compares hand-written scenes at high sample counts, this script writes
+`--count` random scenes from the supported subset (every BSDF plugin with random parameters,
+five shape types, area / point / spot / directional / constant lights, random camera and
+depth) and renders each small (32x32) with both renderers at the same sample count. A scene is
+flagged when the images disagree beyond what noise explains:
+
+    per channel  |mean(ours) - mean(mitsuba)| > max(5 sigma, 1 %) of mean(mitsuba)
+    relMSE after 4x4 downsampling > 3 x its noise-only estimate + 1e-5
+
+(sigma and the noise estimate come from the spread of each renderer's independent chunks:
+both render the same samples per pixel in 4 runs with different seeds). Flagged scenes are kept under out/fuzz/<seed>/ with both images and a PNG
+side by side, to be reduced by hand; the others are deleted unless --keep. Scenes are a
+function of (--seed, index), so a flagged one can be regenerated.
+
+Mitsuba is a development tool only (`pip install mitsuba`, variant llvm_ad_rgb).
+
+    python3 scripts/fuzz_mitsuba.py --count 40 --seed 1
+    python3 scripts/fuzz_mitsuba.py --count 1 --seed 1 --first 17 --keep   # scene 17 again
+"""
+
+import argparse
+import json
+import random
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from validate_pt import ROOT, downsample, mitsuba, read_exr, side_by_side  # noqa: E402
+
+RES = 32
+CHUNKS = 4
+
+
+def rgb(r, lo=0.1, hi=0.9):
+    return ", ".join(f"{r.uniform(lo, hi):.3f}" for _ in range(3))
+
+
+def material(r, allow_delta=True, allow_mask=True):
+    """A random BSDF element (one of every supported plugin).
+
+    `mask` only where the scene has an environment light: Mitsuba 3.9.1's `path` drops every
+    sample whose camera ray passed through a mask and then found no emitter and no non-null
+    surface, NEE contributions gathered on the mask included (`valid_ray` in path.cpp), so a
+    mask lit by a point light comes out opacity² instead of opacity times as bright. With an
+    environment light every ray is valid and the two agree."""
+    kinds = ["diffuse", "checker", "roughconductor", "roughplastic", "roughdielectric", "twosided",
+             "principled", "blend"]
+    if allow_mask:
+        kinds.append("mask")
+    if allow_delta:
+        kinds += ["conductor", "plastic", "dielectric", "thindielectric"]
+    k = r.choice(kinds)
+    metal = r.choice(["Au", "Cu", "Al", "Ag", "Cr"])
+    if k == "diffuse":
+        return f'<bsdf type="diffuse"><rgb name="reflectance" value="{rgb(r)}"/></bsdf>'
+    if k == "checker":
+        return ('<bsdf type="diffuse"><texture type="checkerboard" name="reflectance">'
+                f'<rgb name="color0" value="{rgb(r)}"/><rgb name="color1" value="{rgb(r)}"/>'
+                f'<transform name="to_uv"><scale value="{r.randint(2, 8)}"/></transform>'
+                '</texture></bsdf>')
+    if k == "conductor":
+        return f'<bsdf type="conductor"><string name="material" value="{metal}"/></bsdf>'
+    if k == "roughconductor":
+        return ('<bsdf type="roughconductor"><string name="distribution" value="ggx"/>'
+                f'<string name="material" value="{metal}"/>'
+                f'<float name="alpha" value="{r.uniform(0.05, 0.6):.3f}"/></bsdf>')
+    if k == "plastic":
+        return ('<bsdf type="plastic">'
+                f'<rgb name="diffuse_reflectance" value="{rgb(r)}"/>'
+                f'<float name="int_ior" value="{r.uniform(1.3, 1.7):.3f}"/></bsdf>')
+    if k == "roughplastic":
+        return ('<bsdf type="roughplastic"><string name="distribution" value="ggx"/>'
+                f'<rgb name="diffuse_reflectance" value="{rgb(r)}"/>'
+                f'<float name="alpha" value="{r.uniform(0.05, 0.4):.3f}"/></bsdf>')
+    if k == "dielectric":
+        return f'<bsdf type="dielectric"><float name="int_ior" value="{r.uniform(1.3, 1.8):.3f}"/></bsdf>'
+    if k == "thindielectric":
+        return f'<bsdf type="thindielectric"><float name="int_ior" value="{r.uniform(1.3, 1.7):.3f}"/></bsdf>'
+    if k == "roughdielectric":
+        return ('<bsdf type="roughdielectric"><string name="distribution" value="ggx"/>'
+                f'<float name="int_ior" value="{r.uniform(1.3, 1.7):.3f}"/>'
+                f'<float name="alpha" value="{r.uniform(0.05, 0.4):.3f}"/></bsdf>')
+    if k == "twosided":
+        return f'<bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="{rgb(r)}"/></bsdf></bsdf>'
+    if k == "principled":
+        params = [f'<rgb name="base_color" value="{rgb(r)}"/>']
+        for name, lo, hi in [("roughness", 0.15, 0.9), ("metallic", 0, 1), ("specular", 0.2, 0.8),
+                             ("spec_tint", 0, 1), ("sheen", 0, 1), ("clearcoat", 0, 1),
+                             ("clearcoat_gloss", 0, 1), ("anisotropic", 0, 0.8)]:
+            if r.random() < 0.6:
+                params.append(f'<float name="{name}" value="{r.uniform(lo, hi):.3f}"/>')
+        return f'<bsdf type="principled">{"".join(params)}</bsdf>'
+    if k == "blend":
+        # Two non-delta, non-transmitting models. Mitsuba 3.9.1's blendbsdf loses energy with
+        # delta models, and gains some when one model transmits: where the other model's sample
+        # fails, it evaluates the transmitting one in the failed sample's direction (a
+        # roughconductor + roughdielectric blend seen from inside has albedo 1.95 in Mitsuba,
+        # the blend of its models' albedos is 1.26; docs/validation.md).
+        a, b = material(r, False, False), material(r, False, False)
+        if any(t in a + b for t in ("blendbsdf", "roughdielectric")):
+            a = f'<bsdf type="diffuse"><rgb name="reflectance" value="{rgb(r)}"/></bsdf>'
+        if "roughdielectric" in b:
+            b = f'<bsdf type="roughplastic"><string name="distribution" value="ggx"/><float name="alpha" value="{r.uniform(0.05, 0.4):.3f}"/></bsdf>'
+        return f'<bsdf type="blendbsdf"><float name="weight" value="{r.uniform(0.2, 0.8):.3f}"/>{a}{b}</bsdf>'
+    # mask
+    return (f'<bsdf type="mask"><float name="opacity" value="{r.uniform(0.3, 0.9):.3f}"/>'
+            f'<bsdf type="diffuse"><rgb name="reflectance" value="{rgb(r)}"/></bsdf></bsdf>')
+
+
+def shape(r, bsdf):
+    """A random object standing on or above the floor (y = 0), with `bsdf` nested. Nothing
+    shares a plane with the floor (a cube's bottom face there makes the closest hit a tie that
+    the two renderers break differently)."""
+    x, z = r.uniform(-1.2, 1.2), r.uniform(-1.2, 1.2)
+    k = r.choice(["sphere", "cube", "cylinder", "disk", "rectangle"])
+    if k == "sphere":
+        rad = r.uniform(0.25, 0.6)
+        return (f'<shape type="sphere"><point name="center" x="{x:.3f}" y="{rad:.3f}" z="{z:.3f}"/>'
+                f'<float name="radius" value="{rad:.3f}"/>{bsdf}</shape>')
+    if k == "cylinder":
+        h, rad = r.uniform(0.3, 1.2), r.uniform(0.1, 0.4)
+        return (f'<shape type="cylinder"><point name="p0" x="{x:.3f}" y="0" z="{z:.3f}"/>'
+                f'<point name="p1" x="{x:.3f}" y="{h:.3f}" z="{z:.3f}"/>'
+                f'<float name="radius" value="{rad:.3f}"/>{bsdf}</shape>')
+    s = r.uniform(0.2, 0.5)
+    if k == "cube":
+        return (f'<shape type="cube"><transform name="to_world"><scale value="{s:.3f}"/>'
+                f'<rotate y="1" angle="{r.uniform(0, 90):.1f}"/><translate x="{x:.3f}" y="{s + 0.02:.3f}" z="{z:.3f}"/>'
+                f'</transform>{bsdf}</shape>')
+    # disk / rectangle: tilted towards the camera side, floating
+    return (f'<shape type="{k}"><transform name="to_world"><scale value="{s:.3f}"/>'
+            f'<rotate x="1" angle="{r.uniform(-80, 10):.1f}"/><rotate y="1" angle="{r.uniform(-60, 60):.1f}"/>'
+            f'<translate x="{x:.3f}" y="{r.uniform(0.3, 1.0):.3f}" z="{z:.3f}"/></transform>{bsdf}</shape>')
+
+
+def light(r, allow_environment=True):
+    kinds = ["area", "area-sphere", "point", "spot", "directional"]
+    k = r.choice(kinds + ["constant"] if allow_environment else kinds)
+    if k == "area":
+        s = r.uniform(0.3, 1.0)
+        return (f'<shape type="rectangle"><transform name="to_world"><scale value="{s:.3f}"/>'
+                f'<rotate x="1" angle="90"/><translate x="{r.uniform(-1, 1):.3f}" y="{r.uniform(2.5, 3.5):.3f}" '
+                f'z="{r.uniform(-1, 1):.3f}"/></transform>'
+                f'<emitter type="area"><rgb name="radiance" value="{rgb(r, 3, 12)}"/></emitter></shape>')
+    if k == "area-sphere":
+        return (f'<shape type="sphere"><point name="center" x="{r.uniform(-1.5, 1.5):.3f}" '
+                f'y="{r.uniform(1.5, 3):.3f}" z="{r.uniform(-1.5, 1.5):.3f}"/>'
+                f'<float name="radius" value="{r.uniform(0.1, 0.3):.3f}"/>'
+                f'<emitter type="area"><rgb name="radiance" value="{rgb(r, 5, 20)}"/></emitter></shape>')
+    if k == "point":
+        return (f'<emitter type="point"><point name="position" x="{r.uniform(-1.5, 1.5):.3f}" '
+                f'y="{r.uniform(1.5, 3):.3f}" z="{r.uniform(-1.5, 1.5):.3f}"/>'
+                f'<rgb name="intensity" value="{rgb(r, 3, 15)}"/></emitter>')
+    if k == "spot":
+        return (f'<emitter type="spot"><transform name="to_world"><lookat origin="{r.uniform(-2, 2):.3f}, '
+                f'{r.uniform(2, 3.5):.3f}, {r.uniform(-2, 2):.3f}" target="0, 0, 0"/></transform>'
+                f'<rgb name="intensity" value="{rgb(r, 5, 30)}"/>'
+                f'<float name="cutoff_angle" value="{r.uniform(20, 45):.1f}"/>'
+                f'<float name="beam_width" value="{r.uniform(10, 19):.1f}"/></emitter>')
+    if k == "directional":
+        return (f'<emitter type="directional"><vector name="direction" x="{r.uniform(-1, 1):.3f}" y="-1" '
+                f'z="{r.uniform(-1, 1):.3f}"/><rgb name="irradiance" value="{rgb(r, 0.5, 3)}"/></emitter>')
+    return f'<emitter type="constant"><rgb name="radiance" value="{rgb(r, 0.1, 1)}"/></emitter>'
+
+
+def scene_xml(seed, index):
+    r = random.Random(seed * 1_000_003 + index)
+    elev, azim, dist = r.uniform(10, 55), r.uniform(0, 360), r.uniform(3.5, 6)
+    e, a = np.radians(elev), np.radians(azim)
+    origin = (dist * np.cos(e) * np.sin(a), dist * np.sin(e), dist * np.cos(e) * np.cos(a))
+    # Mitsuba allows one environment emitter per scene.
+    first = light(r)
+    lights = [first] + [light(r, "constant" not in first) for _ in range(r.randint(0, 1))]
+    environment = any("constant" in l for l in lights)
+    lights = "\n    ".join(lights)
+    floor = material(r, allow_delta=False, allow_mask=environment)
+    objects = "\n    ".join(shape(r, material(r, allow_mask=environment))
+                             for _ in range(r.randint(1, 3)))
+    return f"""<scene version="3.0.0">
+    <default name="spp" value="64"/>
+    <default name="res" value="{RES}"/>
+    <integrator type="path"><integer name="max_depth" value="{r.randint(2, 8)}"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="{r.uniform(30, 60):.1f}"/>
+        <transform name="to_world"><lookat origin="{origin[0]:.3f}, {origin[1]:.3f}, {origin[2]:.3f}" target="0, 0.3, 0" up="0, 1, 0"/></transform>
+        <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+        <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="$res"/><rfilter type="box"/></film>
+    </sensor>
+    <shape type="rectangle"><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/></transform>{floor}</shape>
+    {objects}
+    {lights}
+</scene>
+"""
+
+
+def render_mitsuba(xml, spp, max_depth):
+    mi = mitsuba()
+    mi.set_variant("llvm_ad_rgb")
+    sc = mi.load_file(str(xml), spp=spp // CHUNKS, res=RES)
+    integrator = mi.load_dict({"type": "path", "max_depth": max_depth})
+    chunks = [np.array(mi.render(sc, integrator=integrator, spp=spp // CHUNKS, seed=7000 + k),
+                       dtype=np.float64)[..., :3] for k in range(CHUNKS)]
+    return np.mean(chunks, axis=0), np.stack(chunks)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--count", type=int, default=20, help="scenes to try")
+    ap.add_argument("--first", type=int, default=0, help="index of the first scene")
+    ap.add_argument("--seed", type=int, default=1, help="scene generator seed")
+    ap.add_argument("--spp", type=int, default=1024, help="samples per pixel, both renderers")
+    ap.add_argument("--bin", default=str(ROOT / "target" / "release" / "render"), help="our render binary")
+    ap.add_argument("--out", default=str(ROOT / "out" / "fuzz"), help="output folder")
+    ap.add_argument("--keep", action="store_true", help="keep the files of scenes that agree")
+    args = ap.parse_args()
+    out = Path(args.out) / str(args.seed)
+    out.mkdir(parents=True, exist_ok=True)
+    flagged, rows = [], []
+    for index in range(args.first, args.first + args.count):
+        d = out / f"{index:04d}"
+        d.mkdir(exist_ok=True)
+        xml = d / "scene.xml"
+        xml.write_text(scene_xml(args.seed, index))
+        max_depth = int(xml.read_text().split('name="max_depth" value="')[1].split('"')[0])
+        try:
+            ref, ref_chunks = render_mitsuba(xml, args.spp, max_depth)
+        except RuntimeError as e:  # a generator mistake, not a finding about our renderer
+            sys.exit(f"{index:4d}: Mitsuba refused the scene {xml}: {e}")
+        # Ours in as many independent chunks (seeds 1..CHUNKS), so that the noise estimate sees
+        # each renderer's own variance (their sampling strategies differ).
+        ours_chunks, failure = [], None
+        for k in range(CHUNKS):
+            exr = d / f"ours_{k}.exr"
+            cmd = [args.bin, str(xml), "--integrator", "path", "--spp", str(args.spp // CHUNKS),
+                   "--seed", str(k + 1), "--out", str(exr)]
+            done = subprocess.run(cmd, capture_output=True, text=True)
+            if done.returncode != 0:
+                failure = done.stderr.strip()
+                break
+            ours_chunks.append(read_exr(exr))
+        if failure is not None:
+            flagged.append(index)
+            rows.append({"index": index, "error": failure[-400:]})
+            print(f"{index:4d}: ours failed: {failure[-200:]}", flush=True)
+            continue
+        ours_chunks = np.stack(ours_chunks)
+        ours = ours_chunks.mean(axis=0)
+        a, b = downsample(ours), downsample(ref)
+        denom = b * b + 1e-2
+        rel_mse = float(np.mean((a - b) ** 2 / denom))
+        var = lambda c: np.stack([downsample(x) for x in c]).var(axis=0, ddof=1) / CHUNKS
+        noise = float(np.mean((var(ref_chunks) + var(ours_chunks)) / denom))
+        mean_a, mean_b = ours.mean(axis=(0, 1)), ref.mean(axis=(0, 1))
+        mean_rel = (mean_a - mean_b) / np.maximum(mean_b, 1e-8)
+        # sigma of the difference of the two image means, from both renderers' chunk spread.
+        sigma = np.sqrt((ref_chunks.mean(axis=(1, 2)).var(axis=0, ddof=1)
+                         + ours_chunks.mean(axis=(1, 2)).var(axis=0, ddof=1)) / CHUNKS)
+        tol = np.maximum(5 * sigma, 0.01 * np.abs(mean_b))
+        bad_mean = bool(np.any(np.abs(mean_a - mean_b) > tol))
+        bad_mse = rel_mse > 3 * noise + 1e-5
+        row = {"index": index, "rel_mse": rel_mse, "noise": noise, "mean_ours": mean_a.tolist(),
+               "mean_mitsuba": mean_b.tolist(), "mean_rel": mean_rel.tolist(),
+               "flag": bad_mean or bad_mse}
+        rows.append(row)
+        verdict = "FLAG" if row["flag"] else "ok"
+        print(f"{index:4d}: {verdict:4s} relMSE {rel_mse:.2e} (noise {noise:.2e}), mean rel diff "
+              + " ".join(f"{x:+.2%}" for x in mean_rel), flush=True)
+        if row["flag"]:
+            flagged.append(index)
+            mitsuba().Bitmap(ref.astype(np.float32)).write(str(d / "mitsuba.exr"))
+            side_by_side(d / "compare.png", ref, ours, 1.0)
+        elif not args.keep:
+            shutil.rmtree(d)
+    (out / "summary.json").write_text(json.dumps(rows, indent=1) + "\n")
+    print(f"{len(flagged)} of {args.count} scenes flagged: {flagged} (files under {out})")
+    sys.exit(1 if flagged else 0)
+
+
+if __name__ == "__main__":
+    main()
