@@ -243,6 +243,7 @@ impl Bvh4Accel {
         debug_assert_eq!(order.len(), count);
         let ids: Vec<(u32, u32)> = order.iter().map(|&i| gathered.ids[i as usize]).collect();
         drop(order);
+        gathered.ids = Vec::new();
         let geoms = ids.iter().map(|&id| gathered.geom(shapes, id)).collect();
         Ok(Bvh4Accel {
             nodes,

@@ -190,14 +190,15 @@ impl BuildEntries {
             .collect();
         drop(count);
         if large.is_empty() {
-            // Hash collisions only.
+            // Frequent hashes, but no large set of identical boxes (colliding hashes).
             return BuildEntries {
                 primitives: bounds.len(),
                 boxes: bounds,
                 groups: None,
             };
         }
-        let set_of = |b: &Aabb| Some(box_key(b)).filter(|_| candidate(b));
+        // The key of a box that may belong to a large set.
+        let set_of = |b: &Aabb| candidate(b).then(|| box_key(b));
         for (i, b) in bounds.iter().enumerate() {
             if let Some(members) = set_of(b).and_then(|k| large.get_mut(&k)) {
                 members.push(i as u32);
