@@ -63,47 +63,80 @@ struct Analytic {
     cylinders: Vec<Cylinder>,
 }
 
-/// Primitives of the shapes `keep` accepts: their boxes, geometry, (shape, primitive) ids and
-/// the analytic shapes the geometry refers to, in scene order.
-type Gathered = (Vec<Aabb>, Vec<PrimGeom>, Vec<(u32, u32)>, Analytic);
+/// The primitives of the shapes `keep` accepts, in scene order.
+struct Gathered {
+    /// The box of each primitive.
+    bounds: Vec<Aabb>,
+    /// (shape, primitive) of each primitive.
+    ids: Vec<(u32, u32)>,
+    /// The analytic shapes among them, in scene order.
+    analytic: Analytic,
+    /// Per shape, its index in the `analytic` list of its kind (unused for meshes).
+    analytic_index: Vec<u32>,
+}
 
-/// Collects the primitives of the shapes `keep` accepts (see [`Gathered`]).
+/// Collects the primitives of the shapes `keep` accepts (see [`Gathered`]). Their geometry is
+/// made later, in BVH order ([`Gathered::geom`]): a second copy in scene order cost 64 bytes
+/// per triangle during the build.
 fn gather(shapes: &[Shape], keep: impl Fn(usize) -> bool) -> Gathered {
-    let mut bounds = Vec::new();
-    let mut geoms = Vec::new();
-    let mut ids = Vec::new();
-    let mut analytic = Analytic::default();
+    let count = shapes
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| keep(*i))
+        .map(|(_, s)| s.primitive_count())
+        .sum();
+    let mut g = Gathered {
+        bounds: Vec::with_capacity(count),
+        ids: Vec::with_capacity(count),
+        analytic: Analytic::default(),
+        analytic_index: vec![0; shapes.len()],
+    };
     for (si, shape) in shapes.iter().enumerate().filter(|(i, _)| keep(*i)) {
         for prim in 0..shape.primitive_count() as u32 {
             let (min, max) = shape.primitive_bounds(prim);
-            bounds.push(Aabb::new(min, max));
-            ids.push((si as u32, prim));
-            geoms.push(match shape {
-                Shape::Mesh(m) => {
-                    let [a, b, c] = m.triangle(prim);
-                    let p0 = Vec3A::from(a);
-                    PrimGeom::Triangle {
-                        p0,
-                        e1: Vec3A::from(b) - p0,
-                        e2: Vec3A::from(c) - p0,
-                    }
-                }
+            g.bounds.push(Aabb::new(min, max));
+            g.ids.push((si as u32, prim));
+            let analytic = &mut g.analytic;
+            let index = match shape {
+                Shape::Mesh(_) => continue,
                 Shape::Sphere(s) => {
                     analytic.spheres.push(*s);
-                    PrimGeom::Sphere(analytic.spheres.len() as u32 - 1)
+                    analytic.spheres.len()
                 }
                 Shape::Disk(d) => {
                     analytic.disks.push(*d);
-                    PrimGeom::Disk(analytic.disks.len() as u32 - 1)
+                    analytic.disks.len()
                 }
                 Shape::Cylinder(c) => {
                     analytic.cylinders.push(*c);
-                    PrimGeom::Cylinder(analytic.cylinders.len() as u32 - 1)
+                    analytic.cylinders.len()
                 }
-            });
+            };
+            g.analytic_index[si] = index as u32 - 1;
         }
     }
-    (bounds, geoms, ids, analytic)
+    g
+}
+
+impl Gathered {
+    /// The geometry of primitive `prim` of shape `shape` (one of the gathered primitives).
+    fn geom(&self, shapes: &[Shape], (shape, prim): (u32, u32)) -> PrimGeom {
+        let index = self.analytic_index[shape as usize];
+        match &shapes[shape as usize] {
+            Shape::Mesh(m) => {
+                let [a, b, c] = m.triangle(prim);
+                let p0 = Vec3A::from(a);
+                PrimGeom::Triangle {
+                    p0,
+                    e1: Vec3A::from(b) - p0,
+                    e2: Vec3A::from(c) - p0,
+                }
+            }
+            Shape::Sphere(_) => PrimGeom::Sphere(index),
+            Shape::Disk(_) => PrimGeom::Disk(index),
+            Shape::Cylinder(_) => PrimGeom::Cylinder(index),
+        }
+    }
 }
 
 /// Distance along `ray` to `geom` (+∞ on a miss) and, for triangles, the barycentrics.
@@ -161,27 +194,28 @@ impl Bvh4Accel {
     /// indices into `shapes`, and a primitive's distance and barycentrics are computed exactly as
     /// in a BVH over all shapes.
     pub fn build_subset(shapes: &[Shape], keep: impl Fn(usize) -> bool) -> Result<Self> {
-        let (bounds, geoms, ids, analytic) = gather(shapes, keep);
-        if bounds.is_empty() {
+        let mut gathered = gather(shapes, keep);
+        let count = gathered.ids.len();
+        if count == 0 {
             return Ok(Bvh4Accel {
                 nodes: Vec::new(),
-                geoms,
-                ids,
-                analytic,
+                geoms: Vec::new(),
+                ids: Vec::new(),
+                analytic: gathered.analytic,
             });
         }
-        if bounds.len() >= bvh4::MAX_PRIMITIVES {
+        if count >= bvh4::MAX_PRIMITIVES {
             bail!(
-                "the scene has {} primitives; the BVH holds at most {}",
-                bounds.len(),
+                "the scene has {count} primitives; the BVH holds at most {}",
                 bvh4::MAX_PRIMITIVES - 1
             );
         }
         let params = BvhBuildParams {
             max_prims_per_leaf: LEAF_SIZE,
-            ..build_params(bounds.len())
+            ..build_params(count)
         };
-        let entries = bvh4::BuildEntries::new(&bounds);
+        // Each temporary is freed as soon as it is used, before the next large allocation.
+        let mut entries = bvh4::BuildEntries::new(std::mem::take(&mut gathered.bounds));
         let bvh2 = build_bvh2(&entries.boxes, params, &mut Duration::default());
         if bvh2.primitive_indices.len() != entries.boxes.len() {
             bail!(
@@ -190,12 +224,15 @@ impl Bvh4Accel {
                 entries.boxes.len()
             );
         }
+        // The collapse reads the BVH2's boxes, not the entries'.
+        entries.boxes = Vec::new();
         let bvh4::Collapsed {
             nodes,
             order,
             depth,
             ..
         } = bvh4::collapse(&bvh2, &entries);
+        drop((bvh2, entries));
         // Closest-hit traversal pops one entry and pushes at most four per level.
         if 3 * depth + 1 > bvh4::STACK_SIZE {
             bail!(
@@ -203,14 +240,16 @@ impl Bvh4Accel {
                 (bvh4::STACK_SIZE - 1) / 3
             );
         }
-        debug_assert_eq!(order.len(), geoms.len());
-        let geoms = order.iter().map(|&i| geoms[i as usize]).collect();
-        let ids = order.iter().map(|&i| ids[i as usize]).collect();
+        debug_assert_eq!(order.len(), count);
+        let ids: Vec<(u32, u32)> = order.iter().map(|&i| gathered.ids[i as usize]).collect();
+        drop(order);
+        gathered.ids = Vec::new();
+        let geoms = ids.iter().map(|&id| gathered.geom(shapes, id)).collect();
         Ok(Bvh4Accel {
             nodes,
             geoms,
             ids,
-            analytic,
+            analytic: gathered.analytic,
         })
     }
 
@@ -445,6 +484,14 @@ mod tests {
         ]
     }
 
+    /// Every primitive of `shapes` in scene order: geometry, (shape, primitive) ids and the
+    /// analytic shapes the geometry refers to.
+    fn scene_order(shapes: &[Shape]) -> (Vec<PrimGeom>, Vec<(u32, u32)>, Analytic) {
+        let g = gather(shapes, |_| true);
+        let geoms = g.ids.iter().map(|&id| g.geom(shapes, id)).collect();
+        (geoms, g.ids, g.analytic)
+    }
+
     /// The closest hit of `ray` by testing every primitive in scene order: (distance, index),
     /// or (+∞, `usize::MAX`) on a miss.
     fn brute_force(geoms: &[PrimGeom], analytic: &Analytic, ray: &Ray) -> (f32, usize) {
@@ -470,7 +517,7 @@ mod tests {
         for n in [1, 3, 40, 3000] {
             let shapes = random_scene(n, &mut rng);
             let accel = Bvh4Accel::build(&shapes).unwrap();
-            let (_, geoms, ids, analytic) = gather(&shapes, |_| true);
+            let (geoms, ids, analytic) = scene_order(&shapes);
             for k in 0..4000 {
                 let o = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0
                     - Vec3::ONE)
@@ -534,7 +581,7 @@ mod tests {
         // Before the grouping this build took minutes (quadratic in the copies).
         let accel = Bvh4Accel::build(&shapes).unwrap();
         assert_eq!(accel.primitive_count(), 300 + 4 + copies as usize);
-        let (_, geoms, _, analytic) = gather(&shapes, |_| true);
+        let (geoms, _, analytic) = scene_order(&shapes);
         for k in 0..200 {
             let o = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 2.0);
             let ray = Ray::new(o, Vec3::new(0.1 * rng.next_f32(), 0.0, -1.0).normalize());

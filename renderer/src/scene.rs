@@ -159,6 +159,23 @@ impl Scene {
     /// Builds BVH, lights and lookups from a description; rejects inconsistent data with an
     /// error naming the offending shape or emitter.
     pub fn build(desc: &SceneDescription) -> Result<Scene> {
+        Self::build_with(desc, Vec::new())
+    }
+
+    /// [`Scene::build`] taking the description's meshes over instead of copying them (a mesh
+    /// is otherwise held twice while the scene is built, and as long as the description lives).
+    pub fn from_description(mut desc: SceneDescription) -> Result<Scene> {
+        let geometries = desc
+            .shapes
+            .iter_mut()
+            .map(|s| std::mem::replace(&mut s.geometry, Geometry::Mesh(Default::default())))
+            .collect();
+        Self::build_with(&desc, geometries)
+    }
+
+    /// [`Scene::build`] with the shapes' geometry taken from `geometries` (one per shape, in
+    /// order) when it is not empty, else copied from `desc`.
+    fn build_with(desc: &SceneDescription, geometries: Vec<Geometry>) -> Result<Scene> {
         let cam = &desc.camera;
         if cam.width == 0 || cam.height == 0 {
             bail!("film size {}x{} is empty", cam.width, cam.height);
@@ -169,7 +186,10 @@ impl Scene {
         let mut shapes = Vec::with_capacity(desc.shapes.len());
         let mut shape_info = Vec::with_capacity(desc.shapes.len());
         let mut lights = Vec::new();
+        let mut geometries = geometries.into_iter();
         for (i, s) in desc.shapes.iter().enumerate() {
+            let owned = geometries.next();
+            let geometry = owned.as_ref().unwrap_or(&s.geometry);
             if s.bsdf >= desc.bsdfs.len() {
                 bail!(
                     "shape '{}' refers to material {} but only {} exist",
@@ -178,7 +198,7 @@ impl Scene {
                     desc.bsdfs.len()
                 );
             }
-            match &s.geometry {
+            match geometry {
                 Geometry::Mesh(m) => {
                     let nv = m.positions.len();
                     if let Some(t) = m
@@ -230,7 +250,10 @@ impl Scene {
                     }
                 }
             }
-            let shape = Shape::new(&s.geometry);
+            let shape = match owned {
+                Some(g) => Shape::from_geometry(g),
+                None => Shape::new(&s.geometry),
+            };
             let light = match &s.emission {
                 Some(l) if !l.is_finite_non_negative() => match l {
                     Texture::Constant(c) => bail!(
@@ -776,6 +799,45 @@ mod tests {
             name: "occluder".into(),
             ..ball_light(center, radius)
         }
+    }
+
+    /// A scene built from an owned description (its meshes taken over) is the scene built
+    /// from a borrowed one: the same mesh data, lights and hits; and the owned geometry is
+    /// what gets checked (a mesh indexing past its vertices is refused by both).
+    #[test]
+    fn owned_description_builds_the_same_scene() {
+        let shapes = vec![
+            ceiling_light(),
+            ball_light(Vec3::new(1.5, 0.0, 0.0), 0.4),
+            ball(Vec3::new(0.0, 0.5, 0.0), 0.3),
+        ];
+        let d = desc(shapes, vec![]);
+        let copied = Scene::build(&d).unwrap();
+        let owned = Scene::from_description(d.clone()).unwrap();
+        assert_eq!(owned.shapes.len(), copied.shapes.len());
+        assert_eq!(owned.lights.len(), copied.lights.len());
+        let (Shape::Mesh(a), Shape::Mesh(b)) = (&owned.shapes[0], &copied.shapes[0]) else {
+            panic!("shape 0 is the ceiling mesh");
+        };
+        assert_eq!(a.data.positions, b.data.positions);
+        assert_eq!(a.data.indices, b.data.indices);
+        let mut rng = rng_for(5, 0, 0);
+        for _ in 0..200 {
+            let ray = Ray::new(Vec3::ZERO, square_to_uniform_sphere(rng.next_2d()));
+            let (x, y) = (owned.intersect(&ray), copied.intersect(&ray));
+            assert_eq!(x.map(|s| (s.p, s.shape)), y.map(|s| (s.p, s.shape)));
+        }
+        let mut bad = ceiling_light();
+        if let Geometry::Mesh(m) = &mut bad.geometry {
+            m.indices.push([0, 1, 4]);
+        }
+        let d = desc(vec![bad], vec![]);
+        assert!(Scene::build(&d).is_err());
+        let Err(err) = Scene::from_description(d) else {
+            panic!("the bad index was not found");
+        };
+        let err = err.to_string();
+        assert!(err.contains("indexing past its 4 vertices"), "{err}");
     }
 
     #[test]

@@ -124,6 +124,14 @@ pub fn decode(c: u32) -> Child {
 pub struct BuildEntries {
     /// The box of each entry.
     pub boxes: Vec<Aabb>,
+    /// The grouping, or `None` when every entry is one primitive (entry `e` = primitive `e`).
+    groups: Option<Groups>,
+    /// Number of input primitives.
+    primitives: usize,
+}
+
+/// Which primitives each entry of a [`BuildEntries`] holds.
+struct Groups {
     /// Entry `e` holds `items[start[e]..start[e + 1]]` (input primitive indices, ascending).
     start: Vec<u32>,
     /// Primitive indices by entry.
@@ -133,17 +141,47 @@ pub struct BuildEntries {
 /// Primitives sharing one box beyond which they are built as one entry.
 const GROUP_ABOVE: usize = 16;
 
+/// A box's bits, the identity the grouping compares.
+fn box_key(b: &Aabb) -> [u32; 6] {
+    [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z].map(f32::to_bits)
+}
+
+/// A 64-bit hash of a box key (FxHash's multiply-rotate step per word): equal keys hash
+/// equally, which is all the pre-filter in [`BuildEntries::new`] relies on.
+fn key_hash(key: &[u32; 6]) -> u64 {
+    const K: u64 = 0x51_7c_c1_b7_27_22_0a_95;
+    key.iter().fold(0u64, |h, &w| {
+        (h.rotate_left(5) ^ u64::from(w)).wrapping_mul(K)
+    })
+}
+
 impl BuildEntries {
     /// Entries for `bounds`, grouping sets of more than [`GROUP_ABOVE`] identical boxes.
-    pub fn new(bounds: &[Aabb]) -> Self {
-        let key =
-            |b: &Aabb| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z].map(f32::to_bits);
-        // Count first; only the (rare) large sets collect their members, so a mesh of distinct
-        // boxes costs one small map entry per primitive and no allocation per set.
-        let mut count: std::collections::HashMap<[u32; 6], u32> =
-            std::collections::HashMap::with_capacity(bounds.len());
-        for b in bounds {
-            *count.entry(key(b)).or_default() += 1;
+    pub fn new(bounds: Vec<Aabb>) -> Self {
+        // Pre-filter: a set of more than GROUP_ABOVE identical boxes shares one hash, so only
+        // boxes whose hash is that frequent can be grouped. Sorting the hashes (8 bytes per
+        // box) finds them; a mesh of distinct boxes stops here, without a map keyed by boxes.
+        let mut hashes: Vec<u64> = bounds.iter().map(|b| key_hash(&box_key(b))).collect();
+        hashes.sort_unstable();
+        let frequent: Vec<u64> = hashes
+            .chunk_by(|a, b| a == b)
+            .filter(|run| run.len() > GROUP_ABOVE)
+            .map(|run| run[0])
+            .collect();
+        drop(hashes);
+        if frequent.is_empty() {
+            // The usual case: one entry per primitive.
+            return BuildEntries {
+                primitives: bounds.len(),
+                boxes: bounds,
+                groups: None,
+            };
+        }
+        let candidate = |b: &Aabb| frequent.binary_search(&key_hash(&box_key(b))).is_ok();
+        // Count the candidates exactly; only the (rare) large sets collect their members.
+        let mut count: std::collections::HashMap<[u32; 6], u32> = std::collections::HashMap::new();
+        for b in bounds.iter().filter(|b| candidate(b)) {
+            *count.entry(box_key(b)).or_default() += 1;
         }
         let mut large: std::collections::HashMap<[u32; 6], Vec<u32>> = count
             .iter()
@@ -152,41 +190,51 @@ impl BuildEntries {
             .collect();
         drop(count);
         if large.is_empty() {
-            // The usual case: one entry per primitive, without hashing the boxes again.
-            let n = bounds.len() as u32;
+            // Frequent hashes, but no large set of identical boxes (colliding hashes).
             return BuildEntries {
-                boxes: bounds.to_vec(),
-                start: (0..=n).collect(),
-                items: (0..n).collect(),
+                primitives: bounds.len(),
+                boxes: bounds,
+                groups: None,
             };
         }
+        // The key of a box that may belong to a large set.
+        let set_of = |b: &Aabb| candidate(b).then(|| box_key(b));
         for (i, b) in bounds.iter().enumerate() {
-            if let Some(members) = large.get_mut(&key(b)) {
+            if let Some(members) = set_of(b).and_then(|k| large.get_mut(&k)) {
                 members.push(i as u32);
             }
         }
-        let mut entries = BuildEntries {
-            boxes: Vec::with_capacity(bounds.len()),
+        let mut boxes = Vec::with_capacity(bounds.len());
+        let mut groups = Groups {
             start: Vec::with_capacity(bounds.len() + 1),
             items: Vec::with_capacity(bounds.len()),
         };
-        entries.start.push(0);
+        groups.start.push(0);
         // In input order (a set at its first member), so the build does not depend on hashing.
         for (i, b) in bounds.iter().enumerate() {
-            match large.get(&key(b)) {
-                None => entries.items.push(i as u32),
-                Some(members) if members[0] == i as u32 => entries.items.extend_from_slice(members),
+            match set_of(b).and_then(|k| large.get(&k)) {
+                None => groups.items.push(i as u32),
+                Some(members) if members[0] == i as u32 => groups.items.extend_from_slice(members),
                 Some(_) => continue,
             }
-            entries.boxes.push(*b);
-            entries.start.push(entries.items.len() as u32);
+            boxes.push(*b);
+            groups.start.push(groups.items.len() as u32);
         }
-        entries
+        BuildEntries {
+            boxes,
+            groups: Some(groups),
+            primitives: bounds.len(),
+        }
     }
 
-    /// The input primitives of entry `e`.
-    fn members(&self, e: u32) -> &[u32] {
-        &self.items[self.start[e as usize] as usize..self.start[e as usize + 1] as usize]
+    /// Appends the input primitives of entry `e` to `out`.
+    fn extend_members(&self, e: u32, out: &mut Vec<u32>) {
+        match &self.groups {
+            None => out.push(e),
+            Some(g) => out.extend_from_slice(
+                &g.items[g.start[e as usize] as usize..g.start[e as usize + 1] as usize],
+            ),
+        }
     }
 }
 
@@ -210,7 +258,7 @@ pub struct Collapsed {
 pub fn collapse(bvh2: &Bvh2, entries: &BuildEntries) -> Collapsed {
     let mut c = Collapsed {
         nodes: Vec::with_capacity(bvh2.nodes.len() / 2 + 1),
-        order: Vec::with_capacity(entries.items.len()),
+        order: Vec::with_capacity(entries.primitives),
         depth: 1,
         scratch: Vec::new(),
     };
@@ -242,11 +290,9 @@ fn leaf_of(bvh2: &Bvh2, entries: &BuildEntries, n2: usize, c: &mut Collapsed) ->
     // One buffer for every leaf (taken out of `c` while `emit` appends to it).
     let mut prims = std::mem::take(&mut c.scratch);
     prims.clear();
-    prims.extend(
-        bvh2.primitive_indices[first..first + node.prim_count as usize]
-            .iter()
-            .flat_map(|&g| entries.members(g).iter().copied()),
-    );
+    for &g in &bvh2.primitive_indices[first..first + node.prim_count as usize] {
+        entries.extend_members(g, &mut prims);
+    }
     let slot = emit(&prims, &node.aabb, c);
     c.scratch = prims;
     slot
@@ -432,5 +478,74 @@ pub mod simd {
             }
             (out, mask)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3A;
+    use std::collections::HashMap;
+
+    /// The grouping as first written (a map from every box to its primitives): sets of more
+    /// than [`GROUP_ABOVE`] identical boxes become one entry at their first member, in input
+    /// order. Returns each entry's box and primitives.
+    fn reference(bounds: &[Aabb]) -> Vec<(Aabb, Vec<u32>)> {
+        let mut sets: HashMap<[u32; 6], Vec<u32>> = HashMap::new();
+        for (i, b) in bounds.iter().enumerate() {
+            sets.entry(box_key(b)).or_default().push(i as u32);
+        }
+        let mut out = Vec::new();
+        for (i, b) in bounds.iter().enumerate() {
+            let set = &sets[&box_key(b)];
+            if set.len() <= GROUP_ABOVE {
+                out.push((*b, vec![i as u32]));
+            } else if set[0] == i as u32 {
+                out.push((*b, set.clone()));
+            }
+        }
+        out
+    }
+
+    /// The hash pre-filter leaves the grouping and its order exactly as the plain map made it:
+    /// sets of 17, 25 and 40 identical boxes (interleaved with others) are grouped, a set of 16
+    /// is not, boxes differing only in the sign of a zero are different boxes, and distinct
+    /// boxes stay one entry each, without a grouping.
+    #[test]
+    fn grouping_matches_the_plain_map() {
+        let unit = |x: f32| Aabb::new(Vec3A::new(x, 0.0, 0.0), Vec3A::new(x + 1.0, 1.0, 1.0));
+        let distinct: Vec<Aabb> = (0..1000).map(|i| unit(i as f32 * 0.37)).collect();
+        let plain = BuildEntries::new(distinct.clone());
+        assert!(plain.groups.is_none());
+        assert_eq!(plain.boxes.len(), distinct.len());
+        let mut bounds = Vec::new();
+        for i in 0..200 {
+            bounds.push(unit(i as f32));
+            if i % 5 == 0 {
+                bounds.push(unit(-1.0)); // 40 copies
+            }
+            if i % 11 == 0 && i < 187 {
+                bounds.push(unit(-2.0)); // 17 copies
+            }
+            if i % 12 == 0 && i < 192 {
+                bounds.push(unit(-3.0)); // 16 copies
+            }
+            if i % 4 == 0 {
+                // Equal as floats, not as bits: two sets of 25, not one of 50.
+                let z = if i % 8 == 0 { 0.0 } else { -0.0 };
+                bounds.push(Aabb::new(Vec3A::new(z, -5.0, 0.0), Vec3A::ONE));
+            }
+        }
+        let entries = BuildEntries::new(bounds.clone());
+        let expected = reference(&bounds);
+        assert!(expected.len() < bounds.len() - 50);
+        assert_eq!(entries.boxes.len(), expected.len());
+        for (e, (b, members)) in expected.iter().enumerate() {
+            assert_eq!(box_key(&entries.boxes[e]), box_key(b), "entry {e}");
+            let mut got = Vec::new();
+            entries.extend_members(e as u32, &mut got);
+            assert_eq!(&got, members, "entry {e}");
+        }
+        assert_eq!(entries.primitives, bounds.len());
     }
 }

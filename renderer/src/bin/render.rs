@@ -112,7 +112,8 @@ fn run() -> Result<()> {
     for w in &desc.warnings {
         eprintln!("warning: {w}");
     }
-    let scene = Scene::build(&desc).with_context(|| format!("building {}", cli.scene.display()))?;
+    let scene = Scene::from_description(desc)
+        .with_context(|| format!("building {}", cli.scene.display()))?;
     eprintln!(
         "loaded {} ({} shapes, {} lights) in {:.2} s",
         cli.scene.display(),

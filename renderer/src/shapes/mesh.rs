@@ -92,18 +92,23 @@ fn clamp_barycentrics(b: Vec2) -> Vec2 {
 }
 
 impl Mesh {
-    /// Wraps mesh data and precomputes its area distribution.
+    /// Wraps a copy of mesh data and precomputes its area distribution.
     pub fn new(data: &TriangleMesh) -> Self {
+        Self::from_data(data.clone())
+    }
+
+    /// Wraps mesh data (without copying it) and precomputes its area distribution.
+    pub fn from_data(data: TriangleMesh) -> Self {
         let areas: Vec<f32> = (0..data.indices.len())
             .map(|i| {
-                let [a, b, c] = Self::corners(data, i as u32);
+                let [a, b, c] = Self::corners(&data, i as u32);
                 0.5 * (b - a).cross(c - a).length()
             })
             .collect();
         let area = areas.iter().map(|&a| a as f64).sum::<f64>() as f32;
         let face_normals = (0..data.indices.len())
             .map(|i| {
-                let [p0, p1, p2] = Self::corners(data, i as u32);
+                let [p0, p1, p2] = Self::corners(&data, i as u32);
                 (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Z)
             })
             .collect::<Vec<Vec3>>();
@@ -114,7 +119,7 @@ impl Mesh {
             })
         });
         Mesh {
-            data: data.clone(),
+            data,
             area_distribution: Distribution1D::new(&areas),
             area,
             face_normals,

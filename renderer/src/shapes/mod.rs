@@ -78,6 +78,14 @@ pub enum Shape {
 }
 
 impl Shape {
+    /// Builds the shape from its description, taking over a mesh's data instead of copying it.
+    pub fn from_geometry(geometry: Geometry) -> Self {
+        match geometry {
+            Geometry::Mesh(m) => Shape::Mesh(Mesh::from_data(m)),
+            other => Shape::new(&other),
+        }
+    }
+
     /// Builds the shape from its description.
     pub fn new(geometry: &Geometry) -> Self {
         match geometry {

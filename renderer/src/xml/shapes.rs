@@ -372,10 +372,35 @@ struct RawMesh {
     positions: Vec<Vec3>,
     normals: Option<Vec<Vec3>>,
     uvs: Option<Vec<Vec2>>,
-    /// Polygons (any corner count ≥ 3), indices into the vertex arrays.
-    polygons: Vec<Vec<u32>>,
+    /// The corners of every polygon (any corner count ≥ 3), one polygon after the other, as
+    /// indices into the vertex arrays (one buffer, not one allocation per polygon).
+    corners: Vec<u32>,
+    /// Where each polygon's corners end in `corners` (it starts where the previous one ends).
+    polygon_ends: Vec<usize>,
     /// Extra per-vertex and per-polygon properties (PLY only), for `mesh_attribute`.
     attributes: Vec<RawAttribute>,
+}
+
+impl RawMesh {
+    /// Makes room for `n` more polygons of (mostly) three corners.
+    fn reserve_polygons(&mut self, n: usize) {
+        self.corners.reserve(3 * n);
+        self.polygon_ends.reserve_exact(n);
+    }
+
+    /// Appends a polygon (at least three corners).
+    fn push_polygon(&mut self, corners: impl IntoIterator<Item = u32>) {
+        self.corners.extend(corners);
+        self.polygon_ends.push(self.corners.len());
+    }
+
+    /// The polygons in order, each as its corners.
+    fn polygons(&self) -> impl Iterator<Item = &[u32]> {
+        let starts = std::iter::once(0).chain(self.polygon_ends.iter().copied());
+        starts
+            .zip(&self.polygon_ends)
+            .map(|(start, &end)| &self.corners[start..end])
+    }
 }
 
 /// Triangulates, transforms and settles the normals of a loaded mesh; also returns, for each
@@ -391,9 +416,11 @@ fn finish_mesh(
     if raw.positions.iter().any(|p| !p.is_finite()) {
         return Err("vertex positions are not finite".into());
     }
-    let mut indices = Vec::with_capacity(raw.polygons.len());
-    let mut polygon_of = Vec::with_capacity(raw.polygons.len());
-    for (f, poly) in raw.polygons.iter().enumerate() {
+    // A polygon of k corners makes k − 2 triangles.
+    let triangles = raw.corners.len() - 2 * raw.polygon_ends.len();
+    let mut indices = Vec::with_capacity(triangles);
+    let mut polygon_of = Vec::with_capacity(triangles);
+    for (f, poly) in raw.polygons().enumerate() {
         if let Some(bad) = poly.iter().find(|&&i| i as usize >= n) {
             return Err(format!(
                 "face refers to vertex {bad}, but there are only {n} vertices"
@@ -408,7 +435,17 @@ fn finish_mesh(
     if indices.is_empty() {
         return Err("the mesh has no faces".into());
     }
-    let uvs = raw.uvs.map(|uv| {
+    // The polygons are triangulated: freed before the normals are computed.
+    let RawMesh {
+        positions,
+        normals,
+        uvs,
+        corners,
+        polygon_ends,
+        ..
+    } = raw;
+    drop((corners, polygon_ends));
+    let uvs = uvs.map(|uv| {
         if flip_tex {
             uv.into_iter().map(|t| Vec2::new(t.x, 1.0 - t.y)).collect()
         } else {
@@ -416,12 +453,11 @@ fn finish_mesh(
         }
     });
     // Unit-length file normals (zero or non-finite ones make the set unusable: recompute).
-    let file_normals = raw
-        .normals
+    let file_normals = normals
         .filter(|ns| ns.iter().all(|v| v.is_finite() && v.length_squared() > 0.0))
         .map(|ns| ns.into_iter().map(Vec3::normalize).collect());
     let mut mesh = TriangleMesh {
-        positions: raw.positions,
+        positions,
         normals: file_normals,
         uvs,
         indices,
@@ -564,8 +600,7 @@ fn load_obj(path: &Path) -> Result<RawMesh, String> {
                 return Err("inconsistent face data".into());
             };
             if a >= 3 {
-                raw.polygons
-                    .push(corners.iter().map(|i| base + i).collect());
+                raw.push_polygon(corners.iter().map(|i| base + i));
             }
             offset = end;
         }
@@ -689,12 +724,13 @@ fn load_serialized(path: &Path, index: usize) -> Result<RawMesh, String> {
     .chunks_exact(4)
     .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
     .collect();
-    let polygons = indices.chunks_exact(3).map(<[u32]>::to_vec).collect();
+    let polygon_ends = (1..=triangles).map(|t| 3 * t).collect();
     Ok(RawMesh {
         positions,
         normals,
         uvs,
-        polygons,
+        corners: indices,
+        polygon_ends,
         attributes: Vec::new(),
     })
 }
@@ -702,20 +738,30 @@ fn load_serialized(path: &Path, index: usize) -> Result<RawMesh, String> {
 /// Reads a PLY (ASCII or binary) with `vertex` (x, y, z, optional nx/ny/nz and u/v, s/t or
 /// texture_u/texture_v) and `face` (`vertex_indices` or `vertex_index`) elements.
 /// Other vertex and face properties become attributes as Mitsuba 3.9.1 groups them.
+/// Elements are read and converted one at a time: holding the whole payload as parsed
+/// elements (a map of named properties each) took ~500 bytes per triangle.
 fn load_ply(path: &Path) -> Result<RawMesh, String> {
-    use ply_rs_bw::parser::Parser;
-    use ply_rs_bw::ply::{DefaultElement, Property};
+    use ply_rs_bw::parser::{Parser, Reader};
+    use ply_rs_bw::ply::{DefaultElement, Encoding, Property};
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
-    let mut reader = std::io::BufReader::new(file);
-    let ply = Parser::<DefaultElement>::new()
-        .read_ply(&mut reader)
+    // Each element takes at least one byte: counts past the file's size are not reserved for.
+    let file_len = file.metadata().map_or(0, |m| m.len()) as usize;
+    let mut reader = Reader::new(std::io::BufReader::new(file));
+    let parser = Parser::<DefaultElement>::new();
+    let header = parser
+        .read_header(&mut reader)
         .map_err(|e| format!("invalid PLY: {e}"))?;
     let scalar =
         |e: &DefaultElement, k: &str| -> Option<f32> { e.get(k).and_then(|p| p.to_f32_lossy()) };
-    let vertices = ply.payload.get("vertex").ok_or("no \"vertex\" element")?;
-    let faces = ply.payload.get("face").ok_or("no \"face\" element")?;
+    let vertex_def = header
+        .elements
+        .get("vertex")
+        .ok_or("no \"vertex\" element")?;
+    if !header.elements.contains_key("face") {
+        return Err("no \"face\" element".into());
+    }
     let mut raw = RawMesh::default();
-    let has = |k: &str| vertices.first().is_some_and(|v| v.contains_key(k));
+    let has = |k: &str| vertex_def.count > 0 && vertex_def.properties.contains_key(k);
     let has_normals = has("nx") && has("ny") && has("nz");
     let uv_keys = [
         ("u", "v"),
@@ -729,7 +775,7 @@ fn load_ply(path: &Path) -> Result<RawMesh, String> {
     let mut reserved = vec!["x", "y", "z", "nx", "ny", "nz", "u", "v"];
     reserved.extend(uv_keys.iter().flat_map(|(u, v)| [*u, *v]));
     let fields = |name: &str| {
-        ply.header
+        header
             .elements
             .get(name)
             .map(PlyField::of)
@@ -741,41 +787,79 @@ fn load_ply(path: &Path) -> Result<RawMesh, String> {
     let mut face_attributes = new_attributes(&face_sources);
     let mut normals = Vec::new();
     let mut uvs = Vec::new();
-    for v in vertices {
-        let get = |k: &str| scalar(v, k).ok_or_else(|| format!("vertex without numeric \"{k}\""));
-        read_attributes(v, &vertex_sources, &mut vertex_attributes)?;
-        raw.positions
-            .push(Vec3::new(get("x")?, get("y")?, get("z")?));
-        if has_normals {
-            normals.push(Vec3::new(get("nx")?, get("ny")?, get("nz")?));
+    // One face's indices (reused across faces).
+    let mut idx: Vec<i64> = Vec::new();
+    let mut line = String::new();
+    // In file order: every element is read, those other than vertices and faces skipped.
+    for def in header.elements.values() {
+        let kind = def.name.as_str();
+        if kind == "vertex" {
+            let n = def.count.min(file_len);
+            raw.positions.reserve_exact(n);
+            normals.reserve_exact(if has_normals { n } else { 0 });
+            uvs.reserve_exact(if uv_keys.is_some() { n } else { 0 });
+        } else if kind == "face" {
+            raw.reserve_polygons(def.count.min(file_len));
         }
-        if let Some((ku, kv)) = uv_keys {
-            uvs.push(Vec2::new(get(ku)?, get(kv)?));
+        for i in 0..def.count {
+            let element = match header.encoding {
+                Encoding::Ascii => {
+                    line.clear();
+                    let read = std::io::BufRead::read_line(reader.get_mut(), &mut line)
+                        .map_err(|e| e.to_string())?;
+                    if read == 0 {
+                        return Err(format!(
+                            "invalid PLY: unexpected end of file in element \"{kind}\" {i} of {}",
+                            def.count
+                        ));
+                    }
+                    parser.read_ascii_element(&line, def)
+                }
+                Encoding::BinaryLittleEndian => {
+                    parser.read_little_endian_element(reader.get_mut(), def)
+                }
+                Encoding::BinaryBigEndian => parser.read_big_endian_element(reader.get_mut(), def),
+            }
+            .map_err(|e| format!("invalid PLY: element \"{kind}\" {i}: {e}"))?;
+            if kind == "vertex" {
+                let v = &element;
+                let get =
+                    |k: &str| scalar(v, k).ok_or_else(|| format!("vertex without numeric \"{k}\""));
+                read_attributes(v, &vertex_sources, &mut vertex_attributes)?;
+                raw.positions
+                    .push(Vec3::new(get("x")?, get("y")?, get("z")?));
+                if has_normals {
+                    normals.push(Vec3::new(get("nx")?, get("ny")?, get("nz")?));
+                }
+                if let Some((ku, kv)) = uv_keys {
+                    uvs.push(Vec2::new(get(ku)?, get(kv)?));
+                }
+            } else if kind == "face" {
+                let f = &element;
+                let list = f
+                    .get("vertex_indices")
+                    .or_else(|| f.get("vertex_index"))
+                    .ok_or("face without \"vertex_indices\"")?;
+                idx.clear();
+                match list {
+                    Property::ListChar(l) => idx.extend(l.iter().map(|&x| x as i64)),
+                    Property::ListUChar(l) => idx.extend(l.iter().map(|&x| x as i64)),
+                    Property::ListShort(l) => idx.extend(l.iter().map(|&x| x as i64)),
+                    Property::ListUShort(l) => idx.extend(l.iter().map(|&x| x as i64)),
+                    Property::ListInt(l) => idx.extend(l.iter().map(|&x| x as i64)),
+                    Property::ListUInt(l) => idx.extend(l.iter().map(|&x| x as i64)),
+                    _ => return Err("face indices are not an integer list".into()),
+                }
+                if idx.len() < 3 {
+                    continue;
+                }
+                read_attributes(f, &face_sources, &mut face_attributes)?;
+                if let Some(bad) = idx.iter().find(|&&i| i < 0 || i > i64::from(u32::MAX)) {
+                    return Err(format!("invalid vertex index {bad}"));
+                }
+                raw.push_polygon(idx.iter().map(|&i| i as u32));
+            }
         }
-    }
-    for f in faces {
-        let list = f
-            .get("vertex_indices")
-            .or_else(|| f.get("vertex_index"))
-            .ok_or("face without \"vertex_indices\"")?;
-        let idx: Vec<i64> = match list {
-            Property::ListChar(l) => l.iter().map(|&x| x as i64).collect(),
-            Property::ListUChar(l) => l.iter().map(|&x| x as i64).collect(),
-            Property::ListShort(l) => l.iter().map(|&x| x as i64).collect(),
-            Property::ListUShort(l) => l.iter().map(|&x| x as i64).collect(),
-            Property::ListInt(l) => l.iter().map(|&x| x as i64).collect(),
-            Property::ListUInt(l) => l.iter().map(|&x| x as i64).collect(),
-            _ => return Err("face indices are not an integer list".into()),
-        };
-        if idx.len() < 3 {
-            continue;
-        }
-        read_attributes(f, &face_sources, &mut face_attributes)?;
-        if let Some(bad) = idx.iter().find(|&&i| i < 0 || i > i64::from(u32::MAX)) {
-            return Err(format!("invalid vertex index {bad}"));
-        }
-        raw.polygons
-            .push(idx.into_iter().map(|i| i as u32).collect());
     }
     if has_normals {
         raw.normals = Some(normals);
