@@ -237,30 +237,43 @@ fn write_atomically(
     })
 }
 
-/// Writes a float32 RGB OpenEXR (channels `R`, `G`, `B`), atomically.
+/// Writes a float32 RGB OpenEXR (channels `R`, `G`, `B`), atomically. The blocks are ZIP
+/// compressed in increasing line order, as bundles are: the file's bytes are a function of the
+/// pixels alone (the `exr` crate's default, tiles in unspecified order, stores them in the
+/// order its compression threads finish).
 pub fn write_rgb_exr(
     path: &Path,
     width: u32,
     height: u32,
     pixels: &[Rgb],
 ) -> Result<(), ImageIoError> {
+    use exr::prelude::{Encoding, Image, Layer, LayerAttributes, SpecificChannels, WritableImage};
     check_size(path, width, height, pixels)?;
     write_atomically(path, |tmp| {
         let w = width as usize;
-        exr::prelude::write_rgb_file(tmp, w, height as usize, |x, y| {
+        let channels = SpecificChannels::rgb(|exr::math::Vec2(x, y): exr::math::Vec2<usize>| {
             let p = pixels[y * w + x];
             (p.x, p.y, p.z)
-        })
-        .map_err(|error| match error {
-            exr::error::Error::Io(error) => ImageIoError::Io {
-                path: tmp.to_owned(),
-                error,
-            },
-            error => ImageIoError::Exr {
-                path: tmp.to_owned(),
-                error,
-            },
-        })
+        });
+        let layer = Layer::new(
+            (w, height as usize),
+            LayerAttributes::default(),
+            Encoding::SMALL_LOSSLESS,
+            channels,
+        );
+        Image::from_layer(layer)
+            .write()
+            .to_file(tmp)
+            .map_err(|error| match error {
+                exr::error::Error::Io(error) => ImageIoError::Io {
+                    path: tmp.to_owned(),
+                    error,
+                },
+                error => ImageIoError::Exr {
+                    path: tmp.to_owned(),
+                    error,
+                },
+            })
     })
 }
 
@@ -327,6 +340,37 @@ mod tests {
         assert_eq!(back, pixels);
         // No temporary file is left behind.
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn exr_bytes_depend_on_the_pixels_alone() {
+        // Large enough for many compressed blocks, which compress on several threads.
+        let dir = temp_dir("exr-bytes");
+        let (w, h) = (301u32, 203u32);
+        let pixels: Vec<Rgb> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                Rgb::new(
+                    (x * 0.37).sin(),
+                    y / h as f32,
+                    ((x + y) * 0.01).cos().abs() * 9.0,
+                )
+            })
+            .collect();
+        let bytes: Vec<Vec<u8>> = (0..6)
+            .map(|k| {
+                let path = dir.join(format!("{k}.exr"));
+                write_rgb_exr(&path, w, h, &pixels).unwrap();
+                std::fs::read(&path).unwrap()
+            })
+            .collect();
+        assert!(
+            bytes.iter().all(|b| *b == bytes[0]),
+            "EXR bytes differ between writes"
+        );
+        let (rw, rh, back) = read_rgb_image(&dir.join("0.exr")).unwrap();
+        assert_eq!((rw, rh), (w, h));
+        assert!(back.iter().zip(&pixels).all(|(a, b)| a == b));
     }
 
     #[test]
