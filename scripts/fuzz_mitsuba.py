@@ -140,8 +140,9 @@ def shape(r, bsdf):
             f'<translate x="{x:.3f}" y="{r.uniform(0.3, 1.0):.3f}" z="{z:.3f}"/></transform>{bsdf}</shape>')
 
 
-def light(r, allow_environment=True):
-    kinds = ["area", "area-sphere", "point", "spot", "directional"]
+def light(r, allow_environment=True, area_only=False):
+    """A random light; with `area_only` an area light or a constant sky (no delta lights)."""
+    kinds = ["area", "area-sphere"] if area_only else ["area", "area-sphere", "point", "spot", "directional"]
     k = r.choice(kinds + ["constant"] if allow_environment else kinds)
     if k == "area":
         s = r.uniform(0.3, 1.0)
@@ -170,14 +171,16 @@ def light(r, allow_environment=True):
     return f'<emitter type="constant"><rgb name="radiance" value="{rgb(r, 0.1, 1)}"/></emitter>'
 
 
-def scene_xml(seed, index):
+def scene_xml(seed, index, lights="all"):
+    """Scene `index` of generator seed `seed`; `lights="area"`: area lights and a sky only."""
     r = random.Random(seed * 1_000_003 + index)
+    area_only = lights == "area"
     elev, azim, dist = r.uniform(10, 55), r.uniform(0, 360), r.uniform(3.5, 6)
     e, a = np.radians(elev), np.radians(azim)
     origin = (dist * np.cos(e) * np.sin(a), dist * np.sin(e), dist * np.cos(e) * np.cos(a))
     # Mitsuba allows one environment emitter per scene.
-    first = light(r)
-    lights = [first] + [light(r, "constant" not in first) for _ in range(r.randint(0, 1))]
+    first = light(r, True, area_only)
+    lights = [first] + [light(r, "constant" not in first, area_only) for _ in range(r.randint(0, 1))]
     environment = any("constant" in l for l in lights)
     lights = "\n    ".join(lights)
     floor = material(r, allow_delta=False, allow_mask=environment)

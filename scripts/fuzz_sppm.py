@@ -1,0 +1,125 @@
+#!/usr/bin/env python3
+"""Consistency test of multi-level SPPM against our path tracer on random scenes.
+
+The scenes are those of `fuzz_mitsuba.py` (every BSDF plugin with random parameters, five
+shape types) lit by area lights and a constant sky only, so that the path tracer converges
+everywhere (a delta light seen through glass makes caustics only photons carry). Each scene is
+rendered at 32x32 by
+
+* the path tracer: unbounded depth (Russian roulette), `--spp` samples per pixel in 4 runs of
+  different seeds (their spread gives the noise), and
+* `render --integrator sppm-ml`: `--photons` per pass, `--passes` passes, max_depth 24.
+
+A scene is flagged when the image mean of any level (y, z1..z4) differs from the path tracer's
+by more than max(5 sigma, --tol) in any channel (sigma from the path tracer's run-to-run spread
+and the bundle's stored variances). The worst 8x8-pixel block of the sharpest
+level is printed too, for a look (kernel bias at edges makes it larger than the image mean's).
+Flagged scenes keep their XML and images under out/fuzz-sppm/<seed>/.
+
+    python3 scripts/fuzz_sppm.py --count 40 --seed 1 --bin target/release/render
+"""
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from fuzz_mitsuba import scene_xml  # noqa: E402
+from validate_pt import ROOT, mitsuba, read_exr  # noqa: E402
+
+LEVELS = ["y", "z1", "z2", "z3", "z4"]
+CHUNKS = 4
+
+
+def read_levels(path):
+    """The five levels of a bundle as (H, W, 3) float64 arrays, and their stored variances
+    (of each pixel's mean, averaged over RGB) as (H, W) arrays."""
+    mi = mitsuba()
+    mi.set_variant("scalar_rgb")
+    b = mi.Bitmap(str(path))
+    names = [f.name for f in b.struct_()]
+    a = np.array(b, dtype=np.float64)
+    levels = {l: np.stack([a[..., names.index(f"{l}.{c}")] for c in "RGB"], axis=-1) for l in LEVELS}
+    variances = {l: a[..., names.index(f"variance.{l}")] for l in LEVELS}
+    return levels, variances
+
+
+def run(cmd):
+    done = subprocess.run([str(c) for c in cmd], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(done.stderr.strip()[-400:])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--count", type=int, default=20, help="scenes to try")
+    ap.add_argument("--first", type=int, default=0, help="index of the first scene")
+    ap.add_argument("--seed", type=int, default=1, help="scene generator seed")
+    ap.add_argument("--spp", type=int, default=4096, help="path tracer samples per pixel")
+    ap.add_argument("--photons", type=int, default=50_000, help="SPPM photons per pass")
+    ap.add_argument("--passes", type=int, default=512, help="SPPM passes")
+    ap.add_argument("--tol", type=float, default=0.02, help="relative tolerance of the image mean")
+    ap.add_argument("--bin", default=str(ROOT / "target" / "release" / "render"), help="our render binary")
+    ap.add_argument("--out", default=str(ROOT / "out" / "fuzz-sppm"), help="output folder")
+    ap.add_argument("--keep", action="store_true", help="keep the files of scenes that agree")
+    args = ap.parse_args()
+    out = Path(args.out) / str(args.seed)
+    out.mkdir(parents=True, exist_ok=True)
+    flagged, rows = [], []
+    for index in range(args.first, args.first + args.count):
+        d = out / f"{index:04d}"
+        d.mkdir(exist_ok=True)
+        xml = d / "scene.xml"
+        xml.write_text(scene_xml(args.seed, index, lights="area"))
+        try:
+            chunks = []
+            for k in range(CHUNKS):
+                exr = d / f"path_{k}.exr"
+                run([args.bin, xml, "--integrator", "path", "--max-depth", "-1", "--spp",
+                     args.spp // CHUNKS, "--seed", k + 1, "--out", exr])
+                chunks.append(read_exr(exr))
+            run([args.bin, xml, "--integrator", "sppm-ml", "--photons", args.photons, "--passes",
+                 args.passes, "--max-depth", 24, "--seed", 7, "--out", d / "sppm"])
+            levels, variances = read_levels(d / f"sppm_p{args.passes:04d}.exr")
+        except RuntimeError as e:
+            flagged.append(index)
+            rows.append({"index": index, "error": str(e)})
+            print(f"{index:4d}: failed: {e}", flush=True)
+            continue
+        chunks = np.stack(chunks)
+        ref = chunks.mean(axis=0)
+        ref_mean = ref.mean(axis=(0, 1))
+        var_path = chunks.mean(axis=(1, 2)).var(axis=0, ddof=1) / CHUNKS
+        # The image mean's variance from the stored per-pixel variances, pixels taken as
+        # independent (their shared photons correlate them: a lower bound).
+        n_pixels = ref.shape[0] * ref.shape[1]
+        var_sppm = {l: float(variances[l].sum()) / n_pixels**2 for l in LEVELS}
+        tol = {l: np.maximum(5 * np.sqrt(var_path + var_sppm[l]), args.tol * np.abs(ref_mean))
+               for l in LEVELS}
+        rel = {l: ((levels[l].mean(axis=(0, 1)) - ref_mean) / np.maximum(ref_mean, 1e-8)).tolist()
+               for l in LEVELS}
+        bad = [l for l in LEVELS if np.any(np.abs(levels[l].mean(axis=(0, 1)) - ref_mean) > tol[l])]
+        h, w, _ = ref.shape
+        blocks = lambda img: img[: h - h % 8, : w - w % 8].reshape(h // 8, 8, w // 8, 8, 3).mean(axis=(1, 3))
+        worst = float(np.max(np.abs(blocks(levels["y"]) - blocks(ref)) / (blocks(ref) + 1e-2)))
+        row = {"index": index, "mean_rel": rel, "worst_block_rel_y": worst, "flag": bool(bad)}
+        rows.append(row)
+        print(f"{index:4d}: {'FLAG' if bad else 'ok':4s} mean rel diff y {np.mean(rel['y']):+.2%} "
+              f"z2 {np.mean(rel['z2']):+.2%} z4 {np.mean(rel['z4']):+.2%}; worst 8x8 block of y "
+              f"{worst:.1%}" + (f"; off: {', '.join(bad)}" if bad else ""), flush=True)
+        if bad:
+            flagged.append(index)
+        elif not args.keep:
+            shutil.rmtree(d)
+    (out / "summary.json").write_text(json.dumps(rows, indent=1) + "\n")
+    print(f"{len(flagged)} of {args.count} scenes flagged: {flagged} (files under {out})")
+    sys.exit(1 if flagged else 0)
+
+
+if __name__ == "__main__":
+    main()
