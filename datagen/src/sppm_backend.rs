@@ -20,7 +20,8 @@ fn load(xml: &Path, spec: &RunSpec) -> Result<Scene> {
     let desc = renderer::xml::load_scene(xml, &spec.defines, false)
         .map_err(|e| anyhow!("{e}"))
         .with_context(|| format!("loading {}", xml.display()))?;
-    let scene = Scene::build(&desc).with_context(|| format!("building {}", xml.display()))?;
+    let scene =
+        Scene::from_description(desc).with_context(|| format!("building {}", xml.display()))?;
     // Bundles of one dataset share the box filter (the generated scenes name it): another
     // filter spreads each sample over neighbouring pixels and smooths the inputs unlike the
     // rest of the data.

@@ -271,7 +271,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
     if let Some(w) = renderer::integrators::sppm::filter_warning(desc.camera.filter) {
         eprintln!("warning: {w}");
     }
-    let scene = renderer::scene::Scene::build(&desc)
+    let scene = renderer::scene::Scene::from_description(desc)
         .with_context(|| format!("building {}", scene_path.display()))?;
     let settings = SppmSettings {
         photons_per_pass: cli.photons,

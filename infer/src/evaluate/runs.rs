@@ -126,7 +126,7 @@ pub fn load_scene(xml: &std::path::Path, defines: &[(String, String)]) -> Result
     for w in &desc.warnings {
         eprintln!("warning: {}: {w}", xml.display());
     }
-    Scene::build(&desc).with_context(|| format!("building {}", xml.display()))
+    Scene::from_description(desc).with_context(|| format!("building {}", xml.display()))
 }
 
 /// Multi-level run: one bundle per configured pass count.
