@@ -820,7 +820,18 @@ fn load_ply(path: &Path) -> Result<RawMesh, String> {
                 }
                 Encoding::BinaryBigEndian => parser.read_big_endian_element(reader.get_mut(), def),
             }
-            .map_err(|e| format!("invalid PLY: element \"{kind}\" {i}: {e}"))?;
+            .map_err(|e| {
+                if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                    // The binary readers' own words ("failed to fill whole buffer") hide it.
+                    format!(
+                        "invalid PLY: unexpected end of file in element \"{kind}\" {i} of {} \
+                         (truncated file?)",
+                        def.count
+                    )
+                } else {
+                    format!("invalid PLY: element \"{kind}\" {i}: {e}")
+                }
+            })?;
             if kind == "vertex" {
                 let v = &element;
                 let get =

@@ -624,6 +624,18 @@ fn ply_ascii_and_binary_with_and_without_normals() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("vertex 7") && err.contains("bad.ply"), "{err}");
+    // A binary file cut short names the element it ends in.
+    std::fs::write(dir.join("cut.ply"), &bin[..bin.len() - 30]).unwrap();
+    let body = format!(
+        "{SENSOR}\n<shape type=\"ply\"><string name=\"filename\" value=\"cut.ply\"/></shape>"
+    );
+    let err = load(&write_scene(&dir, "cut.xml", &body))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("cut.ply") && err.contains("unexpected end of file in element"),
+        "{err}"
+    );
 }
 
 /// Writes the triangle mesh `parts/meshes/tri.obj` under `dir`.
