@@ -171,8 +171,10 @@ def light(r, allow_environment=True, area_only=False):
     return f'<emitter type="constant"><rgb name="radiance" value="{rgb(r, 0.1, 1)}"/></emitter>'
 
 
-def scene_xml(seed, index, lights="all"):
-    """Scene `index` of generator seed `seed`; `lights="area"`: area lights and a sky only."""
+def scene_xml(seed, index, lights="all", delta_materials=True):
+    """Scene `index` of generator seed `seed`; `lights="area"`: area lights and a sky only;
+    without `delta_materials` no smooth (delta) BSDF, so that every light path is one a path
+    tracer can find."""
     r = random.Random(seed * 1_000_003 + index)
     area_only = lights == "area"
     elev, azim, dist = r.uniform(10, 55), r.uniform(0, 360), r.uniform(3.5, 6)
@@ -184,7 +186,7 @@ def scene_xml(seed, index, lights="all"):
     environment = any("constant" in l for l in lights)
     lights = "\n    ".join(lights)
     floor = material(r, allow_delta=False, allow_mask=environment)
-    objects = "\n    ".join(shape(r, material(r, allow_mask=environment))
+    objects = "\n    ".join(shape(r, material(r, delta_materials, environment))
                              for _ in range(r.randint(1, 3)))
     return f"""<scene version="3.0.0">
     <default name="spp" value="64"/>

@@ -2,9 +2,10 @@
 """Consistency test of multi-level SPPM against our path tracer on random scenes.
 
 The scenes are those of `fuzz_mitsuba.py` (every BSDF plugin with random parameters, five
-shape types) lit by area lights and a constant sky only, so that the path tracer converges
-everywhere (a delta light seen through glass makes caustics only photons carry). Each scene is
-rendered at 32x32 by
+shape types), chosen so that the path tracer converges everywhere: by default lit by area
+lights and a constant sky only; with `--delta-lights`, lit by every light type (point, spot and
+directional too) but without smooth (delta) materials, since a delta light seen through glass
+makes caustics only photons carry. Each scene is rendered at 32x32 by
 
 * the path tracer: unbounded depth (Russian roulette), `--spp` samples per pixel in 4 runs of
   different seeds (their spread gives the noise), and
@@ -67,6 +68,8 @@ def main():
     ap.add_argument("--bin", default=str(ROOT / "target" / "release" / "render"), help="our render binary")
     ap.add_argument("--out", default=str(ROOT / "out" / "fuzz-sppm"), help="output folder")
     ap.add_argument("--keep", action="store_true", help="keep the files of scenes that agree")
+    ap.add_argument("--delta-lights", action="store_true",
+                    help="every light type, no smooth materials (default: area lights and sky)")
     args = ap.parse_args()
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
@@ -75,7 +78,10 @@ def main():
         d = out / f"{index:04d}"
         d.mkdir(exist_ok=True)
         xml = d / "scene.xml"
-        xml.write_text(scene_xml(args.seed, index, lights="area"))
+        if args.delta_lights:
+            xml.write_text(scene_xml(args.seed, index, lights="all", delta_materials=False))
+        else:
+            xml.write_text(scene_xml(args.seed, index, lights="area"))
         try:
             chunks = []
             for k in range(CHUNKS):
