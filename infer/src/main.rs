@@ -258,10 +258,10 @@ fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
         (None, Some(_)) => None,
         (None, None) => Some(DEFAULT_PASSES),
     };
+    // Checked before the scene loads, so a bad limit fails at once.
     if let Some(t) = cli.time {
-        if !t.is_finite() || t <= 0.0 {
-            bail!("--time must be a positive, finite number of seconds, got {t}");
-        }
+        renderer::integrators::sppm::check_time_limit(t)
+            .map_err(|why| anyhow::anyhow!("--time {why}"))?;
     }
     let desc = renderer::xml::load_scene(scene_path, &cli.define, false)
         .with_context(|| format!("loading {}", scene_path.display()))?;

@@ -136,6 +136,19 @@ impl Default for SppmSettings {
     }
 }
 
+/// Checks a wall-clock budget in seconds; the error completes a sentence naming the limit
+/// ("… must be a positive, finite number of seconds, got inf"). An infinite limit would never
+/// stop a run without checkpoints, nor write its bundle.
+pub fn check_time_limit(seconds: f64) -> Result<(), String> {
+    if seconds.is_finite() && seconds > 0.0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "must be a positive, finite number of seconds, got {seconds}"
+        ))
+    }
+}
+
 /// When to emit bundles and when to stop.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct StopCondition {
@@ -459,10 +472,7 @@ pub fn render_sppm_resumable(
         bail!("no stop condition: give pass checkpoints and/or a time limit");
     }
     if let Some(s) = stop.seconds {
-        // An infinite limit would never stop a run without checkpoints, nor write its bundle.
-        if !s.is_finite() || s <= 0.0 {
-            bail!("time limit must be a positive, finite number of seconds, got {s}");
-        }
+        check_time_limit(s).map_err(|why| anyhow::anyhow!("time limit {why}"))?;
     }
     let max_radius = match settings.max_radius {
         Some(r) if r.is_finite() && r > 0.0 => r,
