@@ -215,16 +215,48 @@ def render_mitsuba(xml, spp, max_depth):
     return np.mean(chunks, axis=0), np.stack(chunks)
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def fuzz_arguments(description, spp, spp_help, out_name):
+    """The command line both fuzz scripts share (scene range, seed, spp, binary, output)."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--count", type=int, default=20, help="scenes to try")
     ap.add_argument("--first", type=int, default=0, help="index of the first scene")
     ap.add_argument("--seed", type=int, default=1, help="scene generator seed")
-    ap.add_argument("--spp", type=int, default=1024, help="samples per pixel, both renderers")
+    ap.add_argument("--spp", type=int, default=spp, help=spp_help)
     ap.add_argument("--bin", default=str(ROOT / "target" / "release" / "render"), help="our render binary")
-    ap.add_argument("--out", default=str(ROOT / "out" / "fuzz"), help="output folder")
+    ap.add_argument("--out", default=str(ROOT / "out" / out_name), help="output folder")
     ap.add_argument("--keep", action="store_true", help="keep the files of scenes that agree")
-    args = ap.parse_args()
+    return ap
+
+
+def run_render(cmd):
+    """Runs our `render` with `cmd`; RuntimeError with the end of its stderr when it fails."""
+    done = subprocess.run([str(c) for c in cmd], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(done.stderr.strip()[-400:])
+
+
+def render_path_chunks(binary, xml, spp, out_dir, prefix, *extra):
+    """Our path tracer on `xml` in CHUNKS runs of spp/CHUNKS samples (seeds 1..CHUNKS, images
+    `<prefix>_<k>.exr` in `out_dir`), stacked: their spread is our noise."""
+    chunks = []
+    for k in range(CHUNKS):
+        exr = out_dir / f"{prefix}_{k}.exr"
+        run_render([binary, xml, "--integrator", "path", *extra, "--spp", spp // CHUNKS,
+                    "--seed", k + 1, "--out", exr])
+        chunks.append(read_exr(exr))
+    return np.stack(chunks)
+
+
+def finish(out, rows, flagged, count):
+    """Writes `summary.json`, prints the verdict and exits (1 when a scene is flagged)."""
+    (out / "summary.json").write_text(json.dumps(rows, indent=1) + "\n")
+    print(f"{len(flagged)} of {count} scenes flagged: {flagged} (files under {out})")
+    sys.exit(1 if flagged else 0)
+
+
+def main():
+    args = fuzz_arguments(__doc__.split("\n")[0], 1024, "samples per pixel, both renderers",
+                          "fuzz").parse_args()
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
@@ -238,24 +270,15 @@ def main():
             ref, ref_chunks = render_mitsuba(xml, args.spp, max_depth)
         except RuntimeError as e:  # a generator mistake, not a finding about our renderer
             sys.exit(f"{index:4d}: Mitsuba refused the scene {xml}: {e}")
-        # Ours in as many independent chunks (seeds 1..CHUNKS), so that the noise estimate sees
-        # each renderer's own variance (their sampling strategies differ).
-        ours_chunks, failure = [], None
-        for k in range(CHUNKS):
-            exr = d / f"ours_{k}.exr"
-            cmd = [args.bin, str(xml), "--integrator", "path", "--spp", str(args.spp // CHUNKS),
-                   "--seed", str(k + 1), "--out", str(exr)]
-            done = subprocess.run(cmd, capture_output=True, text=True)
-            if done.returncode != 0:
-                failure = done.stderr.strip()
-                break
-            ours_chunks.append(read_exr(exr))
-        if failure is not None:
+        # Ours in as many independent chunks, so that the noise estimate sees each renderer's
+        # own variance (their sampling strategies differ).
+        try:
+            ours_chunks = render_path_chunks(args.bin, xml, args.spp, d, "ours")
+        except RuntimeError as e:
             flagged.append(index)
-            rows.append({"index": index, "error": failure[-400:]})
-            print(f"{index:4d}: ours failed: {failure[-200:]}", flush=True)
+            rows.append({"index": index, "error": str(e)})
+            print(f"{index:4d}: ours failed: {str(e)[-200:]}", flush=True)
             continue
-        ours_chunks = np.stack(ours_chunks)
         ours = ours_chunks.mean(axis=0)
         a, b = downsample(ours), downsample(ref)
         denom = b * b + 1e-2
@@ -288,9 +311,7 @@ def main():
             side_by_side(d / "compare.png", ref, ours, 1.0)
         elif not args.keep:
             shutil.rmtree(d)
-    (out / "summary.json").write_text(json.dumps(rows, indent=1) + "\n")
-    print(f"{len(flagged)} of {args.count} scenes flagged: {flagged} (files under {out})")
-    sys.exit(1 if flagged else 0)
+    finish(out, rows, flagged, args.count)
 
 
 if __name__ == "__main__":

@@ -20,21 +20,18 @@ Flagged scenes keep their XML and images under out/fuzz-sppm/<seed>/.
     python3 scripts/fuzz_sppm.py --count 40 --seed 1 --bin target/release/render
 """
 
-import argparse
-import json
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from fuzz_mitsuba import scene_xml  # noqa: E402
-from validate_pt import ROOT, mitsuba, read_exr  # noqa: E402
+from fuzz_mitsuba import (  # noqa: E402
+    CHUNKS, finish, fuzz_arguments, render_path_chunks, run_render, scene_xml)
+from validate_pt import mitsuba  # noqa: E402
 
 LEVELS = ["y", "z1", "z2", "z3", "z4"]
-CHUNKS = 4
 
 
 def read_levels(path):
@@ -50,24 +47,11 @@ def read_levels(path):
     return levels, variances
 
 
-def run(cmd):
-    done = subprocess.run([str(c) for c in cmd], capture_output=True, text=True)
-    if done.returncode != 0:
-        raise RuntimeError(done.stderr.strip()[-400:])
-
-
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--count", type=int, default=20, help="scenes to try")
-    ap.add_argument("--first", type=int, default=0, help="index of the first scene")
-    ap.add_argument("--seed", type=int, default=1, help="scene generator seed")
-    ap.add_argument("--spp", type=int, default=4096, help="path tracer samples per pixel")
+    ap = fuzz_arguments(__doc__.split("\n")[0], 4096, "path tracer samples per pixel", "fuzz-sppm")
     ap.add_argument("--photons", type=int, default=50_000, help="SPPM photons per pass")
     ap.add_argument("--passes", type=int, default=512, help="SPPM passes")
     ap.add_argument("--tol", type=float, default=0.02, help="relative tolerance of the image mean")
-    ap.add_argument("--bin", default=str(ROOT / "target" / "release" / "render"), help="our render binary")
-    ap.add_argument("--out", default=str(ROOT / "out" / "fuzz-sppm"), help="output folder")
-    ap.add_argument("--keep", action="store_true", help="keep the files of scenes that agree")
     ap.add_argument("--delta-lights", action="store_true",
                     help="every light type, no smooth materials (default: area lights and sky)")
     args = ap.parse_args()
@@ -83,13 +67,8 @@ def main():
         else:
             xml.write_text(scene_xml(args.seed, index, lights="area"))
         try:
-            chunks = []
-            for k in range(CHUNKS):
-                exr = d / f"path_{k}.exr"
-                run([args.bin, xml, "--integrator", "path", "--max-depth", "-1", "--spp",
-                     args.spp // CHUNKS, "--seed", k + 1, "--out", exr])
-                chunks.append(read_exr(exr))
-            run([args.bin, xml, "--integrator", "sppm-ml", "--photons", args.photons, "--passes",
+            chunks = render_path_chunks(args.bin, xml, args.spp, d, "path", "--max-depth", -1)
+            run_render([args.bin, xml, "--integrator", "sppm-ml", "--photons", args.photons, "--passes",
                  args.passes, "--max-depth", 24, "--seed", 7, "--out", d / "sppm"])
             levels, variances = read_levels(d / f"sppm_p{args.passes:04d}.exr")
         except RuntimeError as e:
@@ -97,7 +76,6 @@ def main():
             rows.append({"index": index, "error": str(e)})
             print(f"{index:4d}: failed: {e}", flush=True)
             continue
-        chunks = np.stack(chunks)
         ref = chunks.mean(axis=0)
         ref_mean = ref.mean(axis=(0, 1))
         var_path = chunks.mean(axis=(1, 2)).var(axis=0, ddof=1) / CHUNKS
@@ -122,9 +100,7 @@ def main():
             flagged.append(index)
         elif not args.keep:
             shutil.rmtree(d)
-    (out / "summary.json").write_text(json.dumps(rows, indent=1) + "\n")
-    print(f"{len(flagged)} of {args.count} scenes flagged: {flagged} (files under {out})")
-    sys.exit(1 if flagged else 0)
+    finish(out, rows, flagged, args.count)
 
 
 if __name__ == "__main__":
