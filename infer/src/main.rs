@@ -9,7 +9,9 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle};
-use clap::Parser;
+use clap::error::ErrorKind;
+use clap::parser::ValueSource;
+use clap::{CommandFactory, FromArgMatches, Parser};
 use indicatif::{ProgressBar, ProgressStyle};
 use infer::preview::{write_side_by_side, write_weight_map, Panel};
 use infer::{reconstruct_tiled, Engine, ErrorReport, TrainedModel};
@@ -22,7 +24,7 @@ use model::training::write_atomic;
 /// Either `--input bundle.exr` (written by `render --integrator sppm-ml` or `datagen`) or
 /// `--scene scene.xml` (renders the bundle first).
 #[derive(Debug, Parser)]
-#[command(version)]
+#[command(name = "infer", version)]
 struct Cli {
     /// Trained model directory (`model.json` + `model.bpk`, as written by `train`).
     #[arg(long, default_value = "models/default")]
@@ -100,8 +102,47 @@ struct Cli {
     state_interval: f64,
 }
 
+/// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
+const RENDERING_ONLY: [&str; 8] = [
+    "passes",
+    "time",
+    "photons",
+    "seed",
+    "threads",
+    "define",
+    "state",
+    "state_interval",
+];
+
+/// The command line, refused (usage error, exit code 2) when it sets a rendering option without
+/// `--scene`: `--input b.exr --passes 256` would otherwise reconstruct the bundle as it is and
+/// ignore the option. (Checked here, not with clap's `requires`: clap does not enforce that on
+/// an option whose required one conflicts with a given one, as `--scene` does with `--input`.)
+fn parse_cli() -> Cli {
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    if cli.scene.is_none() {
+        let given = RENDERING_ONLY
+            .iter()
+            .find(|id| matches.value_source(id) == Some(ValueSource::CommandLine));
+        if let Some(id) = given {
+            let flag = match *id {
+                "define" => "-D".to_string(),
+                id => format!("--{}", id.replace('_', "-")),
+            };
+            Cli::command()
+                .error(
+                    ErrorKind::MissingRequiredArgument,
+                    format!("{flag} sets how --scene renders; it needs --scene, not --input"),
+                )
+                .exit();
+        }
+    }
+    cli
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = parse_cli();
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

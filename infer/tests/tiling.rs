@@ -211,6 +211,41 @@ fn cli_names_a_missing_bundle_and_exits_non_zero() {
 }
 
 #[test]
+fn cli_refuses_rendering_options_without_a_scene() {
+    let dir = temp_dir("cli-input-only");
+    write_tiny_model(&dir);
+    for (option, flag) in [
+        (&["--passes", "256"][..], "--passes"),
+        (&["--time", "60"][..], "--time"),
+        (&["--photons", "1000"][..], "--photons"),
+        (&["--seed", "3"][..], "--seed"),
+        (&["--threads", "1"][..], "--threads"),
+        (&["-D", "res=64"][..], "-D"),
+        (&["--state", "s.state"][..], "--state"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_infer"))
+            .arg("--model")
+            .arg(&dir)
+            .arg("--input")
+            .arg(dir.join("bundle.exr"))
+            .arg("--output")
+            .arg(dir.join("out.exr"))
+            .args(option)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{option:?}: {stderr}");
+        assert!(
+            stderr.contains(&format!("{flag} sets how --scene renders")),
+            "{stderr}"
+        );
+        // Refused before the bundle is looked at: the usage error, not a missing file.
+        assert!(!stderr.contains("bundle.exr"), "{stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn cli_renders_a_scene_by_passes_or_by_time_then_reconstructs() {
     let dir = temp_dir("cli-scene");
     write_tiny_model(&dir);

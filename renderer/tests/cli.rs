@@ -230,6 +230,52 @@ fn bad_input_names_the_file_and_line_and_fails() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+#[test]
+fn an_option_the_chosen_integrator_would_ignore_is_refused() {
+    let dir = temp_dir("ignored-options");
+    let scene = write_scene(&dir);
+    let scene = scene.to_str().unwrap();
+    let out = dir.join("out");
+    let out = out.to_str().unwrap();
+    // (integrator, the option, what the error must name)
+    let cases: [(&str, &[&str], &str); 7] = [
+        ("path", &["--time", "5"], "--time"),
+        ("path", &["--passes", "4"], "--passes"),
+        ("path", &["--photons", "1000"], "--photons"),
+        ("path", &["--knn", "10"], "--knn"),
+        ("path", &["--max-radius", "0.1"], "--max-radius"),
+        ("sppm", &["--passes", "1", "--spp", "4"], "--spp"),
+        (
+            "sppm-ml",
+            &["--passes", "1", "--rr-depth", "3"],
+            "--rr-depth",
+        ),
+    ];
+    for (integrator, options, flag) in cases {
+        let mut args = vec![scene, "--out", out, "--integrator", integrator];
+        args.extend_from_slice(options);
+        let result = run(env!("CARGO_BIN_EXE_render"), &args);
+        let err = stderr(&result);
+        assert_eq!(result.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains(flag) && err.contains(integrator),
+            "{args:?}: {err}"
+        );
+        assert!(err.contains("Usage: render "), "{args:?}: {err}");
+        assert!(
+            std::fs::read_dir(&dir).unwrap().count() == 1,
+            "{args:?}: no output"
+        );
+    }
+    // The defaults of the other integrator's options are not "given": these render.
+    let ok = run(
+        env!("CARGO_BIN_EXE_render"),
+        &[scene, "--out", out, "--spp", "1", "--max-depth", "3"],
+    );
+    assert!(ok.status.success(), "{}", stderr(&ok));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A field of the `state` object in a run-state file's JSON line, if it can be read now.
 fn saved_field(state: &Path, field: &str) -> Option<u64> {
     let text = std::fs::read(state).ok()?;

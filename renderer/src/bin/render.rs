@@ -2,7 +2,9 @@
 //! writes a float32 RGB EXR and optionally a tone-mapped sRGB PNG.
 
 use anyhow::{bail, Context, Result};
-use clap::{Parser, ValueEnum};
+use clap::error::ErrorKind;
+use clap::parser::ValueSource;
+use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use renderer::film::{with_threads, Film};
 use renderer::image_io::{write_png_srgb, write_rgb_exr};
@@ -26,7 +28,7 @@ enum IntegratorKind {
 
 /// Render a Mitsuba 3 XML scene.
 #[derive(Debug, Parser)]
-#[command(version)]
+#[command(name = "render", version)]
 struct Cli {
     /// The scene file (Mitsuba 3 XML).
     scene: PathBuf,
@@ -51,11 +53,13 @@ struct Cli {
     /// Turn unsupported plugins/attributes into warnings instead of errors.
     #[arg(long)]
     lenient: bool,
-    /// Longest path (Mitsuba's `max_depth`; −1 = unbounded). Default: the file's, else −1.
+    /// Longest path (Mitsuba's `max_depth`; −1 = unbounded). Path tracer default: the file's,
+    /// else −1. SPPM bounds its eye and photon paths by it when positive (default 16; the
+    /// file's depth is the path tracer's and is not used).
     #[arg(long, allow_hyphen_values = true)]
     max_depth: Option<i32>,
-    /// Depth at which Russian roulette starts. Default: the file's, else 5.
-    #[arg(long)]
+    /// Path tracer: depth at which Russian roulette starts. Default: the file's, else 5.
+    #[arg(long, help_heading = "Path tracer")]
     rr_depth: Option<u32>,
     /// Keep the run's state in this file and resume from it when it exists: a killed render
     /// started again with the same arguments continues from its last save (the path tracer's
@@ -104,8 +108,48 @@ fn main() -> ExitCode {
     }
 }
 
+/// Options that only one kind of integrator reads, by their clap ids.
+const PATH_ONLY: [&str; 2] = ["spp", "rr_depth"];
+/// Options that only the SPPM integrators read.
+const SPPM_ONLY: [&str; 5] = ["photons", "passes", "time", "knn", "max_radius"];
+
+/// The command line, refused (usage error, exit code 2) when it sets an option that the chosen
+/// integrator would ignore: `--time` with the path tracer would otherwise render the default
+/// 16 spp without a word.
+fn parse_cli() -> Cli {
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    let (ignored, reader) = match cli.integrator {
+        IntegratorKind::Path => (&SPPM_ONLY[..], "the SPPM integrators (sppm, sppm-ml)"),
+        IntegratorKind::Sppm | IntegratorKind::SppmMl => (&PATH_ONLY[..], "the path tracer"),
+    };
+    if let Some(flag) = given_on_command_line(&matches, ignored) {
+        let integrator = cli
+            .integrator
+            .to_possible_value()
+            .expect("no skipped variants");
+        Cli::command()
+            .error(
+                ErrorKind::ArgumentConflict,
+                format!(
+                    "{flag} is read by {reader} only, not by --integrator {}",
+                    integrator.get_name()
+                ),
+            )
+            .exit();
+    }
+    cli
+}
+
+/// The first of `ids` set on the command line, as its `--long-name`.
+fn given_on_command_line(matches: &ArgMatches, ids: &[&str]) -> Option<String> {
+    ids.iter()
+        .find(|id| matches.value_source(id) == Some(ValueSource::CommandLine))
+        .map(|id| format!("--{}", id.replace('_', "-")))
+}
+
 fn run() -> Result<()> {
-    let cli = Cli::parse();
+    let cli = parse_cli();
     let t0 = Instant::now();
     let desc = renderer::xml::load_scene(&cli.scene, &cli.define, cli.lenient)
         .with_context(|| format!("loading {}", cli.scene.display()))?;
