@@ -163,6 +163,9 @@ fn sibling(path: &Path, suffix: &str) -> PathBuf {
 
 fn run(cli: &Cli) -> Result<()> {
     let device = cli.backend.device().map_err(anyhow::Error::msg)?;
+    if let Some(note) = cli.backend.adapter_note(&device) {
+        eprintln!("{note}");
+    }
     let model = TrainedModel::open(&cli.model, &device)
         .with_context(|| format!("loading model {}", cli.model.display()))?;
     eprintln!(

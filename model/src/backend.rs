@@ -29,6 +29,29 @@ impl Backend {
         }
     }
 
+    /// What a run on `device` of this backend should tell its user, if anything: for wgpu, the
+    /// adapter's name, and a warning when it is a software rasterizer (lavapipe, llvmpipe,
+    /// WARP), which runs the kernels on the CPU far slower than flex. Opens the device.
+    pub fn adapter_note(self, device: &Device) -> Option<String> {
+        match self {
+            Backend::Flex | Backend::Ndarray => None,
+            #[cfg(feature = "wgpu")]
+            Backend::Wgpu => device.identity().map(|identity| {
+                let software = if identity.physical.is_none() {
+                    " (a software rasterizer on the CPU: backend `flex` is far faster)"
+                } else {
+                    ""
+                };
+                format!("wgpu adapter: {}{software}", identity.name)
+            }),
+            #[cfg(not(feature = "wgpu"))]
+            Backend::Wgpu => {
+                let _ = device;
+                None
+            }
+        }
+    }
+
     /// The device of this backend, or why it is not available in this build.
     pub fn device(self) -> Result<Device, String> {
         match self {
@@ -36,9 +59,26 @@ impl Backend {
             #[allow(deprecated)]
             Backend::Ndarray => Ok(Device::ndarray()),
             #[cfg(feature = "wgpu")]
-            Backend::Wgpu => Ok(Device::wgpu(Default::default())),
+            Backend::Wgpu => wgpu_device(),
             #[cfg(not(feature = "wgpu"))]
-            Backend::Wgpu => Err("backend `wgpu` needs a build with `--features wgpu`".into()),
+            Backend::Wgpu => Err("backend `wgpu` needs a build with the `wgpu` feature: \
+                                  cargo build --release -p train -p infer --features model/wgpu"
+                .into()),
         }
     }
+}
+
+/// The wgpu device on the adapter wgpu's heuristics pick (a high-power GPU first), or an error
+/// when the machine has no adapter at all: burn opens the device lazily and would otherwise
+/// panic at the first tensor operation, after the dataset has been read.
+#[cfg(feature = "wgpu")]
+fn wgpu_device() -> Result<Device, String> {
+    if Device::enumerate(burn::tensor::DeviceType::Wgpu).is_empty() {
+        return Err(
+            "backend `wgpu` found no graphics adapter (Vulkan, Metal, DirectX 12 or \
+                    OpenGL) on this machine: install the GPU's driver, or use backend `flex`"
+                .into(),
+        );
+    }
+    Ok(Device::wgpu(Default::default()))
 }

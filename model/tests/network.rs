@@ -239,38 +239,74 @@ fn ndarray_and_flex_agree() {
     let nd = Device::ndarray();
     let a = forward_values(&config.init(9, &flex), &config, 4, &flex);
     let b = forward_values(&config.init(9, &nd), &config, 4, &nd);
-    let max_diff = a
-        .iter()
-        .zip(&b)
-        .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
-        .fold(0.0f32, f32::max);
+    let max_diff = max_relative_difference(&a, &b);
     assert!(max_diff < 1e-4, "flex vs ndarray differ by {max_diff}");
 }
 
+/// The largest difference between `a` and `b`, relative to the magnitude (at least 1).
+fn max_relative_difference(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
+        .fold(0.0f32, f32::max)
+}
+
+/// The network's forward pass and one training epoch (Adam steps, then validation) give the
+/// same numbers on wgpu as on flex. Runs wherever an adapter exists — a GPU, or Mesa's lavapipe
+/// on a CPU-only machine (`apt-get install mesa-vulkan-drivers`); without one, `device()` must
+/// say so as an error (not panic later at the first tensor operation) and the test is skipped.
 #[cfg(feature = "wgpu")]
 #[test]
 fn wgpu_and_flex_agree_when_an_adapter_exists() {
-    let config = ModelConfig::preset(Preset::Tiny);
-    let flex = Device::flex();
-    let a = forward_values(&config.init(9, &flex), &config, 4, &flex);
-    let gpu = match std::panic::catch_unwind(|| {
-        let d = Device::wgpu(Default::default());
-        let _ = Tensor::<1>::zeros([1], &d).into_data();
-        d
-    }) {
+    let gpu = match model::backend::Backend::Wgpu.device() {
         Ok(d) => d,
-        Err(_) => {
-            eprintln!("skipped: no wgpu adapter on this machine");
+        Err(e) => {
+            assert!(e.contains("no graphics adapter"), "{e}");
+            eprintln!("skipped: {e}");
             return;
         }
     };
+    if let Some(note) = model::backend::Backend::Wgpu.adapter_note(&gpu) {
+        eprintln!("{note}");
+    }
+    let config = ModelConfig::preset(Preset::Tiny);
+    let flex = Device::flex();
+    let a = forward_values(&config.init(9, &flex), &config, 4, &flex);
     let b = forward_values(&config.init(9, &gpu), &config, 4, &gpu);
-    let max_diff = a
-        .iter()
-        .zip(&b)
-        .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
-        .fold(0.0f32, f32::max);
-    assert!(max_diff < 1e-4, "flex vs wgpu differ by {max_diff}");
+    let forward = max_relative_difference(&a, &b);
+    assert!(
+        forward < 1e-4,
+        "flex vs wgpu forward pass differs by {forward}"
+    );
+
+    let mut none = |_| {};
+    let mut epoch_on = |device: &Device| {
+        let (mut train, mut val) = tiny_sets();
+        let mut trainer = Trainer::new(config.clone(), tiny_settings(1, 1e-3, 5), device);
+        let report = trainer
+            .run_epoch(&mut train, Some(&mut val), &mut none)
+            .unwrap();
+        let relmse = report.validation.expect("validated").output;
+        (parameters(&trainer.model), report.train_loss, relmse)
+    };
+    let (weights_flex, loss_flex, relmse_flex) = epoch_on(&flex);
+    let (weights_gpu, loss_gpu, relmse_gpu) = epoch_on(&gpu);
+    let weights = max_relative_difference(&weights_flex, &weights_gpu);
+    assert!(
+        weights < 1e-4,
+        "weights after one epoch differ by {weights}"
+    );
+    let loss = ((loss_flex - loss_gpu) / loss_flex).abs();
+    assert!(
+        loss < 1e-4,
+        "train loss {loss_flex} (flex) vs {loss_gpu} (wgpu)"
+    );
+    let relmse = ((relmse_flex - relmse_gpu) / relmse_flex).abs();
+    assert!(
+        relmse < 1e-4,
+        "val relMSE {relmse_flex} (flex) vs {relmse_gpu} (wgpu)"
+    );
 }
 
 #[cfg(not(feature = "wgpu"))]

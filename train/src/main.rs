@@ -205,6 +205,9 @@ fn run(cli: &Cli) -> Result<()> {
         }
     }
     let device = cfg.backend.device().map_err(anyhow::Error::msg)?;
+    if let Some(note) = cfg.backend.adapter_note(&device) {
+        eprintln!("{note}");
+    }
     if let Some(split) = &cli.evaluate {
         return evaluate(&cfg, split, &device);
     }

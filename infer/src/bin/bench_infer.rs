@@ -78,6 +78,9 @@ fn run(cli: &Cli) -> Result<()> {
             )
         })?;
     let device = cli.backend.device().map_err(anyhow::Error::msg)?;
+    if let Some(note) = cli.backend.adapter_note(&device) {
+        eprintln!("{note}");
+    }
     let config = ModelConfig::preset(preset);
     let network = config.init(0, &device);
     let model = TrainedModel {

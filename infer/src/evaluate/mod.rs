@@ -126,6 +126,9 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
     let scenes = config.resolve_scenes()?;
     let backend = model::backend::Backend::parse(&config.backend).map_err(anyhow::Error::msg)?;
     let device = backend.device().map_err(anyhow::Error::msg)?;
+    if let Some(note) = backend.adapter_note(&device) {
+        eprintln!("{note}");
+    }
     let model = TrainedModel::open(&config.model, &device)
         .with_context(|| format!("loading model {}", config.model.display()))?;
     let variants = config
