@@ -108,7 +108,7 @@ fn main() -> ExitCode {
     }
 }
 
-/// Options that only one kind of integrator reads, by their clap ids.
+/// Options that only the path tracer reads, by their clap ids.
 const PATH_ONLY: [&str; 2] = ["spp", "rr_depth"];
 /// Options that only the SPPM integrators read.
 const SPPM_ONLY: [&str; 5] = ["photons", "passes", "time", "knn", "max_radius"];
