@@ -143,6 +143,27 @@ fn render_writes_images_and_bundles_that_bundle_info_reads() {
             assert!(png.exists(), "{} missing", png.display());
         }
     }
+    // An exposure is for the PNGs: a negative one is a value, and without --png it is refused.
+    let bundle = dir.join("ml_p0003.exr");
+    let darker = dir.join("darker");
+    let out = run(
+        env!("CARGO_BIN_EXE_bundle_info"),
+        &[
+            bundle.to_str().unwrap(),
+            "--exposure",
+            "-2",
+            "--png",
+            darker.to_str().unwrap(),
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.join("darker_y.png").exists());
+    let out = run(
+        env!("CARGO_BIN_EXE_bundle_info"),
+        &[bundle.to_str().unwrap(), "--exposure", "1"],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--png"), "{}", stderr(&out));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -16,8 +16,8 @@ struct Args {
     /// Write `<prefix>_<layer>.png` for y, z1..z4, albedo, normal and depth.
     #[arg(long)]
     png: Option<PathBuf>,
-    /// Exposure in stops applied to the estimate PNGs.
-    #[arg(long, default_value_t = 0.0)]
+    /// Exposure in stops applied to the estimate PNGs (needs --png).
+    #[arg(long, default_value_t = 0.0, requires = "png", allow_hyphen_values = true)]
     exposure: f32,
 }
 
