@@ -17,7 +17,12 @@ struct Args {
     #[arg(long)]
     png: Option<PathBuf>,
     /// Exposure in stops applied to the estimate PNGs (needs --png).
-    #[arg(long, default_value_t = 0.0, requires = "png", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        requires = "png",
+        allow_hyphen_values = true
+    )]
     exposure: f32,
 }
 
