@@ -247,6 +247,15 @@ def render_path_chunks(binary, xml, spp, out_dir, prefix, *extra):
     return np.stack(chunks)
 
 
+def scene_dirs(args):
+    """(index, folder, scene.xml path) of each scene to try: `<out>/<seed>/<index>/`, created."""
+    out = Path(args.out) / str(args.seed)
+    for index in range(args.first, args.first + args.count):
+        d = out / f"{index:04d}"
+        d.mkdir(parents=True, exist_ok=True)
+        yield index, d, d / "scene.xml"
+
+
 def finish(out, rows, flagged, count):
     """Writes `summary.json`, prints the verdict and exits (1 when a scene is flagged)."""
     (out / "summary.json").write_text(json.dumps(rows, indent=1) + "\n")
@@ -260,10 +269,7 @@ def main():
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
-    for index in range(args.first, args.first + args.count):
-        d = out / f"{index:04d}"
-        d.mkdir(exist_ok=True)
-        xml = d / "scene.xml"
+    for index, d, xml in scene_dirs(args):
         xml.write_text(scene_xml(args.seed, index))
         max_depth = int(xml.read_text().split('name="max_depth" value="')[1].split('"')[0])
         try:

@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from fuzz_mitsuba import (  # noqa: E402
-    CHUNKS, finish, fuzz_arguments, render_path_chunks, run_render, scene_xml)
+    CHUNKS, finish, fuzz_arguments, render_path_chunks, run_render, scene_dirs, scene_xml)
 from validate_pt import mitsuba  # noqa: E402
 
 LEVELS = ["y", "z1", "z2", "z3", "z4"]
@@ -58,10 +58,7 @@ def main():
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
-    for index in range(args.first, args.first + args.count):
-        d = out / f"{index:04d}"
-        d.mkdir(exist_ok=True)
-        xml = d / "scene.xml"
+    for index, d, xml in scene_dirs(args):
         if args.delta_lights:
             xml.write_text(scene_xml(args.seed, index, lights="all", delta_materials=False))
         else:

@@ -62,12 +62,7 @@ struct Cli {
     /// `--scene`: render for this many seconds instead: the render stops after the first pass
     /// that ends past it (the reconstruction's time comes on top). With --passes too, whichever
     /// comes first.
-    #[arg(
-        long,
-        value_name = "SECONDS",
-        requires = "scene",
-        help_heading = "Rendering (--scene)"
-    )]
+    #[arg(long, value_name = "SECONDS", help_heading = "Rendering (--scene)")]
     time: Option<f64>,
     /// `--scene`: photons traced per pass.
     #[arg(long, default_value_t = 100_000, help_heading = "Rendering (--scene)")]
@@ -84,12 +79,7 @@ struct Cli {
     /// `--scene`: keep the render's state in this file and resume from it when it exists (a
     /// killed run started again continues from its last save, bit-identically; see `render
     /// --state`).
-    #[arg(
-        long,
-        value_name = "FILE",
-        requires = "scene",
-        help_heading = "Rendering (--scene)"
-    )]
+    #[arg(long, value_name = "FILE", help_heading = "Rendering (--scene)")]
     state: Option<PathBuf>,
     /// `--scene`: seconds of rendering between saves of --state.
     #[arg(
