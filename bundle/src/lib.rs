@@ -33,6 +33,10 @@ pub const FORMAT_ATTRIBUTE: &str = "bundleFormat";
 /// Format identifier written to [`FORMAT_ATTRIBUTE`]; bumped on incompatible changes.
 pub const FORMAT_VERSION: &str = "sppm-ml-bundle/1";
 
+/// What [`BundleMeta::integrator`] may say: multi-level SPPM, single-level SPPM (every level
+/// layer holds the one estimate), or a synthetic test bundle (`model::synthetic`).
+pub const INTEGRATORS: [&str; 3] = ["sppm-ml", "sppm", "synthetic"];
+
 /// Channel names of an RGB layer.
 const RGB: [&str; 3] = ["R", "G", "B"];
 /// Channel names of the normal layer.
@@ -360,6 +364,7 @@ struct Decoded {
 impl Decoded {
     /// Reads the first layer of an EXR with all channels and attributes.
     fn read(path: &Path) -> Result<Self, BundleError> {
+        check_header(path)?;
         let file = std::fs::File::open(path).map_err(|source| BundleError::Io {
             path: path.to_owned(),
             error: source,
@@ -445,6 +450,109 @@ impl Decoded {
     }
 }
 
+/// Decoded bytes a file may claim per byte it holds. Above the best ratio of any lossless EXR
+/// compression (deflate, as in ZIP: 1032:1), so no valid file is refused, while a corrupt
+/// header that claims gigabytes for a small file is refused before anything is allocated.
+const MAX_EXPANSION: u64 = 2048;
+
+/// Checks an EXR's headers before its pixels are decoded: each layer's data window must start
+/// at (0, 0) (the readers here index pixels from the window's corner) and its decoded size must
+/// be one the file's length can hold. The EXR library allocates what a header claims, so a
+/// single corrupt number would otherwise end the process on a failed allocation.
+fn check_header(path: &Path) -> Result<(), BundleError> {
+    let io = |error| BundleError::Io {
+        path: path.to_owned(),
+        error,
+    };
+    let file_len = std::fs::metadata(path).map_err(io)?.len();
+    let meta =
+        exr::meta::MetaData::read_from_file(path, true).map_err(|error| BundleError::Exr {
+            path: path.to_owned(),
+            error,
+        })?;
+    for header in meta.headers.iter() {
+        let bad = |reason: String| BundleError::Metadata {
+            path: path.to_owned(),
+            attribute: "dataWindow".into(),
+            reason,
+        };
+        let position = header.own_attributes.layer_position;
+        if position.0 != 0 || position.1 != 0 {
+            return Err(bad(format!(
+                "starts at ({}, {}); expected (0, 0)",
+                position.0, position.1
+            )));
+        }
+        let (width, height) = (header.layer_size.0 as u64, header.layer_size.1 as u64);
+        let channels = header.channels.list.len() as u64;
+        let bytes = width
+            .saturating_mul(height)
+            .saturating_mul(channels)
+            .saturating_mul(4);
+        if bytes
+            > file_len
+                .saturating_mul(MAX_EXPANSION)
+                .saturating_add(1 << 20)
+        {
+            return Err(bad(format!(
+                "{width}x{height} pixels of {channels} channels cannot come from a file of \
+                 {file_len} bytes (corrupt header)"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Checks what a bundle's header says about its origin: the format version this code reads,
+/// and metadata a render can write (a known integrator, at least one pass).
+fn check_meta(path: &Path, decoded: &Decoded, meta: &BundleMeta) -> Result<(), BundleError> {
+    let format = decoded
+        .text_attribute(path, FORMAT_ATTRIBUTE)
+        .map_err(|e| match e {
+            BundleError::Metadata { attribute, .. } => BundleError::Metadata {
+                path: path.to_owned(),
+                attribute,
+                reason: format!(
+                    "missing or unreadable: not a bundle written by this toolkit (expected \
+                     \"{FORMAT_VERSION}\")"
+                ),
+            },
+            other => other,
+        })?;
+    let bad = |attribute: &str, reason: String| BundleError::Metadata {
+        path: path.to_owned(),
+        attribute: attribute.into(),
+        reason,
+    };
+    if format != FORMAT_VERSION {
+        return Err(bad(
+            FORMAT_ATTRIBUTE,
+            format!("\"{format}\", but this build reads \"{FORMAT_VERSION}\""),
+        ));
+    }
+    if !INTEGRATORS.contains(&meta.integrator.as_str()) {
+        return Err(bad(
+            META_ATTRIBUTE,
+            format!(
+                "integrator \"{}\" (expected one of {INTEGRATORS:?})",
+                meta.integrator
+            ),
+        ));
+    }
+    if meta.passes == 0 {
+        return Err(bad(META_ATTRIBUTE, "passes is 0".into()));
+    }
+    Ok(())
+}
+
+/// The first negative sample of `img` as (x, y, channel index): variances, radii and depths
+/// are never negative.
+fn find_negative(img: &Image) -> Option<(usize, usize, usize)> {
+    let i = img.data.iter().position(|v| *v < 0.0)?;
+    let pixel = i / img.channels;
+    Some((pixel % img.width, pixel / img.width, i % img.channels))
+}
+
 /// Reads a bundle written by [`write_bundle`]; errors name the file and the missing or bad
 /// channel or attribute.
 pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
@@ -455,6 +563,7 @@ pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
         attribute: META_ATTRIBUTE.into(),
         reason: e.to_string(),
     })?;
+    check_meta(path, &decoded, &meta)?;
     if meta.width as usize != decoded.width || meta.height as usize != decoded.height {
         return Err(BundleError::Metadata {
             path: path.to_owned(),
@@ -474,7 +583,7 @@ pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
     } else {
         None
     };
-    Ok(Bundle {
+    let bundle = Bundle {
         meta,
         levels,
         variance: decoded.image(path, "variance", &LEVEL_NAMES)?,
@@ -482,7 +591,22 @@ pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
         normal: decoded.image(path, "normal", &XYZ)?,
         depth: decoded.image(path, "depth", &["Z"])?,
         radius,
-    })
+    };
+    let non_negative: [(&str, &[&str], Option<&Image>); 3] = [
+        ("variance", &LEVEL_NAMES, Some(&bundle.variance)),
+        ("radius", &LEVEL_NAMES, bundle.radius.as_ref()),
+        ("depth", &["Z"], Some(&bundle.depth)),
+    ];
+    for (layer, names, img) in non_negative {
+        if let Some((x, y, c)) = img.and_then(find_negative) {
+            return Err(BundleError::BadChannel {
+                path: path.to_owned(),
+                channel: format!("{layer}.{}", names[c]),
+                reason: format!("negative value at pixel ({x}, {y})"),
+            });
+        }
+    }
+    Ok(bundle)
 }
 
 /// The reference of scene `scene_id` in a directory of references: `<dir>/<scene id>.exr`, the
@@ -616,6 +740,113 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// Writes `sample_bundle(16, 16)` to `dir/name`, lets `edit` change its bytes, and returns
+    /// the error of reading it back.
+    fn read_edited(dir: &Path, name: &str, edit: impl FnOnce(&mut Vec<u8>)) -> String {
+        let path = dir.join(name);
+        write_bundle(&path, &sample_bundle(16, 16, true)).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        edit(&mut bytes);
+        std::fs::write(&path, &bytes).unwrap();
+        let err = read_bundle(&path).unwrap_err().to_string();
+        assert!(err.contains(name), "{err}");
+        err
+    }
+
+    /// Replaces the first occurrence of `from` in `bytes` by `to` (same length).
+    fn patch(bytes: &mut [u8], from: &[u8], to: &[u8]) {
+        assert_eq!(from.len(), to.len());
+        let at = bytes
+            .windows(from.len())
+            .position(|w| w == from)
+            .expect("pattern in file");
+        bytes[at..at + to.len()].copy_from_slice(to);
+    }
+
+    /// A corrupt data window (one number of the header) is an error naming the attribute, not
+    /// an abort on a failed multi-gigabyte allocation; so is a window not starting at (0, 0).
+    #[test]
+    fn a_corrupt_data_window_is_an_error_not_an_abort() {
+        let dir = temp_dir("window");
+        // The attribute: name, type, size 16, then xMin, yMin, xMax, yMax as i32.
+        let window = |x0: i32, y0: i32, x1: i32, y1: i32| {
+            let mut v = b"dataWindow\0box2i\0".to_vec();
+            v.extend_from_slice(&16i32.to_le_bytes());
+            for n in [x0, y0, x1, y1] {
+                v.extend_from_slice(&n.to_le_bytes());
+            }
+            v
+        };
+        let original = window(0, 0, 15, 15);
+        for (name, edited) in [
+            ("tall.exr", window(0, 0, 15, 4_194_303)),
+            ("wide.exr", window(0, 0, 1 << 30, 15)),
+            ("offset.exr", window(-10, 0, 5, 15)),
+        ] {
+            let err = read_edited(&dir, name, |b| patch(b, &original, &edited));
+            assert!(
+                err.contains("dataWindow") || err.contains("invalid or truncated EXR"),
+                "{err}"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The header must be this format's: another version, an unknown integrator, zero passes
+    /// and negative variances, radii or depths are errors naming what is wrong.
+    #[test]
+    fn bundle_headers_and_non_negative_layers_are_checked() {
+        let dir = temp_dir("header");
+        let err = read_edited(&dir, "v2.exr", |b| {
+            patch(b, FORMAT_VERSION.as_bytes(), b"sppm-ml-bundle/2")
+        });
+        assert!(
+            err.contains("sppm-ml-bundle/2") && err.contains("this build reads"),
+            "{err}"
+        );
+        let err = read_edited(&dir, "noformat.exr", |b| {
+            patch(b, FORMAT_ATTRIBUTE.as_bytes(), b"bundleFormaX")
+        });
+        assert!(
+            err.contains("not a bundle written by this toolkit"),
+            "{err}"
+        );
+        let err = read_edited(&dir, "banana.exr", |b| {
+            patch(b, b"\"sppm-ml\"", b"\"banana!\"")
+        });
+        assert!(err.contains("integrator \"banana!\""), "{err}");
+        let err = read_edited(&dir, "passes.exr", |b| {
+            patch(b, b"\"passes\":128", b"\"passes\":0  ")
+        });
+        assert!(err.contains("passes is 0"), "{err}");
+        for (layer, channel, pixel) in [
+            ("variance", 3, (2, 1)),
+            ("radius", 0, (0, 0)),
+            ("depth", 0, (5, 3)),
+        ] {
+            let mut b = sample_bundle(16, 16, true);
+            let img = match layer {
+                "variance" => &mut b.variance,
+                "radius" => b.radius.as_mut().unwrap(),
+                _ => &mut b.depth,
+            };
+            let i = (pixel.1 * 16 + pixel.0) * img.channels + channel;
+            img.data[i] = -1.0;
+            let path = dir.join(format!("neg-{layer}.exr"));
+            write_bundle(&path, &b).unwrap();
+            let err = read_bundle(&path).unwrap_err().to_string();
+            assert!(
+                err.contains(&format!("{layer}."))
+                    && err.contains(&format!(
+                        "negative value at pixel ({}, {})",
+                        pixel.0, pixel.1
+                    )),
+                "{err}"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn missing_channel_is_an_error_naming_it() {
         let dir = temp_dir("missing");
@@ -636,6 +867,10 @@ mod tests {
         attributes.insert(
             Text::from(META_ATTRIBUTE),
             AttributeValue::Text(Text::from_slice_unchecked(json.as_bytes())),
+        );
+        attributes.insert(
+            Text::from(FORMAT_ATTRIBUTE),
+            AttributeValue::Text(Text::from(FORMAT_VERSION)),
         );
         write_atomic(&path, build_exr(4, 3, channels, attributes)).unwrap();
         let err = read_bundle(&path).unwrap_err();

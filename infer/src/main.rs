@@ -132,6 +132,7 @@ fn parse_cli() -> Cli {
 }
 
 fn main() -> ExitCode {
+    cli_output::install();
     let cli = parse_cli();
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -229,6 +230,19 @@ fn run(cli: &Cli) -> Result<()> {
         packed.width, packed.height, cli.tile
     );
 
+    // Finite inputs can still overflow float32 in Eq. 6 (values near f32::MAX): say so
+    // instead of writing an image of infinities.
+    if let Some(i) = result.image.iter().position(|v| !v.is_finite()) {
+        let pixel = i % (packed.width * packed.height);
+        bail!(
+            "{}: the reconstruction is not finite at pixel ({}, {}), channel {}: the bundle's \
+             values are too large for float32 arithmetic; nothing written",
+            source.display(),
+            pixel % packed.width,
+            pixel / packed.width,
+            ["R", "G", "B"][i / (packed.width * packed.height)]
+        );
+    }
     write_rgb_exr_image(
         &output,
         &interleaved(&result.image, packed.width, packed.height, 3),

@@ -210,6 +210,37 @@ fn cli_names_a_missing_bundle_and_exits_non_zero() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Finite input values so large that the combination overflows float32 give an error naming
+/// the bundle and a pixel, and no output image (not an image of infinities with exit 0).
+#[test]
+fn cli_refuses_to_write_a_non_finite_reconstruction() {
+    let dir = temp_dir("cli-overflow");
+    write_tiny_model(&dir);
+    let (mut bundle, _) = synthetic_bundle(12, 10, 0.1, 3);
+    for level in &mut bundle.levels {
+        level.data.fill(3.0e38);
+    }
+    let input = dir.join("huge.exr");
+    bundle::write_bundle(&input, &bundle).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_infer"))
+        .arg("--model")
+        .arg(&dir)
+        .arg("--input")
+        .arg(&input)
+        .arg("--output")
+        .arg(dir.join("out.exr"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("huge.exr") && stderr.contains("not finite at pixel"),
+        "{stderr}"
+    );
+    assert!(!dir.join("out.exr").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn cli_refuses_rendering_options_without_a_scene() {
     let dir = temp_dir("cli-input-only");

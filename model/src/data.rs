@@ -222,6 +222,18 @@ impl PatchDataset {
         references: Option<&Path>,
     ) -> Result<Self, String> {
         let manifest = Manifest::read(root)?;
+        // A misspelt split would otherwise read as an empty one (e.g. training without
+        // validation, silently).
+        if !manifest.samples.iter().any(|s| s.split == split) {
+            let mut splits: Vec<&str> = manifest.samples.iter().map(|s| s.split.as_str()).collect();
+            splits.sort_unstable();
+            splits.dedup();
+            return Err(format!(
+                "{}: no sample in split `{split}` (the manifest's splits: {})",
+                root.join("manifest.json").display(),
+                splits.join(", ")
+            ));
+        }
         let mut images = Vec::new();
         let mut bad = Vec::new();
         for entry in manifest.samples.iter().filter(|s| s.split == split) {

@@ -99,6 +99,8 @@ fn main() -> Result<()> {
     let (lo, hi) = (lo / 1.5, hi * 1.5);
     let (pmin, pmax) = (pmin / 1.2, pmax * 1.2);
     let width = 560 * panels.len() as u32;
+    // The text's font is embedded (no system fonts needed).
+    plots::register_font().map_err(anyhow::Error::msg)?;
     let root = BitMapBackend::new(&args.out, (width, 460)).into_drawing_area();
     root.fill(&WHITE)?;
     let areas = root.split_evenly((1, panels.len()));

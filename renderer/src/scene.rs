@@ -375,6 +375,14 @@ impl Scene {
             lo = Vec3::ZERO;
             hi = Vec3::ZERO;
         }
+        // Radii, the bounding sphere and photon emission all derive from the extent: a vertex
+        // near f32::MAX would turn them into infinities, and every SPPM radius with them.
+        if !(hi - lo).length().is_finite() {
+            bail!(
+                "the geometry's bounding box ({lo} to {hi}) is too large for single precision: \
+                 its diagonal overflows (a vertex coordinate near ±3.4e38?)"
+            );
+        }
         let camera = Camera::new(cam);
         // Infinite lights must cover the camera too (a camera outside the geometry sees them).
         let (slo, shi) = (lo.min(camera.position()), hi.max(camera.position()));

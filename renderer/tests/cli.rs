@@ -164,6 +164,20 @@ fn render_writes_images_and_bundles_that_bundle_info_reads() {
     );
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(stderr(&out).contains("--png"), "{}", stderr(&out));
+    // Standard output that cannot be written (a full disk) is an error, not a panic.
+    if let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") {
+        let out = Command::new(env!("CARGO_BIN_EXE_bundle_info"))
+            .arg(&bundle)
+            .stdout(full)
+            .output()
+            .unwrap();
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("failed printing to stdout") && !err.contains("panicked"),
+            "{err}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -226,6 +240,47 @@ fn bad_input_names_the_file_and_line_and_fails() {
     ]
     .map(String::from);
     render_fails_naming(&huge, &["needs", "GB of memory"]);
+    // So does a photon count whose per-pass bookkeeping alone cannot fit (10^13 photons).
+    let photons = [
+        scene.to_str().unwrap(),
+        "--integrator",
+        "sppm-ml",
+        "--passes",
+        "1",
+        "--photons",
+        "10000000000000",
+        "--out",
+        dir.join("photons").to_str().unwrap(),
+    ]
+    .map(String::from);
+    render_fails_naming(
+        &photons,
+        &["10000000000000 photons per pass needs", "GB of memory"],
+    );
+    // A light so strong that the variance of its estimates overflows float32: an error naming
+    // the layer and pixel, and no bundle (not a bundle of infinities that only readers refuse).
+    let blinding = dir.join("blinding.xml");
+    std::fs::write(
+        &blinding,
+        std::fs::read_to_string(&scene)
+            .unwrap()
+            .replace("value=\"4, 4, 4\"", "value=\"4, 1e30, 4\""),
+    )
+    .unwrap();
+    let args = [
+        blinding.to_str().unwrap(),
+        "--integrator",
+        "sppm-ml",
+        "--passes",
+        "2",
+        "--photons",
+        "2000",
+        "--out",
+        dir.join("blinding").to_str().unwrap(),
+    ]
+    .map(String::from);
+    render_fails_naming(&args, &["is not finite at pixel", "no bundle written"]);
+    assert!(!dir.join("blinding_p0002.exr").exists());
     // An infinite time limit would never end a run without checkpoints.
     let endless = [
         scene.to_str().unwrap(),

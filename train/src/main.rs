@@ -2,6 +2,7 @@
 //! dataset written by `datagen` (SPEC §5).
 
 mod config;
+mod curves;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -30,9 +31,14 @@ struct Cli {
     /// `model.json`) on whole images of this split (e.g. `test`) and write `eval_<split>.json`.
     #[arg(long, value_name = "SPLIT", conflicts_with = "resume")]
     evaluate: Option<String>,
+    /// Instead of training, redraw `curves.png` in the output directory from its
+    /// `metrics.json` (e.g. for a run made before the picture existed).
+    #[arg(long, conflicts_with_all = ["resume", "evaluate"])]
+    plot: bool,
 }
 
 fn main() -> ExitCode {
+    cli_output::install();
     let cli = Cli::parse();
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -173,6 +179,38 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
     .map_err(anyhow::Error::msg)
 }
 
+/// The title of `curves.png`: the run's output directory and its network.
+fn curves_title(cfg: &TrainConfig, net: &model::ModelConfig) -> String {
+    let preset = format!("{:?}", net.preset).to_lowercase();
+    format!(
+        "{}: {preset} preset, levels {}, {}x{} patches, batch {}",
+        cfg.output.display(),
+        level_list(&net.levels),
+        cfg.patch,
+        cfg.patch,
+        cfg.batch
+    )
+}
+
+/// `--plot`: redraws `curves.png` from the output directory's `metrics.json` (written after
+/// every epoch, so this also works for a run still in progress).
+fn redraw_curves(cfg: &TrainConfig) -> Result<()> {
+    let metrics = cfg.output.join("metrics.json");
+    let text = std::fs::read_to_string(&metrics)
+        .with_context(|| format!("{} (train first)", metrics.display()))?;
+    let history: Vec<EpochReport> =
+        serde_json::from_str(&text).with_context(|| metrics.display().to_string())?;
+    let path = cfg.output.join("curves.png");
+    curves::write(
+        &path,
+        &curves_title(cfg, &cfg.model_config()),
+        &history,
+        &LEVEL_NAMES,
+    )?;
+    println!("{} ({} epochs)", path.display(), history.len());
+    Ok(())
+}
+
 /// Prints every screened-out sample and writes them to `bad_samples.txt`.
 fn report_bad(split: &str, ds: &PatchDataset, output: &Path) -> Result<()> {
     if ds.bad.is_empty() {
@@ -204,6 +242,9 @@ fn run(cli: &Cli) -> Result<()> {
             );
         }
     }
+    if cli.plot {
+        return redraw_curves(&cfg);
+    }
     let device = cfg.backend.device().map_err(anyhow::Error::msg)?;
     if let Some(note) = cfg.backend.adapter_note(&device) {
         eprintln!("{note}");
@@ -232,15 +273,20 @@ fn run(cli: &Cli) -> Result<()> {
             cfg.train_split
         );
     }
-    let mut val = PatchDataset::open(
-        &cfg.dataset,
-        &cfg.val_split,
-        cfg.patch,
-        cfg.patch,
-        cfg.cache_images,
-        cfg.references.as_deref(),
-    )
-    .map_err(anyhow::Error::msg)?;
+    // `val_split = ""` trains without validation.
+    let mut val = if cfg.val_split.is_empty() {
+        PatchDataset::from_samples(Vec::new(), cfg.patch, cfg.patch)
+    } else {
+        PatchDataset::open(
+            &cfg.dataset,
+            &cfg.val_split,
+            cfg.patch,
+            cfg.patch,
+            cfg.cache_images,
+            cfg.references.as_deref(),
+        )
+        .map_err(anyhow::Error::msg)?
+    };
     report_bad(&cfg.val_split, &val, &cfg.output)?;
     let total_bad = train.bad.len() + val.bad.len();
     eprintln!(
@@ -283,6 +329,8 @@ fn run(cli: &Cli) -> Result<()> {
     );
 
     let csv_path = cfg.output.join("metrics.csv");
+    let curves_path = cfg.output.join("curves.png");
+    let curves_title = curves_title(&cfg, &trainer.config);
     let rewrite_metrics = |history: &[EpochReport]| -> Result<()> {
         let mut csv = String::from(CSV_HEADER);
         csv.push('\n');
@@ -292,7 +340,12 @@ fn run(cli: &Cli) -> Result<()> {
         }
         write_atomic(&csv_path, &csv).map_err(anyhow::Error::msg)?;
         let json = serde_json::to_string_pretty(history)?;
-        write_atomic(&cfg.output.join("metrics.json"), &json).map_err(anyhow::Error::msg)
+        write_atomic(&cfg.output.join("metrics.json"), &json).map_err(anyhow::Error::msg)?;
+        // The picture is a convenience: failing to draw it (a full disk) must not stop training.
+        if let Err(e) = curves::write(&curves_path, &curves_title, history, &LEVEL_NAMES) {
+            eprintln!("warning: {e:#}");
+        }
+        Ok(())
     };
 
     let style =

@@ -22,6 +22,21 @@ fn train(config: &Path, args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// Writes `dir/<name>.toml`: one epoch of the `tiny` preset on `data` with `extra` keys,
+/// output `dir/<name>-out`; returns its path.
+fn tiny_config(dir: &Path, name: &str, data: &Path, extra: &str) -> PathBuf {
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(
+        &path,
+        format!(
+            "dataset = {data:?}\npreset = \"tiny\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = 1\nseed = 3\n{extra}output = {:?}\n",
+            dir.join(format!("{name}-out"))
+        ),
+    )
+    .unwrap();
+    path
+}
+
 /// Writes a dataset: 2 good train samples, 1 good val sample, and three bad train samples
 /// (NaN in a level, missing reference, reference of the wrong size).
 fn write_dataset(root: &Path) {
@@ -89,6 +104,7 @@ fn trains_reports_bad_data_and_resumes() {
         "metrics.csv",
         "train.toml",
         "checkpoint/state.json",
+        "curves.png",
     ] {
         assert!(out.join(f).exists(), "{f} missing");
     }
@@ -103,6 +119,30 @@ fn trains_reports_bad_data_and_resumes() {
     assert!(stderr.contains("resuming after epoch 1"), "{stderr}");
     let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "{csv}");
+
+    // `--plot` redraws the training curves from metrics.json alone.
+    std::fs::remove_file(out.join("curves.png")).unwrap();
+    let plot = train(&config, &["--plot"]);
+    assert!(
+        plot.status.success(),
+        "{}",
+        String::from_utf8_lossy(&plot.stderr)
+    );
+    assert!(
+        String::from_utf8_lossy(&plot.stdout).contains("(2 epochs)"),
+        "{}",
+        String::from_utf8_lossy(&plot.stdout)
+    );
+    let png = std::fs::read(out.join("curves.png")).unwrap();
+    assert!(
+        png.starts_with(b"\x89PNG\r\n\x1a\n"),
+        "curves.png is not a PNG"
+    );
+    let untrained = tiny_config(&dir, "untrained", &data, "");
+    let nothing = train(&untrained, &["--plot"]);
+    let stderr = String::from_utf8_lossy(&nothing.stderr);
+    assert_eq!(nothing.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("metrics.json (train first)"), "{stderr}");
 
     // Fine-tuning: `init` starts a new run (own output, epoch 1) from those weights, here with
     // a decaying learning rate; an architecture mismatch is a clear error.
@@ -151,10 +191,21 @@ fn trains_reports_bad_data_and_resumes() {
     let best = report["best_level_relmse"].as_f64().unwrap();
     assert!(output.is_finite() && output > 0.0, "{report}");
     assert!((report["ratio_to_best_level"].as_f64().unwrap() - output / best).abs() < 1e-12);
-    // An unknown split has no usable samples: a clear error, not a panic.
+    // A split the manifest does not have (a typo): an error naming it and the manifest's
+    // splits, not a panic, and not an empty split (for `val_split`: training unvalidated).
     let none = train(&config, &["--evaluate", "nosuchsplit"]);
-    assert!(!none.status.success());
-    assert!(String::from_utf8_lossy(&none.stderr).contains("no usable samples"));
+    let stderr = String::from_utf8_lossy(&none.stderr);
+    assert_eq!(none.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("no sample in split `nosuchsplit`")
+            && stderr.contains("splits: train, val"),
+        "{stderr}"
+    );
+    let typo = tiny_config(&dir, "typo", &data, "val_split = \"vall\"\n");
+    let typo_run = train(&typo, &[]);
+    let stderr = String::from_utf8_lossy(&typo_run.stderr);
+    assert_eq!(typo_run.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("no sample in split `vall`"), "{stderr}");
 
     // Unknown keys are rejected with the file name.
     std::fs::write(&config, "dataset = \"x\"\npreset = \"tiny\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = 1\nseed = 3\noutput = \"o\"\nlearning_rate = 1\n").unwrap();

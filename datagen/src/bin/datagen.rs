@@ -119,6 +119,7 @@ enum Command {
 }
 
 fn main() {
+    cli_output::install();
     match run(Cli::parse()) {
         Ok(code) => std::process::exit(code),
         Err(e) => {

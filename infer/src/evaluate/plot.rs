@@ -8,6 +8,7 @@ use plotters::prelude::*;
 
 use super::scene::SceneEval;
 use crate::report::LEVEL_NAMES;
+use plots::{LEVEL_COLOURS, OURS, STANDARD};
 
 /// One curve: label, colour, points (x, relMSE), dashed or solid.
 struct Curve {
@@ -16,16 +17,6 @@ struct Curve {
     points: Vec<(f64, f64)>,
     dashed: bool,
 }
-
-const STANDARD: RGBColor = RGBColor(0x1f, 0x77, 0xb4);
-const OURS: RGBColor = RGBColor(0xd6, 0x27, 0x28);
-const LEVEL_COLOURS: [RGBColor; 5] = [
-    RGBColor(0x2c, 0xa0, 0x2c),
-    RGBColor(0xff, 0x7f, 0x0e),
-    RGBColor(0x94, 0x67, 0xbd),
-    RGBColor(0x8c, 0x56, 0x4b),
-    RGBColor(0x7f, 0x7f, 0x7f),
-];
 
 /// Positive finite points only (a log axis cannot show the rest).
 fn loggable(points: impl IntoIterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
@@ -79,14 +70,7 @@ fn curves(eval: &SceneEval, by_time: bool) -> Vec<Curve> {
 
 /// Writes the two-panel plot (relMSE vs seconds | relMSE vs passes) as a PNG, atomically.
 pub fn write_convergence_plot(path: &Path, title: &str, eval: &SceneEval) -> Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    // plotters picks the encoder from the extension: keep `.png` on the temp file.
-    let tmp = path.with_file_name(format!(".tmp{}-{name}", std::process::id()));
-    draw(&tmp, title, eval).map_err(|e| anyhow!("plotting {}: {e}", path.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| anyhow!("writing {}: {e}", path.display()))
+    plots::write_atomically(path, |tmp| draw(tmp, title, eval)).map_err(|e| anyhow!(e))
 }
 
 fn draw(path: &Path, title: &str, eval: &SceneEval) -> Result<(), Box<dyn std::error::Error>> {

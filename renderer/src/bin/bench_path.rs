@@ -36,6 +36,7 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
+    cli_output::install();
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -65,6 +65,7 @@ struct Sample {
 }
 
 fn main() -> ExitCode {
+    cli_output::install();
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

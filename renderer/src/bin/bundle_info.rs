@@ -126,6 +126,7 @@ fn write_pngs(b: &Bundle, prefix: &Path, exposure: f32) -> Result<()> {
 }
 
 fn main() -> Result<()> {
+    cli_output::install();
     let args = Args::parse();
     let b = read_bundle(&args.bundle)?;
     println!("file:        {}", args.bundle.display());

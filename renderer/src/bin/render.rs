@@ -56,7 +56,7 @@ struct Cli {
     /// Longest path (Mitsuba's `max_depth`; −1 = unbounded). Path tracer default: the file's,
     /// else −1. SPPM bounds its eye and photon paths by it when positive (default 16; the
     /// file's depth is the path tracer's and is not used).
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_parser = clap::value_parser!(i32).range(-1..))]
     max_depth: Option<i32>,
     /// Path tracer: depth at which Russian roulette starts. Default: the file's, else 5.
     #[arg(long, help_heading = "Path tracer")]
@@ -99,6 +99,7 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
+    cli_output::install();
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -37,6 +37,30 @@ use std::sync::Arc;
 /// Deepest allowed `<include>` nesting (guards against include cycles).
 const MAX_INCLUDE_DEPTH: usize = 16;
 
+/// Deepest allowed element nesting within one file. Real scenes nest a handful of levels
+/// (scene, shape, a few BSDFs, a texture, a transform); the tree is read and built by
+/// recursion, so a file nested thousands deep would overflow the stack.
+const MAX_ELEMENT_DEPTH: usize = 100;
+
+/// Elements that hold a value in their attributes and take no child elements.
+const LEAF_TAGS: &[&str] = &[
+    "float",
+    "integer",
+    "boolean",
+    "string",
+    "rgb",
+    "spectrum",
+    "point",
+    "vector",
+    "lookat",
+    "translate",
+    "rotate",
+    "scale",
+    "matrix",
+    "ref",
+    "default",
+];
+
 /// One XML element after `$name` substitution and `<include>` expansion.
 #[derive(Debug, Clone)]
 pub(crate) struct Element {
@@ -258,6 +282,7 @@ pub(crate) fn read_file(
         file,
         params,
         depth,
+        nesting: 0,
         diag,
     };
     let mut out = reader.convert(doc.root_element())?;
@@ -281,7 +306,10 @@ struct Reader<'d, 'p> {
     doc: &'d roxmltree::Document<'d>,
     file: Arc<Path>,
     params: &'p mut HashMap<String, String>,
+    /// `<include>` depth of this file.
     depth: usize,
+    /// Ancestors of the element being converted, within this file.
+    nesting: usize,
     diag: &'p mut Diagnostics,
 }
 
@@ -315,6 +343,30 @@ impl Reader<'_, '_> {
             ));
         }
         el.attrs = substituted;
+
+        let child_element = node.children().find(|c| c.is_element());
+        if let Some(child) = child_element.filter(|_| LEAF_TAGS.contains(&el.tag.as_str())) {
+            let p = self.doc.text_pos_at(child.range().start);
+            let err = SceneError::Element {
+                location: Location {
+                    file: self.file.clone(),
+                    line: p.row,
+                    column: p.col,
+                },
+                element: el.describe(),
+                message: format!(
+                    "<{}> takes no child elements, found <{}>",
+                    el.tag,
+                    child.tag_name().name()
+                ),
+            };
+            self.diag.unknown(err)?;
+        }
+        if child_element.is_some() && self.nesting >= MAX_ELEMENT_DEPTH {
+            return Err(el.error(format!(
+                "elements nested deeper than {MAX_ELEMENT_DEPTH} levels"
+            )));
+        }
 
         match el.tag.as_str() {
             "default" => {
@@ -350,8 +402,10 @@ impl Reader<'_, '_> {
             _ => {
                 for child in node.children() {
                     if child.is_element() {
-                        let converted = self.convert(child)?;
-                        el.children.extend(converted);
+                        self.nesting += 1;
+                        let converted = self.convert(child);
+                        self.nesting -= 1;
+                        el.children.extend(converted?);
                     } else if child.is_text() && !child.text().unwrap_or_default().trim().is_empty()
                     {
                         let p = self.doc.text_pos_at(child.range().start);

@@ -263,6 +263,64 @@ fn other_errors_are_located_too() {
         .contains("missing attribute \"version\""));
 }
 
+/// A value element (`<float>`, `<rgb>`, `<lookat>`, `<ref>`, `<default>` …) with a child element
+/// is an error at the child, not a silently ignored child; lenient mode warns instead.
+#[test]
+fn children_of_value_elements_are_errors() {
+    let dir = temp_dir("leaf-children");
+    let cases = [
+        ("float", "<shape type=\"sphere\"><float name=\"radius\" value=\"1\">\n<rgb name=\"x\" value=\"1\"/></float></shape>"),
+        ("lookat", "<shape type=\"sphere\"><transform name=\"to_world\"><lookat origin=\"0,0,1\" target=\"0,0,0\">\n<shape type=\"bogus\"/></lookat></transform></shape>"),
+        ("ref", "<bsdf type=\"diffuse\" id=\"b\"/><shape type=\"sphere\"><ref id=\"b\">\n<float name=\"x\" value=\"1\"/></ref></shape>"),
+        ("default", "<default name=\"r\" value=\"1\">\n<float name=\"x\" value=\"1\"/></default>"),
+    ];
+    for (i, (tag, xml)) in cases.iter().enumerate() {
+        let body = format!("{SENSOR}\n{xml}");
+        let path = write_scene(&dir, &format!("leaf{i}.xml"), &body);
+        // The child sits on the line after the value element.
+        let line = body.lines().count() + 1;
+        assert_error_at(&path, line, &format!("<{tag}> takes no child elements"));
+        let lenient = load_scene(&path, &[], true);
+        if *tag != "lookat" {
+            let scene = lenient.unwrap_or_else(|e| panic!("lenient {tag}: {e}"));
+            assert!(
+                scene
+                    .warnings
+                    .iter()
+                    .any(|w| w.contains("takes no child elements")),
+                "{:?}",
+                scene.warnings
+            );
+        }
+    }
+}
+
+/// Elements nested absurdly deep are an error naming the file and line, not a stack overflow.
+#[test]
+fn absurdly_deep_nesting_is_an_error() {
+    let dir = temp_dir("deep-nesting");
+    let depth = 5000;
+    let body = format!(
+        "{SENSOR}\n{}{}",
+        "<bsdf type=\"twosided\">".repeat(depth),
+        "</bsdf>".repeat(depth)
+    );
+    let err = load(&write_scene(&dir, "deep.xml", &body)).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("deep.xml:") && msg.contains("nested deeper than"),
+        "{msg}"
+    );
+    // Realistic nesting (a blend of two-sided BSDFs with textures) still loads.
+    let body = format!(
+        "{SENSOR}\n<shape type=\"sphere\"><bsdf type=\"blendbsdf\"><float name=\"weight\" value=\"0.5\"/>\
+         <bsdf type=\"twosided\"><bsdf type=\"diffuse\"><texture type=\"checkerboard\" name=\"reflectance\">\
+         <transform name=\"to_uv\"><scale x=\"2\" y=\"2\"/></transform></texture></bsdf></bsdf>\
+         <bsdf type=\"diffuse\"/></bsdf></shape>"
+    );
+    load(&write_scene(&dir, "ok.xml", &body)).unwrap();
+}
+
 #[test]
 fn lenient_turns_unknown_plugins_and_parameters_into_warnings() {
     let dir = temp_dir("lenient");

@@ -112,6 +112,7 @@ fn peak_rss_mib() -> Option<f64> {
 }
 
 fn main() -> ExitCode {
+    cli_output::install();
     match run(&Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

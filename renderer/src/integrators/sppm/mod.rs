@@ -332,6 +332,26 @@ fn sanitize(e: Rgb) -> Rgb {
     }
 }
 
+/// The bundle of the current state, or an error naming the first non-finite sample: every
+/// per-pass estimate is finite (`sanitize`), but a mean or variance of huge values can still
+/// overflow float32, and a bundle of infinities would only be refused by whoever reads it.
+fn finite_bundle(
+    scene: &Scene,
+    settings: &SppmSettings,
+    states: &[PixelState],
+    passes: u32,
+    seconds: f64,
+) -> Result<Bundle> {
+    let bundle = make_bundle(scene, settings, states, passes, seconds);
+    if let Some((layer, channel, x, y)) = bundle.find_non_finite() {
+        bail!(
+            "pass {passes}: {layer}.{channel} is not finite at pixel ({x}, {y}): a value \
+             overflowed float32 (emitted radiance or scene size too large?); no bundle written"
+        );
+    }
+    Ok(bundle)
+}
+
 /// Assembles the bundle of the current state.
 fn make_bundle(
     scene: &Scene,
@@ -507,6 +527,10 @@ pub fn render_sppm_resumable(
     let pixel_bytes = std::mem::size_of::<PixelState>() as u64 + 4 * 31;
     let state_bytes = pixel_count as u64 * pixel_bytes;
     crate::memory::check_fits(&format!("SPPM on a {}x{} image", res.x, res.y), state_bytes)?;
+    crate::memory::check_fits(
+        &format!("{} photons per pass", settings.photons_per_pass),
+        state_bytes.saturating_add(photon_trace::chunk_list_bytes(settings.photons_per_pass)),
+    )?;
     // What memory is left bounds the photons a pass may store.
     let max_stored = crate::memory::available_bytes().map_or(u64::MAX, |a| {
         a.saturating_sub(state_bytes) / photon_trace::BYTES_PER_STORED_PHOTON
@@ -552,7 +576,13 @@ pub fn render_sppm_resumable(
             let at_checkpoint = checkpoints.contains(&pass);
             let timed_out = stop.seconds.is_some_and(|s| earlier_seconds >= s);
             if at_checkpoint || timed_out {
-                on_checkpoint(make_bundle(scene, settings, &states, pass, earlier_seconds))?;
+                on_checkpoint(finite_bundle(
+                    scene,
+                    settings,
+                    &states,
+                    pass,
+                    earlier_seconds,
+                )?)?;
             }
             if timed_out || (target.is_some() && next_checkpoint == checkpoints.len()) {
                 return Ok(summary);
@@ -615,7 +645,7 @@ pub fn render_sppm_resumable(
                 next_checkpoint += 1;
             }
             if at_checkpoint || timed_out {
-                on_checkpoint(make_bundle(scene, settings, &states, pass, elapsed))?;
+                on_checkpoint(finite_bundle(scene, settings, &states, pass, elapsed)?)?;
             }
             let done = timed_out || (target.is_some() && next_checkpoint == checkpoints.len());
             // The bundle first, then the state: a stop in between redoes a few passes and

@@ -90,6 +90,14 @@ pub fn trace_photon(
 /// grid its sorted copy, position arrays and sort keys (with scratch).
 pub const BYTES_PER_STORED_PHOTON: u64 = 2 * std::mem::size_of::<Photon>() as u64 + 12 + 32;
 
+/// Memory of the per-chunk deposit lists a pass of `count` photons keeps (one list header per
+/// [`CHUNK`] photons, before any deposit): what an absurd photon count asks for up front.
+pub fn chunk_list_bytes(count: u64) -> u64 {
+    count
+        .div_ceil(CHUNK)
+        .saturating_mul(std::mem::size_of::<Vec<Photon>>() as u64)
+}
+
 /// Traces `count` photons of pass `pass` in parallel (current rayon pool) into `chunks`:
 /// chunk `c` receives the deposits of photons `c·CHUNK..(c+1)·CHUNK` in photon order, so the
 /// concatenation of the chunks is the deposit list in photon-index order whatever the thread

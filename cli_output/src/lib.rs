@@ -1,0 +1,52 @@
+//! What every binary of the toolkit does when its standard output or standard error cannot be
+//! written (a reader that closed the pipe, `> /dev/full`): Rust's `println!` and `eprintln!`
+//! panic then (exit code 101 and a backtrace hint). [`install`] turns exactly those panics into
+//! a one-line message and exit code 1, the same as any other error of the tools; every other
+//! panic keeps Rust's default report.
+
+use std::io::Write;
+
+/// The start of the panic message of a failed `print!`/`println!`/`eprint!`/`eprintln!`.
+const PRINT_FAILURE: &str = "failed printing to std";
+
+/// Whether a panic message is that of a failed print to standard output or error.
+pub fn is_print_failure(message: &str) -> bool {
+    message.starts_with(PRINT_FAILURE)
+}
+
+/// Installs the panic hook described in the crate docs. Call first thing in `main`.
+pub fn install() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if is_print_failure(message) {
+            // Standard error may be the stream that failed: the message is best effort.
+            let _ = writeln!(std::io::stderr(), "error: {message}");
+            std::process::exit(1);
+        }
+        default(info);
+    }));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The messages std gives a failed print are recognised; other panics are not.
+    #[test]
+    fn recognises_print_failures_only() {
+        assert!(is_print_failure(
+            "failed printing to stdout: Broken pipe (os error 32)"
+        ));
+        assert!(is_print_failure(
+            "failed printing to stderr: No space left on device (os error 28)"
+        ));
+        assert!(!is_print_failure("index out of bounds"));
+        assert!(!is_print_failure(""));
+    }
+}
