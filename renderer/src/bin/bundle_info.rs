@@ -125,9 +125,19 @@ fn write_pngs(b: &Bundle, prefix: &Path, exposure: f32) -> Result<()> {
     Ok(())
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
     cli_output::install();
-    let args = Args::parse();
+    match run(&Args::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// Prints the bundle's metadata and statistics, and writes the PNGs if asked.
+fn run(args: &Args) -> Result<()> {
     let b = read_bundle(&args.bundle)?;
     println!("file:        {}", args.bundle.display());
     println!("{}", serde_json::to_string_pretty(&b.meta)?);
