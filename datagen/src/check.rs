@@ -50,7 +50,13 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
     let mut done = 0;
     let mut seen_scenes = std::collections::HashSet::new();
     for s in &manifest.scenes {
-        seen_scenes.insert(s.id.clone());
+        // A repeated entry would be trained on, or split, twice.
+        if !seen_scenes.insert(s.id.clone()) {
+            report.problems.push(format!(
+                "{MANIFEST_FILE}: scene `{}` is listed more than once",
+                s.id
+            ));
+        }
         report.files += 2;
         if !root.join(&s.xml).is_file() {
             report
@@ -116,8 +122,15 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
         done += 1;
         on_file(done, total);
     }
+    let mut seen_bundles = std::collections::HashSet::new();
     for e in &manifest.samples {
         report.files += 1;
+        if !seen_bundles.insert(e.bundle.clone()) {
+            report.problems.push(format!(
+                "{MANIFEST_FILE}: sample {} is listed more than once",
+                e.bundle
+            ));
+        }
         if !seen_scenes.contains(&e.scene) {
             report.problems.push(format!(
                 "{}: scene `{}` is not in the manifest",

@@ -175,6 +175,38 @@ fn damaged_outputs_are_named_by_check_and_redone_by_render() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A scene or sample listed twice in the manifest (it would be trained on twice) is named by
+/// `check`.
+#[test]
+fn check_names_repeated_manifest_entries() {
+    let config = test_config(16, &[2], 1, 4);
+    let dir = fresh_dir("fake-repeated");
+    render_dataset(&config, &dir, options(Shard::ALL), &StandIn::default()).unwrap();
+    assert!(check_dataset(&dir, |_, _| {}).ok());
+    let path = dir.join("manifest.json");
+    let mut manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    for list in ["scenes", "samples"] {
+        let first = manifest[list][0].clone();
+        manifest[list].as_array_mut().unwrap().push(first);
+    }
+    std::fs::write(&path, serde_json::to_string_pretty(&manifest).unwrap()).unwrap();
+    let report = check_dataset(&dir, |_, _| {});
+    let text = report.problems.join("\n");
+    let scene = manifest["scenes"][0]["id"].as_str().unwrap();
+    let bundle = manifest["samples"][0]["bundle"].as_str().unwrap();
+    assert!(
+        text.contains(&format!("scene `{scene}` is listed more than once")),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!("sample {bundle} is listed more than once")),
+        "{text}"
+    );
+    assert_eq!(report.problems.len(), 2, "{text}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn manifest_waits_for_all_shards() {
     let config = test_config(16, &[2], 1, 4);

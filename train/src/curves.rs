@@ -104,6 +104,7 @@ fn y_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64, bool)> {
     }
 }
 
+/// Draws the title and the two panels into the PNG at `path`.
 fn draw(path: &Path, title: &str, panels: &[Panel; 2]) -> Result<(), Box<dyn std::error::Error>> {
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE)?;
