@@ -97,10 +97,11 @@ fn y_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64, bool)> {
         return None;
     }
     if hi / lo > 20.0 {
-        Some((lo / 1.25, hi * 1.25, true))
+        Some((lo / 1.25, hi * 4.0, true))
     } else {
-        let pad = 0.08 * (hi - lo).max(0.05 * hi);
-        Some(((lo - pad).max(0.0), hi + pad, false))
+        // Headroom above the highest line for the legend (upper right).
+        let span = (hi - lo).max(0.01 * hi);
+        Some(((lo - 0.08 * span).max(0.0), hi + 0.45 * span, false))
     }
 }
 
