@@ -1,8 +1,10 @@
 //! What every binary of the toolkit does when its standard output or standard error cannot be
 //! written (a reader that closed the pipe, `> /dev/full`): Rust's `println!` and `eprintln!`
 //! panic then (exit code 101 and a backtrace hint). [`install`] turns exactly those panics into
-//! a one-line message and exit code 1, the same as any other error of the tools; every other
-//! panic keeps Rust's default report.
+//! an ordinary end: a closed pipe (`datagen check | head -1`) ends the process silently with
+//! status 141, as the default SIGPIPE action does for other Unix tools; any other write error
+//! (a full disk) prints one line and exits with 1, like every other error of the tools. Every
+//! other panic keeps Rust's default report.
 
 use std::io::Write;
 
@@ -12,6 +14,15 @@ const PRINT_FAILURE: &str = "failed printing to std";
 /// Whether a panic message is that of a failed print to standard output or error.
 pub fn is_print_failure(message: &str) -> bool {
     message.starts_with(PRINT_FAILURE)
+}
+
+/// Exit status after a closed pipe: 128 + SIGPIPE, what a shell reports for a tool the signal
+/// ended.
+pub const BROKEN_PIPE_STATUS: i32 = 141;
+
+/// Whether a failed print's message is that of a closed pipe (EPIPE).
+pub fn is_broken_pipe(message: &str) -> bool {
+    message.contains("Broken pipe") || message.contains("os error 32")
 }
 
 /// Installs the panic hook described in the crate docs. Call first thing in `main`.
@@ -25,6 +36,10 @@ pub fn install() {
             .or_else(|| payload.downcast_ref::<&str>().copied())
             .unwrap_or("");
         if is_print_failure(message) {
+            if is_broken_pipe(message) {
+                // The reader has what it wanted (`| head`): nothing to report.
+                std::process::exit(BROKEN_PIPE_STATUS);
+            }
             // Standard error may be the stream that failed: the message is best effort.
             let _ = writeln!(std::io::stderr(), "error: {message}");
             std::process::exit(1);
@@ -48,5 +63,11 @@ mod tests {
         ));
         assert!(!is_print_failure("index out of bounds"));
         assert!(!is_print_failure(""));
+        assert!(is_broken_pipe(
+            "failed printing to stdout: Broken pipe (os error 32)"
+        ));
+        assert!(!is_broken_pipe(
+            "failed printing to stdout: No space left on device (os error 28)"
+        ));
     }
 }
