@@ -18,6 +18,7 @@ mod emitters;
 pub mod error;
 pub mod ior;
 mod mesh_attributes;
+mod obj;
 mod props;
 mod sensors;
 mod shapes;

@@ -137,7 +137,7 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
             };
             let path = file_el.resolve_path(filename);
             let raw = match kind {
-                "obj" => load_obj(&path),
+                "obj" => super::obj::load_obj(&path),
                 "ply" => load_ply(&path),
                 _ => load_serialized(&path, shape_index),
             };
@@ -368,10 +368,10 @@ fn cube(to_world: Mat4, flip_normals: bool) -> TriangleMesh {
 
 /// A mesh as read from a file (object space), before normals are settled.
 #[derive(Debug, Default)]
-struct RawMesh {
-    positions: Vec<Vec3>,
-    normals: Option<Vec<Vec3>>,
-    uvs: Option<Vec<Vec2>>,
+pub(super) struct RawMesh {
+    pub(super) positions: Vec<Vec3>,
+    pub(super) normals: Option<Vec<Vec3>>,
+    pub(super) uvs: Option<Vec<Vec2>>,
     /// The corners of every polygon (any corner count ≥ 3), one polygon after the other, as
     /// indices into the vertex arrays (one buffer, not one allocation per polygon).
     corners: Vec<u32>,
@@ -389,7 +389,7 @@ impl RawMesh {
     }
 
     /// Appends a polygon (at least three corners).
-    fn push_polygon(&mut self, corners: impl IntoIterator<Item = u32>) {
+    pub(super) fn push_polygon(&mut self, corners: impl IntoIterator<Item = u32>) {
         self.corners.extend(corners);
         self.polygon_ends.push(self.corners.len());
     }
@@ -534,84 +534,6 @@ fn flip(mesh: &mut TriangleMesh) {
             *v = -*v;
         }
     }
-}
-
-/// Reads a Wavefront OBJ (all objects/groups merged into one mesh, as Mitsuba).
-fn load_obj(path: &Path) -> Result<RawMesh, String> {
-    if !path.is_file() {
-        return Err("file not found".into());
-    }
-    let options = tobj::LoadOptions {
-        single_index: true,
-        triangulate: false,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    // Materials are irrelevant (the XML assigns the BSDF): never fail on a missing .mtl.
-    let (models, _materials) = tobj::load_obj_buf(
-        &mut std::io::BufReader::new(std::fs::File::open(path).map_err(|e| e.to_string())?),
-        &options,
-        |_| Ok(Default::default()),
-    )
-    .map_err(|e| format!("invalid OBJ: {e}"))?;
-    let mut raw = RawMesh::default();
-    let all_normals = models.iter().all(|m| !m.mesh.normals.is_empty());
-    let any_uvs = models.iter().any(|m| !m.mesh.texcoords.is_empty());
-    let mut normals = Vec::new();
-    let mut uvs = Vec::new();
-    for model in &models {
-        let m = &model.mesh;
-        let base = raw.positions.len() as u32;
-        let count = m.positions.len() / 3;
-        raw.positions.extend(
-            m.positions
-                .chunks_exact(3)
-                .map(|c| Vec3::new(c[0], c[1], c[2])),
-        );
-        if all_normals {
-            if m.normals.len() != m.positions.len() {
-                return Err("normal count differs from vertex count".into());
-            }
-            normals.extend(
-                m.normals
-                    .chunks_exact(3)
-                    .map(|c| Vec3::new(c[0], c[1], c[2])),
-            );
-        }
-        if any_uvs {
-            if m.texcoords.is_empty() {
-                uvs.extend(std::iter::repeat_n(Vec2::ZERO, count));
-            } else if m.texcoords.len() / 2 == count {
-                uvs.extend(m.texcoords.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])));
-            } else {
-                return Err("texture coordinate count differs from vertex count".into());
-            }
-        }
-        // Polygons: face_arities lists corner counts (empty = all triangles).
-        let mut offset = 0usize;
-        let arities: Vec<u32> = if m.face_arities.is_empty() {
-            vec![3; m.indices.len() / 3]
-        } else {
-            m.face_arities.clone()
-        };
-        for a in arities {
-            let end = offset + a as usize;
-            let Some(corners) = m.indices.get(offset..end) else {
-                return Err("inconsistent face data".into());
-            };
-            if a >= 3 {
-                raw.push_polygon(corners.iter().map(|i| base + i));
-            }
-            offset = end;
-        }
-    }
-    if all_normals && !models.is_empty() {
-        raw.normals = Some(normals);
-    }
-    if any_uvs {
-        raw.uvs = Some(uvs);
-    }
-    Ok(raw)
 }
 
 /// Reads mesh `index` of a Mitsuba `.serialized` file: little-endian; per mesh a header

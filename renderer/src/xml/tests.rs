@@ -599,8 +599,8 @@ fn obj_with_normals_keeps_them_and_transforms_by_inverse_transpose() {
         r#"<boolean name="face_normals" value="true"/>"#,
     );
     assert!(m.normals.is_none());
-    // Malformed OBJ: an error naming the mesh file and the XML line.
-    std::fs::write(dir.join("bad.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
+    // Malformed OBJ: an error naming the mesh file, its line and the XML line.
+    std::fs::write(dir.join("bad.obj"), "v 0 0 0\n# only one vertex\nf 1 2 3\n").unwrap();
     let body = format!(
         "{SENSOR}\n<shape type=\"obj\"><string name=\"filename\" value=\"bad.obj\"/></shape>"
     );
@@ -608,7 +608,9 @@ fn obj_with_normals_keeps_them_and_transforms_by_inverse_transpose() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("bad.xml:4:") && err.contains("bad.obj"),
+        err.contains("bad.xml:4:")
+            && err.contains("bad.obj")
+            && err.contains("line 3: face vertex index out of bounds: `f 1 2 3`"),
         "{err}"
     );
 }
