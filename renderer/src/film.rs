@@ -51,8 +51,17 @@ impl Film {
     }
 }
 
+/// The most worker threads a render may ask for: far above any machine's cores, and low enough
+/// that a mistyped count (`--threads 20000`) is refused at once instead of spending seconds
+/// starting thousands of threads (outputs do not depend on the count).
+pub const MAX_THREADS: usize = 1024;
+
 /// Runs `f(pool)` inside a rayon pool with `threads` workers (0 = rayon's default: all cores).
 pub fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> anyhow::Result<R> {
+    anyhow::ensure!(
+        threads <= MAX_THREADS,
+        "{threads} worker threads requested: at most {MAX_THREADS} are supported"
+    );
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()?;
@@ -208,4 +217,21 @@ where
     result?;
     save(&film, &done)?;
     Ok(film)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn absurd_thread_counts_are_refused() {
+        assert_eq!(with_threads(2, || 7).unwrap(), 7);
+        let err = with_threads(MAX_THREADS + 1, || ())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("1025 worker threads") && err.contains("1024"),
+            "{err}"
+        );
+    }
 }
