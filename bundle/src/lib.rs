@@ -557,6 +557,18 @@ fn find_negative(img: &Image) -> Option<(usize, usize, usize)> {
 /// channel or attribute.
 pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
     let decoded = Decoded::read(path)?;
+    // No metadata at all: most likely an ordinary image (a reference, a render) given where a
+    // bundle belongs; say so rather than only that an attribute is missing.
+    if !decoded.attributes.contains_key(&Text::from(META_ATTRIBUTE)) {
+        return Err(BundleError::Metadata {
+            path: path.to_owned(),
+            attribute: META_ATTRIBUTE.into(),
+            reason: "missing: this EXR is not a sample bundle (bundles are written by `render \
+                     --integrator sppm-ml` or `sppm`, `infer --scene` and `datagen render`; \
+                     docs/formats.md)"
+                .into(),
+        });
+    }
     let json = decoded.text_attribute(path, META_ATTRIBUTE)?;
     let meta: BundleMeta = serde_json::from_str(&json).map_err(|e| BundleError::Metadata {
         path: path.to_owned(),
@@ -886,7 +898,11 @@ mod tests {
         let path = dir.join("ref.exr");
         write_rgb_exr_image(&path, &Image::new(2, 2, 3)).unwrap();
         let err = read_bundle(&path).unwrap_err();
-        assert!(err.to_string().contains(META_ATTRIBUTE), "{err}");
+        let msg = err.to_string();
+        assert!(
+            msg.contains(META_ATTRIBUTE) && msg.contains("not a sample bundle"),
+            "{msg}"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -8,8 +8,8 @@ use crate::exr_canon::sort_header_attributes;
 use crate::families::generate;
 use crate::fsutil::{remove_if_present, remove_stale_temps, sha256_file, temp_path, write_atomic};
 use crate::manifest::{
-    assemble_manifest, config_fingerprint, outputs_intact, read_record, to_json, JobRecord,
-    SampleEntry, SceneEntry, MANIFEST_FORMAT,
+    assemble_manifest, config_fingerprint, jobs_of_other_config, outputs_intact, read_record,
+    to_json, JobRecord, SampleEntry, SceneEntry, MANIFEST_FORMAT,
 };
 use crate::plan::{Job, Plan, Shard};
 use crate::scene::write_scene_files;
@@ -98,6 +98,8 @@ pub struct RenderReport {
     pub samples: usize,
     /// Whether `manifest.json` is complete (all shards done).
     pub manifest_complete: bool,
+    /// Jobs of this shard that had been rendered under another config (replaced now).
+    pub replaced: usize,
 }
 
 /// Relative amount of work of a job, for the overall progress bar's ETA.
@@ -154,6 +156,22 @@ pub fn render_dataset(
         samples: total_files,
         ..Default::default()
     };
+    report.replaced = jobs_of_other_config(root, &plan, &mine, &fingerprint);
+    if report.replaced > 0 {
+        // Said before the work starts: the user may have meant another directory.
+        let note = format!(
+            "note: {} of this shard's {} jobs in {} were rendered with another config; they are \
+             rendered again and their files replaced (keep one directory per config)",
+            report.replaced,
+            mine.len(),
+            root.display()
+        );
+        if options.progress {
+            let _ = multi.println(note);
+        } else {
+            eprintln!("{note}");
+        }
+    }
     let mut files_done = 0;
     let mut work_done = 0u64;
     overall.set_message(format!("{files_done}/{total_files} samples"));

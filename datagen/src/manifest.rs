@@ -160,6 +160,20 @@ pub fn read_record(root: &Path, plan: &Plan, job: &Job, fingerprint: &str) -> Op
     (record.format == MANIFEST_FORMAT && record.config_sha256 == fingerprint).then_some(record)
 }
 
+/// Jobs of `plan` whose record in `root` was written under a config other than `fingerprint`
+/// (rendering them again replaces their files): a sign that the directory holds another
+/// config's dataset.
+pub fn jobs_of_other_config(root: &Path, plan: &Plan, jobs: &[usize], fingerprint: &str) -> usize {
+    jobs.iter()
+        .filter(|&&j| {
+            std::fs::read_to_string(root.join(plan.record_path(&plan.jobs[j])))
+                .ok()
+                .and_then(|text| serde_json::from_str::<JobRecord>(&text).ok())
+                .is_some_and(|r| r.config_sha256 != fingerprint)
+        })
+        .count()
+}
+
 /// True when every output of the record exists with the recorded checksum.
 pub fn outputs_intact(root: &Path, record: &JobRecord) -> bool {
     record

@@ -20,6 +20,11 @@ fn load(xml: &Path, spec: &RunSpec) -> Result<Scene> {
     let desc = renderer::xml::load_scene(xml, &spec.defines, false)
         .map_err(|e| anyhow!("{e}"))
         .with_context(|| format!("loading {}", xml.display()))?;
+    // Strict as the import: a define the scene never reads (a misspelt name) is an error here,
+    // where it would otherwise shape a whole dataset unnoticed.
+    if let Some(unused) = desc.warnings.iter().find(|w| w.starts_with("-D ")) {
+        bail!("{}: {unused}", xml.display());
+    }
     let scene =
         Scene::from_description(desc).with_context(|| format!("building {}", xml.display()))?;
     // Bundles of one dataset share the box filter (the generated scenes name it): another

@@ -221,6 +221,14 @@ fn average_references_with_the_real_renderer() {
     ok(average(&["--runs", "3", "--out", "avg2", "--threads", "2"]));
     assert_same(&runs_before, &snapshot(&data.join("reference-runs")));
     assert_same(&snapshot(&data.join("avg")), &snapshot(&data.join("avg2")));
+    // Without --out the directory is named after the run count (never the `references-avg8`
+    // that configs name, unless 8 runs were averaged).
+    ok(average(&["--runs", "3", "--threads", "2"]));
+    assert_same(
+        &snapshot(&data.join("avg")),
+        &snapshot(&data.join("references-avg3")),
+    );
+    assert!(!data.join("references-avg8").exists());
     // Bad requests: a clear message and a non-zero exit, the dataset's references untouched.
     let references = snapshot(&data.join("references"));
     for (extra, needle) in [
@@ -236,6 +244,60 @@ fn average_references_with_the_real_renderer() {
         );
     }
     assert_same(&references, &snapshot(&data.join("references")));
+    // The contact sheet of the same dataset: a PNG, and refused settings name the option.
+    let sheet = dir.join("sheet.png");
+    ok(datagen(&[
+        "contact-sheet",
+        data.to_str().unwrap(),
+        "--out",
+        sheet.to_str().unwrap(),
+    ])
+    .output()
+    .unwrap());
+    assert!(image::open(&sheet).unwrap().width() > 16);
+    // The same directory under a changed config: every job is redone, with a note saying so
+    // before the work starts; afterwards the old config no longer matches the records, and
+    // `manifest` says that rather than that jobs are unfinished.
+    let old_config = dir.join("old.toml");
+    std::fs::copy(&config, &old_config).unwrap();
+    let mut changed: datagen::config::Config =
+        toml::from_str(&std::fs::read_to_string(&config).unwrap()).unwrap();
+    changed.render.photons_per_pass += 100;
+    std::fs::write(&config, toml::to_string(&changed).unwrap()).unwrap();
+    let out = ok(render(&config, &data, &[]).output().unwrap());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("were rendered with another config"),
+        "{stderr}"
+    );
+    let out = datagen(&[
+        "manifest",
+        "--config",
+        old_config.to_str().unwrap(),
+        "--out",
+        data.to_str().unwrap(),
+    ])
+    .output()
+    .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("rendered with another config"),
+        "{stderr}"
+    );
+    for (extra, needle) in [
+        (&["--out", "sheet.exr"][..], "*.png"),
+        (&["--out", "x.png", "--tile", "0"][..], "--tile"),
+        (&["--out", "x.png", "--columns", "0"][..], "--columns"),
+    ] {
+        let mut args = vec!["contact-sheet", data.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let out = datagen(&args).current_dir(&dir).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(needle),
+            "{extra:?}: {stderr}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

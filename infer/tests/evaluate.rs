@@ -172,7 +172,7 @@ fn evaluates_explicit_and_dataset_scenes() {
     std::fs::write(
         &config,
         format!(
-            "model = {}\noutput = {}\nphotons_per_pass = 2000\npasses = [2, 4]\nseed = 5\n\
+            "model = {}\noutput = {}\nphotons_per_pass = 2000\npasses = [4, 2, 4]\nseed = 5\n\
              tile = 8\nthreads = 1\n\n[[scenes]]\nname = \"explicit-box\"\nxml = {}\n\
              reference = {}\ndefines = {{ res = \"16\" }}\n\n[dataset]\ndir = {}\n\
              split = \"test\"\n",
@@ -193,6 +193,8 @@ fn evaluates_explicit_and_dataset_scenes() {
     let scenes = results["scenes"].as_array().unwrap();
     let names: Vec<&str> = scenes.iter().map(|s| s["name"].as_str().unwrap()).collect();
     assert_eq!(names, ["explicit-box", "001-box"]);
+    // The checkpoints as run: sorted, each once (the config lists 4, 2, 4).
+    assert_eq!(results["config"]["passes"], serde_json::json!([2, 4]));
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     for s in scenes {
         let name = s["name"].as_str().unwrap();
@@ -342,6 +344,30 @@ fn bad_configs_fail_naming_the_problem() {
     assert!(!run.status.success());
     assert!(stderr.contains("nope.exr"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+    // A split the dataset lacks: the error lists the splits it has.
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    std::fs::write(
+        data.join("manifest.json"),
+        r#"{"scenes": [{"id": "a", "split": "test", "xml": "a.xml", "reference": "a.exr"},
+                       {"id": "b", "split": "val", "xml": "b.xml", "reference": "b.exr"}]}"#,
+    )
+    .unwrap();
+    std::fs::write(
+        &config,
+        format!(
+            "{base}[dataset]\ndir = {}\nsplit = \"tset\"\n",
+            toml_path(&data)
+        ),
+    )
+    .unwrap();
+    let run = evaluate(&config);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("\"tset\"") && stderr.contains("splits: test, val"),
+        "{stderr}"
+    );
     assert!(!dir.join("out").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

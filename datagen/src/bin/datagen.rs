@@ -88,9 +88,10 @@ enum Command {
         /// DIR/reference-runs and reused).
         #[arg(long, default_value_t = 8)]
         runs: usize,
-        /// Output directory inside the dataset.
-        #[arg(long, default_value = "references-avg8")]
-        out: PathBuf,
+        /// Output directory inside the dataset [default: references-avg<RUNS>, e.g.
+        /// references-avg8].
+        #[arg(long)]
+        out: Option<PathBuf>,
         /// Worker threads per render (0 = all cores; output does not depend on it).
         #[arg(long, default_value_t = 0)]
         threads: usize,
@@ -109,12 +110,12 @@ enum Command {
         /// Output PNG.
         #[arg(long)]
         out: PathBuf,
-        /// Tiles per row.
-        #[arg(long, default_value_t = 8)]
-        columns: usize,
-        /// Tile width in pixels.
-        #[arg(long, default_value_t = 160)]
-        tile: usize,
+        /// Tiles per row (at least 1).
+        #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(1..))]
+        columns: u16,
+        /// Tile width in pixels (at least 8).
+        #[arg(long, default_value_t = 160, value_parser = clap::value_parser!(u16).range(8..))]
+        tile: u16,
     },
 }
 
@@ -208,10 +209,28 @@ fn run(cli: Cli) -> Result<i32> {
                     );
                     Ok(0)
                 }
-                None => bail!(
-                    "{}: not every job has finished (rerun `datagen render` for the missing shards)",
-                    out.display()
-                ),
+                None => {
+                    let all: Vec<usize> = (0..plan.jobs.len()).collect();
+                    let other = datagen::manifest::jobs_of_other_config(
+                        &out,
+                        &plan,
+                        &all,
+                        &datagen::manifest::config_fingerprint(&config),
+                    );
+                    if other > 0 {
+                        bail!(
+                            "{}: {other} of {} jobs were rendered with another config than this \
+                             one (is it the config the dataset was made with?)",
+                            out.display(),
+                            all.len()
+                        )
+                    }
+                    bail!(
+                        "{}: not every job has finished (rerun `datagen render` for the missing \
+                         shards)",
+                        out.display()
+                    )
+                }
             }
         }
         Command::Check { dir, quiet } => {
@@ -256,6 +275,9 @@ fn run(cli: Cli) -> Result<i32> {
             state_interval,
             quiet,
         } => {
+            // Named after the run count, so an average of fewer runs never takes the place of
+            // the one configs name (`references-avg8`).
+            let out = out.unwrap_or_else(|| PathBuf::from(format!("references-avg{runs}")));
             // One bar over every extra run's passes (reused runs count as done); every scene of
             // a dataset has the same reference passes.
             let manifest = Manifest::load(&dir)?;
@@ -317,6 +339,15 @@ fn run(cli: Cli) -> Result<i32> {
             columns,
             tile,
         } => {
+            let is_png = out
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+            if !is_png {
+                anyhow::bail!(
+                    "--out {}: the contact sheet is a PNG (name it *.png)",
+                    out.display()
+                );
+            }
             let manifest = Manifest::load(&dir)?;
             let files: Vec<PathBuf> = manifest
                 .scenes
@@ -324,8 +355,8 @@ fn run(cli: Cli) -> Result<i32> {
                 .map(|s| dir.join(&s.reference))
                 .collect();
             let layout = SheetLayout {
-                columns,
-                tile_width: tile,
+                columns: usize::from(columns),
+                tile_width: usize::from(tile),
                 gap: 2,
             };
             let n = write_contact_sheet(&files, layout, &out)?;

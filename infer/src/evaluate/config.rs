@@ -142,8 +142,10 @@ impl EvalConfig {
     pub fn load(path: &Path) -> Result<Self> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let config: EvalConfig =
+        let mut config: EvalConfig =
             toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        // Checkpoints are rendered in increasing order once each: record them so.
+        config.passes = config.pass_counts();
         config
             .validate()
             .with_context(|| format!("config {}", path.display()))?;
@@ -162,7 +164,10 @@ impl EvalConfig {
             bail!("no scenes: give [[scenes]] entries and/or a [dataset]");
         }
         if self.limit == Some(0) {
-            bail!("limit must be positive");
+            bail!("limit (--limit) must be at least 1");
+        }
+        if self.dataset.as_ref().is_some_and(|d| d.limit == Some(0)) {
+            bail!("[dataset] limit must be at least 1");
         }
         if self.max_depth == Some(0) {
             bail!("max_depth must be positive");
@@ -202,6 +207,7 @@ impl EvalConfig {
                 .with_context(|| format!("reading {}", path.display()))?;
             let manifest: Manifest = serde_json::from_str(&text)
                 .with_context(|| format!("parsing {}", path.display()))?;
+            let all_splits: Vec<String> = manifest.scenes.iter().map(|s| s.split.clone()).collect();
             let mut chosen: Vec<EvalScene> = manifest
                 .scenes
                 .into_iter()
@@ -217,7 +223,15 @@ impl EvalConfig {
                 })
                 .collect();
             if chosen.is_empty() {
-                bail!("{}: no scene in split \"{}\"", path.display(), d.split);
+                let mut splits: Vec<&str> = all_splits.iter().map(String::as_str).collect();
+                splits.sort_unstable();
+                splits.dedup();
+                bail!(
+                    "{}: no scene in split \"{}\" (the dataset's splits: {})",
+                    path.display(),
+                    d.split,
+                    splits.join(", ")
+                );
             }
             if let Some(n) = d.limit {
                 chosen.truncate(n);

@@ -27,9 +27,10 @@ struct Cli {
     /// Mitsuba's `max_depth`.
     #[arg(long, default_value_t = 8, allow_hyphen_values = true)]
     max_depth: i32,
-    /// Thread counts to measure.
-    #[arg(long, value_delimiter = ',', default_value = "1,2")]
-    threads: Vec<usize>,
+    /// Thread counts to measure (each 1 to 1024).
+    #[arg(long, value_delimiter = ',', default_value = "1,2",
+          value_parser = clap::value_parser!(u16).range(1..=1024))]
+    threads: Vec<u16>,
     /// Repetitions per thread count (the best is reported).
     #[arg(long, default_value_t = 3)]
     repeat: u32,
@@ -65,7 +66,9 @@ fn run() -> Result<()> {
         for rep in 0..cli.repeat {
             let cpu0 = process_cpu_seconds();
             let t = Instant::now();
-            let film = with_threads(threads, || pt.render(&scene, cli.spp, rep as u64, None))?;
+            let film = with_threads(usize::from(threads), || {
+                pt.render(&scene, cli.spp, rep as u64, None)
+            })?;
             let secs = t.elapsed().as_secs_f64();
             let cpu = process_cpu_seconds() - cpu0;
             std::hint::black_box(&film);

@@ -34,9 +34,10 @@ struct Cli {
     /// Measurements per mode and thread count (interleaved; the median is reported).
     #[arg(long, default_value_t = 3)]
     rounds: u32,
-    /// Thread counts to measure.
-    #[arg(long, value_delimiter = ',', default_value = "1,2")]
-    threads: Vec<usize>,
+    /// Thread counts to measure (each 1 to 1024).
+    #[arg(long, value_delimiter = ',', default_value = "1,2",
+          value_parser = clap::value_parser!(u16).range(1..=1024))]
+    threads: Vec<u16>,
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -113,7 +114,7 @@ fn run() -> Result<()> {
                 if cli.only.as_deref().is_some_and(|o| o != modes[m].name()) {
                     continue;
                 }
-                samples[m].push(measure(&scene, &cli, modes[m], threads)?);
+                samples[m].push(measure(&scene, &cli, modes[m], usize::from(threads))?);
             }
         }
         if cli.only.is_some() {

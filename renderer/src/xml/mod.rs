@@ -151,6 +151,8 @@ pub(crate) struct Diagnostics {
     pub warnings: Vec<String>,
     /// Every XML file read so far (the scene file, then its includes in reading order).
     pub files_read: Vec<PathBuf>,
+    /// Every parameter some `$name` has been replaced by.
+    pub params_used: std::collections::HashSet<String>,
 }
 
 impl Diagnostics {
@@ -191,11 +193,18 @@ pub fn load_scene(
 ) -> Result<SceneDescription, SceneError> {
     let mut diag = Diagnostics {
         lenient,
-        warnings: Vec::new(),
-        files_read: Vec::new(),
+        ..Diagnostics::default()
     };
     let mut params: HashMap<String, String> = defaults.iter().cloned().collect();
     let root = read_file(path, &mut params, 0, &mut diag)?;
+    // A `-D` the scene never reads changes nothing: most likely a misspelt name (`-D rez=64`).
+    for (name, value) in defaults {
+        if !diag.params_used.contains(name) {
+            diag.warnings.push(format!(
+                "-D {name}={value}: no file of the scene uses ${name}; the define changes nothing"
+            ));
+        }
+    }
     if root.tag != "scene" {
         return Err(root.error("the root element must be <scene>"));
     }
@@ -222,8 +231,7 @@ pub fn load_scene(
 pub fn scene_files(path: &Path, defaults: &[(String, String)]) -> Result<Vec<PathBuf>, SceneError> {
     let mut diag = Diagnostics {
         lenient: true,
-        warnings: Vec::new(),
-        files_read: Vec::new(),
+        ..Diagnostics::default()
     };
     let mut params: HashMap<String, String> = defaults.iter().cloned().collect();
     let root = read_file(path, &mut params, 0, &mut diag)?;
@@ -340,7 +348,7 @@ impl Reader<'_, '_> {
         for (k, v) in &el.attrs {
             substituted.push((
                 k.clone(),
-                substitute(v, self.params).map_err(|m| el.error(m))?,
+                substitute(v, self.params, &mut self.diag.params_used).map_err(|m| el.error(m))?,
             ));
         }
         el.attrs = substituted;
@@ -429,9 +437,13 @@ impl Reader<'_, '_> {
     }
 }
 
-/// Replaces every `$name` in `value` by the parameter's value. A `$` not followed by a known
-/// parameter name is an error, as in Mitsuba.
-fn substitute(value: &str, params: &HashMap<String, String>) -> Result<String, String> {
+/// Replaces every `$name` in `value` by the parameter's value, noting the name in `used`. A `$`
+/// not followed by a known parameter name is an error, as in Mitsuba.
+fn substitute(
+    value: &str,
+    params: &HashMap<String, String>,
+    used: &mut std::collections::HashSet<String>,
+) -> Result<String, String> {
     if !value.contains('$') {
         return Ok(value.to_owned());
     }
@@ -450,7 +462,12 @@ fn substitute(value: &str, params: &HashMap<String, String>) -> Result<String, S
             ));
         }
         match params.get(name) {
-            Some(v) => out.push_str(v),
+            Some(v) => {
+                out.push_str(v);
+                if !used.contains(name) {
+                    used.insert(name.to_owned());
+                }
+            }
             None => return Err(format!("undefined parameter \"${name}\" (add <default name=\"{name}\" value=\"...\"/> or -D {name}=...)")),
         }
         rest = &after[len..];

@@ -411,6 +411,15 @@ pub(super) fn build_integrator<'a>(
         ));
         b.diag.unknown(err)?;
     }
+    // `volpath` without media (which the importer refuses) is `path`; `sppm` is the integrator
+    // chosen on the command line anyway. `direct` is the one that would give another image.
+    if kind == "direct" {
+        b.diag.warn(
+            el,
+            "rendered with the integrator chosen on the command line (default `path`, all \
+             bounces up to max_depth); Mitsuba's `direct` gives direct light only",
+        );
+    }
     let mut p = Props::parse(b, el)?;
     let depth_el = p.element_of("max_depth");
     let max_depth = match p.int("max_depth")? {

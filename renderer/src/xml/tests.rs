@@ -387,7 +387,19 @@ fn default_parameters_and_command_line_overrides() {
     // A longer parameter name is not confused with a shorter one.
     let params: HashMap<String, String> =
         [("a".into(), "1".into()), ("ab".into(), "2".into())].into();
-    assert_eq!(substitute("$ab-$a", &params).unwrap(), "2-1");
+    let mut used = std::collections::HashSet::new();
+    assert_eq!(substitute("$ab-$a", &params, &mut used).unwrap(), "2-1");
+    assert_eq!(used.len(), 2);
+    // A define no `$name` reads is reported (a misspelt name would otherwise go unnoticed).
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let typo = [fov[0].clone(), ("rez".to_owned(), "64".to_owned())];
+    let scene = load_scene(&path, &typo, false).unwrap();
+    assert_eq!(scene.warnings.len(), 1, "{:?}", scene.warnings);
+    assert!(
+        scene.warnings[0].contains("-D rez=64") && scene.warnings[0].contains("changes nothing"),
+        "{:?}",
+        scene.warnings
+    );
 }
 
 /// Parses `<transform>` children given as text.
@@ -895,6 +907,24 @@ fn spectra_emitters_and_cameras() {
         Some((8, 5))
     );
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    // `volpath` renders as `path` (no media); `direct` would differ from Mitsuba's: a warning.
+    for (kind, warned) in [("volpath", false), ("direct", true)] {
+        let other = body.replace(
+            r#"<integrator type="path">"#,
+            &format!(r#"<integrator type="{kind}">"#),
+        );
+        let scene = load(&write_scene(&dir, &format!("{kind}.xml"), &other)).unwrap();
+        assert_eq!(scene.integrator.as_ref().map(|i| i.max_depth), Some(8));
+        assert_eq!(
+            scene
+                .warnings
+                .iter()
+                .any(|w| w.contains("direct light only")),
+            warned,
+            "{kind}: {:?}",
+            scene.warnings
+        );
+    }
     assert_eq!(c.filter, FilterDesc::Gaussian { stddev: 0.5 });
     // A constant reflectance spectrum of one is white.
     let Bsdf::Diffuse(d) = &scene.bsdfs[0] else {
