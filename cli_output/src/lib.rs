@@ -4,7 +4,10 @@
 //! an ordinary end: a closed pipe (`datagen check | head -1`) ends the process silently with
 //! status 141, as the default SIGPIPE action does for other Unix tools; any other write error
 //! (a full disk) prints one line and exits with 1, like every other error of the tools. Every
-//! other panic keeps Rust's default report.
+//! other panic keeps Rust's default report. [`paths`] holds the checks of the output files a
+//! command line names.
+
+pub mod paths;
 
 use std::io::Write;
 

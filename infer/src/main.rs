@@ -3,12 +3,14 @@
 //! weights; writes the result as EXR (+ PNG previews) and, given a reference, the relMSE of
 //! every input level and of the output.
 
+use cli_output::paths::{check_distinct, create_parent_dir, ends_with_separator};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle};
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::error::ErrorKind;
 use clap::parser::ValueSource;
 use clap::{CommandFactory, FromArgMatches, Parser};
@@ -24,19 +26,26 @@ use model::training::write_atomic;
 /// Either `--input bundle.exr` (written by `render --integrator sppm-ml` or `datagen`) or
 /// `--scene scene.xml` (renders the bundle first).
 #[derive(Debug, Parser)]
-#[command(name = "infer", version)]
+#[command(
+    name = "infer",
+    version,
+    override_usage = "infer [OPTIONS] --input <bundle.exr> --output <out.exr>\n       \
+                      infer [OPTIONS] --scene <scene.xml> [--output <out.exr>]"
+)]
 struct Cli {
     /// Trained model directory (`model.json` + `model.bpk`, as written by `train`).
     #[arg(long, default_value = "models/default")]
     model: PathBuf,
-    /// Sample bundle to reconstruct.
-    #[arg(long, conflicts_with = "scene", required_unless_present = "scene")]
+    /// Sample bundle to reconstruct (this or `--scene` is required).
+    #[arg(long, value_name = "bundle.exr", conflicts_with = "scene")]
     input: Option<PathBuf>,
     /// Render this Mitsuba 3 XML scene with multi-level SPPM first, then reconstruct.
-    #[arg(long)]
+    #[arg(long, value_name = "scene.xml")]
     scene: Option<PathBuf>,
-    /// Output EXR (RGB). Default with `--scene`: `out/<scene name>/ours.exr`.
-    #[arg(long, required_unless_present = "scene")]
+    /// Output EXR (RGB; a name ending in `.exr` or without extension; missing folders are
+    /// created). Required with `--input`; default with `--scene`: `out/<name>/ours.exr`, the
+    /// name being the scene file's stem, or its folder's name for a file called `scene.xml`.
+    #[arg(long, visible_alias = "out", value_name = "out.exr")]
     output: Option<PathBuf>,
     /// Reference RGB EXR: report relMSE of every input level and of the output.
     #[arg(long)]
@@ -45,7 +54,7 @@ struct Cli {
     #[arg(long)]
     png: bool,
     /// Tensor backend.
-    #[arg(long, default_value = "flex", value_parser = Backend::parse)]
+    #[arg(long, default_value = "flex", value_parser = backend_parser())]
     backend: Backend,
     /// Inference engine: `native` (CPU im2col + gemm, fused combination) or `burn` (Burn's
     /// tensor operations on `--backend`). Default: native with flex, Burn otherwise.
@@ -92,6 +101,16 @@ struct Cli {
     state_interval: f64,
 }
 
+/// `--backend`'s values, listed in `--help` and in the error for an unknown one.
+fn backend_parser() -> impl TypedValueParser<Value = Backend> {
+    PossibleValuesParser::new([
+        PossibleValue::new("flex").help("Burn's pure-Rust CPU backend"),
+        PossibleValue::new("ndarray").help("burn-ndarray (CPU; slow)"),
+        PossibleValue::new("wgpu").help("burn-wgpu: needs the `wgpu` cargo feature and a GPU"),
+    ])
+    .try_map(|name| Backend::parse(&name))
+}
+
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
 const RENDERING_ONLY: [&str; 8] = [
     "passes",
@@ -111,6 +130,19 @@ const RENDERING_ONLY: [&str; 8] = [
 fn parse_cli() -> Cli {
     let matches = Cli::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    // Checked here, not by clap: its message would name `--input` and `--output` only.
+    let missing = match (&cli.input, &cli.scene, &cli.output) {
+        (None, None, _) => Some("one of --input <bundle.exr> or --scene <scene.xml> is required"),
+        (Some(_), None, None) => {
+            Some("--output <out.exr> is required with --input (only --scene has a default output)")
+        }
+        _ => None,
+    };
+    if let Some(message) = missing {
+        Cli::command()
+            .error(ErrorKind::MissingRequiredArgument, message)
+            .exit();
+    }
     if cli.scene.is_none() {
         let given = RENDERING_ONLY
             .iter()
@@ -152,7 +184,115 @@ fn sibling(path: &Path, suffix: &str) -> PathBuf {
     path.with_file_name(format!("{stem}{suffix}"))
 }
 
+/// `--scene`'s default output `out/<name>/ours.exr`: `<name>` is the scene file's stem
+/// (`sc/volpath.xml` → `out/volpath/ours.exr`, so two scenes of one folder do not share an
+/// output), or the name of its folder for a file called `scene.xml` (`scenes/default/scene.xml`
+/// → `out/default/ours.exr`).
+fn default_output(scene: &Path) -> PathBuf {
+    let stem = scene
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .filter(|s| !s.is_empty());
+    let name = match stem {
+        Some(stem) if stem != "scene" => stem,
+        _ => scene
+            .parent()
+            .and_then(|p| p.file_name())
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into()),
+    };
+    PathBuf::from("out").join(name).join("ours.exr")
+}
+
+/// The PNG of the output (`--png`).
+fn png_path(output: &Path) -> PathBuf {
+    output.with_extension("png")
+}
+
+/// The comparison PNG (`--png`).
+fn compare_path(output: &Path) -> PathBuf {
+    sibling(output, "_compare.png")
+}
+
+/// The weight-map PNG (`--png`).
+fn weights_path(output: &Path) -> PathBuf {
+    sibling(output, "_weights.png")
+}
+
+/// The relMSE report (`--reference`).
+fn report_path(output: &Path) -> PathBuf {
+    sibling(output, "_report.json")
+}
+
+/// The bundle `--scene` renders.
+fn bundle_path(output: &Path) -> PathBuf {
+    sibling(output, "_bundle.exr")
+}
+
+/// Checks, before any work, the files this run writes: the output is an EXR named `.exr` (or
+/// without extension: `--output z.png` would write an EXR named .png, then its PNG preview over
+/// it), no output is an existing directory, and no two of the outputs and inputs (`--input`,
+/// `--reference`, `--scene`, `--state`) are one file.
+fn check_outputs(cli: &Cli, output: &Path) -> Result<()> {
+    let option = if cli.output.is_some() {
+        "--output"
+    } else {
+        "the default output"
+    };
+    if output.is_dir() || ends_with_separator(output) {
+        bail!("{option} {} is a directory", output.display());
+    }
+    if let Some(ext) = output.extension() {
+        if !ext.eq_ignore_ascii_case("exr") {
+            bail!(
+                "{option} {}: the output is an OpenEXR image, not .{}; give a name ending in \
+                 .exr (--png writes the PNG previews next to it)",
+                output.display(),
+                ext.to_string_lossy()
+            );
+        }
+    }
+    // (what names it, path)
+    let mut files: Vec<(String, PathBuf)> = vec![(option.to_string(), output.to_owned())];
+    if cli.scene.is_some() {
+        files.push(("the bundle (--scene)".into(), bundle_path(output)));
+    }
+    if cli.png {
+        files.push(("the PNG (--png)".into(), png_path(output)));
+        files.push(("the comparison PNG (--png)".into(), compare_path(output)));
+        files.push(("the weight map (--png)".into(), weights_path(output)));
+    }
+    if cli.reference.is_some() {
+        files.push(("the report (--reference)".into(), report_path(output)));
+    }
+    for (what, path) in &files[1..] {
+        if path.is_dir() {
+            bail!("{} ({what}) is a directory", path.display());
+        }
+    }
+    let inputs = [
+        ("--input", &cli.input),
+        ("--reference", &cli.reference),
+        ("--scene", &cli.scene),
+        ("--state", &cli.state),
+    ];
+    files.extend(
+        inputs
+            .into_iter()
+            .filter_map(|(what, path)| Some((what.to_string(), path.clone()?))),
+    );
+    check_distinct(&files).map_err(anyhow::Error::msg)?;
+    Ok(())
+}
+
 fn run(cli: &Cli) -> Result<()> {
+    // The output paths are checked before anything is loaded, rendered or reconstructed.
+    let output = match (&cli.output, &cli.scene) {
+        (Some(output), _) => output.clone(),
+        (None, Some(scene)) => default_output(scene),
+        (None, None) => bail!("give --output out.exr"),
+    };
+    check_outputs(cli, &output)?;
     let device = cli.backend.device().map_err(anyhow::Error::msg)?;
     if let Some(note) = cli.backend.adapter_note(&device) {
         eprintln!("{note}");
@@ -170,32 +310,20 @@ fn run(cli: &Cli) -> Result<()> {
         cli.engine.unwrap_or(Engine::default_for(cli.backend))
     );
 
-    let output = match (&cli.output, &cli.scene) {
-        (Some(output), _) => output.clone(),
-        (None, Some(scene)) => {
-            let name = scene
-                .parent()
-                .and_then(|p| p.file_name())
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "scene".into());
-            PathBuf::from("out").join(name).join("ours.exr")
-        }
-        (None, None) => bail!("give --output out.exr"),
-    };
     // Read the reference before any rendering so a bad file fails fast.
     let reference_image = match &cli.reference {
         Some(path) => Some((path, read_rgb_exr_image(path)?)),
         None => None,
     };
-    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-
     let (bundle, source) = match (&cli.input, &cli.scene) {
-        (Some(input), _) => (read_bundle(input)?, input),
+        (Some(input), _) => {
+            let bundle = read_bundle(input)?;
+            create_parent_dir("--output", &output).map_err(anyhow::Error::msg)?;
+            (bundle, input)
+        }
         (None, Some(scene)) => {
-            let bundle = render_bundle(cli, scene)?;
-            let bundle_path = sibling(&output, "_bundle.exr");
+            let bundle = render_bundle(cli, scene, &output)?;
+            let bundle_path = bundle_path(&output);
             write_bundle(&bundle_path, &bundle)?;
             eprintln!("wrote {} (the multi-level bundle)", bundle_path.display());
             (bundle, scene)
@@ -249,7 +377,7 @@ fn run(cli: &Cli) -> Result<()> {
     )?;
     let mut written = vec![output.clone()];
     if cli.png {
-        let png = output.with_extension("png");
+        let png = png_path(&output);
         let (w, h) = (packed.width, packed.height);
         write_side_by_side(
             &png,
@@ -270,16 +398,16 @@ fn run(cli: &Cli) -> Result<()> {
         if let Some(r) = &reference {
             panels.push(Panel { planes: r });
         }
-        let compare = sibling(&output, "_compare.png");
+        let compare = compare_path(&output);
         write_side_by_side(&compare, w, h, &panels)?;
-        let weights = sibling(&output, "_weights.png");
+        let weights = weights_path(&output);
         write_weight_map(&weights, w, h, &result.shares)?;
         written.extend([png, compare, weights]);
     }
     if let Some(r) = &reference {
         let report = ErrorReport::new(&packed, &result.image, r);
         print!("{}", report.to_text());
-        let json = sibling(&output, "_report.json");
+        let json = report_path(&output);
         write_atomic(&json, &serde_json::to_string_pretty(&report)?).map_err(anyhow::Error::msg)?;
         written.push(json);
     }
@@ -294,8 +422,8 @@ fn run(cli: &Cli) -> Result<()> {
 const DEFAULT_PASSES: u32 = 64;
 
 /// Renders `scene` with multi-level SPPM for `--passes` passes (and/or `--time` seconds) and
-/// returns the bundle.
-fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
+/// returns the bundle; creates the folder of `output` once the scene has loaded.
+fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> {
     use renderer::integrators::sppm::{
         render_sppm_resumable, SppmMode, SppmSettings, StopCondition,
     };
@@ -312,7 +440,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
             .map_err(|why| anyhow::anyhow!("--time {why}"))?;
     }
     let desc = renderer::xml::load_scene(scene_path, &cli.define, false)
-        .with_context(|| format!("loading {}", scene_path.display()))?;
+        .map_err(|e| renderer::xml::load_error(e, scene_path))?;
     for w in &desc.warnings {
         eprintln!("warning: {w}");
     }
@@ -321,6 +449,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path) -> Result<Bundle> {
     }
     let scene = renderer::scene::Scene::from_description(desc)
         .with_context(|| format!("building {}", scene_path.display()))?;
+    create_parent_dir("--output", output).map_err(anyhow::Error::msg)?;
     let settings = SppmSettings {
         photons_per_pass: cli.photons,
         seed: cli.seed,

@@ -26,31 +26,7 @@ fn stderr(out: &Output) -> String {
 /// A tiny scene: a diffuse floor under an area light, seen by a perspective camera.
 fn write_scene(dir: &Path) -> PathBuf {
     let path = dir.join("scene.xml");
-    std::fs::write(
-        &path,
-        r#"<scene version="3.0.0">
-    <default name="res" value="16"/>
-    <integrator type="path"><integer name="max_depth" value="4"/></integrator>
-    <sensor type="perspective">
-        <float name="fov" value="45"/>
-        <transform name="to_world"><lookat origin="0, 3, 3" target="0, 0, 0" up="0, 1, 0"/></transform>
-        <film type="hdrfilm">
-            <integer name="width" value="$res"/><integer name="height" value="$res"/>
-            <rfilter type="box"/>
-        </film>
-    </sensor>
-    <shape type="rectangle">
-        <transform name="to_world"><rotate x="1" angle="-90"/><scale value="2"/></transform>
-        <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
-    </shape>
-    <shape type="rectangle">
-        <transform name="to_world"><rotate x="1" angle="90"/><translate y="2"/></transform>
-        <emitter type="area"><rgb name="radiance" value="4, 4, 4"/></emitter>
-    </shape>
-</scene>
-"#,
-    )
-    .unwrap();
+    std::fs::write(&path, include_str!("fixtures/lit-floor.xml")).unwrap();
     path
 }
 

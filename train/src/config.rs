@@ -6,7 +6,7 @@ use anyhow::{bail, Context, Result};
 use model::loss::Loss;
 use model::training::TrainSettings;
 use model::{ModelConfig, Preset, Weighting};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 pub use model::backend::Backend;
 
@@ -143,6 +143,80 @@ impl TrainConfig {
             loss: self.loss,
         }
     }
+
+    /// What a checkpoint of network `model` trained with `settings` cannot continue as this
+    /// config says, one `<key> <checkpoint's> (checkpoint) vs <config's> (config)` per differing
+    /// TOML key: the network (`preset`, `weighting`, `window`, `levels`) and the optimisation
+    /// (`batch`, `lr`, `lr_end`, `seed`, `loss`; `epochs` too under a decaying rate, whose
+    /// schedule spans them). Empty: the checkpoint resumes with this config.
+    pub fn checkpoint_differences(
+        &self,
+        model: &ModelConfig,
+        settings: &TrainSettings,
+    ) -> Vec<String> {
+        let net = self.model_config();
+        let ours = self.settings();
+        let mut out = Vec::new();
+        let mut differ = |key: &str, checkpoint: String, config: String| {
+            if checkpoint != config {
+                out.push(format!(
+                    "{key} {checkpoint} (checkpoint) vs {config} (config)"
+                ));
+            }
+        };
+        differ("preset", toml_name(&model.preset), toml_name(&net.preset));
+        differ(
+            "weighting",
+            toml_name(&model.weighting),
+            toml_name(&net.weighting),
+        );
+        differ("window", model.window.to_string(), net.window.to_string());
+        differ(
+            "levels",
+            format!("{:?}", model.levels),
+            format!("{:?}", net.levels),
+        );
+        differ("batch", settings.batch.to_string(), ours.batch.to_string());
+        differ("lr", settings.lr.to_string(), ours.lr.to_string());
+        let lr_end = |e: Option<f64>| e.map_or_else(|| "absent".to_string(), |e| e.to_string());
+        differ("lr_end", lr_end(settings.lr_end), lr_end(ours.lr_end));
+        differ("seed", settings.seed.to_string(), ours.seed.to_string());
+        differ("loss", toml_name(&settings.loss), toml_name(&ours.loss));
+        if settings.lr_end.is_some() && settings.epochs != ours.epochs {
+            out.push(format!(
+                "epochs {} (checkpoint) vs {} (config; fixed by lr_end, whose decay spans them)",
+                settings.epochs, ours.epochs
+            ));
+        }
+        // Same keys, different network: a preset whose sizes changed since the checkpoint.
+        if out.is_empty() && *model != net {
+            let layers = |c: &ModelConfig| {
+                format!(
+                    "{} {} hidden layers of {} filters, kernel {}, {} input channels",
+                    toml_name(&c.preset),
+                    c.hidden_layers,
+                    c.filters,
+                    c.kernel,
+                    c.in_channels
+                )
+            };
+            out.push(format!(
+                "network {} (checkpoint) vs {} (config)",
+                layers(model),
+                layers(&net)
+            ));
+        }
+        out
+    }
+}
+
+/// How an enum value is spelt in the TOML, e.g. `tiny` or `relative-log-l1`.
+fn toml_name<T: Serialize>(value: &T) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(s)) => s,
+        Ok(other) => other.to_string(),
+        Err(e) => format!("<{e}>"),
+    }
 }
 
 #[cfg(test)]
@@ -180,6 +254,75 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("l2") && err.contains("relmse"), "{err}");
+    }
+
+    #[test]
+    fn checkpoint_differences_name_the_toml_keys() {
+        let base: TrainConfig = toml::from_str(BASE).unwrap();
+        let (model, settings) = (base.model_config(), base.settings());
+        assert!(base.checkpoint_differences(&model, &settings).is_empty());
+        // A longer run with a constant rate resumes: `epochs` may be raised.
+        let longer: TrainConfig =
+            toml::from_str(&BASE.replace("epochs = 1", "epochs = 3")).unwrap();
+        assert!(longer.checkpoint_differences(&model, &settings).is_empty());
+        let diff = |extra: &str| {
+            let cfg: TrainConfig = toml::from_str(&format!("{BASE}{extra}")).unwrap();
+            cfg.checkpoint_differences(&model, &settings)
+        };
+        assert_eq!(
+            diff("lr = 0.01\n"),
+            ["lr 0.0001 (checkpoint) vs 0.01 (config)"]
+        );
+        let changed = TrainConfig {
+            preset: Preset::Small,
+            batch: 8,
+            seed: 2,
+            loss: Loss::Relmse,
+            lr_end: Some(1e-5),
+            ..base.clone()
+        };
+        assert_eq!(
+            changed.checkpoint_differences(&model, &settings),
+            [
+                "preset tiny (checkpoint) vs small (config)",
+                "window 5 (checkpoint) vs 11 (config)",
+                "batch 2 (checkpoint) vs 8 (config)",
+                "lr_end absent (checkpoint) vs 0.00001 (config)",
+                "seed 1 (checkpoint) vs 2 (config)",
+                "loss relative-log-l1 (checkpoint) vs relmse (config)",
+            ]
+        );
+        assert_eq!(
+            diff("weighting = \"softmax\"\nwindow = 7\nlevels = [0, 2]\n"),
+            [
+                "weighting relu (checkpoint) vs softmax (config)",
+                "window 5 (checkpoint) vs 7 (config)",
+                "levels [0, 1, 2, 3, 4] (checkpoint) vs [0, 2] (config)",
+            ]
+        );
+        // Under a decaying rate the schedule spans `epochs`: they are fixed.
+        let decaying: TrainConfig = toml::from_str(&format!("{BASE}lr_end = 1e-6\n")).unwrap();
+        let decaying_longer = TrainConfig {
+            epochs: 3,
+            ..decaying.clone()
+        };
+        let err = decaying_longer.checkpoint_differences(&model, &decaying.settings());
+        assert_eq!(err.len(), 1, "{err:?}");
+        assert!(
+            err[0].starts_with("epochs 1 (checkpoint) vs 3 (config"),
+            "{err:?}"
+        );
+        // The same keys but another network (a preset whose sizes changed): named as a whole.
+        let older = ModelConfig {
+            filters: 16,
+            ..model.clone()
+        };
+        let err = base.checkpoint_differences(&older, &settings);
+        assert_eq!(
+            err,
+            ["network tiny 2 hidden layers of 16 filters, kernel 3, 27 input channels (checkpoint) \
+              vs tiny 2 hidden layers of 12 filters, kernel 3, 27 input channels (config)"]
+        );
     }
 
     #[test]

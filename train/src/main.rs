@@ -229,6 +229,82 @@ fn report_bad(split: &str, ds: &PatchDataset, output: &Path) -> Result<()> {
     write_atomic(&path, &text).map_err(anyhow::Error::msg)
 }
 
+/// Files of a training run in its output directory, finished or partial: the checkpoint is
+/// complete once `state.json` is written (a `checkpoint/` without it holds nothing resumable).
+const RUN_FILES: [&str; 6] = [
+    "checkpoint/state.json",
+    "model.bpk",
+    "model.safetensors",
+    "model.json",
+    "metrics.csv",
+    "metrics.json",
+];
+
+/// What `checkpoint/state.json` records that a resumed run must agree with (its history is
+/// read by `Trainer::resume`).
+#[derive(serde::Deserialize)]
+struct CheckpointHead {
+    model: model::ModelConfig,
+    settings: model::training::TrainSettings,
+    epochs_done: usize,
+}
+
+/// Refuses, before anything is written: a new run into an `output` that holds a run (it would
+/// be overwritten); `--resume` without a checkpoint; `--resume` with a config whose network or
+/// optimisation settings the checkpoint cannot continue, or with fewer epochs than it has done.
+fn check_output(cfg: &TrainConfig, resume: bool) -> Result<()> {
+    let checkpoint = cfg.output.join("checkpoint");
+    let state_path = checkpoint.join("state.json");
+    if !resume {
+        let found: Vec<&str> = RUN_FILES
+            .into_iter()
+            .filter(|f| cfg.output.join(f).exists())
+            .collect();
+        if found.is_empty() {
+            return Ok(());
+        }
+        let hint = if state_path.is_file() {
+            "pass --resume to continue it, or choose another `output` (or delete the directory) \
+             to start a new one"
+        } else {
+            "it has no checkpoint to resume: choose another `output` (or delete the directory) to \
+             start a new one"
+        };
+        bail!(
+            "{} already holds a training run ({}); {hint}",
+            cfg.output.display(),
+            found.join(", ")
+        );
+    }
+    if !state_path.is_file() {
+        bail!(
+            "no checkpoint to resume in {} (start without --resume)",
+            checkpoint.display()
+        );
+    }
+    let text =
+        std::fs::read_to_string(&state_path).with_context(|| state_path.display().to_string())?;
+    let head: CheckpointHead =
+        serde_json::from_str(&text).with_context(|| state_path.display().to_string())?;
+    let differences = cfg.checkpoint_differences(&head.model, &head.settings);
+    if !differences.is_empty() {
+        bail!(
+            "{}: checkpoint settings differ from the config: {}",
+            state_path.display(),
+            differences.join("; ")
+        );
+    }
+    if cfg.epochs < head.epochs_done {
+        bail!(
+            "{}: epochs {} (config) is fewer than the {} the checkpoint has done",
+            state_path.display(),
+            cfg.epochs,
+            head.epochs_done
+        );
+    }
+    Ok(())
+}
+
 fn run(cli: &Cli) -> Result<()> {
     let cfg = TrainConfig::read(&cli.config)?;
     // A misspelt `references` directory would otherwise only show as every sample screened out.
@@ -252,9 +328,11 @@ fn run(cli: &Cli) -> Result<()> {
     if let Some(split) = &cli.evaluate {
         return evaluate(&cfg, split, &device);
     }
+    // Everything that can refuse the run is checked before anything is written into `output`.
+    check_output(&cfg, cli.resume)?;
+    let config_text =
+        std::fs::read_to_string(&cli.config).with_context(|| cli.config.display().to_string())?;
     std::fs::create_dir_all(&cfg.output).with_context(|| cfg.output.display().to_string())?;
-    let config_text = std::fs::read_to_string(&cli.config)?;
-    write_atomic(&cfg.output.join("train.toml"), &config_text).map_err(anyhow::Error::msg)?;
 
     let mut train = PatchDataset::open(
         &cfg.dataset,
@@ -313,14 +391,9 @@ fn run(cli: &Cli) -> Result<()> {
     } else {
         Trainer::new(cfg.model_config(), settings, &device)
     };
-    if trainer.config.levels != cfg.model_config().levels {
-        bail!(
-            "{}: levels {:?} differ from the checkpoint's {:?}",
-            cli.config.display(),
-            cfg.model_config().levels,
-            trainer.config.levels
-        );
-    }
+    // The run is accepted (data screened, checkpoint or `init` weights loaded): record its
+    // config.
+    write_atomic(&cfg.output.join("train.toml"), &config_text).map_err(anyhow::Error::msg)?;
     eprintln!(
         "model: {:?}, levels {}, {} parameters",
         trainer.config.preset,

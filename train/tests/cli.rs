@@ -119,6 +119,22 @@ fn trains_reports_bad_data_and_resumes() {
     assert!(stderr.contains("resuming after epoch 1"), "{stderr}");
     let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "{csv}");
+    // Fewer epochs than the checkpoint has done cannot be honoured: refused, nothing recorded.
+    write_config(1);
+    let fewer = run(true);
+    let stderr = String::from_utf8_lossy(&fewer.stderr);
+    assert_eq!(fewer.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("epochs 1 (config) is fewer than the 2 the checkpoint has done"),
+        "{stderr}"
+    );
+    assert!(
+        std::fs::read_to_string(out.join("train.toml"))
+            .unwrap()
+            .contains("epochs = 2"),
+        "the refused config was recorded"
+    );
+    write_config(2);
 
     // `--plot` redraws the training curves from metrics.json alone.
     std::fs::remove_file(out.join("curves.png")).unwrap();
@@ -148,17 +164,17 @@ fn trains_reports_bad_data_and_resumes() {
     // a decaying learning rate; an architecture mismatch is a clear error.
     let tuned = dir.join("tuned");
     let tune_config = dir.join("tune.toml");
-    let write_tune = |preset: &str| {
+    let write_tune = |preset: &str, output: &Path| {
         std::fs::write(
             &tune_config,
             format!(
                 "dataset = {:?}\npreset = \"{preset}\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = 1\nseed = 3\nlr = 1e-3\nlr_end = 1e-5\ninit = {:?}\noutput = {:?}\n",
-                data, out, tuned
+                data, out, output
             ),
         )
         .unwrap();
     };
-    write_tune("tiny");
+    write_tune("tiny", &tuned);
     let tune = train(&tune_config, &[]);
     let stderr = String::from_utf8_lossy(&tune.stderr);
     assert!(tune.status.success(), "{stderr}");
@@ -170,11 +186,17 @@ fn trains_reports_bad_data_and_resumes() {
         std::fs::read(out.join("model.bpk")).unwrap(),
         "fine-tuning changed nothing"
     );
-    write_tune("small");
+    // (A fresh output: `tuned` holds a run that a new one must not overwrite.)
+    let tuned_small = dir.join("tuned-small");
+    write_tune("small", &tuned_small);
     let mismatch = train(&tune_config, &[]);
     assert!(!mismatch.status.success());
     let stderr = String::from_utf8_lossy(&mismatch.stderr);
     assert!(stderr.contains("architecture"), "{stderr}");
+    assert!(
+        !tuned_small.join("train.toml").exists(),
+        "a refused run recorded its config"
+    );
 
     // `--evaluate val` scores the final weights on whole images of the split.
     let eval = train(&config, &["--evaluate", "val"]);
@@ -212,6 +234,178 @@ fn trains_reports_bad_data_and_resumes() {
     let bad = run(false);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("learning_rate"));
+}
+
+/// The output files of a run, by name, to show that a refused command changed none.
+fn snapshot(out: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files = Vec::new();
+    for dir in [out.to_path_buf(), out.join("checkpoint")] {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_file() {
+                let name = path.strip_prefix(out).unwrap().display().to_string();
+                files.push((name, std::fs::read(&path).unwrap()));
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+#[test]
+fn refuses_to_overwrite_a_run_or_resume_it_with_other_settings() {
+    let dir = temp_dir("refuse");
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    write_dataset(&data);
+    let out = dir.join("run-out");
+    // An output directory that exists but holds no run is fine.
+    std::fs::create_dir_all(&out).unwrap();
+    let config = tiny_config(&dir, "run", &data, "");
+    let text = std::fs::read_to_string(&config).unwrap();
+    let first = train(&config, &[]);
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let before = snapshot(&out);
+    assert!(before.iter().any(|(n, _)| n == "train.toml"), "{before:?}");
+
+    // Training again into it (no `--resume`): refused, naming the directory and `--resume`.
+    let again = train(&config, &[]);
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert_eq!(again.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{} already holds a training run", out.display()))
+            && stderr.contains("checkpoint/state.json")
+            && stderr.contains("pass --resume to continue it")
+            && stderr.contains("another `output`"),
+        "{stderr}"
+    );
+    assert_eq!(snapshot(&out), before, "a refused run changed the output");
+
+    // Final weights without a checkpoint are a run too, but not one `--resume` continues.
+    let weights_only = dir.join("weights-only");
+    std::fs::create_dir_all(&weights_only).unwrap();
+    std::fs::copy(out.join("model.bpk"), weights_only.join("model.bpk")).unwrap();
+    let other = dir.join("other.toml");
+    std::fs::write(
+        &other,
+        text.replace(&format!("{:?}", out), &format!("{:?}", weights_only)),
+    )
+    .unwrap();
+    let onto_weights = train(&other, &[]);
+    let stderr = String::from_utf8_lossy(&onto_weights.stderr);
+    assert_eq!(onto_weights.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("already holds a training run (model.bpk)")
+            && stderr.contains("no checkpoint to resume")
+            && !stderr.contains("pass --resume"),
+        "{stderr}"
+    );
+    assert!(!weights_only.join("train.toml").exists());
+
+    // `--resume` with settings the checkpoint cannot continue: each differing TOML key listed
+    // (no Rust structs), nothing written, not even the rejected config as train.toml.
+    for (change, expected) in [
+        (
+            ("lr", "lr = 0.01\n"),
+            vec!["lr 0.0001 (checkpoint) vs 0.01 (config)"],
+        ),
+        (
+            ("preset", "preset = \"small\"\n"),
+            vec![
+                "preset tiny (checkpoint) vs small (config)",
+                "window 5 (checkpoint) vs 11 (config)",
+            ],
+        ),
+        (
+            ("levels", "levels = [0, 2]\nweighting = \"softmax\"\n"),
+            vec![
+                "weighting relu (checkpoint) vs softmax (config)",
+                "levels [0, 1, 2, 3, 4] (checkpoint) vs [0, 2] (config)",
+            ],
+        ),
+        (
+            ("batch", "batch = 2\nseed = 4\nloss = \"relmse\"\n"),
+            vec![
+                "batch 4 (checkpoint) vs 2 (config)",
+                "seed 3 (checkpoint) vs 4 (config)",
+                "loss relative-log-l1 (checkpoint) vs relmse (config)",
+            ],
+        ),
+    ] {
+        let (key, lines) = change;
+        // Replace the key's line(s) of the base config, or add them.
+        let mut changed: String = text
+            .lines()
+            .filter(|l| {
+                !lines
+                    .lines()
+                    .any(|n| n.split(' ').next() == l.split(' ').next())
+            })
+            .map(|l| format!("{l}\n"))
+            .collect();
+        changed.push_str(lines);
+        std::fs::write(&config, &changed).unwrap();
+        let resumed = train(&config, &["--resume"]);
+        let stderr = String::from_utf8_lossy(&resumed.stderr);
+        assert_eq!(resumed.status.code(), Some(1), "{key}: {stderr}");
+        let expected = format!(
+            "checkpoint settings differ from the config: {}",
+            expected.join("; ")
+        );
+        assert!(stderr.contains(&expected), "{key}: {stderr}");
+        assert!(!stderr.contains("TrainSettings {"), "{key}: {stderr}");
+        assert_eq!(
+            snapshot(&out),
+            before,
+            "{key}: a refused resume changed the output"
+        );
+    }
+    // The same config resumes (one epoch done, one asked: nothing to train) and records it.
+    std::fs::write(&config, &text).unwrap();
+    let resumed = train(&config, &["--resume"]);
+    let stderr = String::from_utf8_lossy(&resumed.stderr);
+    assert!(resumed.status.success(), "{stderr}");
+    assert!(stderr.contains("resuming after epoch 1"), "{stderr}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("train.toml")).unwrap(),
+        text
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn resume_without_a_checkpoint_creates_nothing() {
+    let dir = temp_dir("nockpt");
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    let config = tiny_config(&dir, "fresh", &data, "");
+    let out = dir.join("fresh-out");
+    let resumed = train(&config, &["--resume"]);
+    let stderr = String::from_utf8_lossy(&resumed.stderr);
+    assert_eq!(resumed.status.code(), Some(1), "{stderr}");
+    let expected = format!(
+        "no checkpoint to resume in {} (start without --resume)",
+        out.join("checkpoint").display()
+    );
+    assert!(stderr.contains(&expected), "{stderr}");
+    assert!(!out.exists(), "a refused resume created {}", out.display());
+    // An output directory without a checkpoint (only a run's config): the same, untouched.
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("train.toml"), "old").unwrap();
+    let resumed = train(&config, &["--resume"]);
+    let stderr = String::from_utf8_lossy(&resumed.stderr);
+    assert_eq!(resumed.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains(&expected), "{stderr}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("train.toml")).unwrap(),
+        "old"
+    );
+    assert_eq!(std::fs::read_dir(&out).unwrap().count(), 1);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

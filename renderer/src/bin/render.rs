@@ -5,6 +5,7 @@ use anyhow::{bail, Context, Result};
 use clap::error::ErrorKind;
 use clap::parser::ValueSource;
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, ValueEnum};
+use cli_output::paths::{check_distinct, check_extension, ends_with_separator, extension};
 use indicatif::{ProgressBar, ProgressStyle};
 use renderer::film::{with_threads, Film};
 use renderer::image_io::{write_png_srgb, write_rgb_exr};
@@ -35,11 +36,14 @@ struct Cli {
     /// Light-transport algorithm.
     #[arg(long, value_enum, default_value_t = IntegratorKind::Path)]
     integrator: IntegratorKind,
-    /// Output: an RGB EXR for `path`; the bundle path or prefix for the SPPM integrators.
-    #[arg(long)]
+    /// Output: an RGB EXR for `path` (its name ends in `.exr` or has no extension); for the
+    /// SPPM integrators the prefix of the bundles `<prefix>_p<passes>.exr` (a trailing `.exr` is
+    /// dropped: `b.exr` gives `b_p0064.exr`). Missing folders are created.
+    #[arg(long, visible_alias = "output", value_name = "PATH")]
     out: PathBuf,
-    /// Also write a tone-mapped (clamped, sRGB) PNG preview here.
-    #[arg(long)]
+    /// Also write a tone-mapped (clamped, sRGB) PNG preview here (a name ending in `.png` or
+    /// without extension).
+    #[arg(long, value_name = "FILE")]
     png: Option<PathBuf>,
     /// Random seed; the same seed and settings give a bit-identical image for any thread count.
     #[arg(long, default_value_t = 0)]
@@ -151,14 +155,18 @@ fn given_on_command_line(matches: &ArgMatches, ids: &[&str]) -> Option<String> {
 
 fn run() -> Result<()> {
     let cli = parse_cli();
+    // Everything about the outputs that can be known without the scene is checked first, so a
+    // bad name fails at once instead of after the render.
+    let outputs = check_outputs(&cli)?;
     let t0 = Instant::now();
     let desc = renderer::xml::load_scene(&cli.scene, &cli.define, cli.lenient)
-        .with_context(|| format!("loading {}", cli.scene.display()))?;
+        .map_err(|e| renderer::xml::load_error(e, &cli.scene))?;
     for w in &desc.warnings {
         eprintln!("warning: {w}");
     }
     let scene = Scene::from_description(desc)
         .with_context(|| format!("building {}", cli.scene.display()))?;
+    create_parent_dirs(&outputs)?;
     eprintln!(
         "loaded {} ({} shapes, {} lights) in {:.2} s",
         cli.scene.display(),
@@ -171,6 +179,103 @@ fn run() -> Result<()> {
         IntegratorKind::Sppm => run_sppm(&cli, &scene, false),
         IntegratorKind::SppmMl => run_sppm(&cli, &scene, true),
     })?
+}
+
+/// The image extensions other than `.exr` that an SPPM bundle prefix is refused with: `--out
+/// b.png` asks for an image the SPPM integrators do not write.
+const IMAGE_EXTENSIONS: [&str; 9] = [
+    "png", "jpg", "jpeg", "hdr", "tif", "tiff", "bmp", "pfm", "ppm",
+];
+
+/// Checks the output paths before anything is loaded or rendered and returns the folders the
+/// outputs go to, each with the option that names it:
+/// - an output and the PNG preview (or the run-state file, or the scene) that are one file are
+///   refused, one would overwrite the other (SPPM: each bundle of a `--passes` checkpoint);
+/// - the path tracer's EXR must be named `.exr` (or have no extension), the PNG `.png`: `--out
+///   q.png` would otherwise write an EXR named .png; an SPPM prefix must not name an image;
+/// - an output that is an existing directory is refused.
+///
+/// Also the SPPM options that need no scene (`--passes`/`--time`).
+fn check_outputs(cli: &Cli) -> Result<Vec<(&'static str, PathBuf)>> {
+    // (what names it, path) of every file this run writes or reads
+    let mut files: Vec<(String, PathBuf)> = Vec::new();
+    let mut folders = Vec::new();
+    match cli.integrator {
+        IntegratorKind::Path => {
+            if cli.out.is_dir() || ends_with_separator(&cli.out) {
+                bail!("--out {} is a directory", cli.out.display());
+            }
+            files.push(("--out".into(), cli.out.clone()));
+            folders.push(("--out", cli.out.clone()));
+        }
+        IntegratorKind::Sppm | IntegratorKind::SppmMl => {
+            if cli.passes.is_empty() && cli.time.is_none() {
+                bail!("SPPM needs --passes N[,N…] and/or --time SECONDS");
+            }
+            if cli.passes.contains(&0) {
+                bail!("--passes values must be at least 1");
+            }
+            if let Some(ext) = extension(&cli.out).filter(|e| IMAGE_EXTENSIONS.contains(&&**e)) {
+                bail!(
+                    "--out {}: the SPPM integrators write EXR bundles <prefix>_p<passes>.exr, \
+                     not a .{ext} image; give a prefix (or a name ending in .exr), and --png \
+                     for a preview",
+                    cli.out.display()
+                );
+            }
+            // Also the folder of a run stopped by --time only.
+            folders.push(("--out", bundle_path(&cli.out, 1)));
+            let mut passes = cli.passes.clone();
+            passes.sort_unstable();
+            passes.dedup();
+            for n in passes {
+                let path = bundle_path(&cli.out, n);
+                if path.is_dir() {
+                    bail!(
+                        "{} (the bundle of pass {n} of --out {}) is a directory",
+                        path.display(),
+                        cli.out.display()
+                    );
+                }
+                files.push((format!("the pass-{n} bundle of --out"), path));
+            }
+        }
+    }
+    if let Some(png) = &cli.png {
+        if png.is_dir() || ends_with_separator(png) {
+            bail!("--png {} is a directory", png.display());
+        }
+        files.push(("--png".into(), png.clone()));
+        folders.push(("--png", png.clone()));
+    }
+    if let Some(state) = &cli.state {
+        files.push(("--state".into(), state.clone()));
+    }
+    files.push(("the scene".into(), cli.scene.clone()));
+    check_distinct(&files).map_err(anyhow::Error::msg)?;
+    if cli.integrator == IntegratorKind::Path {
+        check_extension(
+            "--out",
+            &cli.out,
+            "exr",
+            "the path tracer writes an OpenEXR image",
+        )
+        .map_err(anyhow::Error::msg)?;
+    }
+    if let Some(png) = &cli.png {
+        check_extension("--png", png, "png", "the preview is a PNG image")
+            .map_err(anyhow::Error::msg)?;
+    }
+    Ok(folders)
+}
+
+/// Creates the missing folders of the outputs `files` (option, a file in the folder) before
+/// rendering, so that a render is never lost to a missing folder.
+fn create_parent_dirs(files: &[(&str, PathBuf)]) -> Result<()> {
+    for (option, file) in files {
+        cli_output::paths::create_parent_dir(option, file).map_err(anyhow::Error::msg)?;
+    }
+    Ok(())
 }
 
 /// Depth settings: command line, else the scene file's integrator, else Mitsuba's defaults.
@@ -263,9 +368,14 @@ fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
 // parsed command line (--photons, --passes, --time, --seed, --out, --png, depths) and the scene.
 // ---------------------------------------------------------------------------------------------
 
-/// The bundle file of `passes` passes for the output prefix `out`: `<out>_p<passes>.exr`.
+/// The bundle file of `passes` passes for the output prefix `out`: `<out>_p<passes>.exr`, a
+/// trailing `.exr` of the prefix dropped first (`b.exr` → `b_p0064.exr`, not `b.exr_p0064.exr`).
 fn bundle_path(out: &Path, passes: u32) -> PathBuf {
-    let mut name = out.as_os_str().to_owned();
+    let prefix = match out.extension() {
+        Some(ext) if ext.eq_ignore_ascii_case("exr") => out.with_extension(""),
+        _ => out.to_owned(),
+    };
+    let mut name = prefix.into_os_string();
     name.push(format!("_p{passes:04}.exr"));
     PathBuf::from(name)
 }
@@ -276,12 +386,6 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
     use renderer::integrators::sppm::{
         render_sppm_resumable, SppmMode, SppmSettings, StopCondition, DEFAULT_MAX_DEPTH,
     };
-    if cli.passes.is_empty() && cli.time.is_none() {
-        bail!("SPPM needs --passes N[,N…] and/or --time SECONDS");
-    }
-    if cli.passes.contains(&0) {
-        bail!("--passes values must be at least 1");
-    }
     if let Some(w) = renderer::integrators::sppm::filter_warning(scene.camera.filter().desc()) {
         eprintln!("warning: {w}");
     }

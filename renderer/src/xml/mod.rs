@@ -173,6 +173,19 @@ impl Diagnostics {
     }
 }
 
+/// A [`load_scene`] error as a command line reports it: with the scene's name in front unless
+/// the message already starts with it (`nope.xml: No such file or directory`, not `loading
+/// nope.xml: nope.xml: …`); an error in an `<include>`d file keeps the scene that included it.
+pub fn load_error(error: SceneError, scene: &Path) -> anyhow::Error {
+    let names_scene = error.to_string().starts_with(&scene.display().to_string());
+    let error = anyhow::Error::new(error);
+    if names_scene {
+        error
+    } else {
+        error.context(format!("loading {}", scene.display()))
+    }
+}
+
 /// Parses one `-D NAME=VALUE` command-line override of a scene `<default>` (for [`load_scene`]).
 pub fn parse_define(s: &str) -> Result<(String, String), String> {
     match s.split_once('=') {
