@@ -178,6 +178,7 @@ impl ModelConfig {
             output,
             weighting: self.weighting,
         }
+        .with_stable_ids()
     }
 }
 
@@ -328,7 +329,30 @@ impl ModelConfig {
             hidden,
             output,
             weighting: self.weighting,
-        })
+        }
+        .with_stable_ids())
+    }
+}
+
+/// Numbers a network's parameters 0, 1, 2, … in module order. Burn draws every new
+/// parameter's id at random, and the ids are stored in the weight, checkpoint and optimizer
+/// files: with drawn ids two identical trainings would write different files.
+struct StableIds {
+    next: u64,
+}
+
+impl burn::module::ModuleMapper for StableIds {
+    fn map_float<const D: usize>(&mut self, mut param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        param.id = burn::module::ParamId::from(self.next);
+        self.next += 1;
+        param
+    }
+}
+
+impl Network {
+    /// This network with its parameters numbered in module order ([`StableIds`]).
+    fn with_stable_ids(self) -> Self {
+        self.map(&mut StableIds { next: 0 })
     }
 }
 

@@ -207,14 +207,79 @@ pub fn save_burnpack(model: &Network, path: &Path) -> Result<(), String> {
     std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-/// Saves a module as safetensors, atomically.
+/// Saves a module as safetensors, atomically, with its header in a canonical order.
 pub fn save_safetensors(model: &Network, path: &Path) -> Result<(), String> {
     let tmp = temp_path(path);
     let mut store = SafetensorsStore::from_file(&tmp);
     model
         .save_into(&mut store)
         .map_err(|e| format!("{}: {e}", path.display()))?;
+    canonical_safetensors_header(&tmp).map_err(|e| format!("{}: {e}", path.display()))?;
     std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Rewrites a safetensors file's JSON header with its keys sorted. Burn writes the
+/// `__metadata__` entries from a hash map, in an order that changes from run to run, so the
+/// same weights would give different files. The tensor entries name their byte ranges, so their
+/// order is free; the header keeps its length (padded with spaces, as the format allows), so the
+/// tensor data is not moved.
+pub fn canonical_safetensors_header(path: &Path) -> Result<(), String> {
+    let mut bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    let len_bytes: [u8; 8] = bytes
+        .get(..8)
+        .and_then(|b| b.try_into().ok())
+        .ok_or("not a safetensors file (shorter than its header length)")?;
+    let len = usize::try_from(u64::from_le_bytes(len_bytes)).map_err(|e| e.to_string())?;
+    let header = bytes
+        .get(8..8 + len)
+        .ok_or("not a safetensors file (header longer than the file)")?;
+    let value: serde_json::Value =
+        serde_json::from_slice(header).map_err(|e| format!("safetensors header: {e}"))?;
+    let mut sorted = serde_json::to_vec(&sort_keys(value)).map_err(|e| e.to_string())?;
+    if sorted.len() > len {
+        return Err("safetensors header grew when sorted".into());
+    }
+    sorted.resize(len, b' ');
+    bytes[8..8 + len].copy_from_slice(&sorted);
+    std::fs::write(path, bytes).map_err(|e| e.to_string())
+}
+
+/// Writes the burnpack file `from` to `to` with its tensors in name order. Burn's optimizer
+/// lists its per-parameter state in hash-map order, which changes from run to run, so the same
+/// training would otherwise write different checkpoint files. (Scalars and metadata are kept in
+/// maps ordered by key already.)
+fn sorted_burnpack(from: &Path, to: &Path) -> Result<(), String> {
+    let reader = burn_pack::Reader::from_file_exact(from).map_err(|e| e.to_string())?;
+    let scalars = reader.scalars().clone();
+    let metadata = reader.metadata().clone();
+    let mut tensors = reader.into_tensors().map_err(|e| e.to_string())?;
+    tensors.sort_by(|a, b| a.name.cmp(&b.name));
+    let mut writer = burn_pack::Writer::new(tensors)
+        .auto_extension(false)
+        .overwrite(true);
+    for (key, value) in &scalars {
+        writer = writer.with_scalar(key, *value);
+    }
+    for (key, value) in &metadata {
+        writer = writer.with_metadata(key, value);
+    }
+    writer.write_to_file(to).map_err(|e| e.to_string())
+}
+
+/// `value` with the keys of every object in sorted order (whatever order serde_json's map
+/// keeps, which depends on its `preserve_order` feature).
+fn sort_keys(value: serde_json::Value) -> serde_json::Value {
+    match value {
+        serde_json::Value::Object(map) => {
+            let sorted: std::collections::BTreeMap<String, serde_json::Value> =
+                map.into_iter().map(|(k, v)| (k, sort_keys(v))).collect();
+            serde_json::Value::Object(sorted.into_iter().collect())
+        }
+        serde_json::Value::Array(items) => {
+            serde_json::Value::Array(items.into_iter().map(sort_keys).collect())
+        }
+        other => other,
+    }
 }
 
 /// Loads burnpack weights into a freshly built network of `config`.
@@ -398,10 +463,14 @@ impl Trainer {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         save_burnpack(&self.model, &dir.join("model.bpk"))?;
         let optim_path = dir.join("optimizer.bpk");
-        let tmp = temp_path(&optim_path);
+        let raw = temp_path(&dir.join("optimizer.raw.bpk"));
         self.optim
-            .save(&tmp)
+            .save(&raw)
             .map_err(|e| format!("{}: {e:?}", optim_path.display()))?;
+        let tmp = temp_path(&optim_path);
+        let sorted = sorted_burnpack(&raw, &tmp);
+        let _ = std::fs::remove_file(&raw);
+        sorted.map_err(|e| format!("{}: {e}", optim_path.display()))?;
         std::fs::rename(&tmp, &optim_path).map_err(|e| format!("{}: {e}", optim_path.display()))?;
         let state = CheckpointState {
             model: self.config.clone(),

@@ -158,6 +158,55 @@ fn tiny_settings(epochs: usize, lr: f64, seed: u64) -> TrainSettings {
 }
 
 #[test]
+fn training_writes_the_same_files_on_any_thread_count() {
+    // Weights, checkpoint and optimizer state, byte for byte: the parameter ids stored in them
+    // are numbered, not drawn, and the safetensors header is sorted (state.json is left out:
+    // it records each epoch's seconds).
+    let config = ModelConfig::preset(Preset::Tiny);
+    let train_in = |threads: usize, dir: &std::path::Path| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let device = Device::flex();
+            let (mut train, _) = tiny_sets();
+            let mut trainer = Trainer::new(config.clone(), tiny_settings(1, 1e-3, 9), &device);
+            trainer.run_epoch(&mut train, None, &mut |_| {}).unwrap();
+            trainer.save_checkpoint(&dir.join("checkpoint")).unwrap();
+            trainer.save_final(dir).unwrap();
+        });
+    };
+    let (one, two) = (temp_dir("threads-1"), temp_dir("threads-2"));
+    train_in(1, &one);
+    train_in(2, &two);
+    for file in [
+        "model.bpk",
+        "model.safetensors",
+        "model.json",
+        "checkpoint/model.bpk",
+        "checkpoint/optimizer.bpk",
+    ] {
+        let a = std::fs::read(one.join(file)).unwrap();
+        let b = std::fs::read(two.join(file)).unwrap();
+        assert!(a == b, "{file} differs between 1 and 2 threads");
+    }
+    // The sorted header is still a valid safetensors file with the same tensors.
+    let bytes = std::fs::read(one.join("model.safetensors")).unwrap();
+    let len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + len]).unwrap();
+    let tensors = header
+        .as_object()
+        .unwrap()
+        .keys()
+        .filter(|k| *k != "__metadata__")
+        .count();
+    assert_eq!(tensors, 2 * (config.hidden_layers + 1));
+    let _ = std::fs::remove_dir_all(&one);
+    let _ = std::fs::remove_dir_all(&two);
+}
+
+#[test]
 fn resume_continues_exactly() {
     let device = Device::flex();
     let config = ModelConfig::preset(Preset::Tiny);
