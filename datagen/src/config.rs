@@ -197,6 +197,62 @@ pub enum MetalObject {
     Mirror,
 }
 
+/// Most scenes one dataset config may list (every scene's id and jobs are listed up front).
+pub const MAX_SCENES: u64 = 100_000;
+
+/// Largest image side of a dataset (a bundle of 8192² pixels is already ~8 GB).
+pub const MAX_SIDE: u32 = 8192;
+
+/// Most objects a scene may get from an object-count range (`objects`, `objects_per_shelf`,
+/// `shelves`, `waves`).
+pub const MAX_OBJECTS: u64 = 1000;
+
+/// Checks every `[lo, hi]` range under `value` (the families' parameters, serialised; `path`
+/// names where): finite numbers with lo ≤ hi, and object counts within [`MAX_OBJECTS`]. A range
+/// like `[35, 1e300]` (infinite as f32) would otherwise only fail inside a generated scene.
+fn check_ranges(path: &str, value: &serde_json::Value) -> Result<(), String> {
+    match value {
+        serde_json::Value::Object(map) => {
+            for (key, v) in map {
+                check_ranges(&format!("{path}.{key}"), v)?;
+            }
+            Ok(())
+        }
+        serde_json::Value::Array(items) if items.len() == 2 => {
+            // Ranges are the pairs of numbers; serde_json writes a non-finite f32 as null.
+            let numeric = items.iter().all(|v| v.is_number() || v.is_null());
+            if !numeric {
+                // A two-entry choice list (light kinds, external scenes): look inside.
+                for (i, v) in items.iter().enumerate() {
+                    check_ranges(&format!("{path}[{i}]"), v)?;
+                }
+                return Ok(());
+            }
+            let (Some(lo), Some(hi)) = (items[0].as_f64(), items[1].as_f64()) else {
+                return Err(format!("{path}: range values must be finite numbers"));
+            };
+            if !(lo.is_finite() && hi.is_finite()) {
+                return Err(format!("{path}: range values must be finite numbers"));
+            }
+            if lo > hi {
+                return Err(format!("{path}: the range [{lo}, {hi}] has lo > hi"));
+            }
+            let counts = ["objects", "objects_per_shelf", "shelves", "waves"];
+            if counts.iter().any(|c| path.ends_with(&format!(".{c}"))) && hi > MAX_OBJECTS as f64 {
+                return Err(format!("{path}: at most {MAX_OBJECTS} (got {hi})"));
+            }
+            Ok(())
+        }
+        serde_json::Value::Array(items) => {
+            for (i, v) in items.iter().enumerate() {
+                check_ranges(&format!("{path}[{i}]"), v)?;
+            }
+            Ok(())
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Parameter ranges of the room family; `[lo, hi]` pairs are sampled uniformly.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -431,6 +487,16 @@ impl Config {
         if self.width == 0 || self.height == 0 {
             return Err("width and height must be positive".into());
         }
+        if self.width.max(self.height) > MAX_SIDE {
+            return Err(format!(
+                "width and height must be at most {MAX_SIDE} (got {}x{})",
+                self.width, self.height
+            ));
+        }
+        check_ranges(
+            "families",
+            &serde_json::to_value(&self.families).map_err(|e| e.to_string())?,
+        )?;
         let r = &self.render;
         if r.passes.is_empty() || r.passes.contains(&0) {
             return Err("render.passes must be a non-empty list of positive pass counts".into());
@@ -499,7 +565,24 @@ impl Config {
                 }
             }
         }
-        if self.scene_count() == 0 {
+        let f = &self.families;
+        let total: u64 = [
+            f.room.as_ref().map_or(0, |c| c.count),
+            f.glass.as_ref().map_or(0, |c| c.count),
+            f.water.as_ref().map_or(0, |c| c.count),
+            f.metal.as_ref().map_or(0, |c| c.count),
+            f.shelf.as_ref().map_or(0, |c| c.count),
+        ]
+        .iter()
+        .map(|&c| u64::from(c))
+        .sum::<u64>()
+            + f.external.as_ref().map_or(0, |c| c.scenes.len() as u64);
+        if total > MAX_SCENES {
+            return Err(format!(
+                "the families' counts add up to {total} scenes; at most {MAX_SCENES}"
+            ));
+        }
+        if total == 0 {
             return Err("no scenes: give at least one family a positive count".into());
         }
         Ok(())

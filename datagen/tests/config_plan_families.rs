@@ -114,6 +114,30 @@ fn config_errors_name_file_and_field() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("glas"), "{e}");
+
+    // Values the config's types accept but no dataset can be made of, each refused naming its
+    // field (found by scripts/fuzz_inputs.py: a huge count aborted on a failed allocation, an
+    // f32-infinite range failed inside a generated scene).
+    for (from, to, needle) in [
+        ("count = 1", "count = 2147483648", "at most 100000"),
+        (
+            "fov = [55.0, 75.0]",
+            "fov = [55.0, 1e300]",
+            "families.room.fov",
+        ),
+        ("fov = [55.0, 75.0]", "fov = [75.0, 55.0]", "lo > hi"),
+        (
+            "objects = [2, 5]",
+            "objects = [2, 4000000000]",
+            "families.room.objects",
+        ),
+        ("width = 32", "width = 65536", "at most 8192"),
+    ] {
+        let bad = text.replacen(from, to, 1);
+        assert_ne!(bad, text, "tiny.toml no longer has `{from}`");
+        let e = Config::parse(&bad, "bad.toml").unwrap_err().to_string();
+        assert!(e.contains("bad.toml") && e.contains(needle), "{to}: {e}");
+    }
 }
 
 #[test]

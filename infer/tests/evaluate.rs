@@ -344,6 +344,15 @@ fn bad_configs_fail_naming_the_problem() {
     assert!(!run.status.success());
     assert!(stderr.contains("nope.exr"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+    // More worker threads than any machine has: refused before anything runs.
+    std::fs::write(&config, format!("{base}threads = 100000\n")).unwrap();
+    let run = evaluate(&config);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains("threads = 100000: at most 1024"),
+        "{stderr}"
+    );
     // A split the dataset lacks: the error lists the splits it has.
     let data = dir.join("data");
     std::fs::create_dir_all(&data).unwrap();

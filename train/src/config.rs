@@ -99,6 +99,9 @@ impl TrainConfig {
         let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
         let cfg: TrainConfig =
             toml::from_str(&text).with_context(|| format!("{}", path.display()))?;
+        if cfg.dataset.as_os_str().is_empty() {
+            bail!("{}: dataset must name a dataset directory", path.display());
+        }
         if cfg.patch == 0 || cfg.stride == 0 || cfg.batch == 0 || cfg.epochs == 0 {
             bail!(
                 "{}: patch, stride, batch and epochs must be positive",

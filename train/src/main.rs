@@ -123,12 +123,7 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
         .iter()
         .map(|e| e.width.min(e.height))
         .min()
-        .with_context(|| {
-            format!(
-                "{}: no usable samples in split `{split}`",
-                cfg.dataset.display()
-            )
-        })?;
+        .with_context(|| no_usable_samples(cfg, split, &ds))?;
     ds.patch = side;
     ds.stride = side;
     let v = validate(&net, &model_config, &mut ds, 1, device)
@@ -209,6 +204,24 @@ fn redraw_curves(cfg: &TrainConfig) -> Result<()> {
     )?;
     println!("{} ({} epochs)", path.display(), history.len());
     Ok(())
+}
+
+/// The error for a split of which no sample can be used, with the first reason when samples
+/// were screened out (e.g. a `patch` larger than the images), so that it stands on its own.
+fn no_usable_samples(cfg: &TrainConfig, split: &str, ds: &PatchDataset) -> String {
+    let mut message = format!(
+        "{}: no usable samples in split `{split}`",
+        cfg.dataset.display()
+    );
+    if let Some(first) = ds.bad.first() {
+        message.push_str(&format!(
+            " (all {} screened out; the first: {}: {})",
+            ds.bad.len(),
+            first.file.display(),
+            first.reason
+        ));
+    }
+    message
 }
 
 /// Prints every screened-out sample and writes them to `bad_samples.txt`.
@@ -345,11 +358,7 @@ fn run(cli: &Cli) -> Result<()> {
     .map_err(anyhow::Error::msg)?;
     report_bad(&cfg.train_split, &train, &cfg.output)?;
     if train.images.is_empty() {
-        bail!(
-            "{}: no usable samples in split `{}`",
-            cfg.dataset.display(),
-            cfg.train_split
-        );
+        bail!(no_usable_samples(&cfg, &cfg.train_split, &train));
     }
     // `val_split = ""` trains without validation.
     let mut val = if cfg.val_split.is_empty() {

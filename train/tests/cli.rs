@@ -409,6 +409,38 @@ fn resume_without_a_checkpoint_creates_nothing() {
 }
 
 #[test]
+fn a_split_nothing_can_be_trained_on_says_why() {
+    let dir = temp_dir("unusable");
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    write_dataset(&data);
+    // A patch larger than every image: the error itself names the reason, not only the list of
+    // screened-out samples before it.
+    let config = tiny_config(&dir, "huge", &data, "");
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(&config, text.replace("patch = 16", "patch = 64")).unwrap();
+    let run = train(&config, &[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    let last = stderr.lines().last().unwrap_or_default();
+    assert!(
+        last.contains("no usable samples in split `train`")
+            && last.contains("smaller than the 64x64 patch"),
+        "{stderr}"
+    );
+    // An empty dataset path is named as such.
+    let config = tiny_config(&dir, "nodata", Path::new(""), "");
+    let run = train(&config, &[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("dataset must name a dataset directory"),
+        "{stderr}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn references_key_replaces_the_manifest_references() {
     let dir = temp_dir("refs");
     let data = dir.join("data");

@@ -154,6 +154,13 @@ impl EvalConfig {
 
     /// Checks values the run cannot use.
     pub fn validate(&self) -> Result<()> {
+        if self.threads > renderer::film::MAX_THREADS {
+            bail!(
+                "threads = {}: at most {} worker threads are supported",
+                self.threads,
+                renderer::film::MAX_THREADS
+            );
+        }
         if self.photons_per_pass == 0 {
             bail!("photons_per_pass must be positive");
         }
