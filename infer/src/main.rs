@@ -79,8 +79,9 @@ struct Cli {
     /// `--scene`: random seed of the render.
     #[arg(long, default_value_t = 1, help_heading = "Rendering (--scene)")]
     seed: u64,
-    /// `--scene`: worker threads of the renderer (0 = all cores).
-    #[arg(long, default_value_t = 0, help_heading = "Rendering (--scene)")]
+    /// Worker threads of the render and of the reconstruction (0 = all cores; the output does
+    /// not depend on it).
+    #[arg(long, default_value_t = 0)]
     threads: usize,
     /// `--scene`: override a `<default name=… value=…>` of the scene, e.g. `-D res=128`.
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = renderer::xml::parse_define, help_heading = "Rendering (--scene)")]
@@ -112,12 +113,11 @@ fn backend_parser() -> impl TypedValueParser<Value = Backend> {
 }
 
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
-const RENDERING_ONLY: [&str; 8] = [
+const RENDERING_ONLY: [&str; 7] = [
     "passes",
     "time",
     "photons",
     "seed",
-    "threads",
     "define",
     "state",
     "state_interval",
@@ -166,7 +166,10 @@ fn parse_cli() -> Cli {
 fn main() -> ExitCode {
     cli_output::install();
     let cli = parse_cli();
-    match run(&cli) {
+    // Every parallel part (the render, the native engine, Burn's CPU backends) runs on rayon:
+    // one pool of `--threads` bounds them all.
+    let result = renderer::film::with_threads(cli.threads, || run(&cli)).and_then(|r| r);
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");

@@ -241,6 +241,38 @@ fn cli_refuses_to_write_a_non_finite_reconstruction() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--threads` bounds the reconstruction of a given bundle too, and changes nothing in it.
+#[test]
+fn cli_threads_apply_to_the_reconstruction_and_change_nothing() {
+    let dir = temp_dir("cli-threads");
+    write_tiny_model(&dir);
+    let (bundle, _) = synthetic_bundle(40, 24, 0.2, 8);
+    let input = dir.join("b.exr");
+    bundle::write_bundle(&input, &bundle).unwrap();
+    let run = |threads: &str| {
+        let output = dir.join(format!("out{threads}.exr"));
+        let out = Command::new(env!("CARGO_BIN_EXE_infer"))
+            .arg("--model")
+            .arg(&dir)
+            .arg("--input")
+            .arg(&input)
+            .arg("--output")
+            .arg(&output)
+            .args(["--threads", threads])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        bundle::read_rgb_exr_image(&output).unwrap().data
+    };
+    let one = run("1");
+    assert!(one == run("2"), "the output depends on --threads");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn cli_refuses_rendering_options_without_a_scene() {
     let dir = temp_dir("cli-input-only");
@@ -250,7 +282,6 @@ fn cli_refuses_rendering_options_without_a_scene() {
         (&["--time", "60"][..], "--time"),
         (&["--photons", "1000"][..], "--photons"),
         (&["--seed", "3"][..], "--seed"),
-        (&["--threads", "1"][..], "--threads"),
         (&["-D", "res=64"][..], "-D"),
         (&["--state", "s.state"][..], "--state"),
     ] {

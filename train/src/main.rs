@@ -35,12 +35,27 @@ struct Cli {
     /// `metrics.json` (e.g. for a run made before the picture existed).
     #[arg(long, conflicts_with_all = ["resume", "evaluate"])]
     plot: bool,
+    /// Worker threads on the CPU backends (0 = all cores, at most 1024). The trained weights and
+    /// files do not depend on it.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=1024))]
+    threads: u16,
 }
 
 fn main() -> ExitCode {
     cli_output::install();
     let cli = Cli::parse();
-    match run(&cli) {
+    // Burn's CPU backends run on rayon: one pool of `--threads` bounds the whole run.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(usize::from(cli.threads))
+        .build();
+    let result = match pool {
+        Ok(pool) => pool.install(|| run(&cli)),
+        Err(e) => Err(anyhow::anyhow!(
+            "starting {} worker threads: {e}",
+            cli.threads
+        )),
+    };
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");

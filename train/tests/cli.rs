@@ -88,7 +88,18 @@ fn trains_reports_bad_data_and_resumes() {
         .unwrap();
     };
     write_config(1);
-    let run = |resume: bool| train(&config, if resume { &["--resume"] } else { &[] });
+    // The first run on one thread, the resumed one on all cores (the files do not depend on
+    // it: model/tests/network.rs).
+    let run = |resume: bool| {
+        train(
+            &config,
+            if resume {
+                &["--resume"]
+            } else {
+                &["--threads", "1"]
+            },
+        )
+    };
     let first = run(false);
     let stderr = String::from_utf8_lossy(&first.stderr);
     assert!(first.status.success(), "{stderr}");
