@@ -29,6 +29,7 @@ use model::training::write_atomic;
 #[command(
     name = "infer",
     version,
+    allow_negative_numbers = true,
     override_usage = "infer [OPTIONS] --input <bundle.exr> --output <out.exr>\n       \
                       infer [OPTIONS] --scene <scene.xml> [--output <out.exr>]"
 )]

@@ -325,6 +325,23 @@ fn an_option_the_chosen_integrator_would_ignore_is_refused() {
         &[scene, "--out", out, "--spp", "1", "--max-depth", "3"],
     );
     assert!(ok.status.success(), "{}", stderr(&ok));
+    // A negative number is read as a value, not as an unknown option (clap's advice to write
+    // `-- -1` would be wrong here), and `--max-depth -1` (unbounded) needs no `=`.
+    let negative = run(
+        env!("CARGO_BIN_EXE_render"),
+        &[scene, "--out", out, "--spp", "-1"],
+    );
+    let err = stderr(&negative);
+    assert_eq!(negative.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("invalid value '-1' for '--spp") && !err.contains("-- -1"),
+        "{err}"
+    );
+    let unbounded = run(
+        env!("CARGO_BIN_EXE_render"),
+        &[scene, "--out", out, "--spp", "1", "--max-depth", "-1"],
+    );
+    assert!(unbounded.status.success(), "{}", stderr(&unbounded));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

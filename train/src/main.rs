@@ -19,7 +19,7 @@ use config::TrainConfig;
 
 /// Train the multi-level SPPM combiner network.
 #[derive(Parser, Debug)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Training configuration (TOML).
     #[arg(long)]

@@ -28,6 +28,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Write every scene of a config as Mitsuba 3 XML + PLY into OUT/<scene-id>/.
+    #[command(allow_negative_numbers = true)]
     Scenes {
         /// Dataset config (TOML), e.g. configs/datagen/small.toml.
         #[arg(long)]
@@ -37,6 +38,7 @@ enum Command {
         out: PathBuf,
     },
     /// Render references and input bundles into OUT (resumable; shards share OUT).
+    #[command(allow_negative_numbers = true)]
     Render {
         /// Dataset config (TOML).
         #[arg(long)]
@@ -60,6 +62,7 @@ enum Command {
         quiet: bool,
     },
     /// Assemble OUT/manifest.json from the job records (done automatically by the last shard).
+    #[command(allow_negative_numbers = true)]
     Manifest {
         /// Dataset config (TOML).
         #[arg(long)]
@@ -69,6 +72,7 @@ enum Command {
         out: PathBuf,
     },
     /// Verify a dataset against its manifest; exit status 1 on any problem.
+    #[command(allow_negative_numbers = true)]
     Check {
         /// Dataset directory.
         dir: PathBuf,
@@ -78,6 +82,7 @@ enum Command {
     },
     /// Average more runs of a dataset's reference settings (other seeds) into less noisy
     /// references for evaluation: writes DIR/OUT/<scene id>.exr and DIR/OUT/noise.json.
+    #[command(allow_negative_numbers = true)]
     AverageReferences {
         /// Dataset directory (with manifest.json).
         dir: PathBuf,
@@ -104,6 +109,7 @@ enum Command {
         quiet: bool,
     },
     /// Write a PNG grid of a dataset's reference images.
+    #[command(allow_negative_numbers = true)]
     ContactSheet {
         /// Dataset directory.
         dir: PathBuf,

@@ -19,7 +19,7 @@ use serde_json::{json, Value};
 
 /// Benchmark tiled inference of a network preset against the PyTorch peer.
 #[derive(Debug, Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Network preset: paper, medium, small or tiny.
     #[arg(long, default_value = "paper")]

@@ -11,7 +11,7 @@ use infer::evaluate::config::EvalConfig;
 
 /// Equal-time evaluation of multi-level SPPM + neural reconstruction against standard SPPM.
 #[derive(Debug, Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Evaluation config (TOML), e.g. `configs/eval/small.toml`.
     #[arg(long)]

@@ -13,7 +13,7 @@ use std::time::Instant;
 
 /// Measure path-tracing samples per second.
 #[derive(Debug, Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Scene file (Mitsuba 3 XML).
     #[arg(default_value = "../shared/scenes/external/cbox/scene.xml")]

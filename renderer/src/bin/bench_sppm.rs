@@ -17,7 +17,7 @@ use renderer::scene::Scene;
 
 /// Measure the time per pass of `sppm-ml` over `sppm` and the thread scaling of SPPM.
 #[derive(Debug, Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Scene file (Mitsuba 3 XML).
     #[arg(default_value = "scenes/default/scene.xml")]

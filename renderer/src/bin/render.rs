@@ -29,7 +29,7 @@ enum IntegratorKind {
 
 /// Render a Mitsuba 3 XML scene.
 #[derive(Debug, Parser)]
-#[command(name = "render", version)]
+#[command(name = "render", version, allow_negative_numbers = true)]
 struct Cli {
     /// The scene file (Mitsuba 3 XML).
     scene: PathBuf,
