@@ -35,7 +35,7 @@ use model::training::write_atomic;
 )]
 struct Cli {
     /// Trained model directory (`model.json` + `model.bpk`, as written by `train`).
-    #[arg(long, default_value = "models/default")]
+    #[arg(long, default_value = DEFAULT_MODEL)]
     model: PathBuf,
     /// Sample bundle to reconstruct (this or `--scene` is required).
     #[arg(long, value_name = "bundle.exr", conflicts_with = "scene")]
@@ -112,6 +112,9 @@ fn backend_parser() -> impl TypedValueParser<Value = Backend> {
     ])
     .try_map(|name| Backend::parse(&name))
 }
+
+/// `--model`'s default: the bundled weights, relative to the repository root.
+const DEFAULT_MODEL: &str = "models/default";
 
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
 const RENDERING_ONLY: [&str; 7] = [
@@ -301,8 +304,15 @@ fn run(cli: &Cli) -> Result<()> {
     if let Some(note) = cli.backend.adapter_note(&device) {
         eprintln!("{note}");
     }
-    let model = TrainedModel::open(&cli.model, &device)
-        .with_context(|| format!("loading model {}", cli.model.display()))?;
+    let model = TrainedModel::open(&cli.model, &device).with_context(|| {
+        // The default is relative to the repository root: say so where it is the default.
+        let hint = if cli.model == Path::new(DEFAULT_MODEL) && !cli.model.exists() {
+            " (the default, relative to the repository root: run from there or give --model DIR)"
+        } else {
+            ""
+        };
+        format!("loading model {}{hint}", cli.model.display())
+    })?;
     eprintln!(
         "model {}: preset {:?}, window {}×{}, receptive radius {} px, backend {:?}, engine {:?}",
         cli.model.display(),
@@ -380,6 +390,9 @@ fn run(cli: &Cli) -> Result<()> {
         &interleaved(&result.image, packed.width, packed.height, 3),
     )?;
     let mut written = vec![output.clone()];
+    if cli.scene.is_some() {
+        written.push(bundle_path(&output));
+    }
     if cli.png {
         let png = png_path(&output);
         let (w, h) = (packed.width, packed.height);

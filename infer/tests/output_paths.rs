@@ -171,7 +171,14 @@ fn the_default_output_is_named_after_the_scene_file() {
         );
         assert!(out.status.success(), "{scene}: {}", stderr(&out));
         assert!(dir.join(output).is_file(), "{scene}: no {output}");
-        assert!(String::from_utf8_lossy(&out.stdout).contains(output));
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(stdout.contains(output), "{stdout}");
+        // The bundle it rendered is listed with the other files written.
+        let bundle = output.replace("ours.exr", "ours_bundle.exr");
+        assert!(
+            stdout.contains(&bundle) && dir.join(&bundle).is_file(),
+            "{stdout}"
+        );
     }
     // A missing scene is named once.
     let err = fails_naming(
