@@ -172,6 +172,9 @@ fn run(cli: &Cli) -> Result<()> {
         println!("  ours ({:?}) / pytorch: {:.2}", timed[0].0, ours / p);
     } else if !peer.is_null() {
         println!("  peer failed: {}", peer["error"]);
+    } else if cli.peer != "none" {
+        // Said, not silently left out: the peer implements the paper preset only.
+        println!("  (no PyTorch peer: it implements the paper preset only; this is {preset:?})");
     }
     if let Some(path) = &cli.output {
         let all = json!({
