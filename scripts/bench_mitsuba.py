@@ -98,6 +98,8 @@ def main():
     ap.add_argument("--mitsuba-only", action="store_true")
     ap.add_argument("--ours-only", action="store_true")
     ap.add_argument("--json", type=Path, help="also write the numbers as JSON")
+    ap.add_argument("--out-dir", type=Path, default=ROOT / "out" / "bench",
+                    help="folder for our rendered images (default out/bench)")
     args = ap.parse_args()
 
     rows, results = [], {"scene": str(CBOX), "res": RES, "max_depth": MAX_DEPTH, "cpus": os.cpu_count()}
@@ -119,7 +121,7 @@ def main():
         if not args.no_build:
             subprocess.run(["cargo", "build", "--release", "-p", "renderer", "--bin", "render"], cwd=ROOT,
                            check=True)
-        out_dir = ROOT / "out" / "bench"
+        out_dir = args.out_dir
         out_dir.mkdir(parents=True, exist_ok=True)
         for t in [int(x) for x in args.threads.split(",")]:
             sps, wall, reported, cmd, cpu = bench_ours(args.bin, args.ours_spp, t, out_dir)

@@ -8,6 +8,11 @@
 # Reference: our path tracer (validated against Mitsuba 3, docs/validation.md) at 8192 spp with
 # max_depth 24 (deeper than SPPM's 16 photon bounces, so both see the same light). Writes
 # out/consistency/<scene>/ and prints a markdown table (relMSE vs the reference).
+#
+# Environment (all optional): NO_BUILD=1 skips `cargo build`; RENDER / INFER name the binaries
+# (default: ${CARGO_TARGET_DIR:-target}/release/{render,infer}); OUT_ROOT replaces
+# out/consistency; REF_SPP (default 8192) sets the reference's spp; THREADS is passed to
+# render and infer as --threads (default 0: all cores). Existing files are reused.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MODEL=${1:-models/default}
@@ -15,21 +20,24 @@ SCENE=${2:-scenes/validation/cornell-diffuse/scene.xml}
 PHOTONS=${3:-16000}
 PASSES=${4:-100,400,1600}
 NAME=$(basename "$(dirname "$SCENE")")
-OUT=out/consistency/$NAME
+OUT=${OUT_ROOT:-out/consistency}/$NAME
 mkdir -p "$OUT"
-cargo build --release -p renderer -p infer --bins --locked
+[ -n "${NO_BUILD:-}" ] || cargo build --release -p renderer -p infer --bins --locked
 BIN=${CARGO_TARGET_DIR:-target}/release
-[ -f "$OUT/reference.exr" ] || "$BIN/render" "$SCENE" --integrator path --spp 8192 --max-depth 24 \
-    --seed 7 --out "$OUT/reference.exr" --png "$OUT/reference.png"
+RENDER=${RENDER:-$BIN/render}
+INFER=${INFER:-$BIN/infer}
+THREADS=${THREADS:-0}
+[ -f "$OUT/reference.exr" ] || "$RENDER" "$SCENE" --integrator path --spp "${REF_SPP:-8192}" --max-depth 24 \
+    --seed 7 --threads "$THREADS" --out "$OUT/reference.exr" --png "$OUT/reference.png"
 LAST=$(printf 'p%04d' "${PASSES##*,}")
-[ -f "$OUT/bundle_$LAST.exr" ] || "$BIN/render" "$SCENE" --integrator sppm-ml --photons "$PHOTONS" \
-    --passes "$PASSES" --seed 3 --out "$OUT/bundle"
+[ -f "$OUT/bundle_$LAST.exr" ] || "$RENDER" "$SCENE" --integrator sppm-ml --photons "$PHOTONS" \
+    --passes "$PASSES" --seed 3 --threads "$THREADS" --out "$OUT/bundle"
 echo "| passes | y | z1 | z2 | z3 | z4 | ours | ours / best input |"
 echo "|---:|---:|---:|---:|---:|---:|---:|---:|"
 for p in ${PASSES//,/ }; do
     tag=$(printf 'p%04d' "$p")
-    "$BIN/infer" --model "$MODEL" --input "$OUT/bundle_$tag.exr" --reference "$OUT/reference.exr" \
-        --output "$OUT/ours_$tag.exr" --png > /dev/null
+    "$INFER" --model "$MODEL" --input "$OUT/bundle_$tag.exr" --reference "$OUT/reference.exr" \
+        --threads "$THREADS" --output "$OUT/ours_$tag.exr" --png > /dev/null
     python3 - "$OUT/ours_${tag}_report.json" "$p" <<'PY'
 import json, sys
 r = json.load(open(sys.argv[1]))

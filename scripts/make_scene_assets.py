@@ -7,6 +7,7 @@ only), so it runs on any machine; the generated files are committed, so users ne
     python3 scripts/make_scene_assets.py            # writes into scenes/
 """
 
+import argparse
 import math
 import struct
 import zlib
@@ -343,6 +344,7 @@ def mesh_attribute_assets(folder: Path):
 
 
 def main():
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     pos, nrm, uv, faces = torus(0.22, 0.08, 48, 24)
     write_obj(SCENES / "default" / "meshes" / "torus.obj", pos, nrm, uv, faces,
               "torus, major radius 0.22, minor radius 0.08, axis +y")
