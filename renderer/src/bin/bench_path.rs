@@ -11,12 +11,16 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
+/// The scene measured when none is given: Mitsuba's Cornell box from the shared test scenes
+/// next to the repository.
+const DEFAULT_SCENE: &str = "../shared/scenes/external/cbox/scene.xml";
+
 /// Measure path-tracing samples per second.
 #[derive(Debug, Parser)]
 #[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Scene file (Mitsuba 3 XML).
-    #[arg(default_value = "../shared/scenes/external/cbox/scene.xml")]
+    #[arg(default_value = DEFAULT_SCENE)]
     scene: PathBuf,
     /// Image side length (sets the `res` default of the file).
     #[arg(long, default_value_t = 256)]
@@ -50,6 +54,12 @@ fn main() -> ExitCode {
 fn run() -> Result<()> {
     let cli = Cli::parse();
     let defines = vec![("res".to_string(), cli.res.to_string())];
+    if !cli.scene.exists() && cli.scene == std::path::Path::new(DEFAULT_SCENE) {
+        anyhow::bail!(
+            "{DEFAULT_SCENE} not found: the default scene (Mitsuba's Cornell box from the shared test scenes next to the repository) is relative to the \
+             repository root; run from there or give a scene file"
+        );
+    }
     let desc = renderer::xml::load_scene(&cli.scene, &defines, false)
         .with_context(|| format!("loading {}", cli.scene.display()))?;
     let scene = Scene::build(&desc)?;

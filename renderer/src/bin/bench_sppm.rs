@@ -15,12 +15,15 @@ use clap::Parser;
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
 use renderer::scene::Scene;
 
+/// The scene measured when none is given (the bundled default scene).
+const DEFAULT_SCENE: &str = "scenes/default/scene.xml";
+
 /// Measure the time per pass of `sppm-ml` over `sppm` and the thread scaling of SPPM.
 #[derive(Debug, Parser)]
 #[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Scene file (Mitsuba 3 XML).
-    #[arg(default_value = "scenes/default/scene.xml")]
+    #[arg(default_value = DEFAULT_SCENE)]
     scene: PathBuf,
     /// Image side length (sets the `res` default of the file).
     #[arg(long, default_value_t = 256)]
@@ -88,6 +91,12 @@ fn run() -> Result<()> {
         "--threads needs at least one count"
     );
     let defines = vec![("res".to_string(), cli.res.to_string())];
+    if !cli.scene.exists() && cli.scene == std::path::Path::new(DEFAULT_SCENE) {
+        anyhow::bail!(
+            "{DEFAULT_SCENE} not found: the default scene (the bundled default scene) is relative to the \
+             repository root; run from there or give a scene file"
+        );
+    }
     let desc = renderer::xml::load_scene(&cli.scene, &defines, false)
         .with_context(|| format!("loading {}", cli.scene.display()))?;
     let scene = Scene::build(&desc)?;
