@@ -258,6 +258,17 @@ fn evaluates_explicit_and_dataset_scenes() {
         assert!(*times.last().unwrap() >= last_total);
     }
     assert!(html.contains("data:image/png;base64,"));
+    // Footnotes only for marks the page carries: nothing reused in a first run, and the
+    // extrapolation note only when a checkpoint was extrapolated.
+    assert!(!html.contains("† taken from"));
+    let extrapolated = scenes.iter().any(|s| {
+        s["eval"]["checkpoints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|c| c["standard_equal_time"]["extrapolated"] == true)
+    });
+    assert_eq!(html.contains("did not reach that time"), extrapolated);
     assert!(html.contains("dual-vs-multi"));
     let summary = &results["summary"];
     assert_eq!(summary["scenes"], 2);
@@ -290,6 +301,24 @@ fn evaluates_explicit_and_dataset_scenes() {
     assert!(again.status.success(), "{stderr}");
     assert_eq!(stderr.matches("taken from").count(), 2, "{stderr}");
     assert_eq!(evals(&out), first);
+    // The report says which scenes were taken from the earlier run (their timings are its).
+    let reused = |out: &Path| -> Vec<bool> {
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap())
+                .unwrap();
+        r["scenes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s["reused"] == true)
+            .collect()
+    };
+    assert_eq!(reused(&out), [true, true]);
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(
+        html.contains("† taken from an earlier run"),
+        "no resume footnote"
+    );
     // A changed reference makes its scene evaluated again; the other is still taken.
     let mut changed = bundle::read_rgb_exr_image(&data.join("references/001-box.exr")).unwrap();
     changed.data[0] += 0.5;
@@ -302,6 +331,7 @@ fn evaluates_explicit_and_dataset_scenes() {
     let now = evals(&out);
     assert_eq!(now[0], first[0]);
     assert_ne!(now[1], first[1]);
+    assert_eq!(reused(&out), [true, false]);
     // A damaged per-scene file is an error naming it, not silently replaced.
     let saved = out.join("scenes/explicit-box.json");
     std::fs::write(&saved, "{ not json").unwrap();

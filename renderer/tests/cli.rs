@@ -121,7 +121,7 @@ fn render_writes_images_and_bundles_that_bundle_info_reads() {
     }
     // An exposure is for the PNGs: a negative one is a value, and without --png it is refused.
     let bundle = dir.join("ml_p0003.exr");
-    let darker = dir.join("darker");
+    let darker = dir.join("new/folder/darker");
     let out = run(
         env!("CARGO_BIN_EXE_bundle_info"),
         &[
@@ -133,7 +133,8 @@ fn render_writes_images_and_bundles_that_bundle_info_reads() {
         ],
     );
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(dir.join("darker_y.png").exists());
+    // (into a folder made for it)
+    assert!(dir.join("new/folder/darker_y.png").exists());
     let out = run(
         env!("CARGO_BIN_EXE_bundle_info"),
         &[bundle.to_str().unwrap(), "--exposure", "1"],

@@ -2,7 +2,7 @@
 //! (PNGs embedded as base64 data URIs, so the page can be moved or mailed on its own).
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
@@ -99,7 +99,7 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
         "<h2>Summary at {} passes</h2>\n<p>Ours better than standard SPPM at equal time on \
          <b>{} of {}</b> evaluated scenes; median ratio ours/standard <b>{}</b>, geometric mean \
          {}; ours better than its best input level on {}; median multi-level overhead per pass \
-         {}. {} scene(s) failed.</p>",
+         {} (over every scene and checkpoint). {} scene(s) failed.</p>",
         s.passes,
         s.ours_better_equal_time,
         s.scenes - s.failed,
@@ -132,8 +132,9 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
                 };
                 let _ = writeln!(
                     h,
-                    "<tr><td class=\"l\"><a href=\"#{name}\">{name}</a></td><td>{:.2}</td><td>{}</td>\
+                    "<tr><td class=\"l\"><a href=\"#{name}\">{name}</a>{}</td><td>{:.2}</td><td>{}</td>\
                      <td>{}{}</td><td class=\"{class}\">{:.3}</td><td>{}</td><td>{} ({})</td><td>{}</td></tr>",
+                    if r.reused { "†" } else { "" },
                     c.total_seconds,
                     sci(c.ours_relmse),
                     sci(c.standard_equal_time.relmse),
@@ -158,10 +159,27 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
             }
         }
     }
-    h.push_str(
-        "</table>\n<p>* standard SPPM's curve did not reach that time; its nearest end point is \
-         used.</p>\n",
-    );
+    h.push_str("</table>\n");
+    // Footnotes only for marks the page carries.
+    let extrapolated = results.scenes.iter().any(|r| {
+        r.eval.as_ref().is_some_and(|e| {
+            e.checkpoints
+                .iter()
+                .any(|c| c.standard_equal_time.extrapolated)
+        })
+    });
+    if extrapolated {
+        h.push_str(
+            "<p>* standard SPPM's curve did not reach that time; its nearest end point is \
+             used.</p>\n",
+        );
+    }
+    if results.scenes.iter().any(|r| r.reused) {
+        h.push_str(
+            "<p>† taken from an earlier run with the same settings (<code>--resume</code>): \
+             its timings are that run's.</p>\n",
+        );
+    }
     let _ = writeln!(
         h,
         "<div class=\"note\"><p><b>Method.</b> {}</p></div>",
@@ -174,9 +192,14 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
         let _ = writeln!(h, "<h2 id=\"{name}\">{name}</h2>");
         let _ = writeln!(
             h,
-            "<p><code>{}</code>, reference <code>{}</code></p>",
-            escape(&r.xml.display().to_string()),
-            escape(&r.reference.display().to_string())
+            "<p><code>{}</code>, reference <code>{}</code>{}</p>",
+            escape(&lexically_normal(&r.xml).display().to_string()),
+            escape(&lexically_normal(&r.reference).display().to_string()),
+            if r.reused {
+                " (taken from an earlier run with the same settings: its timings are that run's)"
+            } else {
+                ""
+            }
         );
         let Some(e) = &r.eval else {
             let _ = writeln!(
@@ -324,6 +347,25 @@ fn ablation_section(h: &mut String, a: &Ablation) {
     );
 }
 
+/// `path` with `.` and `dir/..` pairs removed by name (`a/../b/./c` → `b/c`); leading `..`
+/// stay. For display: the file system is not consulted.
+fn lexically_normal(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for part in path.components() {
+        match part {
+            Component::CurDir => {}
+            Component::ParentDir
+                if matches!(out.components().next_back(), Some(Component::Normal(_))) =>
+            {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -337,6 +379,14 @@ mod tests {
         assert_eq!(percent(Some(0.123)), "+12.3 %");
         assert_eq!(percent(None), "–");
         assert_eq!(sci(f64::NAN), "–");
+        assert_eq!(
+            lexically_normal(Path::new("/tmp/a/mix/../my/./scene.xml")),
+            Path::new("/tmp/a/my/scene.xml")
+        );
+        assert_eq!(
+            lexically_normal(Path::new("../shared/x/../cbox.xml")),
+            Path::new("../shared/cbox.xml")
+        );
     }
 
     #[test]

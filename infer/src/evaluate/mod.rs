@@ -59,6 +59,10 @@ pub struct SceneResult {
     pub comparison_standard: Option<compare::CurvePoint>,
     /// Colour-scale maximum of the error maps.
     pub error_scale: Option<f32>,
+    /// Taken from an earlier run with the same settings (`--resume`): the timings are that
+    /// run's.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub reused: bool,
 }
 
 impl SceneResult {
@@ -75,6 +79,7 @@ impl SceneResult {
             inputs: None,
             comparison_standard: None,
             error_scale: None,
+            reused: false,
         }
     }
 }
@@ -175,8 +180,9 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
             _ => None,
         };
         let r = match reused {
-            Some(r) => {
+            Some(mut r) => {
                 eprintln!("  taken from {}", saved.display());
+                r.reused = true;
                 r
             }
             None => {

@@ -139,6 +139,11 @@ fn main() -> std::process::ExitCode {
 /// Prints the bundle's metadata and statistics, and writes the PNGs if asked.
 fn run(args: &Args) -> Result<()> {
     let b = read_bundle(&args.bundle)?;
+    if let Some(prefix) = &args.png {
+        // Before any output: a folder that cannot be made fails at once (missing ones are
+        // made, as every other command does for its outputs).
+        cli_output::paths::create_parent_dir("--png", prefix).map_err(anyhow::Error::msg)?;
+    }
     println!("file:        {}", args.bundle.display());
     println!("{}", serde_json::to_string_pretty(&b.meta)?);
     println!(
