@@ -84,6 +84,14 @@ struct Cli {
     /// not depend on it).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// `--scene`: longest eye and photon path of the render (as `render --max-depth` for SPPM;
+    /// the scene file's depth is the path tracer's and is not used) [default: 16].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..), help_heading = "Rendering (--scene)")]
+    max_depth: Option<u32>,
+    /// `--scene`: turn unsupported plugins/attributes of the scene into warnings instead of
+    /// errors (as `render --lenient`).
+    #[arg(long, help_heading = "Rendering (--scene)")]
+    lenient: bool,
     /// `--scene`: override a `<default name=… value=…>` of the scene, e.g. `-D res=128`.
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = renderer::xml::parse_define, help_heading = "Rendering (--scene)")]
     define: Vec<(String, String)>,
@@ -117,11 +125,13 @@ fn backend_parser() -> impl TypedValueParser<Value = Backend> {
 const DEFAULT_MODEL: &str = "models/default";
 
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
-const RENDERING_ONLY: [&str; 7] = [
+const RENDERING_ONLY: [&str; 9] = [
     "passes",
     "time",
     "photons",
     "seed",
+    "max_depth",
+    "lenient",
     "define",
     "state",
     "state_interval",
@@ -456,7 +466,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
         renderer::integrators::sppm::check_time_limit(t)
             .map_err(|why| anyhow::anyhow!("--time {why}"))?;
     }
-    let desc = renderer::xml::load_scene(scene_path, &cli.define, false)
+    let desc = renderer::xml::load_scene(scene_path, &cli.define, cli.lenient)
         .map_err(|e| renderer::xml::load_error(e, scene_path))?;
     for w in &desc.warnings {
         eprintln!("warning: {w}");
@@ -473,6 +483,9 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
         mode: SppmMode::MultiLevel,
         threads: cli.threads,
         scene_name: scene_path.display().to_string(),
+        max_depth: cli
+            .max_depth
+            .unwrap_or(renderer::integrators::sppm::DEFAULT_MAX_DEPTH),
         ..SppmSettings::default()
     };
     let stop = StopCondition {

@@ -237,3 +237,58 @@ fn usage_names_input_or_scene_and_help_lists_the_backends() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--lenient` reaches the render (an unsupported plugin becomes a warning) and `--max-depth`
+/// bounds it: a depth-1 render of a Cornell box loses the light that bounces between its walls.
+#[test]
+fn lenient_and_max_depth_reach_the_render() {
+    let dir = temp_dir("lenient");
+    write_tiny_model(&dir);
+    let scene = SCENE.replace("</scene>", "<shape type=\"nonsense\"/>\n</scene>");
+    std::fs::write(dir.join("odd.xml"), scene).unwrap();
+    let base = [
+        "--model",
+        s(&dir),
+        "--scene",
+        "odd.xml",
+        "--passes",
+        "1",
+        "--photons",
+        "1000",
+    ];
+    let err = fails_naming(&dir, &base, 1, &["nonsense"]);
+    assert!(err.contains("odd.xml"), "{err}");
+    let mut lenient = base.to_vec();
+    lenient.push("--lenient");
+    let out = infer(&dir, &lenient);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("warning"), "{}", stderr(&out));
+
+    let cbox = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes/validation/cornell-diffuse/scene.xml");
+    let mean_of = |output: &str, extra: &[&str]| {
+        let mut args = vec![
+            "--model",
+            s(&dir),
+            "--scene",
+            s(&cbox),
+            "-D",
+            "res=16",
+            "--passes",
+            "2",
+            "--photons",
+            "4000",
+            "--output",
+            output,
+        ];
+        args.extend_from_slice(extra);
+        let out = infer(&dir, &args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let b = bundle::read_bundle(&dir.join(output.replace(".exr", "_bundle.exr"))).unwrap();
+        b.levels[4].data.iter().map(|v| f64::from(*v)).sum::<f64>()
+    };
+    let deep = mean_of("deep.exr", &[]);
+    let shallow = mean_of("shallow.exr", &["--max-depth", "1"]);
+    assert!(shallow < 0.9 * deep, "depth 1: {shallow}, default: {deep}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

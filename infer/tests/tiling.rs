@@ -282,6 +282,8 @@ fn cli_refuses_rendering_options_without_a_scene() {
         (&["--time", "60"][..], "--time"),
         (&["--photons", "1000"][..], "--photons"),
         (&["--seed", "3"][..], "--seed"),
+        (&["--max-depth", "4"][..], "--max-depth"),
+        (&["--lenient"][..], "--lenient"),
         (&["-D", "res=64"][..], "-D"),
         (&["--state", "s.state"][..], "--state"),
     ] {
