@@ -1,10 +1,21 @@
 //! What the toolkit's PNG plots share (`evaluate`'s convergence plots, `train`'s curves, the
 //! renderer's validation figures): the font compiled into the binary, so drawing text needs no
-//! system fonts or fontconfig; one colour per estimate, the same in every picture; and writing a
-//! picture atomically.
+//! system fonts or fontconfig; one colour per estimate, the same in every picture; log axes
+//! with readable ticks ([`LogAxis`]); series whose legend swatch matches their line, with the
+//! legend in the corner that covers the fewest data ([`draw_series`], [`draw_legend`]); and
+//! writing a picture atomically.
 
 use std::error::Error;
+
+mod series;
+mod ticks;
+
+pub use series::{
+    draw_legend, draw_series, legend_size, pick_corner, swatch, Series, DASH, LEGEND_FONT,
+    LEGEND_INSET,
+};
 use std::path::Path;
+pub use ticks::{binary_log_ticks, decimal_log_ticks, tick_label, LogAxis, LogTicks};
 
 use plotters::style::{FontStyle, RGBColor};
 

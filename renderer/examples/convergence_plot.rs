@@ -117,39 +117,48 @@ fn main() -> Result<()> {
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d((pmin..pmax).log_scale(), (lo..hi).log_scale())?;
+            .build_cartesian_2d(
+                plots::LogAxis::new(pmin..pmax, plots::LogTicks::Binary, 8),
+                plots::LogAxis::new(lo..hi, plots::LogTicks::Decimal, 10),
+            )?;
         chart
             .configure_mesh()
-            // Log axes: the minor grid lines of plotters crowd the decades; keep the major ones.
-            .light_line_style(TRANSPARENT)
-            .x_labels(6)
+            // Light lines at the 2..9 multiples of each decade show the log scale.
+            .light_line_style(BLACK.mix(0.04))
             .x_desc("passes")
             .y_desc("relMSE (4x4 downsampled)")
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()?;
-        chart.draw_series(DashedLineSeries::new(
-            [(pmin, args.target), (pmax, args.target)],
-            6,
-            4,
-            BLACK.stroke_width(1),
-        ))?;
-        for (l, name) in curves.levels.iter().enumerate() {
-            let colour = colours[l % colours.len()];
-            let pts: Vec<(f64, f64)> = curves.rows.iter().map(|(p, v)| (*p, v[l])).collect();
-            chart
-                .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))?
-                .label(name.as_str())
-                .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
-            chart.draw_series(pts.into_iter().map(|p| Circle::new(p, 3, colour.filled())))?;
-        }
+        let mut series: Vec<plots::Series> = curves
+            .levels
+            .iter()
+            .enumerate()
+            .map(|(l, name)| plots::Series {
+                label: name.clone(),
+                colour: colours[l % colours.len()],
+                points: curves.rows.iter().map(|(p, v)| (*p, v[l])).collect(),
+                dashed: false,
+            })
+            .collect();
+        plots::draw_series(&mut chart, &series).map_err(|e| anyhow::anyhow!("{e}"))?;
+        // The target: a dashed black line without markers, named in the legend.
+        let target = plots::Series {
+            label: "target".into(),
+            colour: BLACK,
+            points: vec![(pmin, args.target), (pmax, args.target)],
+            dashed: true,
+        };
         chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+            .draw_series(DashedLineSeries::new(
+                target.points.clone(),
+                plots::DASH.0,
+                plots::DASH.1,
+                target.stroke(),
+            ))?
+            .label("target")
+            .legend(plots::swatch(target.stroke(), true));
+        series.push(target);
+        plots::draw_legend(&mut chart, &series, &[SeriesLabelPosition::UpperRight])
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
     }
     root.present()
         .with_context(|| format!("writing {}", args.out.display()))?;

@@ -6,38 +6,34 @@ use std::path::Path;
 
 use anyhow::{anyhow, Result};
 use model::training::EpochReport;
+use plots::{LogAxis, LogTicks, Series};
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 /// Picture size in pixels.
 const SIZE: (u32, u32) = (1120, 440);
+/// Height of the title strip.
+const HEADER: u32 = 32;
+/// Margin around each panel's chart.
+const MARGIN: u32 = 14;
+/// Height of the x axis' labels.
+const X_LABELS: u32 = 36;
 
-/// One line of a panel.
-struct Line {
-    /// Legend text.
-    name: String,
-    /// Stroke colour.
-    colour: RGBColor,
-    /// (epoch, value) with value > 0 and finite.
-    points: Vec<(f64, f64)>,
-    /// Inputs are dashed: they do not train, they are the bar.
-    dashed: bool,
-}
-
-/// One panel: a y-axis title and its lines.
+/// One panel: a y-axis title and its lines (inputs dashed: they do not train, they are the
+/// bar).
 struct Panel {
     /// Title of the y axis.
     y_title: &'static str,
-    /// The lines drawn.
-    lines: Vec<Line>,
+    /// The lines drawn, each a (epoch, value) series with value > 0 and finite.
+    lines: Vec<Series>,
 }
 
 /// The two panels for `history`: training loss | validation relMSE (output and inputs).
 fn panels(history: &[EpochReport], level_names: &[&str; 5]) -> [Panel; 2] {
     let positive = |e: usize, v: f64| (v.is_finite() && v > 0.0).then_some((e as f64, v));
-    let loss = Line {
-        name: "training loss".into(),
+    let loss = Series {
+        label: "training loss".into(),
         colour: plots::OURS,
         points: history
             .iter()
@@ -50,8 +46,8 @@ fn panels(history: &[EpochReport], level_names: &[&str; 5]) -> [Panel; 2] {
             .iter()
             .filter_map(|r| Some((r.epoch, r.validation.as_ref()?)))
     };
-    let mut relmse = vec![Line {
-        name: "reconstruction".into(),
+    let mut relmse = vec![Series {
+        label: "reconstruction".into(),
         colour: plots::OURS,
         points: validated()
             .filter_map(|(e, v)| positive(e, v.output))
@@ -59,8 +55,8 @@ fn panels(history: &[EpochReport], level_names: &[&str; 5]) -> [Panel; 2] {
         dashed: false,
     }];
     for (l, (name, colour)) in level_names.iter().zip(plots::LEVEL_COLOURS).enumerate() {
-        relmse.push(Line {
-            name: format!("input {name}"),
+        relmse.push(Series {
+            label: format!("input {name}"),
             colour,
             points: validated()
                 .filter_map(|(e, v)| positive(e, v.levels[l]))
@@ -88,20 +84,28 @@ pub fn write(path: &Path, title: &str, history: &[EpochReport], levels: &[&str; 
 
 /// The y range of a panel holding `values`: `(low, high, log)` — a log axis when the values
 /// span more than a factor of 20 (an untrained network's first epochs against the final one),
-/// else a linear axis, whose labels stay readable over a narrow range.
-fn y_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64, bool)> {
+/// else a linear axis, whose labels stay readable over a narrow range. The top `headroom`
+/// fraction of the axis (0..0.9) stays above every value: room for the legend, which then
+/// covers no data in an upper corner.
+fn y_range(values: impl Iterator<Item = f64>, headroom: f64) -> Option<(f64, f64, bool)> {
     let (lo, hi) = values.fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
         (lo.min(v), hi.max(v))
     });
     if hi <= 0.0 {
         return None;
     }
+    let f = headroom.clamp(0.0, 0.9);
+    // The top of an axis from `bottom` whose top fraction f lies above `top`.
+    let above = |bottom: f64, top: f64| (top - f * bottom) / (1.0 - f);
     if hi / lo > 20.0 {
-        Some((lo / 1.25, hi * 4.0, true))
+        let bottom = lo / 1.25;
+        // A little room above the highest point even without a legend.
+        let top = (hi * 1.25).ln();
+        Some((bottom, above(bottom.ln(), top).exp(), true))
     } else {
-        // Headroom above the highest line for the legend (upper right).
         let span = (hi - lo).max(0.01 * hi);
-        Some(((lo - 0.08 * span).max(0.0), hi + 0.45 * span, false))
+        let bottom = (lo - 0.08 * span).max(0.0);
+        Some((bottom, above(bottom, hi + 0.08 * span), false))
     }
 }
 
@@ -109,97 +113,70 @@ fn y_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64, bool)> {
 fn draw(path: &Path, title: &str, panels: &[Panel; 2]) -> Result<(), Box<dyn std::error::Error>> {
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE)?;
-    let (header, body) = root.split_vertically(32);
+    let (header, body) = root.split_vertically(HEADER);
     header.titled(title, ("sans-serif", 18))?;
     let last_epoch = panels
         .iter()
         .flat_map(|p| p.lines.iter().flat_map(|l| l.points.iter().map(|q| q.0)))
         .fold(1.0f64, f64::max);
     let x = 0.5..last_epoch + 0.5;
+    let plot_height = SIZE.1.saturating_sub(HEADER + 2 * MARGIN + X_LABELS).max(1);
     for (area, panel) in body.split_evenly((1, 2)).iter().zip(panels) {
         let values = panel
             .lines
             .iter()
             .flat_map(|l| l.points.iter().map(|q| q.1));
+        // Room for the legend above the data, plus a few pixels of air.
+        let (_, legend_height) = plots::legend_size(panel.lines.iter().map(|l| l.label.as_str()))?;
+        let headroom = f64::from(legend_height + plots::LEGEND_INSET + 6) / f64::from(plot_height);
         // Nothing to show yet (e.g. no validation split): the panel stays blank.
-        let Some((lo, hi, log)) = y_range(values) else {
+        let Some((lo, hi, log)) = y_range(values, headroom) else {
             continue;
         };
         let mut builder = ChartBuilder::on(area);
         builder
-            .margin(14)
-            .x_label_area_size(36)
+            .margin(MARGIN)
+            .x_label_area_size(X_LABELS)
             .y_label_area_size(72);
         if log {
-            let chart = builder.build_cartesian_2d(x.clone(), (lo..hi).log_scale())?;
-            draw_panel(chart, panel, last_epoch)?;
+            let y = LogAxis::new(lo..hi, LogTicks::Decimal, 10);
+            let chart = builder.build_cartesian_2d(x.clone(), y)?;
+            draw_panel(chart, panel, last_epoch, true)?;
         } else {
             let chart = builder.build_cartesian_2d(x.clone(), lo..hi)?;
-            draw_panel(chart, panel, last_epoch)?;
+            draw_panel(chart, panel, last_epoch, false)?;
         }
     }
     root.present()?;
     Ok(())
 }
 
-/// A y tick as a person writes it: four significant digits without trailing zeros between
-/// 0.01 and 1000, scientific notation outside.
-fn tick_label(v: f64) -> String {
-    if v == 0.0 {
-        return "0".into();
-    }
-    let magnitude = v.abs().log10().floor();
-    if !(-2.0..3.0).contains(&magnitude) {
-        return format!("{v:.2e}");
-    }
-    let text = format!("{v:.*}", (3.0 - magnitude) as usize);
-    text.trim_end_matches('0').trim_end_matches('.').to_string()
-}
-
-/// Axes, lines and legend of one panel, whatever its y axis.
+/// Axes, lines and legend of one panel, whatever its y axis (`log`: a [`LogAxis`], whose
+/// light grid lines mark the multiples of each decade).
 fn draw_panel<'a, Y>(
     mut chart: ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, Y>>,
     panel: &Panel,
     last_epoch: f64,
+    log: bool,
 ) -> Result<(), Box<dyn std::error::Error>>
 where
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
     chart
         .configure_mesh()
-        .light_line_style(TRANSPARENT)
+        // Light lines only where a log axis puts them (2..9 of each decade).
+        .light_line_style(BLACK.mix(0.04))
+        .x_max_light_lines(0)
+        .y_max_light_lines(if log { 10 } else { 0 })
         .x_desc("epoch")
         .y_desc(panel.y_title)
         .x_labels((last_epoch as usize).clamp(2, 12))
         .x_label_formatter(&|e| format!("{e:.0}"))
         .y_labels(8)
-        .y_label_formatter(&|v| tick_label(*v))
+        .y_label_formatter(&|v| plots::tick_label(*v))
         .draw()?;
-    for line in &panel.lines {
-        let colour = line.colour;
-        let stroke = colour.stroke_width(if line.dashed { 1 } else { 2 });
-        let series = if line.dashed {
-            chart.draw_series(DashedLineSeries::new(line.points.clone(), 6, 4, stroke))?
-        } else {
-            chart.draw_series(LineSeries::new(line.points.clone(), stroke))?
-        };
-        series
-            .label(line.name.as_str())
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], stroke));
-        // Markers make a single epoch (and each measured point) visible.
-        chart.draw_series(
-            line.points
-                .iter()
-                .map(|&p| Circle::new(p, 2, colour.filled())),
-        )?;
-    }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 12))
-        .draw()?;
+    plots::draw_series(&mut chart, &panel.lines)?;
+    plots::draw_legend(&mut chart, &panel.lines, &[SeriesLabelPosition::UpperRight])?;
     Ok(())
 }
 
@@ -241,21 +218,24 @@ mod tests {
         assert_eq!(val.lines[1].points, vec![(1.0, 0.4), (3.0, 0.4)]);
         assert!(val.lines[4].points.is_empty(), "NaN level");
         assert!(val.lines[5].points.is_empty(), "zero level");
-        assert_eq!(val.lines[3].name, "input z2");
+        assert_eq!(val.lines[3].label, "input z2");
+        assert!(val.lines[3].dashed && !val.lines[0].dashed);
     }
 
-    /// Tick labels read as numbers a person would write.
+    /// The y range leaves the asked-for top fraction above every value (room for the
+    /// legend), on a linear axis for a narrow range and a log axis for a wide one.
     #[test]
-    fn tick_labels_are_short() {
-        assert_eq!(tick_label(0.0), "0");
-        assert_eq!(tick_label(0.8), "0.8");
-        assert_eq!(tick_label(0.1285), "0.1285");
-        assert_eq!(tick_label(0.128), "0.128");
-        assert_eq!(tick_label(2.5), "2.5");
-        assert_eq!(tick_label(120.0), "120");
-        assert_eq!(tick_label(0.0123), "0.0123");
-        assert_eq!(tick_label(0.004), "4.00e-3");
-        assert_eq!(tick_label(25000.0), "2.50e4");
+    fn y_range_leaves_headroom_for_the_legend() {
+        let (lo, hi, log) = y_range([0.05, 0.1, 0.76].into_iter(), 0.4).unwrap();
+        assert!(!log);
+        assert!((0.0..0.05).contains(&lo), "{lo}");
+        assert!((hi - 0.76) / (hi - lo) >= 0.4 - 1e-9, "{lo}..{hi}");
+        let (lo, hi, log) = y_range([0.01, 0.5, 2.0].into_iter(), 0.3).unwrap();
+        assert!(log);
+        assert!(lo < 0.01);
+        let top = (hi.ln() - 2f64.ln()) / (hi.ln() - lo.ln());
+        assert!(top >= 0.3 - 1e-9, "{lo}..{hi}");
+        assert!(y_range(std::iter::empty(), 0.3).is_none());
     }
 
     /// A PNG of the right size is written in place, with no temp file left behind.
