@@ -128,6 +128,31 @@ impl NoiseReport {
     }
 }
 
+/// The lines `datagen average-references` prints after averaging `split` into a folder whose
+/// report (its `noise.json`, at `noise_path`) is `report`: the noise of each scene this call
+/// averaged, and a note on the scenes of other splits the report keeps from earlier calls.
+pub fn summary_lines(report: &NoiseReport, split: Split, noise_path: &Path) -> Vec<String> {
+    let mut lines: Vec<String> = report
+        .scenes
+        .iter()
+        .filter(|(_, n)| n.split == split)
+        .map(|(id, n)| {
+            format!(
+                "{id}: noise of one run {:.3e} relMSE, of the mean of {} {:.3e}",
+                n.relmse_one_run, n.runs, n.relmse_mean
+            )
+        })
+        .collect();
+    let earlier = report.scenes.values().filter(|n| n.split != split).count();
+    if earlier > 0 {
+        lines.push(format!(
+            "({earlier} scene(s) of other splits, averaged by earlier calls, are kept in {})",
+            noise_path.display()
+        ));
+    }
+    lines
+}
+
 /// Where extra run `seed` of `scene` lives (relative to the dataset root): the settings are in
 /// the name, so runs of another reference configuration are never mixed in.
 fn run_path(scene: &SceneEntry, seed: u64) -> PathBuf {
@@ -251,7 +276,33 @@ pub fn average_references(
                 first.reference_photons
             )
         }
-        Some(r) => r,
+        Some(r) => {
+            // Means of another run count in one folder would be read as one set of references
+            // of uneven noise: refused, not silently replaced scene by scene.
+            let other: std::collections::BTreeSet<usize> = r
+                .scenes
+                .values()
+                .map(|n| n.runs)
+                .filter(|&n| n != options.runs)
+                .collect();
+            if !other.is_empty() {
+                let found: Vec<String> = other.iter().map(usize::to_string).collect();
+                let named = PathBuf::from(format!("references-avg{}", options.runs));
+                let example = if options.out == named {
+                    String::new()
+                } else {
+                    format!(" (e.g. {})", named.display())
+                };
+                bail!(
+                    "{}: holds averages of {} runs (see its {NOISE_FILE}), this call asks for \
+                     {}; choose another --out{example}",
+                    out_dir.display(),
+                    found.join(" and "),
+                    options.runs,
+                )
+            }
+            r
+        }
         None => NoiseReport {
             reference_passes: first.reference_passes,
             reference_photons: first.reference_photons,

@@ -8,12 +8,14 @@ use bundle::{read_bundle, read_rgb_exr_image};
 use renderer::state_file::scene_fingerprint;
 use std::path::Path;
 
-/// The outcome of a check: files looked at and problems found (each names its file).
+/// The outcome of a check: files looked at and problems found (each names its file; a file
+/// with several problems has one line naming all of them).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct CheckReport {
     /// Files checked.
     pub files: usize,
-    /// Problems, one line each, starting with the file's path relative to the dataset root.
+    /// Problems, one line per broken file (or manifest problem), starting with the file's path
+    /// relative to the dataset root.
     pub problems: Vec<String>,
 }
 
@@ -92,33 +94,39 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
         }
         done += 1;
         on_file(done, total);
-        if let Some(problem) = checksum_problem(root, &s.reference, &s.reference_sha256) {
-            report.problems.push(problem);
-        }
-        match read_rgb_exr_image(&root.join(&s.reference)) {
-            Err(e) => report
-                .problems
-                .push(format!("{}: unreadable: {e}", s.reference)),
-            Ok(img) => {
-                if (img.width, img.height) != (w, h) {
-                    report.problems.push(format!(
-                        "{}: size {}x{}, manifest says {w}x{h}",
-                        s.reference, img.width, img.height
-                    ));
+        // Every problem of the reference on one line (a truncated file is both unreadable and
+        // of another checksum: one broken file, one line).
+        let mut reasons = Vec::new();
+        match file_state(root, &s.reference, &s.reference_sha256) {
+            FileState::Missing(why) => reasons.push(why),
+            state => {
+                match read_rgb_exr_image(&root.join(&s.reference)) {
+                    Err(e) => reasons.push(format!("unreadable: {e}")),
+                    Ok(img) => {
+                        if (img.width, img.height) != (w, h) {
+                            reasons.push(format!(
+                                "size {}x{}, manifest says {w}x{h}",
+                                img.width, img.height
+                            ));
+                        }
+                        if let Some(i) = img.data.iter().position(|v| !v.is_finite()) {
+                            let p = i / 3;
+                            reasons.push(format!(
+                                "non-finite value {} (NaN/Inf) in channel {} at pixel ({}, {})",
+                                img.data[i],
+                                ["R", "G", "B"][i % 3],
+                                p % img.width.max(1),
+                                p / img.width.max(1)
+                            ));
+                        }
+                    }
                 }
-                if let Some(i) = img.data.iter().position(|v| !v.is_finite()) {
-                    let p = i / 3;
-                    report.problems.push(format!(
-                        "{}: non-finite value {} (NaN/Inf) in channel {} at pixel ({}, {})",
-                        s.reference,
-                        img.data[i],
-                        ["R", "G", "B"][i % 3],
-                        p % img.width.max(1),
-                        p / img.width.max(1)
-                    ));
+                if let FileState::Mismatch(why) = state {
+                    reasons.push(why);
                 }
             }
         }
+        report.problems.extend(file_problem(&s.reference, reasons));
         done += 1;
         on_file(done, total);
     }
@@ -131,60 +139,84 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
                 e.bundle
             ));
         }
+        // Every problem of the bundle on one line, as for references.
+        let mut reasons = Vec::new();
         if !seen_scenes.contains(&e.scene) {
-            report.problems.push(format!(
-                "{}: scene `{}` is not in the manifest",
-                e.bundle, e.scene
-            ));
+            reasons.push(format!("scene `{}` is not in the manifest", e.scene));
         }
-        if let Some(problem) = checksum_problem(root, &e.bundle, &e.sha256) {
-            report.problems.push(problem);
-        }
-        match read_bundle(&root.join(&e.bundle)) {
-            Err(err) => report
-                .problems
-                .push(format!("{}: unreadable: {err}", e.bundle)),
-            Ok(b) => {
-                let m = &b.meta;
-                if (m.width as usize, m.height as usize) != (w, h) {
-                    report.problems.push(format!(
-                        "{}: size {}x{}, reference/manifest size is {w}x{h}",
-                        e.bundle, m.width, m.height
-                    ));
+        match file_state(root, &e.bundle, &e.sha256) {
+            FileState::Missing(why) => reasons.push(why),
+            state => {
+                match read_bundle(&root.join(&e.bundle)) {
+                    Err(err) => reasons.push(format!("unreadable: {err}")),
+                    Ok(b) => {
+                        let m = &b.meta;
+                        if (m.width as usize, m.height as usize) != (w, h) {
+                            reasons.push(format!(
+                                "size {}x{}, reference/manifest size is {w}x{h}",
+                                m.width, m.height
+                            ));
+                        }
+                        if m.passes != e.passes
+                            || m.seed != e.seed
+                            || m.photons_per_pass != e.photons
+                        {
+                            reasons.push(format!(
+                                "metadata (passes {}, seed {}, photons {}) disagrees with the \
+                                 manifest (passes {}, seed {}, photons {})",
+                                m.passes, m.seed, m.photons_per_pass, e.passes, e.seed, e.photons
+                            ));
+                        }
+                        if m.scene != e.scene {
+                            reasons.push(format!(
+                                "metadata scene `{}`, manifest says `{}`",
+                                m.scene, e.scene
+                            ));
+                        }
+                        if let Some((layer, channel, x, y)) = b.find_non_finite() {
+                            reasons.push(format!(
+                                "non-finite value (NaN/Inf) in layer `{layer}` channel \
+                                 `{channel}` at pixel ({x}, {y})"
+                            ));
+                        }
+                    }
                 }
-                if m.passes != e.passes || m.seed != e.seed || m.photons_per_pass != e.photons {
-                    report.problems.push(format!(
-                        "{}: metadata (passes {}, seed {}, photons {}) disagrees with the manifest (passes {}, seed {}, photons {})",
-                        e.bundle, m.passes, m.seed, m.photons_per_pass, e.passes, e.seed, e.photons
-                    ));
-                }
-                if m.scene != e.scene {
-                    report.problems.push(format!(
-                        "{}: metadata scene `{}`, manifest says `{}`",
-                        e.bundle, m.scene, e.scene
-                    ));
-                }
-                if let Some((layer, channel, x, y)) = b.find_non_finite() {
-                    report.problems.push(format!(
-                        "{}: non-finite value (NaN/Inf) in layer `{layer}` channel `{channel}` at pixel ({x}, {y})",
-                        e.bundle
-                    ));
+                if let FileState::Mismatch(why) = state {
+                    reasons.push(why);
                 }
             }
         }
+        report.problems.extend(file_problem(&e.bundle, reasons));
         done += 1;
         on_file(done, total);
     }
     report
 }
 
-/// A problem line when the file is missing or its SHA-256 differs from the recorded one.
-fn checksum_problem(root: &Path, rel: &str, expected: &str) -> Option<String> {
-    match sha256_file(&root.join(rel)) {
-        Err(e) => Some(format!("{rel}: missing or unreadable: {e}")),
-        Ok(sha) if sha != expected => Some(format!(
-            "{rel}: checksum mismatch (file {sha}, manifest {expected}): truncated or modified"
+/// What the checksum says about a file of the dataset.
+enum FileState {
+    /// Present with the recorded SHA-256.
+    Intact,
+    /// Missing or unreadable (the reason): nothing else about it can be checked.
+    Missing(String),
+    /// Present, another SHA-256 (the reason).
+    Mismatch(String),
+}
+
+/// Compares the file `rel` (under `root`) with its recorded SHA-256.
+fn file_state(root: &Path, rel: &str, expected: &str) -> FileState {
+    let path = root.join(rel);
+    match sha256_file(&path) {
+        Err(_) if !path.exists() => FileState::Missing("missing".into()),
+        Err(e) => FileState::Missing(format!("unreadable: {e}")),
+        Ok(sha) if sha != expected => FileState::Mismatch(format!(
+            "checksum mismatch (file {sha}, manifest {expected}): truncated or modified"
         )),
-        Ok(_) => None,
+        Ok(_) => FileState::Intact,
     }
+}
+
+/// The one problem line of the file `rel`: its reasons joined, `None` when there are none.
+fn file_problem(rel: &str, reasons: Vec<String>) -> Option<String> {
+    (!reasons.is_empty()).then(|| format!("{rel}: {}", reasons.join("; ")))
 }

@@ -15,10 +15,10 @@ use crate::plan::{Job, Plan, Shard};
 use crate::scene::write_scene_files;
 use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, write_bundle, write_rgb_exr_image, Bundle, Image};
-use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use renderer::state_file::scene_fingerprint;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// What one render run needs to know.
 #[derive(Debug, Clone, PartialEq)]
@@ -100,6 +100,8 @@ pub struct RenderReport {
     pub manifest_complete: bool,
     /// Jobs of this shard that had been rendered under another config (replaced now).
     pub replaced: usize,
+    /// Wall-clock time of the invocation.
+    pub elapsed: Duration,
 }
 
 /// Relative amount of work of a job, for the overall progress bar's ETA.
@@ -124,25 +126,116 @@ fn job_files(config: &Config, job: &Job) -> usize {
     }
 }
 
-/// Runs this shard's jobs of `config` into the dataset directory `root`.
+/// Runs this shard's jobs of `config` into the dataset directory `root`, with progress bars on
+/// stderr when `options.progress` is set.
 pub fn render_dataset(
     config: &Config,
     root: &Path,
     options: RenderOptions,
     renderer: &dyn SampleRenderer,
 ) -> Result<RenderReport> {
+    let target = if options.progress {
+        ProgressDrawTarget::stderr()
+    } else {
+        ProgressDrawTarget::hidden()
+    };
+    render_dataset_to(config, root, options, renderer, target)
+}
+
+/// A position given to a bar that is not work of this session (skipped jobs, the passes a
+/// resumed run had done before): recorded, then forgotten by the rate and ETA estimate.
+fn jump(bar: &ProgressBar, pos: u64) {
+    bar.set_position(pos);
+    // `tick` records the position in the estimator whatever the draw rate; the reset then
+    // drops everything before now, the jump included.
+    bar.tick();
+    bar.reset_eta();
+}
+
+/// A rate of passes per second as a progress bar shows it: three significant digits, or
+/// seconds per pass when a pass takes longer than a second (`104 passes/s`, `2.35 passes/s`,
+/// `12.3 s/pass`); `— passes/s` while nothing has been measured.
+pub fn format_pass_rate(per_sec: f64) -> String {
+    if !(per_sec.is_finite() && per_sec > 0.0) {
+        return "\u{2014} passes/s".into();
+    }
+    let three = |v: f64| -> String {
+        if v >= 99.95 {
+            format!("{v:.0}")
+        } else if v >= 9.995 {
+            format!("{v:.1}")
+        } else {
+            format!("{v:.2}")
+        }
+    };
+    if per_sec >= 1.0 {
+        format!("{} passes/s", three(per_sec))
+    } else {
+        format!("{} s/pass", three(1.0 / per_sec))
+    }
+}
+
+/// Passes per second since the first pass of this session: shared by a job's progress callback
+/// (which starts it) and its bar's `{rate}` key.
+#[derive(Debug, Clone, Default)]
+struct SessionRate(std::sync::Arc<std::sync::Mutex<Option<(u64, Instant)>>>);
+
+impl SessionRate {
+    /// Starts the measurement at position `pos` (now).
+    fn start(&self, pos: u64) {
+        if let Ok(mut base) = self.0.lock() {
+            *base = Some((pos, Instant::now()));
+        }
+    }
+
+    /// The rate at position `pos`; 0 before two passes were seen.
+    fn per_sec(&self, pos: u64) -> f64 {
+        match self.0.lock().ok().and_then(|b| *b) {
+            Some((base, at)) if pos > base => {
+                (pos - base) as f64 / at.elapsed().as_secs_f64().max(1e-9)
+            }
+            _ => 0.0,
+        }
+    }
+}
+
+/// Finishes and clears a bar when dropped, so that no bar is left on the terminal (a finished
+/// bar's line does not end, and what is printed next would be glued to it), on errors too.
+struct ClearOnDrop(ProgressBar);
+
+impl Drop for ClearOnDrop {
+    fn drop(&mut self) {
+        self.0.finish_and_clear();
+    }
+}
+
+/// [`render_dataset`] drawing its progress to `target` (tests give a terminal stand-in).
+pub fn render_dataset_to(
+    config: &Config,
+    root: &Path,
+    options: RenderOptions,
+    renderer: &dyn SampleRenderer,
+    target: ProgressDrawTarget,
+) -> Result<RenderReport> {
+    let started = Instant::now();
     std::fs::create_dir_all(root).with_context(|| format!("creating {}", root.display()))?;
     remove_stale_temps(root);
     let plan = Plan::new(config);
     let fingerprint = config_fingerprint(config);
     let mine = plan.shard_jobs(options.shard);
-    let multi = MultiProgress::with_draw_target(if options.progress {
-        ProgressDrawTarget::stderr()
-    } else {
-        ProgressDrawTarget::hidden()
-    });
+    let multi = MultiProgress::with_draw_target(target);
+    // A line for the user: above the bars, or plainly on stderr where no bar is drawn (--quiet,
+    // or stderr is not a terminal).
+    let say = |line: String| {
+        if multi.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            let _ = multi.println(line);
+        }
+    };
     let total_work: u64 = mine.iter().map(|&j| job_work(config, &plan.jobs[j])).sum();
-    let overall = multi.add(ProgressBar::new(total_work.max(1)));
+    let overall = ClearOnDrop(multi.add(ProgressBar::new(total_work.max(1))));
+    let overall = &overall.0;
     overall.set_style(
         ProgressStyle::with_template(
             "{prefix} [{elapsed_precise}] {wide_bar} {percent:>3}% {msg} ETA {eta_precise}",
@@ -159,51 +252,81 @@ pub fn render_dataset(
     report.replaced = jobs_of_other_config(root, &plan, &mine, &fingerprint);
     if report.replaced > 0 {
         // Said before the work starts: the user may have meant another directory.
-        let note = format!(
+        say(format!(
             "note: {} of this shard's {} jobs in {} were rendered with another config; they are \
              rendered again and their files replaced (keep one directory per config)",
             report.replaced,
             mine.len(),
             root.display()
-        );
-        if options.progress {
-            let _ = multi.println(note);
-        } else {
-            eprintln!("{note}");
-        }
+        ));
     }
     let mut files_done = 0;
     let mut work_done = 0u64;
-    overall.set_message(format!("{files_done}/{total_files} samples"));
-    // The user's scene files, hashed up front: a missing one stops the run before any render,
-    // and a job of a scene whose file changed since its record is redone.
+    // Files as in the summary line: references and bundles.
+    overall.set_message(format!("{files_done}/{total_files} files"));
+    // The user's scene files, hashed up front: a missing one (the XML or any file it reads)
+    // stops the run before any render, and a job of a scene whose files changed since its
+    // record is redone.
     let external = external_hashes(config, &plan, &mine)?;
     for &j in &mine {
         let job = plan.jobs[j];
         let work = job_work(config, &job);
         let existing = read_record(root, &plan, &job, &fingerprint);
         let scene_hash = external.get(&job.scene()).cloned();
-        if existing.is_some_and(|r| r.scene_sha256 == scene_hash && outputs_intact(root, &r)) {
+        let scene_id = &plan.scenes[job.scene()].id;
+        // How the job is named to the user (its record does not exist until it is done).
+        let label = match job {
+            Job::Reference { .. } => format!("{scene_id} reference"),
+            Job::Inputs { seed_index, .. } => format!("{scene_id} seed {seed_index}"),
+        };
+        let skip =
+            existing.is_some_and(|r| r.scene_sha256 == scene_hash && outputs_intact(root, &r));
+        if skip {
             report.skipped += 1;
         } else {
             let passes = match job {
                 Job::Reference { .. } => config.render.reference_passes,
                 Job::Inputs { .. } => *config.render.passes.last().unwrap_or(&0),
             };
-            let bar = multi.add(ProgressBar::new(u64::from(passes)));
-            bar.set_style(
-                ProgressStyle::with_template("  {msg:24} {bar:30} {pos}/{len} passes {per_sec}")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            let bar = ClearOnDrop(multi.add(ProgressBar::new(u64::from(passes))));
+            // The rate of this session's passes: measured from the first pass this session
+            // reports (a resumed run's earlier passes are not in it).
+            let rate = SessionRate::default();
+            let shown = rate.clone();
+            bar.0.set_style(
+                ProgressStyle::with_template("  {msg:24} {bar:30} {pos}/{len} passes  {rate}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar())
+                    .with_key(
+                        "rate",
+                        move |s: &ProgressState, w: &mut dyn std::fmt::Write| {
+                            let _ = w.write_str(&format_pass_rate(shown.per_sec(s.pos())));
+                        },
+                    ),
             );
-            let scene_id = &plan.scenes[job.scene()].id;
-            bar.set_message(match job {
-                Job::Reference { .. } => format!("{scene_id} reference"),
-                Job::Inputs { seed_index, .. } => format!("{scene_id} seed {seed_index}"),
-            });
+            bar.0.set_message(label.clone());
+            // A state of this job and config left by a killed session: the run resumes from
+            // it (its first pass reported is the one after the saved pass).
+            let resuming = root.join(plan.state_path(&job, &fingerprint)).is_file();
+            let mut first_pass = true;
             let start = Instant::now();
             let mut on_pass = |pass: u32| {
-                bar.set_position(u64::from(pass));
-                overall.set_position(work_done + work * u64::from(pass) / u64::from(passes.max(1)));
+                let overall_pos = work_done + work * u64::from(pass) / u64::from(passes.max(1));
+                if std::mem::take(&mut first_pass) {
+                    rate.start(u64::from(pass));
+                    if resuming && pass > 1 {
+                        say(format!(
+                            "{label}: resuming at pass {} of {passes}",
+                            pass - 1
+                        ));
+                        // The passes done before are not this session's work: not in the
+                        // overall ETA either.
+                        bar.0.set_position(u64::from(pass));
+                        jump(overall, overall_pos);
+                        return;
+                    }
+                }
+                bar.0.set_position(u64::from(pass));
+                overall.set_position(overall_pos);
             };
             let record = run_job(
                 config,
@@ -216,9 +339,8 @@ pub fn render_dataset(
                 renderer,
                 &mut on_pass,
             )
-            .with_context(|| format!("job {}", plan.record_path(&job)))?;
-            bar.finish_and_clear();
-            multi.remove(&bar);
+            .with_context(|| format!("job {label}"))?;
+            drop(bar);
             write_atomic(&root.join(plan.record_path(&job)), &to_json(&record))
                 .with_context(|| format!("writing {}", plan.record_path(&job)))?;
             // Wall-clock timing is useful but not reproducible: it lives outside the records.
@@ -227,12 +349,19 @@ pub fn render_dataset(
             report.rendered += 1;
         }
         files_done += job_files(config, &job);
-        overall.set_message(format!("{files_done}/{total_files} samples"));
+        overall.set_message(format!("{files_done}/{total_files} files"));
         work_done += work;
-        overall.set_position(work_done);
+        if skip {
+            // Done by an earlier session: not this session's work.
+            jump(overall, work_done);
+        } else {
+            overall.set_position(work_done);
+        }
     }
-    overall.finish();
+    // Cleared, not left standing: the caller's summary line follows on a line of its own.
+    overall.finish_and_clear();
     report.manifest_complete = assemble_manifest(root, config, &plan)?.is_some();
+    report.elapsed = started.elapsed();
     Ok(report)
 }
 
@@ -259,8 +388,8 @@ fn remove_stale_states(root: &Path, plan: &Plan, job: &Job, fingerprint: &str) -
 }
 
 /// Fingerprint ([`scene_fingerprint`]: the scene file, every file it reads, its `defines`) of
-/// every external scene among `jobs` (by scene index); an error naming the file when the scene
-/// file cannot be read.
+/// every external scene among `jobs` (by scene index); an error naming the file, the scene and
+/// its XML when the scene file or a file it reads cannot be read.
 fn external_hashes(
     config: &Config,
     plan: &Plan,
@@ -269,18 +398,67 @@ fn external_hashes(
     let mut out = std::collections::BTreeMap::new();
     for &j in jobs {
         let scene = plan.jobs[j].scene();
-        if let (Some(s), false) = (config.external_scene(scene), out.contains_key(&scene)) {
-            let hash = scene_fingerprint(&s.xml, &s.define_pairs()).with_context(|| {
-                format!(
-                    "scene {} (families.external): reading {}",
-                    plan.scenes[scene].id,
-                    s.xml.display()
-                )
-            })?;
+        if out.contains_key(&scene) {
+            continue;
+        }
+        if let Some(hash) = external_fingerprint(config, plan, scene)? {
             out.insert(scene, hash);
         }
     }
     Ok(out)
+}
+
+/// Checks that every file of every external scene of `config` (`[families.external]`) can be
+/// read: the scene files, their includes, meshes, textures, spectra. An error names the file,
+/// the scene and its XML.
+pub fn check_external_scenes(config: &Config) -> Result<()> {
+    let plan = Plan::new(config);
+    for scene in 0..plan.scenes.len() {
+        external_fingerprint(config, &plan, scene)?;
+    }
+    Ok(())
+}
+
+/// The fingerprint of scene `scene` when it is external (`None` for a generated one), after
+/// checking that its XML and every file it reads ([`renderer::xml::scene_files`]) can be read.
+fn external_fingerprint(config: &Config, plan: &Plan, scene: usize) -> Result<Option<String>> {
+    let Some(s) = config.external_scene(scene) else {
+        return Ok(None);
+    };
+    let id = &plan.scenes[scene].id;
+    let defines = s.define_pairs();
+    let files = renderer::xml::scene_files(&s.xml, &defines).with_context(|| {
+        format!(
+            "scene {id} (families.external): reading {}",
+            s.xml.display()
+        )
+    })?;
+    for file in &files {
+        let readable = std::fs::File::open(file)
+            .and_then(|f| f.metadata())
+            .and_then(|m| {
+                if m.is_file() {
+                    Ok(())
+                } else {
+                    Err(std::io::Error::other("not a file"))
+                }
+            });
+        if let Err(e) = readable {
+            bail!(
+                "scene {id} (families.external, {}): cannot read {}, a file the scene reads: \
+                 {e}",
+                s.xml.display(),
+                file.display()
+            );
+        }
+    }
+    let hash = scene_fingerprint(&s.xml, &defines).with_context(|| {
+        format!(
+            "scene {id} (families.external): reading {}",
+            s.xml.display()
+        )
+    })?;
+    Ok(Some(hash))
 }
 
 /// `path` as the manifest records it: relative to the dataset `root` (both made absolute), so

@@ -7,7 +7,9 @@ mod common;
 use anyhow::Result;
 use bundle::{read_rgb_exr_image, Bundle, Image};
 use common::{fresh_dir, stand_in_bundle, test_config};
-use datagen::average::{average_references, run_seed, AverageOptions, NoiseReport, NOISE_FILE};
+use datagen::average::{
+    average_references, run_seed, summary_lines, AverageOptions, NoiseReport, NOISE_FILE,
+};
 use datagen::jobs::{render_dataset, RenderOptions, RunSpec, SampleRenderer};
 use datagen::manifest::Manifest;
 use datagen::plan::Shard;
@@ -143,11 +145,43 @@ fn mean_and_noise_match_hand_computed_values_and_runs_are_reused() {
         serde_json::from_slice(&std::fs::read(dir.join("avg").join(NOISE_FILE)).unwrap()).unwrap();
     assert_eq!(written, report);
 
-    // The same request renders nothing; one more run renders only that run per scene.
+    // The same request renders nothing.
     let again = average(&dir, &manifest, 3, &renderer);
     assert_eq!(renderer.references.load(Ordering::SeqCst), 2 * in_split);
     assert_eq!(again, report);
-    average(&dir, &manifest, 4, &renderer);
+    // Another run count into the same folder is refused (its means would silently replace
+    // the 3-run ones), naming the folder, both counts and --out; nothing is rendered or written.
+    let before = std::fs::read(dir.join("avg").join(NOISE_FILE)).unwrap();
+    for runs in [2, 4] {
+        let err = average_references(
+            &dir,
+            &manifest,
+            &renderer,
+            &options(&manifest, runs),
+            |_, _, _| {},
+            &mut |_| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("avg")
+                && err.contains("averages of 3 runs")
+                && err.contains(&format!("asks for {runs}"))
+                && err.contains("--out"),
+            "{err}"
+        );
+    }
+    assert_eq!(renderer.references.load(Ordering::SeqCst), 2 * in_split);
+    assert_eq!(
+        std::fs::read(dir.join("avg").join(NOISE_FILE)).unwrap(),
+        before
+    );
+    // One more run into another folder renders only that run per scene.
+    let four = AverageOptions {
+        out: PathBuf::from("avg4"),
+        ..options(&manifest, 4)
+    };
+    average_references(&dir, &manifest, &renderer, &four, |_, _, _| {}, &mut |_| {}).unwrap();
     assert_eq!(renderer.references.load(Ordering::SeqCst), 3 * in_split);
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -222,6 +256,23 @@ fn splits_share_one_directory_and_its_noise_report() {
     assert_eq!(got, want);
     let path = dir.join("avg").join(NOISE_FILE);
     assert_eq!(NoiseReport::read(&path).unwrap(), Some(both.clone()));
+    // What the second call prints: its own split's scenes, the first split's only counted.
+    let lines = summary_lines(&both, splits[1], &path);
+    let of = |split| manifest.scenes.iter().filter(move |s| s.split == split);
+    assert_eq!(lines.len(), of(splits[1]).count() + 1, "{lines:?}");
+    for s in of(splits[1]) {
+        assert!(lines.iter().any(|l| l.starts_with(&s.id)), "{lines:?}");
+    }
+    for s in of(splits[0]) {
+        assert!(!lines.iter().any(|l| l.contains(&s.id)), "{lines:?}");
+    }
+    assert!(
+        lines.last().unwrap().contains(&format!(
+            "{} scene(s) of other splits, averaged by earlier calls",
+            of(splits[0]).count()
+        )),
+        "{lines:?}"
+    );
 
     // A report of the first version (one split for the file) is read and kept.
     let (id, scene) = both.scenes.iter().next().unwrap();

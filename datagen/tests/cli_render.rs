@@ -177,6 +177,13 @@ fn shards_kill_resume_and_check() {
             .any(|l| l.contains(&nan) && l.contains("NaN") && l.contains("variance")),
         "{stdout}"
     );
+    // One line and one count per broken file, however many of its checks fail.
+    assert_eq!(
+        stdout.lines().filter(|l| l.starts_with("BAD ")).count(),
+        2,
+        "{stdout}"
+    );
+    assert!(stdout.contains("2 problem(s)"), "{stdout}");
     std::fs::remove_dir_all(&work).unwrap();
 }
 
@@ -235,6 +242,11 @@ fn average_references_with_the_real_renderer() {
         (&["--out", "references"][..], "references"),
         (&["--runs", "1"][..], "at least 2"),
         (&["--split", "nope"][..], "nope"),
+        // `avg` holds 3-run means: 2-run means would silently replace them.
+        (
+            &["--runs", "2", "--out", "avg"][..],
+            "holds averages of 3 runs",
+        ),
     ] {
         let out = average(extra);
         let stderr = String::from_utf8_lossy(&out.stderr);
@@ -397,9 +409,15 @@ fn a_reference_job_killed_mid_run_resumes_from_its_state() {
         stderr.contains("reference.") && stderr.contains(".state") && stderr.contains("truncated"),
         "{stderr}"
     );
-    // Intact, it resumes; the dataset equals the uninterrupted one and no state is left.
+    // Intact, it resumes, saying so; the dataset equals the uninterrupted one and no state is
+    // left.
     std::fs::write(&state, &good).unwrap();
-    ok(render(&config_path, &dir, &saving).output().unwrap());
+    let out = ok(render(&config_path, &dir, &saving).output().unwrap());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(&format!(" reference: resuming at pass {passes} of 300")),
+        "{stderr}"
+    );
     assert_same(&reference, &snapshot(&dir));
 
     // Killed again mid-reference, then run under a changed config: the old state is not
@@ -604,6 +622,11 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
         stderr.contains("lamp/scene.xml") && stderr.contains("renders 32x32, the dataset is 16x16"),
         "{stderr}"
     );
+    // The failing job is named by scene and kind, not by a record that does not exist yet.
+    assert!(
+        stderr.contains("job 006-bright-lamp reference") && !stderr.contains("records/"),
+        "{stderr}"
+    );
     // A scene without `<rfilter type="box"/>` (Mitsuba's default is a Gaussian) is refused.
     let soft = work.join("mine/soft/scene.xml");
     std::fs::create_dir_all(soft.parent().unwrap()).unwrap();
@@ -635,6 +658,53 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
         !work.join("missing/references").exists(),
         "nothing rendered"
     );
+    // `datagen scenes` checks the user's scenes too.
+    let scenes = |out: &str| {
+        datagen(&[
+            "scenes",
+            "--config",
+            config_path.to_str().unwrap(),
+            "--out",
+            work.join(out).to_str().unwrap(),
+        ])
+        .output()
+        .unwrap()
+    };
+    let out = scenes("scenes-missing");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("nowhere.xml"),
+        "{stderr}"
+    );
+    // A file the scene reads (its mesh) missing: named with the scene and its XML, before any
+    // job (and by `scenes`).
+    let bare = work.join("mine/bare");
+    let bare_xml = user_scene(&bare, 20.0);
+    std::fs::remove_file(bare.join("floor.obj")).unwrap();
+    let mut meshless = config.clone();
+    meshless.families.external.as_mut().unwrap().scenes[1].xml = bare_xml;
+    std::fs::write(&config_path, toml::to_string(&meshless).unwrap()).unwrap();
+    let out = render(&config_path, &work.join("meshless"), &[])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success()
+            && stderr.contains("bare/floor.obj")
+            && stderr.contains("bare/scene.xml")
+            && stderr.contains("006-bright-lamp"),
+        "{stderr}"
+    );
+    assert!(
+        !work.join("meshless/references").exists(),
+        "nothing rendered"
+    );
+    let out = scenes("scenes-meshless");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("bare/floor.obj"),
+        "{stderr}"
+    );
     std::fs::remove_dir_all(&work).unwrap();
 }
 
@@ -656,7 +726,9 @@ fn an_input_job_killed_between_its_bundles_resumes_from_its_state() {
     let states = run_states(&dir, "s00.");
     let (_, passes) = states.iter().find(|(_, p)| *p >= 5).unwrap();
     assert!(*passes < 60, "saved at pass {passes}");
-    ok(render(&config_path, &dir, &saving).output().unwrap());
+    let out = ok(render(&config_path, &dir, &saving).output().unwrap());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains(" seed 0: resuming at pass "), "{stderr}");
     assert_same(&reference, &snapshot(&dir));
     std::fs::remove_dir_all(&work).unwrap();
 }

@@ -48,10 +48,20 @@ impl SampleRenderer for StandIn {
         &self,
         xml: &Path,
         spec: &RunSpec,
-        _: &mut (dyn FnMut(u32) + Send),
+        on_pass: &mut (dyn FnMut(u32) + Send),
     ) -> Result<Image> {
         self.runs.fetch_add(1, Ordering::SeqCst);
         let (w, h) = size(xml);
+        // A run resumes after the pass its state file holds (here as text), as SPPM does.
+        let saved: u32 = spec
+            .state
+            .as_ref()
+            .and_then(|s| std::fs::read_to_string(&s.path).ok())
+            .and_then(|t| t.trim().parse().ok())
+            .unwrap_or(0);
+        for p in saved + 1..=spec.passes[0] {
+            on_pass(p);
+        }
         Ok(image(spec, w, h, 3, spec.passes[0], 0))
     }
 
@@ -158,13 +168,30 @@ fn damaged_outputs_are_named_by_check_and_redone_by_render() {
         report.problems.iter().any(|p| p.starts_with(&missing)),
         "{text}"
     );
-    // Exactly the three damaged files are named.
+    // Exactly the three damaged files are named, each on one line (a truncated file is both
+    // unreadable and of another checksum; a missing one is not "unreadable" besides).
     let named: std::collections::BTreeSet<&str> = report
         .problems
         .iter()
         .map(|p| p.split(':').next().unwrap())
         .collect();
     assert_eq!(named.len(), 3, "{text}");
+    assert_eq!(report.problems.len(), 3, "{text}");
+    let line = |file: &str| {
+        report
+            .problems
+            .iter()
+            .find(|p| p.starts_with(file))
+            .unwrap()
+    };
+    assert!(
+        line(&truncated).contains("unreadable") && line(&truncated).contains("checksum mismatch"),
+        "{text}"
+    );
+    assert!(
+        line(&missing).contains("missing") && !line(&missing).contains("; unreadable"),
+        "{text}"
+    );
 
     // Rendering again redoes exactly the three damaged jobs and restores the dataset.
     let r = StandIn::default();
@@ -230,4 +257,116 @@ fn manifest_waits_for_all_shards() {
     assert!(report.manifest_complete);
     assert!(check_dataset(&dir, |_, _| {}).ok());
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A terminal stand-in for the progress bars: records what is written and where the cursor
+/// is left (column 0 = at the start of a line, where the next output begins cleanly).
+#[derive(Debug, Default, Clone)]
+struct Term {
+    text: std::sync::Arc<std::sync::Mutex<(String, usize)>>,
+}
+
+const TERM_WIDTH: u16 = 100;
+
+impl indicatif::TermLike for Term {
+    fn width(&self) -> u16 {
+        TERM_WIDTH
+    }
+    fn move_cursor_up(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_down(&self, _: usize) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn move_cursor_right(&self, n: usize) -> std::io::Result<()> {
+        self.text.lock().unwrap().1 += n;
+        Ok(())
+    }
+    fn move_cursor_left(&self, n: usize) -> std::io::Result<()> {
+        let mut t = self.text.lock().unwrap();
+        t.1 = t.1.saturating_sub(n);
+        Ok(())
+    }
+    fn write_line(&self, s: &str) -> std::io::Result<()> {
+        let mut t = self.text.lock().unwrap();
+        t.0.push_str(s);
+        t.0.push('\n');
+        t.1 = 0;
+        Ok(())
+    }
+    fn write_str(&self, s: &str) -> std::io::Result<()> {
+        let mut t = self.text.lock().unwrap();
+        t.0.push_str(s);
+        t.1 = match s.rfind('\n') {
+            Some(at) => s[at + 1..].chars().count(),
+            None => t.1 + s.chars().count(),
+        };
+        Ok(())
+    }
+    fn clear_line(&self) -> std::io::Result<()> {
+        let mut t = self.text.lock().unwrap();
+        t.0.push('\n');
+        t.1 = 0;
+        Ok(())
+    }
+    fn flush(&self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// On a terminal: a job resumed from a state of a killed session says so; the overall bar
+/// counts files; and no finished bar is left standing (the summary line printed after
+/// `render_dataset` would be glued to it).
+#[test]
+fn progress_says_resuming_counts_files_and_leaves_a_clean_line() {
+    use datagen::manifest::config_fingerprint;
+    use datagen::plan::{Job, Plan};
+    let config = test_config(16, &[2], 1, 8);
+    let dir = fresh_dir("fake-progress");
+    // A killed session's state of the first reference job, saved at pass 5 of 8.
+    let plan = Plan::new(&config);
+    let job = Job::Reference { scene: 0 };
+    let state = dir.join(plan.state_path(&job, &config_fingerprint(&config)));
+    std::fs::create_dir_all(state.parent().unwrap()).unwrap();
+    std::fs::write(&state, "5").unwrap();
+    let term = Term::default();
+    let target = indicatif::ProgressDrawTarget::term_like(Box::new(term.clone()));
+    let mut o = options(Shard::ALL);
+    o.progress = true;
+    let report =
+        datagen::jobs::render_dataset_to(&config, &dir, o, &StandIn::default(), target).unwrap();
+    assert_eq!(report.rendered, 10);
+    assert!(!state.exists());
+    let (text, column) = std::mem::take(&mut *term.text.lock().unwrap());
+    let resumed = format!("{} reference: resuming at pass 5 of 8", plan.scenes[0].id);
+    assert_eq!(text.matches("resuming at pass").count(), 1, "{text}");
+    assert!(text.contains(&resumed), "{text}");
+    assert!(
+        text.contains("/10 files") && !text.contains("samples"),
+        "{text}"
+    );
+    assert!(
+        text.contains("passes/s") || text.contains("s/pass"),
+        "{text}"
+    );
+    assert_eq!(column, 0, "the last bar was left standing:\n{text}");
+    // The resumed job's rate counts this session's passes only: none measured at its first.
+    let first = text
+        .split('\n')
+        .find(|l| l.contains(" 6/8 passes"))
+        .expect("the resumed job's bar at its first pass");
+    assert!(first.contains("\u{2014} passes/s"), "{first}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn pass_rates_have_three_significant_digits() {
+    use datagen::jobs::format_pass_rate;
+    assert_eq!(format_pass_rate(20752.0366), "20752 passes/s");
+    assert_eq!(format_pass_rate(103.9879), "104 passes/s");
+    assert_eq!(format_pass_rate(12.345), "12.3 passes/s");
+    assert_eq!(format_pass_rate(2.3456), "2.35 passes/s");
+    assert_eq!(format_pass_rate(0.08), "12.5 s/pass");
+    assert_eq!(format_pass_rate(0.0), "\u{2014} passes/s");
+    assert_eq!(format_pass_rate(f64::NAN), "\u{2014} passes/s");
 }

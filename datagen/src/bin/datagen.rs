@@ -3,12 +3,12 @@
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
-use datagen::average::{average_references, AverageOptions};
+use datagen::average::{average_references, summary_lines, AverageOptions, NOISE_FILE};
 use datagen::check::check_dataset;
 use datagen::config::Config;
 use datagen::contact_sheet::{write_contact_sheet, SheetLayout};
 use datagen::families::{generate, scene_list};
-use datagen::jobs::{render_dataset, RenderOptions};
+use datagen::jobs::{check_external_scenes, render_dataset, RenderOptions};
 use datagen::manifest::{assemble_manifest, Manifest};
 use datagen::plan::{Plan, Shard, Split};
 use datagen::scene::write_scene_files;
@@ -144,11 +144,20 @@ fn positive_interval(seconds: f64) -> Result<f64> {
     Ok(seconds)
 }
 
+/// A duration as `HH:MM:SS`, as the progress bars show elapsed time.
+fn hms(d: std::time::Duration) -> String {
+    let s = d.as_secs();
+    format!("{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
+}
+
 /// Runs a command; returns the exit status.
 fn run(cli: Cli) -> Result<i32> {
     match cli.command {
         Command::Scenes { config, out } => {
             let config = Config::load(&config)?;
+            // The user's own scenes are not written, but they must be there: their XML and
+            // every file it reads (as `render` checks before any job).
+            check_external_scenes(&config)?;
             let list = scene_list(&config);
             let mut written = 0;
             for (index, (id, _)) in list.iter().enumerate() {
@@ -188,12 +197,13 @@ fn run(cli: Cli) -> Result<i32> {
             };
             let report = render_dataset(&config, &out, options, &SppmBackend)?;
             eprintln!(
-                "shard {}/{}: {} jobs rendered, {} already done, {} files; manifest {}",
+                "shard {}/{}: {} jobs rendered, {} already done, {} files in {}; manifest {}",
                 shard.index,
                 shard.count,
                 report.rendered,
                 report.skipped,
                 report.samples,
+                hms(report.elapsed),
                 if report.manifest_complete {
                     "complete"
                 } else {
@@ -330,11 +340,11 @@ fn run(cli: Cli) -> Result<i32> {
                 },
             )?;
             bar.finish_and_clear();
-            for (id, n) in &report.scenes {
-                println!(
-                    "{id}: noise of one run {:.3e} relMSE, of the mean of {} {:.3e}",
-                    n.relmse_one_run, n.runs, n.relmse_mean
-                );
+            // What this call averaged (its split); noise.json also keeps the scenes of other
+            // splits that earlier calls averaged into the same folder.
+            let noise = dir.join(&out).join(NOISE_FILE);
+            for line in summary_lines(&report, split, &noise) {
+                println!("{line}");
             }
             println!("wrote {}", dir.join(&out).display());
             Ok(0)
