@@ -1,5 +1,5 @@
 //! Contact sheets: a PNG grid of a dataset's reference images (tone-mapped for display), in
-//! scene-id order so families appear in blocks.
+//! scene-id order so families appear in blocks, each tile labelled with its scene id.
 
 use anyhow::{bail, Context, Result};
 use bundle::{read_rgb_exr_image, Image};
@@ -77,13 +77,17 @@ fn resample(src: &[[u8; 3]], w: usize, h: usize, tw: usize, th: usize) -> Vec<[u
 }
 
 /// Builds the sheet from reference EXRs and writes it as PNG. Returns the image count.
-pub fn write_contact_sheet(files: &[PathBuf], layout: SheetLayout, out: &Path) -> Result<usize> {
-    if files.is_empty() {
+pub fn write_contact_sheet(
+    entries: &[(String, PathBuf)],
+    layout: SheetLayout,
+    out: &Path,
+) -> Result<usize> {
+    if entries.is_empty() {
         bail!("no reference images to put on a contact sheet");
     }
-    let images = files
+    let images = entries
         .iter()
-        .map(|f| read_rgb_exr_image(f).map_err(anyhow::Error::from))
+        .map(|(_, f)| read_rgb_exr_image(f).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
     let first = &images[0];
     let tw = layout.tile_width.max(1);
@@ -106,6 +110,8 @@ pub fn write_contact_sheet(files: &[PathBuf], layout: SheetLayout, out: &Path) -
             }
         }
     }
+    let labels: Vec<&str> = entries.iter().map(|(l, _)| l.as_str()).collect();
+    label_tiles(&mut sheet, &labels, layout, cols, th)?;
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)?;
     }
@@ -119,4 +125,73 @@ pub fn write_contact_sheet(files: &[PathBuf], layout: SheetLayout, out: &Path) -
     crate::fsutil::write_atomic(out, &bytes)
         .with_context(|| format!("writing {}", out.display()))?;
     Ok(images.len())
+}
+
+/// Writes each tile's label (its scene id) in its top-left corner, white on a dark band so it
+/// reads on any image; tiles too small for text (under 48 px wide) stay unlabelled.
+fn label_tiles(
+    sheet: &mut image::RgbImage,
+    labels: &[&str],
+    layout: SheetLayout,
+    cols: usize,
+    tile_height: usize,
+) -> Result<()> {
+    use plotters::prelude::*;
+    let tw = layout.tile_width.max(1);
+    if tw < 48 || tile_height < 16 {
+        return Ok(());
+    }
+    plots::register_font().map_err(anyhow::Error::msg)?;
+    let (w, h) = sheet.dimensions();
+    let size = (tw as f64 / 12.0).clamp(9.0, 16.0);
+    let g = layout.gap;
+    let root = BitMapBackend::with_buffer(sheet.as_mut(), (w, h)).into_drawing_area();
+    let style = TextStyle::from(("sans-serif", size).into_font()).color(&WHITE);
+    for (k, label) in labels.iter().enumerate() {
+        let (ox, oy) = (
+            g + (k % cols) * (tw + g),
+            g + (k / cols) * (tile_height + g),
+        );
+        let band = (size * 1.4) as i32;
+        let (x0, y0) = (ox as i32, oy as i32);
+        root.draw(&Rectangle::new(
+            [(x0, y0), (x0 + tw as i32 - 1, y0 + band)],
+            RGBColor(0, 0, 0).mix(0.55).filled(),
+        ))
+        .map_err(|e| anyhow::anyhow!("drawing a label: {e}"))?;
+        root.draw_text(label, &style, (x0 + 3, y0 + (size * 0.2) as i32))
+            .map_err(|e| anyhow::anyhow!("drawing a label: {e}"))?;
+    }
+    root.present()
+        .map_err(|e| anyhow::anyhow!("drawing the labels: {e}"))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiles_are_labelled_when_large_enough() {
+        let layout = |tile_width| SheetLayout {
+            columns: 2,
+            tile_width,
+            gap: 2,
+        };
+        let bright = |img: &image::RgbImage| img.pixels().filter(|p| p.0[0] > 200).count();
+        // Two 160-px tiles: the ids are written in white.
+        let mut sheet = image::RgbImage::new(2 * 160 + 6, 100);
+        label_tiles(&mut sheet, &["000-room", "001-glass"], layout(160), 2, 96).unwrap();
+        assert!(bright(&sheet) > 20, "no label text drawn");
+        // The second label lands in the second tile.
+        let right = (0..sheet.height())
+            .flat_map(|y| (164..sheet.width()).map(move |x| (x, y)))
+            .filter(|&(x, y)| sheet.get_pixel(x, y).0[0] > 200)
+            .count();
+        assert!(right > 10, "no label in the second tile");
+        // Tiles too small for text stay as they are.
+        let mut small = image::RgbImage::new(2 * 40 + 6, 30);
+        label_tiles(&mut small, &["000-room", "001-glass"], layout(40), 2, 24).unwrap();
+        assert_eq!(bright(&small), 0);
+    }
 }

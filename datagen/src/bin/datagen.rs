@@ -365,10 +365,10 @@ fn run(cli: Cli) -> Result<i32> {
                 );
             }
             let manifest = Manifest::load(&dir)?;
-            let files: Vec<PathBuf> = manifest
+            let files: Vec<(String, PathBuf)> = manifest
                 .scenes
                 .iter()
-                .map(|s| dir.join(&s.reference))
+                .map(|s| (s.id.clone(), dir.join(&s.reference)))
                 .collect();
             let layout = SheetLayout {
                 columns: usize::from(columns),
