@@ -374,6 +374,20 @@ fn bad_configs_fail_naming_the_problem() {
     assert!(!run.status.success());
     assert!(stderr.contains("nope.exr"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+    // An output that is a file, and a dataset directory that does not exist: named by key.
+    let file = dir.join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let as_output = base.replace(&toml_path(&dir.join("out")), &toml_path(&file));
+    std::fs::write(&config, as_output).unwrap();
+    let run = evaluate(&config);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("exists and is not a directory"), "{stderr}");
+    std::fs::write(&config, format!("{base}[dataset]\ndir = \"nowhere\"\n")).unwrap();
+    let run = evaluate(&config);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("[dataset] dir = nowhere"), "{stderr}");
     // More worker threads than any machine has: refused before anything runs.
     std::fs::write(&config, format!("{base}threads = 100000\n")).unwrap();
     let run = evaluate(&config);

@@ -60,7 +60,7 @@ pub const MAX_THREADS: usize = 1024;
 pub fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> anyhow::Result<R> {
     anyhow::ensure!(
         threads <= MAX_THREADS,
-        "{threads} worker threads requested: at most {MAX_THREADS} are supported"
+        "--threads {threads}: at most {MAX_THREADS} worker threads are supported"
     );
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -230,7 +230,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("1025 worker threads") && err.contains("1024"),
+            err.contains("--threads 1025") && err.contains("1024"),
             "{err}"
         );
     }

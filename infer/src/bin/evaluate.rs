@@ -72,7 +72,16 @@ fn run(cli: &Cli) -> Result<bool> {
     println!("wrote {}", config.output.join("index.html").display());
     println!("wrote {}", config.output.join("results.json").display());
     if s.failed > 0 {
-        eprintln!("error: {} scene(s) failed (listed in the report)", s.failed);
+        // The first failure's reason, so that the last line stands on its own.
+        let first = results
+            .scenes
+            .iter()
+            .find_map(|r| r.error.as_ref().map(|e| format!("{}: {e}", r.name)))
+            .unwrap_or_default();
+        eprintln!(
+            "error: {} scene(s) failed (listed in the report; the first: {first})",
+            s.failed
+        );
     }
     Ok(s.failed == 0)
 }

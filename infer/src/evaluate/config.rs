@@ -154,6 +154,12 @@ impl EvalConfig {
 
     /// Checks values the run cannot use.
     pub fn validate(&self) -> Result<()> {
+        if self.output.exists() && !self.output.is_dir() {
+            bail!(
+                "output = {}: exists and is not a directory",
+                self.output.display()
+            );
+        }
         if self.threads > renderer::film::MAX_THREADS {
             bail!(
                 "threads = {}: at most {} worker threads are supported",
@@ -210,8 +216,13 @@ impl EvalConfig {
         }
         if let Some(d) = &self.dataset {
             let path = d.dir.join("manifest.json");
-            let text = std::fs::read_to_string(&path)
-                .with_context(|| format!("reading {}", path.display()))?;
+            let text = std::fs::read_to_string(&path).with_context(|| {
+                format!(
+                    "[dataset] dir = {}: reading {}",
+                    d.dir.display(),
+                    path.display()
+                )
+            })?;
             let manifest: Manifest = serde_json::from_str(&text)
                 .with_context(|| format!("parsing {}", path.display()))?;
             let all_splits: Vec<String> = manifest.scenes.iter().map(|s| s.split.clone()).collect();

@@ -146,7 +146,7 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
         })
         .collect::<Result<Vec<_>>>()?;
     std::fs::create_dir_all(&config.output)
-        .with_context(|| format!("creating {}", config.output.display()))?;
+        .with_context(|| format!("output = {}: creating it", config.output.display()))?;
     let passes = config.pass_counts();
     // The settings and model files, hashed once for every scene's saved result.
     let run_fingerprint = resume::run_fingerprint(config)?;
