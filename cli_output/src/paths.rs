@@ -11,6 +11,15 @@ pub fn ends_with_separator(path: &Path) -> bool {
         .ends_with(std::path::is_separator)
 }
 
+/// Refuses an output `path` (given by `option`) that is an existing directory or is written as
+/// one (`out/`).
+pub fn check_not_directory(option: &str, path: &Path) -> Result<(), String> {
+    if path.is_dir() || ends_with_separator(path) {
+        return Err(format!("{option} {} is a directory", path.display()));
+    }
+    Ok(())
+}
+
 /// `path`'s extension, lower-cased.
 pub fn extension(path: &Path) -> Option<String> {
     path.extension()
@@ -110,6 +119,12 @@ mod tests {
         assert!(check_extension("--out", Path::new("q.EXR"), "exr", "an EXR").is_ok());
         assert!(check_extension("--out", Path::new("q"), "exr", "an EXR").is_ok());
         assert!(ends_with_separator(Path::new("out/")) && !ends_with_separator(Path::new("out")));
+        let err = check_not_directory("--out", &dir).unwrap_err();
+        assert!(
+            err.starts_with("--out ") && err.ends_with("is a directory"),
+            "{err}"
+        );
+        assert!(check_not_directory("--out", &dir.join("a/x.exr")).is_ok());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -3,7 +3,7 @@
 //! weights; writes the result as EXR (+ PNG previews) and, given a reference, the relMSE of
 //! every input level and of the output.
 
-use cli_output::paths::{check_distinct, create_parent_dir, ends_with_separator};
+use cli_output::paths::{check_distinct, check_extension, check_not_directory, create_parent_dir};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -256,19 +256,14 @@ fn check_outputs(cli: &Cli, output: &Path) -> Result<()> {
     } else {
         "the default output"
     };
-    if output.is_dir() || ends_with_separator(output) {
-        bail!("{option} {} is a directory", output.display());
-    }
-    if let Some(ext) = output.extension() {
-        if !ext.eq_ignore_ascii_case("exr") {
-            bail!(
-                "{option} {}: the output is an OpenEXR image, not .{}; give a name ending in \
-                 .exr (--png writes the PNG previews next to it)",
-                output.display(),
-                ext.to_string_lossy()
-            );
-        }
-    }
+    check_not_directory(option, output).map_err(anyhow::Error::msg)?;
+    check_extension(
+        option,
+        output,
+        "exr",
+        "the output is an OpenEXR image (--png writes the PNG previews next to it)",
+    )
+    .map_err(anyhow::Error::msg)?;
     // (what names it, path)
     let mut files: Vec<(String, PathBuf)> = vec![(option.to_string(), output.to_owned())];
     if cli.scene.is_some() {

@@ -284,7 +284,8 @@ fn evaluates_explicit_and_dataset_scenes() {
             .output()
             .unwrap()
     };
-    let evals = |out: &Path| -> Vec<serde_json::Value> {
+    // One field of every scene of `out/results.json`.
+    let field_of_scenes = |out: &Path, field: &str| -> Vec<serde_json::Value> {
         let r: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap())
                 .unwrap();
@@ -292,9 +293,10 @@ fn evaluates_explicit_and_dataset_scenes() {
             .as_array()
             .unwrap()
             .iter()
-            .map(|s| s["eval"].clone())
+            .map(|s| s[field].clone())
             .collect()
     };
+    let evals = |out: &Path| field_of_scenes(out, "eval");
     let first = evals(&out);
     let again = resume(&config);
     let stderr = String::from_utf8_lossy(&again.stderr);
@@ -303,14 +305,9 @@ fn evaluates_explicit_and_dataset_scenes() {
     assert_eq!(evals(&out), first);
     // The report says which scenes were taken from the earlier run (their timings are its).
     let reused = |out: &Path| -> Vec<bool> {
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap())
-                .unwrap();
-        r["scenes"]
-            .as_array()
-            .unwrap()
+        field_of_scenes(out, "reused")
             .iter()
-            .map(|s| s["reused"] == true)
+            .map(|v| *v == true)
             .collect()
     };
     assert_eq!(reused(&out), [true, true]);

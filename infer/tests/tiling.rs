@@ -189,17 +189,27 @@ fn write_tiny_model(dir: &Path) {
     .unwrap();
 }
 
+/// `infer --model dir --input input --output output`, to be given more arguments.
+fn infer_input(
+    dir: &Path,
+    input: impl AsRef<std::ffi::OsStr>,
+    output: impl AsRef<std::ffi::OsStr>,
+) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_infer"));
+    cmd.arg("--model")
+        .arg(dir)
+        .arg("--input")
+        .arg(input)
+        .arg("--output")
+        .arg(output);
+    cmd
+}
+
 #[test]
 fn cli_names_a_missing_bundle_and_exits_non_zero() {
     let dir = temp_dir("cli");
     write_tiny_model(&dir);
-    let out = Command::new(env!("CARGO_BIN_EXE_infer"))
-        .arg("--model")
-        .arg(&dir)
-        .arg("--input")
-        .arg(dir.join("nope.exr"))
-        .arg("--output")
-        .arg(dir.join("out.exr"))
+    let out = infer_input(&dir, dir.join("nope.exr"), dir.join("out.exr"))
         .output()
         .unwrap();
     assert!(!out.status.success());
@@ -222,13 +232,7 @@ fn cli_refuses_to_write_a_non_finite_reconstruction() {
     }
     let input = dir.join("huge.exr");
     bundle::write_bundle(&input, &bundle).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_infer"))
-        .arg("--model")
-        .arg(&dir)
-        .arg("--input")
-        .arg(&input)
-        .arg("--output")
-        .arg(dir.join("out.exr"))
+    let out = infer_input(&dir, &input, dir.join("out.exr"))
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -251,13 +255,7 @@ fn cli_threads_apply_to_the_reconstruction_and_change_nothing() {
     bundle::write_bundle(&input, &bundle).unwrap();
     let run = |threads: &str| {
         let output = dir.join(format!("out{threads}.exr"));
-        let out = Command::new(env!("CARGO_BIN_EXE_infer"))
-            .arg("--model")
-            .arg(&dir)
-            .arg("--input")
-            .arg(&input)
-            .arg("--output")
-            .arg(&output)
+        let out = infer_input(&dir, &input, &output)
             .args(["--threads", threads])
             .output()
             .unwrap();
@@ -287,13 +285,7 @@ fn cli_refuses_rendering_options_without_a_scene() {
         (&["-D", "res=64"][..], "-D"),
         (&["--state", "s.state"][..], "--state"),
     ] {
-        let out = Command::new(env!("CARGO_BIN_EXE_infer"))
-            .arg("--model")
-            .arg(&dir)
-            .arg("--input")
-            .arg(dir.join("bundle.exr"))
-            .arg("--output")
-            .arg(dir.join("out.exr"))
+        let out = infer_input(&dir, dir.join("bundle.exr"), dir.join("out.exr"))
             .args(option)
             .output()
             .unwrap();

@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use clap::error::ErrorKind;
 use clap::parser::ValueSource;
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, ValueEnum};
-use cli_output::paths::{check_distinct, check_extension, ends_with_separator, extension};
+use cli_output::paths::{check_distinct, check_extension, check_not_directory, extension};
 use indicatif::{ProgressBar, ProgressStyle};
 use renderer::film::{with_threads, Film};
 use renderer::image_io::{write_png_srgb, write_rgb_exr};
@@ -202,9 +202,7 @@ fn check_outputs(cli: &Cli) -> Result<Vec<(&'static str, PathBuf)>> {
     let mut folders = Vec::new();
     match cli.integrator {
         IntegratorKind::Path => {
-            if cli.out.is_dir() || ends_with_separator(&cli.out) {
-                bail!("--out {} is a directory", cli.out.display());
-            }
+            check_not_directory("--out", &cli.out).map_err(anyhow::Error::msg)?;
             files.push(("--out".into(), cli.out.clone()));
             folders.push(("--out", cli.out.clone()));
         }
@@ -242,9 +240,7 @@ fn check_outputs(cli: &Cli) -> Result<Vec<(&'static str, PathBuf)>> {
         }
     }
     if let Some(png) = &cli.png {
-        if png.is_dir() || ends_with_separator(png) {
-            bail!("--png {} is a directory", png.display());
-        }
+        check_not_directory("--png", png).map_err(anyhow::Error::msg)?;
         files.push(("--png".into(), png.clone()));
         folders.push(("--png", png.clone()));
     }
