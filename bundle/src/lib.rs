@@ -458,49 +458,146 @@ const MAX_EXPANSION: u64 = 2048;
 /// Checks an EXR's headers before its pixels are decoded: each layer's data window must start
 /// at (0, 0) (the readers here index pixels from the window's corner) and its decoded size must
 /// be one the file's length can hold. The EXR library allocates what a header claims, so a
-/// single corrupt number would otherwise end the process on a failed allocation.
+/// single corrupt number would otherwise end the process on a failed allocation. The first
+/// header's raw window is checked before the library parses it, so that every corrupt window is
+/// an error naming `dataWindow` and its value.
 fn check_header(path: &Path) -> Result<(), BundleError> {
     let io = |error| BundleError::Io {
         path: path.to_owned(),
         error,
     };
     let file_len = std::fs::metadata(path).map_err(io)?.len();
+    // The raw window first: the EXR library refuses some corrupt windows itself (coordinates
+    // beyond ±(2³⁰ − 1), a window its chunk count does not match) with messages that do not
+    // name the attribute.
+    let mut prefix = Vec::new();
+    {
+        use std::io::Read;
+        let file = std::fs::File::open(path).map_err(io)?;
+        file.take(RAW_HEADER_BYTES)
+            .read_to_end(&mut prefix)
+            .map_err(io)?;
+    }
+    if let Some((window, channels)) = raw_window_and_channels(&prefix) {
+        let [x0, y0, x1, y1] = window.map(i64::from);
+        check_window(
+            path,
+            file_len,
+            (x0, y0),
+            (x1 - x0 + 1, y1 - y0 + 1),
+            channels as u64,
+        )?;
+    }
     let meta =
         exr::meta::MetaData::read_from_file(path, true).map_err(|error| BundleError::Exr {
             path: path.to_owned(),
             error,
         })?;
     for header in meta.headers.iter() {
-        let bad = |reason: String| BundleError::Metadata {
-            path: path.to_owned(),
-            attribute: "dataWindow".into(),
-            reason,
-        };
         let position = header.own_attributes.layer_position;
-        if position.0 != 0 || position.1 != 0 {
-            return Err(bad(format!(
-                "starts at ({}, {}); expected (0, 0)",
-                position.0, position.1
-            )));
-        }
-        let (width, height) = (header.layer_size.0 as u64, header.layer_size.1 as u64);
-        let channels = header.channels.list.len() as u64;
-        let bytes = width
-            .saturating_mul(height)
-            .saturating_mul(channels)
-            .saturating_mul(4);
-        if bytes
-            > file_len
-                .saturating_mul(MAX_EXPANSION)
-                .saturating_add(1 << 20)
-        {
-            return Err(bad(format!(
-                "{width}x{height} pixels of {channels} channels cannot come from a file of \
-                 {file_len} bytes (corrupt header)"
-            )));
-        }
+        check_window(
+            path,
+            file_len,
+            (i64::from(position.0), i64::from(position.1)),
+            (header.layer_size.0 as i64, header.layer_size.1 as i64),
+            header.channels.list.len() as u64,
+        )?;
     }
     Ok(())
+}
+
+/// Bytes at the start of a file searched for the first header's raw attributes (a bundle's
+/// header, its JSON metadata included, is a few kilobytes).
+const RAW_HEADER_BYTES: u64 = 1 << 20;
+
+/// Refuses a data window (corner `position`, `size` in pixels, `channels` channels) that does
+/// not start at (0, 0), is empty, or holds more float32 samples than a file of `file_len` bytes
+/// can decode to: an error naming the attribute `dataWindow` and the offending value.
+fn check_window(
+    path: &Path,
+    file_len: u64,
+    position: (i64, i64),
+    size: (i64, i64),
+    channels: u64,
+) -> Result<(), BundleError> {
+    let bad = |reason: String| BundleError::Metadata {
+        path: path.to_owned(),
+        attribute: "dataWindow".into(),
+        reason,
+    };
+    if position != (0, 0) {
+        return Err(bad(format!(
+            "starts at ({}, {}); expected (0, 0)",
+            position.0, position.1
+        )));
+    }
+    let (width, height) = size;
+    if width <= 0 || height <= 0 {
+        return Err(bad(format!("{width}x{height} pixels: empty or inverted")));
+    }
+    let bytes = (width as u64)
+        .saturating_mul(height as u64)
+        .saturating_mul(channels)
+        .saturating_mul(4);
+    if bytes
+        > file_len
+            .saturating_mul(MAX_EXPANSION)
+            .saturating_add(1 << 20)
+    {
+        return Err(bad(format!(
+            "{width}x{height} pixels of {channels} channels cannot come from a file of \
+             {file_len} bytes (corrupt header)"
+        )));
+    }
+    Ok(())
+}
+
+/// The number of entries of a raw `chlist` attribute value: each a name, then 16 bytes (type,
+/// linear, reserved, sampling); an empty name ends the list.
+fn raw_channel_count(value: &[u8]) -> Option<usize> {
+    let (mut count, mut k) = (0, 0);
+    while *value.get(k)? != 0 {
+        k += value[k..].iter().position(|&b| b == 0)? + 1 + 16;
+        count += 1;
+    }
+    Some(count)
+}
+
+/// The first header's `dataWindow` (xMin, yMin, xMax, yMax) and number of channels, read from
+/// the raw attributes at the start of an EXR (`bytes`: magic number, version, then attributes
+/// as name, type, size, value); `None` where the header is not laid out so (the EXR library
+/// then reports it).
+fn raw_window_and_channels(bytes: &[u8]) -> Option<([i32; 4], usize)> {
+    let c_string = |at: usize| -> Option<(&[u8], usize)> {
+        let len = bytes.get(at..)?.iter().position(|&b| b == 0)?;
+        Some((&bytes[at..at + len], at + len + 1))
+    };
+    let i32_at = |at: usize| -> Option<i32> {
+        Some(i32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?))
+    };
+    let (mut window, mut channels) = (None, None);
+    let mut at = 8;
+    loop {
+        let (name, next) = c_string(at)?;
+        if name.is_empty() {
+            break;
+        }
+        let (kind, next) = c_string(next)?;
+        let size = usize::try_from(i32_at(next)?).ok()?;
+        let value_at = next + 4;
+        let end = value_at.checked_add(size)?;
+        let value = bytes.get(value_at..end)?;
+        match (name, kind) {
+            (b"dataWindow", b"box2i") if size == 16 => {
+                let n = |k: usize| i32_at(value_at + 4 * k);
+                window = Some([n(0)?, n(1)?, n(2)?, n(3)?]);
+            }
+            (b"channels", b"chlist") => channels = raw_channel_count(value),
+            _ => {}
+        }
+        at = end;
+    }
+    Some((window?, channels.unwrap_or(1)))
 }
 
 /// Checks what a bundle's header says about its origin: the format version this code reads,
@@ -650,12 +747,19 @@ pub fn read_rgb_exr_image(path: &Path) -> Result<Image, BundleError> {
 mod tests {
     use super::*;
 
-    /// A bundle with distinct, position-dependent values in every channel.
+    /// The value [`sample_bundle`] puts at interleaved index `i` of the layer with `salt`.
+    fn sample_value(salt: f32, i: usize) -> f32 {
+        salt + i as f32 * 0.25 - (i % 7) as f32 * 1e-3
+    }
+
+    /// A bundle with distinct, position-dependent values in every channel: sample `i` of a
+    /// layer is [`sample_value`]`(salt, i)`, salts y 0, z1 100, z2 200, z3 300, z4 400,
+    /// variance 1000, albedo 2000, normal −3000, depth 4000, radius 5000.
     fn sample_bundle(width: usize, height: usize, with_radius: bool) -> Bundle {
         let fill = |channels: usize, salt: f32| {
             let mut img = Image::new(width, height, channels);
             for (i, v) in img.data.iter_mut().enumerate() {
-                *v = salt + i as f32 * 0.25 - (i % 7) as f32 * 1e-3;
+                *v = sample_value(salt, i);
             }
             img
         };
@@ -705,6 +809,8 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// The written EXR has exactly the documented `layer.channel` names, each holding the
+    /// values of the layer and channel it names (swapped layers or channels fail).
     #[test]
     fn channel_names_follow_the_documented_layout() {
         let dir = temp_dir("names");
@@ -730,6 +836,39 @@ mod tests {
         expected.push("depth.Z".into());
         expected.sort();
         assert_eq!(names, expected);
+        // Each named channel holds the layer it names: (channel, salt of that layer in
+        // `sample_bundle`, channels of the layer, index of the channel within it), written out
+        // here from docs/formats.md rather than taken from the writer's layer table.
+        let (width, height) = (3, 2);
+        let mut layout: Vec<(String, f32, usize, usize)> = Vec::new();
+        for (l, level) in ["y", "z1", "z2", "z3", "z4"].into_iter().enumerate() {
+            for (c, channel) in ["R", "G", "B"].into_iter().enumerate() {
+                layout.push((format!("{level}.{channel}"), l as f32 * 100.0, 3, c));
+            }
+            layout.push((format!("variance.{level}"), 1000.0, 5, l));
+            layout.push((format!("radius.{level}"), 5000.0, 5, l));
+        }
+        for (c, channel) in ["R", "G", "B"].into_iter().enumerate() {
+            layout.push((format!("albedo.{channel}"), 2000.0, 3, c));
+        }
+        for (c, channel) in ["X", "Y", "Z"].into_iter().enumerate() {
+            layout.push((format!("normal.{channel}"), -3000.0, 3, c));
+        }
+        layout.push(("depth.Z".into(), 4000.0, 1, 0));
+        assert_eq!(layout.len(), names.len());
+        for (name, salt, channels, c) in &layout {
+            let plane = &decoded.planes[name];
+            assert_eq!(plane.len(), width * height, "channel {name}: plane size");
+            for (pixel, &got) in plane.iter().enumerate() {
+                let want = sample_value(*salt, pixel * channels + c);
+                assert!(
+                    got == want,
+                    "channel {name} at pixel ({}, {}): {got}, but its layer holds {want}",
+                    pixel % width,
+                    pixel / width
+                );
+            }
+        }
         assert_eq!(
             decoded.text_attribute(&path, FORMAT_ATTRIBUTE).unwrap(),
             FORMAT_VERSION
@@ -790,17 +929,51 @@ mod tests {
             v
         };
         let original = window(0, 0, 15, 15);
-        for (name, edited) in [
-            ("tall.exr", window(0, 0, 15, 4_194_303)),
-            ("wide.exr", window(0, 0, 1 << 30, 15)),
-            ("offset.exr", window(-10, 0, 5, 15)),
+        for (name, edited, value) in [
+            ("tall.exr", window(0, 0, 15, 4_194_303), "16x4194304 pixels"),
+            (
+                "wide.exr",
+                window(0, 0, 1 << 30, 15),
+                "1073741825x16 pixels",
+            ),
+            ("offset.exr", window(-10, 0, 5, 15), "starts at (-10, 0)"),
         ] {
             let err = read_edited(&dir, name, |b| patch(b, &original, &edited));
             assert!(
-                err.contains("dataWindow") || err.contains("invalid or truncated EXR"),
-                "{err}"
+                err.contains("`dataWindow`") && err.contains(value),
+                "{name}: the error must name the attribute and \"{value}\": {err}"
             );
         }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The raw header scan reads the data window and channel count the writer wrote, for
+    /// bundles with and without radii (27 and 32 channels) and for plain RGB images.
+    #[test]
+    fn raw_header_scan_finds_the_written_window_and_channels() {
+        let dir = temp_dir("raw-header");
+        for (with_radius, channels) in [(false, 27), (true, 32)] {
+            let path = dir.join(format!("b{with_radius}.exr"));
+            write_bundle(&path, &sample_bundle(7, 5, with_radius)).unwrap();
+            let bytes = std::fs::read(&path).unwrap();
+            assert_eq!(
+                raw_window_and_channels(&bytes),
+                Some(([0, 0, 6, 4], channels)),
+                "{}",
+                path.display()
+            );
+        }
+        let path = dir.join("rgb.exr");
+        write_rgb_exr_image(&path, &Image::new(9, 2, 3)).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!(
+            raw_window_and_channels(&bytes),
+            Some(([0, 0, 8, 1], 3)),
+            "{}",
+            path.display()
+        );
+        // Not an EXR header: nothing found, the EXR library reports it.
+        assert_eq!(raw_window_and_channels(b"P6\n16 16\n255\n"), None);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

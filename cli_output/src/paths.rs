@@ -11,6 +11,20 @@ pub fn ends_with_separator(path: &Path) -> bool {
         .ends_with(std::path::is_separator)
 }
 
+/// Refuses a missing input `path` that is a binary's `default` (a path relative to the
+/// repository root, such as a bench's default scene) with a message that says so: the usual
+/// cause is running from another directory. `what` names the default ("the bundled default
+/// scene"). Other paths are left to the loader's own error.
+pub fn check_default_input(path: &Path, default: &str, what: &str) -> Result<(), String> {
+    if path == Path::new(default) && !path.exists() {
+        return Err(format!(
+            "{default} not found: {what} is relative to the repository root; run from there \
+             or give a scene file"
+        ));
+    }
+    Ok(())
+}
+
 /// Refuses an output `path` (given by `option`) that is an existing directory or is written as
 /// one (`out/`).
 pub fn check_not_directory(option: &str, path: &Path) -> Result<(), String> {
@@ -126,5 +140,21 @@ mod tests {
         );
         assert!(check_not_directory("--out", &dir.join("a/x.exr")).is_ok());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A missing default is explained as relative to the repository root; a missing path the
+    /// user gave, or a default that exists, is left to the loader.
+    #[test]
+    fn a_missing_default_input_names_the_repository_root() {
+        let default = "no-such-dir/scene.xml";
+        let err =
+            check_default_input(Path::new(default), default, "the default scene").unwrap_err();
+        assert!(
+            err.starts_with("no-such-dir/scene.xml not found: the default scene is relative to the repository root"),
+            "{err}"
+        );
+        assert!(check_default_input(Path::new("other/scene.xml"), default, "x").is_ok());
+        let here = concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml");
+        assert!(check_default_input(Path::new(here), here, "x").is_ok());
     }
 }

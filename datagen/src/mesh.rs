@@ -314,23 +314,83 @@ mod tests {
         assert!((v - exact).abs() / exact < 5e-3, "{v}");
     }
 
+    /// `Waves::gradient` equals the hand-written closed form Σ a·k·cos(k·p + φ) and a central
+    /// finite difference of `Waves::height`, and the height field's positions and normals are
+    /// y = Σ a·sin(k·p + φ) and (−∂h/∂x, 1, −∂h/∂z) normalised, from the closed form.
     #[test]
     fn height_field_normals_match_gradient() {
+        // Two waves, one oblique, so both gradient components and both wave-vector components
+        // of each wave matter (a swapped component or a missing factor k shows).
+        let spec = [
+            ((2.0f64, 0.0f64), 0.1f64, 0.3f64),
+            ((0.7, -1.3), 0.05, -0.8),
+        ];
         let waves = Waves {
-            waves: vec![(Vec2::new(2.0, 0.0), 0.1, 0.3)],
+            waves: spec
+                .iter()
+                .map(|&((kx, kz), a, ph)| (Vec2::new(kx as f32, kz as f32), a as f32, ph as f32))
+                .collect(),
         };
+        let height = |x: f64, z: f64| -> f64 {
+            spec.iter()
+                .map(|&((kx, kz), a, ph)| a * (kx * x + kz * z + ph).sin())
+                .sum()
+        };
+        let gradient = |x: f64, z: f64| -> (f64, f64) {
+            spec.iter()
+                .map(|&((kx, kz), a, ph)| {
+                    let c = a * (kx * x + kz * z + ph).cos();
+                    (kx * c, kz * c)
+                })
+                .fold((0.0, 0.0), |s, g| (s.0 + g.0, s.1 + g.1))
+        };
+        // The gradient against the closed form and a central difference of `height`.
+        let step = 1e-2f32;
+        for i in 0..=10 {
+            for j in 0..=10 {
+                let (x, z) = (-1.0 + 0.2 * i as f32, -1.0 + 0.2 * j as f32);
+                let g = waves.gradient(x, z);
+                let (gx, gz) = gradient(f64::from(x), f64::from(z));
+                assert!(
+                    (f64::from(g.x) - gx).abs() < 1e-6 && (f64::from(g.y) - gz).abs() < 1e-6,
+                    "gradient at ({x}, {z}) = {g}, closed form ({gx}, {gz})"
+                );
+                let fd = Vec2::new(
+                    (waves.height(x + step, z) - waves.height(x - step, z)) / (2.0 * step),
+                    (waves.height(x, z + step) - waves.height(x, z - step)) / (2.0 * step),
+                );
+                assert!(
+                    (g - fd).abs().max_element() < 1e-3,
+                    "gradient at ({x}, {z}) = {g}, central difference of height {fd}"
+                );
+            }
+        }
         let mesh = height_field(&waves, 1.0, 1.0, 8);
-        for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
-            let g = waves.gradient(p.x, p.z);
-            let expect = Vec3::new(-g.x, 1.0, -g.y).normalize();
-            assert!((*n - expect).length() < 1e-5);
-            assert!((p.y - 0.1 * (2.0 * p.x + 0.3).sin()).abs() < 1e-6);
+        assert_eq!(mesh.positions.len(), 81);
+        for (k, (p, n)) in mesh.positions.iter().zip(&mesh.normals).enumerate() {
+            let (x, z) = (f64::from(p.x), f64::from(p.z));
+            let (gx, gz) = gradient(x, z);
+            let len = (gx * gx + 1.0 + gz * gz).sqrt();
+            let expect = Vec3::new((-gx / len) as f32, (1.0 / len) as f32, (-gz / len) as f32);
+            assert!(
+                (*n - expect).length() < 1e-5,
+                "vertex {k} at {p}: normal {n}, want {expect}"
+            );
+            assert!(
+                (f64::from(p.y) - height(x, z)).abs() < 1e-6,
+                "vertex {k} at {p}: height {}, want {}",
+                p.y,
+                height(x, z)
+            );
         }
         assert_eq!(mesh.triangles.len(), 2 * 64);
         // All faces point up.
         for t in &mesh.triangles {
             let p = |k: usize| mesh.positions[t[k] as usize];
-            assert!((p(1) - p(0)).cross(p(2) - p(0)).y > 0.0);
+            assert!(
+                (p(1) - p(0)).cross(p(2) - p(0)).y > 0.0,
+                "triangle {t:?} faces down"
+            );
         }
     }
 }

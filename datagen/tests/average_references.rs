@@ -1,6 +1,7 @@
-//! `average_references` with a stand-in renderer whose runs are constant images: the mean and
-//! the noise estimate equal hand-computed values, extra runs are reused (and only the missing
-//! ones rendered when more runs are asked for), and bad requests are errors.
+//! `average_references` with a stand-in renderer whose runs are images that depend on the seed,
+//! the pixel and the channel: the per-pixel mean and the noise estimate equal values computed
+//! by hand from the documented formula, extra runs are reused (and only the missing ones
+//! rendered when more runs are asked for), and bad requests are errors.
 
 mod common;
 
@@ -18,24 +19,39 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 const SIDE: usize = 8;
 
-/// The value of every sample of a run with this seed.
+/// The overall level of a run with this seed.
 fn level(seed: u64) -> f32 {
     0.25 + (seed % 7) as f32 * 0.5
 }
 
-/// Every run is a constant image; counts reference runs.
+/// The sample of a run with this seed at pixel (x, y), channel c: the seed's level scaled by a
+/// ramp over x, plus offsets in y and c and a term mixing seed, pixel and channel, so the
+/// per-pixel spread between runs differs from pixel to pixel and from channel to channel.
+fn sample(seed: u64, x: usize, y: usize, c: usize) -> f32 {
+    let mix = (seed as usize % 5 + 3 * x + 5 * y + 7 * c) % 4;
+    level(seed) * (1.0 + 0.25 * x as f32) + 0.125 * y as f32 + 0.5 * c as f32 + 0.0625 * mix as f32
+}
+
+/// The stand-in renderer: every run is [`run_image`] of its seed; counts reference runs.
 #[derive(Default)]
-struct Constant {
+struct StandIn {
     references: AtomicUsize,
 }
 
-fn constant(seed: u64, channels: usize) -> Image {
+/// The image of a run with this seed, `channels` channels of [`sample`].
+fn run_image(seed: u64, channels: usize) -> Image {
     let mut img = Image::new(SIDE, SIDE, channels);
-    img.data.fill(level(seed));
+    for y in 0..SIDE {
+        for x in 0..SIDE {
+            for c in 0..channels {
+                img.set(x, y, c, sample(seed, x, y, c));
+            }
+        }
+    }
     img
 }
 
-impl SampleRenderer for Constant {
+impl SampleRenderer for StandIn {
     fn reference(
         &self,
         _: &Path,
@@ -43,7 +59,7 @@ impl SampleRenderer for Constant {
         _: &mut (dyn FnMut(u32) + Send),
     ) -> Result<Image> {
         self.references.fetch_add(1, Ordering::SeqCst);
-        Ok(constant(spec.seed, 3))
+        Ok(run_image(spec.seed, 3))
     }
 
     fn inputs(
@@ -59,7 +75,7 @@ impl SampleRenderer for Constant {
                 p,
                 (SIDE, SIDE),
                 false,
-                |channels, _| constant(spec.seed, channels),
+                |channels, _| run_image(spec.seed, channels),
             ))?;
         }
         Ok(())
@@ -75,7 +91,7 @@ fn dataset(name: &str) -> (PathBuf, Manifest) {
         progress: false,
         state_interval: 60.0,
     };
-    render_dataset(&config, &dir, options, &Constant::default()).unwrap();
+    render_dataset(&config, &dir, options, &StandIn::default()).unwrap();
     let manifest = Manifest::load(&dir).unwrap();
     (dir, manifest)
 }
@@ -90,7 +106,7 @@ fn options(manifest: &Manifest, runs: usize) -> AverageOptions {
     }
 }
 
-fn average(dir: &Path, manifest: &Manifest, runs: usize, renderer: &Constant) -> NoiseReport {
+fn average(dir: &Path, manifest: &Manifest, runs: usize, renderer: &StandIn) -> NoiseReport {
     average_references(
         dir,
         manifest,
@@ -102,6 +118,8 @@ fn average(dir: &Path, manifest: &Manifest, runs: usize, renderer: &Constant) ->
     .unwrap()
 }
 
+/// The averaged image is the per-pixel, per-channel mean of the runs and the noise report the
+/// documented relMSE of one run (and of the mean), both computed by hand; runs are reused.
 #[test]
 fn mean_and_noise_match_hand_computed_values_and_runs_are_reused() {
     let (dir, manifest) = dataset("avg-values");
@@ -111,12 +129,12 @@ fn mean_and_noise_match_hand_computed_values_and_runs_are_reused() {
         .iter()
         .filter(|s| s.split == scene.split)
         .count();
-    let renderer = Constant::default();
+    let renderer = StandIn::default();
     let report = average(&dir, &manifest, 3, &renderer);
     assert_eq!(renderer.references.load(Ordering::SeqCst), 2 * in_split);
     assert_eq!(report.scenes.len(), in_split);
 
-    // By hand: the runs are constants v0 (the dataset's reference), v1, v2.
+    // By hand: the runs are images of seeds s0 (the dataset's reference), s1, s2.
     let seeds: Vec<u64> = (0..3)
         .map(|r| {
             if r == 0 {
@@ -126,21 +144,57 @@ fn mean_and_noise_match_hand_computed_values_and_runs_are_reused() {
             }
         })
         .collect();
-    let v: Vec<f64> = seeds.iter().map(|&s| f64::from(level(s))).collect();
-    let mean = v.iter().sum::<f64>() / 3.0;
-    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 2.0;
-    let noise = var / (mean * mean + 0.01);
     let got = &report.scenes[&scene.id];
     assert_eq!(got.seeds, seeds);
+    // Per sample: mean m and unbiased variance s² over the runs; per pixel: the weight
+    // 1/(g² + 0.01) with g the mean over RGB of m; the noise of one run is the mean over all
+    // samples of s²·weight (Σ s²/(ref² + 0.01) / (3·pixels), datagen::average::SceneNoise).
+    let mut mean = vec![[0.0f64; 3]; SIDE * SIDE];
+    let mut sum = 0.0f64;
+    for y in 0..SIDE {
+        for x in 0..SIDE {
+            let m = &mut mean[y * SIDE + x];
+            let mut s2 = [0.0f64; 3];
+            for c in 0..3 {
+                let v: Vec<f64> = seeds
+                    .iter()
+                    .map(|&s| f64::from(sample(s, x, y, c)))
+                    .collect();
+                m[c] = v.iter().sum::<f64>() / 3.0;
+                s2[c] = v.iter().map(|x| (x - m[c]).powi(2)).sum::<f64>() / 2.0;
+            }
+            let grey = (m[0] + m[1] + m[2]) / 3.0;
+            sum += (s2[0] + s2[1] + s2[2]) / (grey * grey + 0.01);
+        }
+    }
+    let noise = sum / (3 * SIDE * SIDE) as f64;
+    assert!(noise > 0.0, "the runs must differ: noise {noise}");
     assert!(
-        (got.relmse_one_run - noise).abs() <= 1e-6 * noise.max(1e-12),
-        "{} vs {noise}",
+        (got.relmse_one_run - noise).abs() <= 1e-6 * noise,
+        "relmse_one_run {} vs {noise} by hand",
         got.relmse_one_run
     );
-    assert!((got.relmse_mean - noise / 3.0).abs() <= 1e-6 * noise.max(1e-12));
-    let img = read_rgb_exr_image(&dir.join("avg").join(format!("{}.exr", scene.id))).unwrap();
-    assert_eq!((img.width, img.height), (SIDE, SIDE));
-    assert!(img.data.iter().all(|&x| x == mean as f32));
+    assert!(
+        (got.relmse_mean - noise / 3.0).abs() <= 1e-6 * noise,
+        "relmse_mean {} vs {} by hand",
+        got.relmse_mean,
+        noise / 3.0
+    );
+    let avg_path = dir.join("avg").join(format!("{}.exr", scene.id));
+    let img = read_rgb_exr_image(&avg_path).unwrap();
+    assert_eq!((img.width, img.height, img.channels), (SIDE, SIDE, 3));
+    for y in 0..SIDE {
+        for x in 0..SIDE {
+            for (c, &want) in mean[y * SIDE + x].iter().enumerate() {
+                let got = f64::from(img.get(x, y, c));
+                assert!(
+                    (got - want).abs() <= 1e-6 * want,
+                    "{}: pixel ({x}, {y}) channel {c} = {got}, want the mean {want}",
+                    avg_path.display()
+                );
+            }
+        }
+    }
     let written: NoiseReport =
         serde_json::from_slice(&std::fs::read(dir.join("avg").join(NOISE_FILE)).unwrap()).unwrap();
     assert_eq!(written, report);
@@ -186,10 +240,12 @@ fn mean_and_noise_match_hand_computed_values_and_runs_are_reused() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Too few runs and output folders that would overwrite the dataset are errors naming them;
+/// the dataset's own references stay as rendered.
 #[test]
 fn bad_requests_are_errors() {
     let (dir, manifest) = dataset("avg-errors");
-    let renderer = Constant::default();
+    let renderer = StandIn::default();
     let run = |o: AverageOptions| {
         average_references(&dir, &manifest, &renderer, &o, |_, _, _| {}, &mut |_| {})
             .unwrap_err()
@@ -206,10 +262,8 @@ fn bad_requests_are_errors() {
     // The dataset's own references are untouched by any of this.
     let reference = std::fs::read(dir.join(&manifest.scenes[0].reference)).unwrap();
     assert_eq!(
-        read_rgb_exr_image(&dir.join(&manifest.scenes[0].reference))
-            .unwrap()
-            .data[0],
-        level(manifest.scenes[0].reference_seed)
+        read_rgb_exr_image(&dir.join(&manifest.scenes[0].reference)).unwrap(),
+        run_image(manifest.scenes[0].reference_seed, 3)
     );
     assert!(!reference.is_empty());
     assert_eq!(renderer.references.load(Ordering::SeqCst), 0);
@@ -224,7 +278,7 @@ fn bad_requests_are_errors() {
 #[test]
 fn splits_share_one_directory_and_its_noise_report() {
     let (dir, manifest) = dataset("avg-splits");
-    let renderer = Constant::default();
+    let renderer = StandIn::default();
     let mut splits: Vec<_> = manifest.scenes.iter().map(|s| s.split).collect();
     splits.sort_by_key(|s| s.name());
     splits.dedup();

@@ -78,15 +78,28 @@ fn presets_parse_with_intended_sizes() {
     assert_eq!(paper.render.photons_per_pass, 100_000);
 }
 
+/// Config errors name the file, the field or table (and the line, for TOML errors that have
+/// one) and what is wrong.
 #[test]
 fn config_errors_name_file_and_field() {
     let text = std::fs::read_to_string(preset_path("tiny")).unwrap();
 
+    // The 1-based line of the first line of `text` containing `needle`.
+    let line_of = |text: &str, needle: &str| {
+        text.lines()
+            .position(|l| l.contains(needle))
+            .unwrap_or_else(|| panic!("tiny.toml no longer has `{needle}`"))
+            + 1
+    };
+
     let typo = text.replacen("photons_per_pass =", "photon_per_pass =", 1);
     let e = Config::parse(&typo, "typo.toml").unwrap_err().to_string();
+    let line = line_of(&typo, "photon_per_pass =");
     assert!(
-        e.contains("typo.toml") && e.contains("photon_per_pass"),
-        "{e}"
+        e.contains("typo.toml")
+            && e.contains(&format!("line {line}"))
+            && e.contains("photon_per_pass"),
+        "want typo.toml, line {line} and the field: {e}"
     );
 
     let descending = text.replacen("passes = [2, 4]", "passes = [4, 2]", 1);
@@ -105,15 +118,18 @@ fn config_errors_name_file_and_field() {
     let split = text.replacen("train = 0.6", "train = 0.7", 1);
     assert_ne!(split, text, "tiny.toml no longer has `train = 0.6`");
     let e = Config::parse(&split, "split.toml").unwrap_err().to_string();
-    assert!(e.contains("sum to 1"), "{e}");
+    assert!(
+        e.contains("split.toml") && e.contains("split fractions") && e.contains("sum to 1"),
+        "want split.toml and the split fractions: {e}"
+    );
 
-    let e = Config::parse(
-        &text.replacen("[families.glass]", "[families.glas]", 1),
-        "f.toml",
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(e.contains("glas"), "{e}");
+    let glas = text.replacen("[families.glass]", "[families.glas]", 1);
+    let e = Config::parse(&glas, "f.toml").unwrap_err().to_string();
+    let line = line_of(&glas, "[families.glas]");
+    assert!(
+        e.contains("f.toml") && e.contains(&format!("line {line}")) && e.contains("`glas`"),
+        "want f.toml, line {line} and the table `glas`: {e}"
+    );
 
     // Values the config's types accept but no dataset can be made of, each refused naming its
     // field (found by scripts/fuzz_inputs.py: a huge count aborted on a failed allocation, an

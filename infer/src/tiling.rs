@@ -381,6 +381,8 @@ mod tests {
         }
     }
 
+    /// Bands and tiles of any size reconstruct exactly what the whole image does, with a network
+    /// whose every layer has non-zero biases (a band or tile that dropped them would differ).
     #[test]
     fn bands_and_tiles_equal_the_whole_image() {
         use model::features::pack;
@@ -394,9 +396,14 @@ mod tests {
         let config = ModelConfig::preset(Preset::Tiny);
         let model = TrainedModel {
             dir: std::path::PathBuf::new(),
-            network: config.init(5, &device),
+            network: model::synthetic::with_distinct_biases(config.init(5, &device)),
             config,
         };
+        for conv in model.network.hidden.iter().chain([&model.network.output]) {
+            let bias = conv.bias.as_ref().expect("convolutions have a bias").val();
+            let bias = bias.into_data().try_to_vec::<f32>().unwrap();
+            assert!(bias.iter().all(|&b| b != 0.0), "a zero bias: {bias:?}");
+        }
         let whole = reconstruct_banded(&model, &packed, 0, usize::MAX, &device, |_, _| {});
         for (tile, band) in [(0, 50), (12, 50), (12, usize::MAX), (12, 1)] {
             let parts = reconstruct_banded(&model, &packed, tile, band, &device, |_, _| {});

@@ -8,9 +8,9 @@ use std::process::Command;
 use burn::tensor::Device;
 use infer::{reconstruct_tiled, Engine, TrainedModel};
 use model::features::pack;
-use model::synthetic::synthetic_bundle;
+use model::synthetic::{synthetic_bundle, with_biases, with_distinct_biases};
 use model::training::save_burnpack;
-use model::{ModelConfig, Preset, Weighting};
+use model::{ModelConfig, Network, Preset, Weighting};
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("infer-{name}-{}", std::process::id()));
@@ -19,10 +19,39 @@ fn temp_dir(name: &str) -> PathBuf {
     dir
 }
 
+/// The bias values of every convolution of `network`, hidden layers first.
+fn biases(network: &Network) -> Vec<Vec<f32>> {
+    network
+        .hidden
+        .iter()
+        .chain(std::iter::once(&network.output))
+        .map(|conv| {
+            let bias = conv.bias.as_ref().expect("convolutions have a bias");
+            bias.val().into_data().try_to_vec::<f32>().unwrap()
+        })
+        .collect()
+}
+
+/// Panics unless every bias of `network` is non-zero and the values within each layer differ.
+fn assert_distinct_non_zero_biases(name: &str, network: &Network) {
+    for (layer, mut bias) in biases(network).into_iter().enumerate() {
+        assert!(
+            bias.iter().all(|&b| b != 0.0),
+            "{name}: layer {layer} has a zero bias: {bias:?}"
+        );
+        let n = bias.len();
+        bias.sort_by(f32::total_cmp);
+        bias.dedup();
+        assert_eq!(bias.len(), n, "{name}: layer {layer} repeats a bias value");
+    }
+}
+
+/// A network of `preset` and `weighting` with Glorot weights from `seed` and distinct non-zero
+/// biases ([`with_distinct_biases`]): the bias path of every engine is exercised.
 fn model(preset: Preset, weighting: Weighting, seed: u64) -> TrainedModel {
     let mut config = ModelConfig::preset(preset);
     config.weighting = weighting;
-    let network = config.init(seed, &Device::flex());
+    let network = with_distinct_biases(config.init(seed, &Device::flex()));
     TrainedModel {
         dir: PathBuf::new(),
         config,
@@ -39,6 +68,8 @@ fn max_relative_difference(a: &[f32], b: &[f32]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Tiled reconstruction (ragged tiles, overlapping halos) equals the untiled one, on both
+/// engines, for networks with non-zero biases.
 #[test]
 fn tiled_equals_untiled_on_an_odd_sized_image() {
     // 53×41 with 16-px tiles: 4×3 tiles, ragged last row and column; the small preset's halo
@@ -53,6 +84,7 @@ fn tiled_equals_untiled_on_an_odd_sized_image() {
         (Preset::Tiny, Weighting::Softmax, Engine::Native),
     ] {
         let m = model(preset, weighting, 11);
+        assert_distinct_non_zero_biases(&format!("{preset:?}"), &m.network);
         let whole = reconstruct_tiled(&m, &packed, 0, engine, &device, |_, _| {});
         let mut calls = 0;
         let tiled = reconstruct_tiled(&m, &packed, 16, engine, &device, |done, total| {
@@ -80,6 +112,10 @@ fn tiled_equals_untiled_on_an_odd_sized_image() {
     }
 }
 
+/// The native engine computes what the Burn engine computes, for every preset, both weightings
+/// and a dual network, all with distinct non-zero biases in every layer; the biases change the
+/// output far beyond the tolerance, so an engine that skipped them or read them from another
+/// layer or channel would fail.
 #[test]
 fn native_engine_equals_burn() {
     // Every preset, both weightings and a dual (ỹ, z̃3) network, on an image smaller than the
@@ -89,15 +125,17 @@ fn native_engine_equals_burn() {
     let device = Device::flex();
     let mut dual = model(Preset::Tiny, Weighting::Relu, 4);
     dual.config = dual.config.clone().with_levels(vec![0, 3]);
-    dual.network = dual.config.init(4, &device);
+    dual.network = with_distinct_biases(dual.config.init(4, &device));
     for (name, m) in [
         ("paper", model(Preset::Paper, Weighting::Relu, 1)),
         ("medium", model(Preset::Medium, Weighting::Relu, 6)),
         ("small", model(Preset::Small, Weighting::Relu, 2)),
         ("small softmax", model(Preset::Small, Weighting::Softmax, 2)),
         ("tiny", model(Preset::Tiny, Weighting::Relu, 3)),
+        ("tiny softmax", model(Preset::Tiny, Weighting::Softmax, 3)),
         ("dual", dual),
     ] {
+        assert_distinct_non_zero_biases(name, &m.network);
         let burn = reconstruct_tiled(&m, &packed, 0, Engine::Burn, &device, |_, _| {});
         let native = reconstruct_tiled(&m, &packed, 0, Engine::Native, &device, |_, _| {});
         let d = max_relative_difference(&native.image, &burn.image);
@@ -105,14 +143,42 @@ fn native_engine_equals_burn() {
             d <= 2e-5,
             "{name}: native differs from Burn by {d:e} (relative)"
         );
-        let d = native
-            .shares
-            .iter()
-            .zip(&burn.shares)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
+        let d = max_abs_difference(&native.shares, &burn.shares);
         assert!(d <= 1e-5, "{name}: weight shares differ by {d:e}");
+        // The same network with zero biases reconstructs something else, far outside the
+        // tolerance: the comparison above sees the biases.
+        let unbiased = TrainedModel {
+            dir: PathBuf::new(),
+            config: m.config.clone(),
+            network: with_biases(m.network.clone(), |_| 0.0),
+        };
+        assert!(biases(&unbiased.network)
+            .iter()
+            .flatten()
+            .all(|&b| b == 0.0));
+        let without = reconstruct_tiled(&unbiased, &packed, 0, Engine::Burn, &device, |_, _| {});
+        let image = max_relative_difference(&without.image, &burn.image);
+        let shares = max_abs_difference(&without.shares, &burn.shares);
+        eprintln!(
+            "{name}: biases move the image by {image:e} (relative), the shares by {shares:e}"
+        );
+        // (A dual network's one share is always 1: only its image can show the biases.)
+        let shares_move = m.config.pairs() == 1 || shares > 100.0 * 1e-5;
+        assert!(
+            image > 100.0 * 2e-5 && shares_move,
+            "{name}: the biases move the image by only {image:e} and the shares by {shares:e}: \
+             the comparison cannot see them"
+        );
     }
+}
+
+/// Largest |a − b| over all samples.
+fn max_abs_difference(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max)
 }
 
 #[test]
@@ -171,10 +237,26 @@ fn missing_or_broken_model_files_are_named() {
     .unwrap();
     let err = TrainedModel::open(&dir, &device).err().unwrap().to_string();
     assert!(err.contains("model.bpk"), "{err}");
-    // Weights of another architecture do not load silently.
+    // Weights of another architecture do not load silently: the error names the weights file
+    // and the tensor whose shape differs.
     let other = ModelConfig::preset(Preset::Small).init(1, &device);
     save_burnpack(&other, &dir.join("model.bpk")).unwrap();
-    assert!(TrainedModel::open(&dir, &device).is_err());
+    let err = TrainedModel::open(&dir, &device).err().unwrap().to_string();
+    assert!(
+        err.contains("model.bpk") && err.contains("ShapeMismatch") && err.contains("hidden.0"),
+        "{err}"
+    );
+    // Nor do those of a deeper network whose first layers have this network's shapes.
+    let deeper = ModelConfig {
+        hidden_layers: config.hidden_layers + 1,
+        ..config.clone()
+    };
+    save_burnpack(&deeper.init(1, &device), &dir.join("model.bpk")).unwrap();
+    let err = TrainedModel::open(&dir, &device).err().unwrap().to_string();
+    assert!(
+        err.contains("model.bpk") && err.contains(&format!("hidden.{}", config.hidden_layers)),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

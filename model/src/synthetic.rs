@@ -1,4 +1,5 @@
-//! Synthetic multi-level bundles with a known truth, for tests and smoke runs.
+//! Synthetic multi-level bundles with a known truth, and networks with chosen biases, for
+//! tests and smoke runs.
 //!
 //! The truth is a smooth pattern plus edges. ỹ is the truth plus independent noise (unbiased,
 //! noisy, like the sharpest SPPM level gathered by path A); z̃1..z̃4 are box blurs of radius
@@ -6,11 +7,14 @@
 //! and increasingly biased, like path B's nested bandwidths).
 
 use bundle::{Bundle, BundleMeta, Image};
+use burn::module::{Module, ModuleMapper, Param};
+use burn::tensor::{Tensor, TensorData};
 use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 use crate::data::Sample;
 use crate::features::{interleaved, pack, planar_reference};
+use crate::model::Network;
 
 /// Approximately standard-normal noise (sum of four uniforms, rescaled).
 fn gaussian(rng: &mut Pcg64Mcg) -> f32 {
@@ -118,4 +122,43 @@ pub fn synthetic_sample(w: usize, h: usize, noise: f32, seed: u64) -> Sample {
     let packed = pack(&bundle).expect("synthetic bundle is well formed");
     let reference = planar_reference(&reference, w, h).expect("synthetic reference is well formed");
     Sample { packed, reference }
+}
+
+/// Sets every bias (the networks' only 1-D parameters) from its index over all biases in
+/// module order.
+struct SetBiases<F: FnMut(usize) -> f32> {
+    /// The value of bias entry n.
+    value: F,
+    /// Bias entries set so far.
+    next: usize,
+}
+
+impl<F: FnMut(usize) -> f32> ModuleMapper for SetBiases<F> {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        if D != 1 {
+            return param;
+        }
+        param.map(|t| {
+            let dims = t.dims();
+            let values: Vec<f32> = (self.next..self.next + dims[0])
+                .map(&mut self.value)
+                .collect();
+            self.next += dims[0];
+            Tensor::from_data(TensorData::new(values, dims), &t.device())
+        })
+    }
+}
+
+/// `network` with bias entry n (over all layers, in module order) set to `value(n)`.
+pub fn with_biases(network: Network, value: impl FnMut(usize) -> f32) -> Network {
+    network.map(&mut SetBiases { value, next: 0 })
+}
+
+/// `network` with distinct non-zero biases (`init` gives zero ones, which leave a bias path
+/// untested): entry n gets ±0.3·(2·frac(0.3 + n·0.618…) − 1), different from channel to channel
+/// and layer to layer, so a bias skipped or read from another layer or channel shows.
+pub fn with_distinct_biases(network: Network) -> Network {
+    with_biases(network, |n| {
+        (0.3 * (2.0 * (0.3 + n as f64 * 0.618_033_988_749_895).fract() - 1.0)) as f32
+    })
 }

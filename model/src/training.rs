@@ -38,6 +38,46 @@ pub struct TrainSettings {
     pub loss: Loss,
 }
 
+/// What a checkpoint trained with `checkpoint` cannot continue as `config` says, one
+/// `<key> <checkpoint's> (checkpoint) vs <config's> (config)` per differing key of the train
+/// TOML (`batch`, `lr`, `lr_end`, `seed`, `loss`; `epochs` too under a decaying rate, whose
+/// schedule spans them). Empty: the run resumes with `config` (which may add epochs).
+pub fn settings_differences(checkpoint: &TrainSettings, config: &TrainSettings) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut differ = |key: &str, was: String, now: String| {
+        if was != now {
+            out.push(format!("{key} {was} (checkpoint) vs {now} (config)"));
+        }
+    };
+    differ(
+        "batch",
+        checkpoint.batch.to_string(),
+        config.batch.to_string(),
+    );
+    differ("lr", checkpoint.lr.to_string(), config.lr.to_string());
+    let lr_end = |e: Option<f64>| e.map_or_else(|| "absent".to_string(), |e| e.to_string());
+    differ("lr_end", lr_end(checkpoint.lr_end), lr_end(config.lr_end));
+    differ("seed", checkpoint.seed.to_string(), config.seed.to_string());
+    differ("loss", toml_name(&checkpoint.loss), toml_name(&config.loss));
+    if checkpoint.lr_end.is_some() && checkpoint.epochs != config.epochs {
+        out.push(format!(
+            "epochs {} (checkpoint) vs {} (config; fixed by lr_end, whose decay spans them)",
+            checkpoint.epochs, config.epochs
+        ));
+    }
+    out
+}
+
+/// How `value` is spelt in a TOML config (its serde name: `relative-log-l1`, not Debug's
+/// `RelativeLogL1`).
+pub fn toml_name<T: Serialize>(value: &T) -> String {
+    match serde_json::to_value(value) {
+        Ok(serde_json::Value::String(s)) => s,
+        Ok(other) => other.to_string(),
+        Err(e) => format!("<{e}>"),
+    }
+}
+
 impl TrainSettings {
     /// The learning rate of step `step` (0-based) of a run of `total_steps`: `lr`, or the cosine
     /// decay from `lr` (first step) to `lr_end` (last step).
@@ -302,6 +342,16 @@ pub fn load_burnpack(
             path.display()
         ));
     }
+    // Tensors the network has no place for (a deeper network's extra layers) are not ignored.
+    if !result.unused.is_empty() {
+        return Err(format!(
+            "{}: weights do not match the model config: the file holds {} that a network of \
+             {} hidden layers does not have",
+            path.display(),
+            result.unused.join(", "),
+            config.hidden_layers
+        ));
+    }
     Ok(model)
 }
 
@@ -491,20 +541,12 @@ impl Trainer {
             .map_err(|e| format!("{}: {e}", state_path.display()))?;
         let state: CheckpointState =
             serde_json::from_str(&text).map_err(|e| format!("{}: {e}", state_path.display()))?;
-        let same = |a: &TrainSettings, b: &TrainSettings| {
-            a.batch == b.batch
-                && a.lr == b.lr
-                && a.seed == b.seed
-                && a.lr_end == b.lr_end
-                && a.loss == b.loss
-                && (a.lr_end.is_none() || a.epochs == b.epochs)
-        };
-        if !same(&state.settings, &settings) {
+        let differences = settings_differences(&state.settings, &settings);
+        if !differences.is_empty() {
             return Err(format!(
-                "{}: checkpoint settings {:?} differ from the config's {:?}",
+                "{}: checkpoint settings differ from the config: {}",
                 state_path.display(),
-                state.settings,
-                settings
+                differences.join("; ")
             ));
         }
         let device = device.clone().autodiff();

@@ -52,7 +52,9 @@ impl UniformSource for Pcg32 {
     }
 }
 
-/// Power heuristic (β = 2) weight of a strategy with density `a` against one with density `b`.
+/// Power heuristic (β = 2) weight of a strategy with density `a` against one with density `b`:
+/// a²/(a² + b²). A strategy that cannot produce the sample (`a` = 0) gets weight 0, also when
+/// `b` = 0; an infinite `a` (a delta strategy) gets weight 1 against any finite `b`.
 #[inline]
 pub fn power_heuristic(a: f32, b: f32) -> f32 {
     let (a2, b2) = (a * a, b * b);
@@ -297,12 +299,51 @@ mod tests {
         assert!((mean - 0.5).abs() < 0.005, "mean {mean}");
     }
 
+    /// The power heuristic gives the hand-computed a²/(a² + b²) (not the balance heuristic's
+    /// a/(a + b)), its complements sum to one, and the documented 0 and ∞ cases hold.
     #[test]
-    fn mis_weights_sum_to_one() {
-        for (a, b) in [(0.3, 2.0), (5.0, 5.0), (1e-3, 10.0), (0.0, 1.0)] {
+    fn mis_weights_are_the_power_heuristic_and_sum_to_one() {
+        // (a, b, a²/(a² + b²) by hand).
+        for (a, b, want) in [
+            (0.3f32, 2.0f32, 0.09f64 / 4.09),
+            (1.0, 2.0, 0.2),
+            (2.0, 1.0, 0.8),
+            (3.0, 4.0, 9.0 / 25.0),
+            (5.0, 5.0, 0.5),
+            (1e-3, 10.0, 1e-6 / (1e-6 + 100.0)),
+            (0.0, 1.0, 0.0),
+        ] {
+            let got = f64::from(power_heuristic(a, b));
+            assert!(
+                (got - want).abs() <= 1e-6 * want.max(1e-6),
+                "power_heuristic({a}, {b}) = {got}, want {want}"
+            );
             let s = power_heuristic(a, b) + power_heuristic(b, a);
-            assert!((s - 1.0).abs() < 1e-6, "{a} {b}: {s}");
+            assert!((s - 1.0).abs() < 1e-6, "{a} {b}: weights sum to {s}");
         }
+        // Neither strategy can produce the sample: no weight (not NaN).
+        assert_eq!(power_heuristic(0.0, 0.0), 0.0, "power_heuristic(0, 0)");
+        // A delta strategy (infinite density) takes all the weight against a finite one.
+        assert_eq!(
+            power_heuristic(f32::INFINITY, 3.0),
+            1.0,
+            "power_heuristic(inf, 3)"
+        );
+        assert_eq!(
+            power_heuristic(f32::INFINITY, 0.0),
+            1.0,
+            "power_heuristic(inf, 0)"
+        );
+        assert_eq!(
+            power_heuristic(3.0, f32::INFINITY),
+            0.0,
+            "power_heuristic(3, inf)"
+        );
+        assert_eq!(
+            power_heuristic(0.0, f32::INFINITY),
+            0.0,
+            "power_heuristic(0, inf)"
+        );
     }
 
     /// Monte Carlo integral of a density over its domain must be 1 (uniform sphere estimator).
@@ -342,32 +383,114 @@ mod tests {
         assert!((m - Vec2::splat(1.0 / 3.0)).abs().max_element() < 0.005);
     }
 
+    /// The documented contract of `sample`, by linear scan: the item is the last `i` with
+    /// `cdf[i] <= u` among the items of non-zero probability, its probability is `pmf[i]` and
+    /// the remapped `u` is `(u - cdf[i]) / pmf[i]` in [0, 1).
+    fn sample_by_linear_scan(d: &Distribution1D, u: f32) -> (usize, f32, f64) {
+        let mut pick = None;
+        for i in 0..d.len() {
+            if d.pmf[i] > 0.0 && d.cdf[i] <= u {
+                pick = Some(i);
+            }
+        }
+        let i = pick.expect("some item of non-zero probability starts at or below u");
+        let p = d.pmf[i];
+        let du = (f64::from(u) - f64::from(d.cdf[i])) / f64::from(p);
+        (i, p, du)
+    }
+
+    /// `Distribution1D::sample` on short tables (the branch-free count, n + 1 <= 9 cdf entries)
+    /// and long ones (the binary search) picks what a linear scan of the documented contract
+    /// picks, with zero weights, `u` = 0, `u` exactly on cdf entries, just below them and just
+    /// below 1; the probability and the remapped `u` are the contract's too.
     #[test]
-    fn short_table_count_equals_binary_search() {
-        // The branch-free count for short tables picks exactly what the binary search picks,
-        // zero weights and the ends included.
+    fn sample_matches_a_linear_scan_on_short_and_long_tables() {
         let mut rng = rng_for(31, 0, 0);
-        for n in 1..=12 {
-            for _ in 0..50 {
-                let w: Vec<f32> = (0..n)
-                    .map(|_| {
-                        let x = rng.next_f32();
-                        if x < 0.3 {
-                            0.0
-                        } else {
-                            x
-                        }
-                    })
-                    .collect();
+        let below_one = 1.0 - f32::EPSILON / 2.0;
+        let mut checked = [0usize; 2];
+        for n in 1..=12usize {
+            // Fixed patterns (leading, inner, trailing and all-but-one zeros), then random ones.
+            let mut tables: Vec<Vec<f32>> = vec![
+                (0..n).map(|i| (i + 1) as f32).collect(),
+                (0..n).map(|i| if i == 0 { 0.0 } else { 1.0 }).collect(),
+                (0..n).map(|i| if i + 1 == n { 0.0 } else { 2.0 }).collect(),
+                (0..n).map(|i| if i % 2 == 1 { 0.0 } else { 0.5 }).collect(),
+                (0..n).map(|i| if i == n / 2 { 3.0 } else { 0.0 }).collect(),
+            ];
+            for _ in 0..30 {
+                tables.push(
+                    (0..n)
+                        .map(|_| {
+                            let x = rng.next_f32();
+                            if x < 0.3 {
+                                0.0
+                            } else {
+                                x
+                            }
+                        })
+                        .collect(),
+                );
+            }
+            for w in tables {
                 let d = Distribution1D::new(&w);
-                for k in 0..200 {
-                    let u = if k == 0 { 0.0 } else { rng.next_f32() };
-                    let want = d.cdf.partition_point(|&c| c <= u);
-                    let count: usize = d.cdf.iter().map(|&c| usize::from(c <= u)).sum();
-                    assert_eq!(count, want, "{w:?} u = {u}");
+                assert_eq!(d.cdf.len(), n + 1, "{w:?}: cdf length");
+                // The cdf is the running sum of the normalised weights, ending at exactly 1.
+                let total: f64 = w.iter().map(|&x| f64::from(x)).sum();
+                let mut acc = 0.0f64;
+                for i in 0..n {
+                    let want_pmf = if total > 0.0 {
+                        f64::from(w[i]) / total
+                    } else {
+                        1.0 / n as f64
+                    };
+                    assert!(
+                        (f64::from(d.cdf[i]) - acc).abs() < 1e-6
+                            && (f64::from(d.pmf(i)) - want_pmf).abs() < 1e-6,
+                        "{w:?}: cdf[{i}] = {}, pmf = {} (want {acc}, {want_pmf})",
+                        d.cdf[i],
+                        d.pmf(i)
+                    );
+                    acc += want_pmf;
+                }
+                assert_eq!(d.cdf[n], 1.0, "{w:?}: cdf[n]");
+                let mut us = vec![0.0, below_one];
+                for &c in &d.cdf[..n] {
+                    us.push(c);
+                    if c > 0.0 {
+                        us.push(c.next_down());
+                    }
+                    if c.next_up() < 1.0 {
+                        us.push(c.next_up());
+                    }
+                }
+                us.extend((0..20).map(|_| rng.next_f32()));
+                // `u` lies in [0, 1): cdf entries of trailing zero weights are 1 already.
+                us.retain(|&u| u < 1.0);
+                for u in us {
+                    let (i, p, du) = d.sample(u);
+                    let (want_i, want_p, want_du) = sample_by_linear_scan(&d, u);
+                    assert_eq!(
+                        (i, p),
+                        (want_i, want_p),
+                        "{w:?} (cdf {:?}): sample({u}) index and probability",
+                        d.cdf
+                    );
+                    assert!(
+                        p > 0.0,
+                        "{w:?}: sample({u}) picked item {i} of probability 0"
+                    );
+                    let want_du = want_du.clamp(0.0, f64::from(1.0 - f32::EPSILON));
+                    assert!(
+                        (f64::from(du) - want_du).abs() <= 1e-5 && (0.0..1.0).contains(&du),
+                        "{w:?} (cdf {:?}): sample({u}) remapped u = {du}, want {want_du}",
+                        d.cdf
+                    );
+                    checked[usize::from(d.cdf.len() > 9)] += 1;
                 }
             }
         }
+        // Both arms of `sample` ran (short tables up to n = 8, binary search from n = 9).
+        assert!(checked[0] > 1000 && checked[1] > 1000, "{checked:?}");
     }
 
     #[test]

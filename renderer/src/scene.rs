@@ -916,6 +916,8 @@ mod tests {
         }
     }
 
+    /// A light sample's density equals the density of the surface its ray hits, and its MIS
+    /// weight against a BSDF density is the power heuristic, summing to one with its complement.
     #[test]
     fn sampled_light_pdf_matches_the_pdf_of_the_hit_and_mis_sums_to_one() {
         let scene = Scene::build(&desc(
@@ -945,10 +947,18 @@ mod tests {
                 "{pdf} vs {} (cos {cos_l})",
                 ls.pdf
             );
-            // MIS against any BSDF density for the same direction sums to one.
+            // MIS against any BSDF density for the same direction is the power heuristic
+            // l²/(l² + b²), and the two weights sum to one.
             let bsdf_pdf = 0.37 * ls.wi.y.abs();
+            let (l, b) = (f64::from(ls.pdf), f64::from(bsdf_pdf));
+            let want = l * l / (l * l + b * b);
+            let w = f64::from(power_heuristic(ls.pdf, bsdf_pdf));
+            assert!(
+                (w - want).abs() <= 1e-5,
+                "light weight {w} for pdfs {l} (light), {b} (BSDF); want {want}"
+            );
             let s = power_heuristic(ls.pdf, bsdf_pdf) + power_heuristic(bsdf_pdf, ls.pdf);
-            assert!((s - 1.0).abs() < 1e-5);
+            assert!((s - 1.0).abs() < 1e-5, "MIS weights sum to {s}");
             checked += 1;
         }
         assert!(checked > 1000);

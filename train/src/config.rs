@@ -4,9 +4,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use model::loss::Loss;
-use model::training::TrainSettings;
+use model::training::{toml_name, TrainSettings};
 use model::{ModelConfig, Preset, Weighting};
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 
 pub use model::backend::Backend;
 
@@ -179,18 +179,7 @@ impl TrainConfig {
             format!("{:?}", model.levels),
             format!("{:?}", net.levels),
         );
-        differ("batch", settings.batch.to_string(), ours.batch.to_string());
-        differ("lr", settings.lr.to_string(), ours.lr.to_string());
-        let lr_end = |e: Option<f64>| e.map_or_else(|| "absent".to_string(), |e| e.to_string());
-        differ("lr_end", lr_end(settings.lr_end), lr_end(ours.lr_end));
-        differ("seed", settings.seed.to_string(), ours.seed.to_string());
-        differ("loss", toml_name(&settings.loss), toml_name(&ours.loss));
-        if settings.lr_end.is_some() && settings.epochs != ours.epochs {
-            out.push(format!(
-                "epochs {} (checkpoint) vs {} (config; fixed by lr_end, whose decay spans them)",
-                settings.epochs, ours.epochs
-            ));
-        }
+        out.extend(model::training::settings_differences(settings, &ours));
         // Same keys, different network: a preset whose sizes changed since the checkpoint.
         if out.is_empty() && *model != net {
             let layers = |c: &ModelConfig| {
@@ -210,15 +199,6 @@ impl TrainConfig {
             ));
         }
         out
-    }
-}
-
-/// How an enum value is spelt in the TOML, e.g. `tiny` or `relative-log-l1`.
-fn toml_name<T: Serialize>(value: &T) -> String {
-    match serde_json::to_value(value) {
-        Ok(serde_json::Value::String(s)) => s,
-        Ok(other) => other.to_string(),
-        Err(e) => format!("<{e}>"),
     }
 }
 

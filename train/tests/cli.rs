@@ -240,11 +240,18 @@ fn trains_reports_bad_data_and_resumes() {
     assert_eq!(typo_run.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("no sample in split `vall`"), "{stderr}");
 
-    // Unknown keys are rejected with the file name.
+    // Unknown keys are rejected with the file name and the key's line.
     std::fs::write(&config, "dataset = \"x\"\npreset = \"tiny\"\npatch = 16\nstride = 8\nbatch = 4\nepochs = 1\nseed = 3\noutput = \"o\"\nlearning_rate = 1\n").unwrap();
     let bad = run(false);
-    assert!(!bad.status.success());
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("learning_rate"));
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(bad.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&config.display().to_string())
+            && stderr.contains("line 9")
+            && stderr.contains("unknown field `learning_rate`"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
 /// The output files of a run, by name, to show that a refused command changed none.

@@ -91,12 +91,8 @@ fn run() -> Result<()> {
         "--threads needs at least one count"
     );
     let defines = vec![("res".to_string(), cli.res.to_string())];
-    if !cli.scene.exists() && cli.scene == std::path::Path::new(DEFAULT_SCENE) {
-        anyhow::bail!(
-            "{DEFAULT_SCENE} not found: the default scene (the bundled default scene) is relative to the \
-             repository root; run from there or give a scene file"
-        );
-    }
+    cli_output::paths::check_default_input(&cli.scene, DEFAULT_SCENE, "the bundled default scene")
+        .map_err(anyhow::Error::msg)?;
     let desc = renderer::xml::load_scene(&cli.scene, &defines, false)
         .with_context(|| format!("loading {}", cli.scene.display()))?;
     let scene = Scene::build(&desc)?;

@@ -334,6 +334,8 @@ fn bundles_are_bit_identical_for_one_and_two_threads() {
     }
 }
 
+/// Checkpoints deliver one bundle each in order, a time limit stops after a pass, and invalid
+/// settings are errors naming the setting.
 #[test]
 fn checkpoints_and_time_limit() {
     let scene = lit_box(4);
@@ -378,9 +380,20 @@ fn checkpoints_and_time_limit() {
         photons_per_pass: 0,
         ..s.clone()
     };
-    assert!(render_sppm(&scene, &bad, &stop, |_| Ok(()), |_| {}).is_err());
+    let e = format!(
+        "{:#}",
+        render_sppm(&scene, &bad, &stop, |_| Ok(()), |_| {}).unwrap_err()
+    );
+    assert!(e.contains("photons per pass must be positive"), "{e}");
     let none = StopCondition::default();
-    assert!(render_sppm(&scene, &s, &none, |_| Ok(()), |_| {}).is_err());
+    let e = format!(
+        "{:#}",
+        render_sppm(&scene, &s, &none, |_| Ok(()), |_| {}).unwrap_err()
+    );
+    assert!(
+        e.contains("no stop condition") && e.contains("checkpoints") && e.contains("time limit"),
+        "{e}"
+    );
 }
 
 /// `gather` against a brute-force sum over all photons of β·f(wo, wp)·Φp/(N·π·r²) with the
@@ -812,6 +825,8 @@ fn a_resumed_run_is_bit_identical_to_an_uninterrupted_one() {
     }
 }
 
+/// A state file saved under other settings, another scene or the other mode, or damaged, is
+/// refused with an error naming the file and the reason (the differing field and both values).
 #[test]
 fn a_state_file_from_another_run_or_damaged_is_refused() {
     let scene = lit_box(6);
@@ -845,7 +860,11 @@ fn a_state_file_from_another_run_or_damaged_is_refused() {
         ..file.clone()
     };
     let e = error(&s, &other_scene, &[4]);
-    assert!(e.contains("scene"), "{e}");
+    assert!(
+        e.contains(&name)
+            && e.contains(r#"scene_fingerprint: "lit box" in the file, "another" in this run"#),
+        "{e}"
+    );
     let single = settings(SppmMode::Single, 1_000, 2);
     let e = error(&single, &file, &[4]);
     assert!(
