@@ -335,6 +335,20 @@ fn check_output(cfg: &TrainConfig, resume: bool) -> Result<()> {
 
 fn run(cli: &Cli) -> Result<()> {
     let cfg = TrainConfig::read(&cli.config)?;
+    // A `dataset` that is no directory would otherwise surface as `<it>/manifest.json: Not a
+    // directory`, without the key that set it (redrawing the curves needs no dataset).
+    if !cli.plot && !cfg.dataset.is_dir() {
+        bail!(
+            "{}: dataset = {}: {}",
+            cli.config.display(),
+            cfg.dataset.display(),
+            if cfg.dataset.exists() {
+                "not a directory"
+            } else {
+                "no such directory (a relative path is read from the directory train runs in)"
+            }
+        );
+    }
     // A misspelt `references` directory would otherwise only show as every sample screened out.
     if let Some(dir) = &cfg.references {
         let path = cfg.dataset.join(dir);

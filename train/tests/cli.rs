@@ -426,6 +426,28 @@ fn resume_without_a_checkpoint_creates_nothing() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A `dataset` that is a file or does not exist is refused naming the config and the key,
+/// before anything is written.
+#[test]
+fn a_dataset_that_is_no_directory_is_named_with_its_key() {
+    let dir = temp_dir("nodata");
+    let file = dir.join("file");
+    std::fs::write(&file, "not a dataset").unwrap();
+    for (data, why) in [
+        (file.clone(), "not a directory"),
+        (dir.join("missing"), "no such directory"),
+    ] {
+        let config = tiny_config(&dir, "run", &data, "");
+        let out = train(&config, &[]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        let expected = format!("{}: dataset = {}: {why}", config.display(), data.display());
+        assert!(stderr.contains(&expected), "{stderr}");
+        assert!(!dir.join("run-out").exists(), "{stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn a_split_nothing_can_be_trained_on_says_why() {
     let dir = temp_dir("unusable");
