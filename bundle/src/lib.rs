@@ -507,8 +507,9 @@ fn check_header(path: &Path) -> Result<(), BundleError> {
 }
 
 /// Bytes at the start of a file searched for the first header's raw attributes (a bundle's
-/// header, its JSON metadata included, is a few kilobytes).
-const RAW_HEADER_BYTES: u64 = 1 << 20;
+/// header, its JSON metadata included, is a few kilobytes; a longer header is left to the EXR
+/// library). Kept small: every bundle read pays for it, on top of the library's own read.
+const RAW_HEADER_BYTES: u64 = 64 << 10;
 
 /// Refuses a data window (corner `position`, `size` in pixels, `channels` channels) that does
 /// not start at (0, 0), is empty, or holds more float32 samples than a file of `file_len` bytes

@@ -606,18 +606,23 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
         "005-floor",
     );
 
+    // Renders with `variant` written as the config into `work/<out>`: (exit success, stderr).
+    let render_variant = |variant: &datagen::config::Config, out: &str| {
+        std::fs::write(&config_path, toml::to_string(variant).unwrap()).unwrap();
+        let out = render(&config_path, &work.join(out), &[]).output().unwrap();
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
     // A scene whose film is not the dataset's size, and a missing scene file: errors naming
     // the file, the second before anything is rendered.
     let mut wrong = config.clone();
     wrong.families.external.as_mut().unwrap().scenes[1]
         .defines
         .clear();
-    std::fs::write(&config_path, toml::to_string(&wrong).unwrap()).unwrap();
-    let out = render(&config_path, &work.join("wrong"), &[])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let (ok, stderr) = render_variant(&wrong, "wrong");
+    assert!(!ok);
     assert!(
         stderr.contains("lamp/scene.xml") && stderr.contains("renders 32x32, the dataset is 16x16"),
         "{stderr}"
@@ -635,24 +640,16 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
     std::fs::write(&soft, text.replace("<rfilter type=\"box\"/>", "")).unwrap();
     let mut gaussian = config.clone();
     gaussian.families.external.as_mut().unwrap().scenes[0].xml = soft;
-    std::fs::write(&config_path, toml::to_string(&gaussian).unwrap()).unwrap();
-    let out = render(&config_path, &work.join("soft"), &[])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let (ok, stderr) = render_variant(&gaussian, "soft");
+    assert!(!ok);
     assert!(
         stderr.contains("soft/scene.xml") && stderr.contains("<rfilter type=\"box\"/>"),
         "{stderr}"
     );
     let mut missing = config.clone();
     missing.families.external.as_mut().unwrap().scenes[0].xml = work.join("nowhere.xml");
-    std::fs::write(&config_path, toml::to_string(&missing).unwrap()).unwrap();
-    let out = render(&config_path, &work.join("missing"), &[])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let (ok, stderr) = render_variant(&missing, "missing");
+    assert!(!ok);
     assert!(stderr.contains("nowhere.xml"), "{stderr}");
     assert!(
         !work.join("missing/references").exists(),
@@ -683,14 +680,9 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
     std::fs::remove_file(bare.join("floor.obj")).unwrap();
     let mut meshless = config.clone();
     meshless.families.external.as_mut().unwrap().scenes[1].xml = bare_xml;
-    std::fs::write(&config_path, toml::to_string(&meshless).unwrap()).unwrap();
-    let out = render(&config_path, &work.join("meshless"), &[])
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let (ok, stderr) = render_variant(&meshless, "meshless");
     assert!(
-        !out.status.success()
-            && stderr.contains("bare/floor.obj")
+        !ok && stderr.contains("bare/floor.obj")
             && stderr.contains("bare/scene.xml")
             && stderr.contains("006-bright-lamp"),
         "{stderr}"

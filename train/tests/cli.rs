@@ -22,6 +22,14 @@ fn train(config: &Path, args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// A fresh test directory `name` and its empty dataset folder `<dir>/data`.
+fn dir_with_data(name: &str) -> (PathBuf, PathBuf) {
+    let dir = temp_dir(name);
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    (dir, data)
+}
+
 /// Writes `dir/<name>.toml`: one epoch of the `tiny` preset on `data` with `extra` keys,
 /// output `dir/<name>-out`; returns its path.
 fn tiny_config(dir: &Path, name: &str, data: &Path, extra: &str) -> PathBuf {
@@ -71,9 +79,7 @@ fn write_dataset(root: &Path) {
 
 #[test]
 fn trains_reports_bad_data_and_resumes() {
-    let dir = temp_dir("run");
-    let data = dir.join("data");
-    std::fs::create_dir_all(&data).unwrap();
+    let (dir, data) = dir_with_data("run");
     write_dataset(&data);
     let out = dir.join("out");
     let config = dir.join("tiny.toml");
@@ -272,9 +278,7 @@ fn snapshot(out: &Path) -> Vec<(String, Vec<u8>)> {
 
 #[test]
 fn refuses_to_overwrite_a_run_or_resume_it_with_other_settings() {
-    let dir = temp_dir("refuse");
-    let data = dir.join("data");
-    std::fs::create_dir_all(&data).unwrap();
+    let (dir, data) = dir_with_data("refuse");
     write_dataset(&data);
     let out = dir.join("run-out");
     // An output directory that exists but holds no run is fine.
@@ -397,9 +401,7 @@ fn refuses_to_overwrite_a_run_or_resume_it_with_other_settings() {
 
 #[test]
 fn resume_without_a_checkpoint_creates_nothing() {
-    let dir = temp_dir("nockpt");
-    let data = dir.join("data");
-    std::fs::create_dir_all(&data).unwrap();
+    let (dir, data) = dir_with_data("nockpt");
     let config = tiny_config(&dir, "fresh", &data, "");
     let out = dir.join("fresh-out");
     let resumed = train(&config, &["--resume"]);
@@ -450,9 +452,7 @@ fn a_dataset_that_is_no_directory_is_named_with_its_key() {
 
 #[test]
 fn a_split_nothing_can_be_trained_on_says_why() {
-    let dir = temp_dir("unusable");
-    let data = dir.join("data");
-    std::fs::create_dir_all(&data).unwrap();
+    let (dir, data) = dir_with_data("unusable");
     write_dataset(&data);
     // A patch larger than every image: the error itself names the reason, not only the list of
     // screened-out samples before it.
