@@ -190,8 +190,8 @@ pub struct IntegratorDesc {
     pub max_depth: i32,
     /// `rr_depth` (Mitsuba's default 5).
     pub rr_depth: u32,
-    /// `hide_emitters`: emitters seen directly from the camera (area lights and the
-    /// environment, not their reflections) render black, as in Mitsuba.
+    /// `hide_emitters`: as in Mitsuba, the camera sees through area emitters to what lies
+    /// behind them and sees the environment black (their reflections and light stay).
     pub hide_emitters: bool,
 }
 

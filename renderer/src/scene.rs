@@ -115,6 +115,10 @@ pub struct ShapeInfo {
     pub light: Option<u32>,
 }
 
+/// Most emitting surfaces [`Scene::intersect_behind_emitters`] passes through on one ray; a
+/// ray still on an emitter after that many is treated as escaped.
+const MAX_EMITTER_SKIPS: usize = 256;
+
 /// A scene ready for rendering.
 pub struct Scene {
     /// The camera.
@@ -455,6 +459,27 @@ impl Scene {
     pub fn intersect(&self, ray: &Ray) -> Option<SurfaceInteraction> {
         let hit = self.accel.intersect(ray)?;
         Some(self.interaction(ray, &hit))
+    }
+
+    /// The closest surface hit by a camera ray that sees through area emitters, as Mitsuba 3's
+    /// `hide_emitters` does: a hit on an emitting shape continues the ray in the same direction
+    /// from that surface, so the camera shows what lies behind the light (the light's own
+    /// surface, lit or not, is not seen). `None` when the ray escapes.
+    pub fn intersect_behind_emitters(&self, ray: &Ray) -> Option<SurfaceInteraction> {
+        let mut ray = *ray;
+        // Each step starts past the previous surface (`spawn_ray`'s offset), so the loop ends;
+        // the bound only guards against a stack of coincident emitters the offset cannot clear.
+        for _ in 0..MAX_EMITTER_SKIPS {
+            let si = self.intersect(&ray)?;
+            if si.light.is_none() {
+                return Some(si);
+            }
+            ray = Ray {
+                tmax: ray.tmax - si.t,
+                ..si.spawn_ray(ray.d)
+            };
+        }
+        None
     }
 
     /// What a ray that only looks for emitted light finds — the BSDF-sampling half of a

@@ -50,7 +50,8 @@ impl PathTracer {
         let mut prev_p = ray.o;
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
-        // Mitsuba's `hide_emitters`: the camera ray's own emission is dropped (only that).
+        // Mitsuba's `hide_emitters`: the camera ray sees through area emitters and not the
+        // environment; reflections of both stay.
         let hide_direct = scene.hide_emitters();
         loop {
             let hidden = hide_direct && depth == 0;
@@ -89,7 +90,13 @@ impl PathTracer {
                 };
                 break;
             }
-            let Some(si) = scene.intersect(&ray) else {
+            // Hidden emitters are seen through, to what lies behind them (as Mitsuba 3).
+            let hit = if hidden {
+                scene.intersect_behind_emitters(&ray)
+            } else {
+                scene.intersect(&ray)
+            };
+            let Some(si) = hit else {
                 if scene.has_environment() && !hidden {
                     result += environment(&ray);
                 }
@@ -402,6 +409,90 @@ mod tests {
             "same random streams, same light"
         );
         assert!((hidden.get(4, 4) - Rgb::ONE).abs().max_element() < 0.1);
+    }
+
+    /// `hide_emitters` sees through area emitters, as Mitsuba 3: a white emitting sphere
+    /// between the camera and a diffuse ball, in a constant environment. Hidden, the camera
+    /// sees the ball behind the emitter (and, past the ball's silhouette, the hidden
+    /// environment: black), never the emitter's own lit surface.
+    #[test]
+    fn hide_emitters_sees_through_area_emitters() {
+        let sphere = |center: Vec3, radius: f32, bsdf: usize, emission: Option<Rgb>| ShapeDesc {
+            name: "sphere".into(),
+            geometry: Geometry::Sphere {
+                center,
+                radius,
+                rotation: glam::Mat3::IDENTITY,
+                flip_normals: false,
+            },
+            bsdf,
+            emission: emission.map(Texture::Constant),
+        };
+        let desc = |hide: bool| SceneDescription {
+            camera: camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 8),
+            sample_count: None,
+            integrator: Some(crate::description::IntegratorDesc {
+                kind: "path".into(),
+                max_depth: -1,
+                rr_depth: 5,
+                hide_emitters: hide,
+            }),
+            bsdfs: vec![diffuse(1.0), diffuse(0.5)],
+            // The ball (radius 0.5 at the origin) and, in front of it, a larger emitter that
+            // covers the ball and some environment around it in the central pixels.
+            shapes: vec![
+                sphere(Vec3::ZERO, 0.5, 1, None),
+                sphere(Vec3::new(0.0, 0.0, -2.5), 0.6, 0, Some(Rgb::splat(3.0))),
+            ],
+            emitters: vec![EmitterDesc::Constant { radiance: Rgb::ONE }],
+            warnings: vec![],
+        };
+        let hidden_scene = Scene::build(&desc(true)).unwrap();
+        // The closest hit is the emitter; behind it lies the ball, 3.5 − 0.5 from the camera.
+        let ray = Ray::new(Vec3::new(0.0, 0.0, -4.0), Vec3::Z);
+        assert_eq!(hidden_scene.intersect(&ray).unwrap().shape, 1);
+        let behind = hidden_scene.intersect_behind_emitters(&ray).unwrap();
+        assert_eq!(behind.shape, 0);
+        assert!((behind.p.z + 0.5).abs() < 1e-4, "{:?}", behind.p);
+        // A ray that passes the emitter and then escapes finds nothing.
+        let past = Ray::new(Vec3::new(0.0, 0.0, -4.0), Vec3::new(0.5, 0.0, 1.5).normalize());
+        assert_eq!(hidden_scene.intersect(&past).unwrap().shape, 1);
+        assert!(hidden_scene.intersect_behind_emitters(&past).is_none());
+
+        let shown = PathTracer::default().render(&Scene::build(&desc(false)).unwrap(), 64, 1, None);
+        let hidden = PathTracer::default().render(&hidden_scene, 64, 1, None);
+        // The emitter fills the centre of the 8×8 image in both; shown, it glows (3 + its lit
+        // white surface); hidden, the centre is the ball, lit by the environment and the
+        // emitter, and darker than the emitter.
+        let centre = (hidden.get(3, 3) + hidden.get(4, 4)) * 0.5;
+        assert!(shown.get(3, 3).min_element() > 3.0, "{:?}", shown.get(3, 3));
+        assert!(
+            centre.min_element() > 0.2 && centre.max_element() < 3.0,
+            "{centre:?}"
+        );
+        // Every pixel of the hidden image that the emitter covers but the ball does not is
+        // black: the ray went through the emitter into the hidden environment.
+        let mut through_to_environment = 0;
+        for y in 0..8 {
+            for x in 0..8 {
+                // The pixel's corners and centre (both spheres project to disks, so a pixel
+                // whose five rays pass the emitter and miss the ball lies inside that ring).
+                let through = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)]
+                    .iter()
+                    .all(|&(dx, dy)| {
+                        let film = glam::Vec2::new(x as f32 + dx, y as f32 + dy);
+                        let ray = hidden_scene.camera.ray_at(film, glam::Vec2::splat(0.5));
+                        hidden_scene.intersect(&ray).map(|si| si.shape) == Some(1)
+                            && hidden_scene.intersect_behind_emitters(&ray).is_none()
+                    });
+                if through {
+                    through_to_environment += 1;
+                    assert_eq!(hidden.get(x, y), Rgb::ZERO, "pixel ({x}, {y})");
+                    assert!(shown.get(x, y).min_element() > 3.0, "pixel ({x}, {y})");
+                }
+            }
+        }
+        assert!(through_to_environment >= 4, "{through_to_environment}");
     }
 
     #[test]

@@ -899,3 +899,36 @@ fn a_state_file_from_another_run_or_damaged_is_refused() {
     assert_eq!(more.len(), 1);
     let _ = std::fs::remove_dir_all(file.path.parent().unwrap());
 }
+
+/// `hide_emitters` (Mitsuba 3's): an eye path from the camera sees through an area light to
+/// the surface behind it. Straight up under the box's ceiling light, the visible point is on
+/// the ceiling (y = 1), not on the light (y = 0.99), and the light's emission is not counted.
+#[test]
+fn hidden_emitters_are_seen_through_by_the_eye_path() {
+    let mut scene = lit_box(4);
+    let up = crate::math::Ray::new(Vec3::new(0.01, 0.0, 0.02), Vec3::Y);
+    let trace = |scene: &Scene| {
+        let mut rng = rng_for(3, 0, 0);
+        trace_eye_path(scene, up, &mut rng, 8)
+    };
+    let shown = trace(&scene);
+    let on_light = shown.vp.expect("a visible point on the light");
+    assert!((on_light.p.y - 0.99).abs() < 1e-4, "{:?}", on_light.p);
+    assert!(shown.direct.min_element() >= 8.0, "{:?}", shown.direct);
+
+    scene.integrator = Some(crate::description::IntegratorDesc {
+        kind: "sppm".into(),
+        max_depth: -1,
+        rr_depth: 5,
+        hide_emitters: true,
+    });
+    let hidden = trace(&scene);
+    let on_ceiling = hidden.vp.expect("a visible point behind the light");
+    assert!((on_ceiling.p.y - 1.0).abs() < 1e-4, "{:?}", on_ceiling.p);
+    // The ceiling above the light gets no direct light (the light emits downwards only).
+    assert_eq!(hidden.direct, Rgb::ZERO);
+    // The G-buffer describes the ceiling: its albedo and its depth from the camera.
+    assert_eq!(hidden.gbuffer.albedo, Rgb::splat(0.7));
+    let depth = scene.camera.depth_of(Vec3::new(0.01, 1.0, 0.02));
+    assert!((hidden.gbuffer.depth - depth).abs() < 1e-4, "{}", hidden.gbuffer.depth);
+}

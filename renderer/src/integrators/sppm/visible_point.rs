@@ -239,11 +239,16 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
         pdf: 1.0,
         delta: true,
     };
-    // Mitsuba's `hide_emitters`: the camera ray's own emission is dropped (only that).
+    // Mitsuba's `hide_emitters`: the camera ray sees through area emitters and not the
+    // environment; reflections of both stay.
     let hide_direct = scene.hide_emitters();
     for depth in 0..=max_depth {
-        let hit = scene.intersect(&ray);
         let hidden = hide_direct && depth == 0;
+        let hit = if hidden {
+            scene.intersect_behind_emitters(&ray)
+        } else {
+            scene.intersect(&ray)
+        };
         if !(std::mem::take(&mut emission_counted) || hidden) {
             out.direct += beta * emission_along(scene, &ray, hit.as_ref(), &last);
         }
