@@ -83,6 +83,17 @@ class Scene:
         m = re.search(r'name="hide_emitters"\s+value="(true|false)"', text)
         self.hide_emitters = bool(m) and m.group(1) == "true"
         self.has_integrator = "<integrator" in text
+        # `direct` scenes are compared with Mitsuba's `direct` at the file's sample counts.
+        integ = ET.fromstring(text).find("integrator")
+        self.integrator = integ.get("type") if integ is not None else "path"
+        counts = {e.get("name"): int(e.get("value")) for e in (integ if integ is not None else [])
+                  if e.tag == "integer" and e.get("name", "").endswith("_samples")}
+        shading = counts.get("shading_samples", 1)
+        self.emitter_samples = counts.get("emitter_samples", shading)
+        self.bsdf_samples = counts.get("bsdf_samples", shading)
+        # The table's max_depth column: `direct` has none, it shows its sample counts instead.
+        self.depth_label = (f"direct ({self.emitter_samples} emitter, {self.bsdf_samples} BSDF)"
+                            if self.integrator == "direct" else str(self.max_depth))
         # Externals: the shared reference was made with `path` unless meta.json says otherwise.
         self.path_traceable = self.meta.get("integrator", "path") == "path"
 
@@ -151,6 +162,9 @@ def mitsuba_reference(scene, spp, out_dir, force):
     }
     if scene.hide_emitters:  # only then: the cache keys of the other scenes stay as they were
         settings["hide_emitters"] = True
+    if scene.integrator == "direct":
+        settings.update(integrator="direct", emitter_samples=scene.emitter_samples,
+                        bsdf_samples=scene.bsdf_samples)
     key = scene.files_hash(settings)
     exr, npy, info_path = out_dir / "mitsuba.exr", out_dir / "mitsuba_chunks.npy", out_dir / "mitsuba.json"
     if not force and info_path.exists() and exr.exists() and npy.exists():
@@ -162,8 +176,12 @@ def mitsuba_reference(scene, spp, out_dir, force):
     chunks = max(1, spp // CHUNK_SPP)
     chunk_spp = spp // chunks
     sc = mi.load_file(str(scene.xml), **scene.load_params(chunk_spp))
-    integrator = mi.load_dict({"type": "path", "max_depth": scene.max_depth, "rr_depth": scene.rr_depth,
-                               "hide_emitters": scene.hide_emitters})
+    if scene.integrator == "direct":
+        integrator = mi.load_dict({"type": "direct", "emitter_samples": scene.emitter_samples,
+                                   "bsdf_samples": scene.bsdf_samples, "hide_emitters": scene.hide_emitters})
+    else:
+        integrator = mi.load_dict({"type": "path", "max_depth": scene.max_depth, "rr_depth": scene.rr_depth,
+                                   "hide_emitters": scene.hide_emitters})
     t0 = time.time()
     acc, downs = None, []
     for k in range(chunks):
@@ -194,11 +212,19 @@ def render_help(binary):
 
 
 def ours_command(scene, binary, help_text, spp, seed, out_exr, out_png, threads):
-    """The `render` command line for one scene (path tracer, 128x128, the scene's max_depth)."""
-    cmd = [str(binary), str(scene.xml), "--integrator", "path", "--spp", str(spp), "--seed", str(seed),
+    """The `render` command line for one scene (path tracer, 128x128, the scene's max_depth;
+    `direct` scenes with the direct integrator at the file's sample counts)."""
+    integrator = "direct" if scene.integrator == "direct" else "path"
+    cmd = [str(binary), str(scene.xml), "--integrator", integrator, "--spp", str(spp), "--seed", str(seed),
            "--out", str(out_exr), "--png", str(out_png)]
     if threads:
         cmd += ["--threads", str(threads)]
+    if integrator == "direct":
+        if "res" in scene.defaults:
+            cmd += ["-D", f"res={RES}"]
+        if "spp" in scene.defaults:
+            cmd += ["-D", f"spp={spp}"]
+        return cmd
     for name, value in (("res", RES), ("spp", spp), ("max_depth", scene.max_depth)):
         if name in scene.defaults:
             cmd += ["-D", f"{name}={value}"]
@@ -321,13 +347,13 @@ def main():
             seconds = time.time() - t0
             if proc.returncode != 0:
                 failures += 1
-                rows.append(f"| {scene.name} | {scene.group} | {scene.max_depth} | – | – | – | – | – | "
+                rows.append(f"| {scene.name} | {scene.group} | {scene.depth_label} | – | – | – | – | – | "
                             f"FAIL: render exited with {proc.returncode} |")
                 continue
         ours = read_exr(ours_exr)
         if ours.shape != ref.shape:
             failures += 1
-            rows.append(f"| {scene.name} | {scene.group} | {scene.max_depth} | – | – | – | – | – | "
+            rows.append(f"| {scene.name} | {scene.group} | {scene.depth_label} | – | – | – | – | – | "
                         f"FAIL: image {ours.shape[1]}x{ours.shape[0]}, Mitsuba's {ref.shape[1]}x{ref.shape[0]} |")
             continue
         rel_mse, mean_a, mean_b, mean_rel, noise = compare(ours, ref, ref_chunks, args.spp, args.ref_spp)
@@ -340,7 +366,7 @@ def main():
             mean_mitsuba=list(map(float, mean_b)), mean_rel=list(map(float, mean_rel)),
             ok=bool(ok), spp=args.spp, ref_spp=args.ref_spp, seconds_ours=seconds,
             seconds_mitsuba=info.get("seconds")), indent=2) + "\n")
-        rows.append(f"| {scene.name} | {scene.group} | {scene.max_depth} | {rel_mse:.2e} | {noise:.1e} | "
+        rows.append(f"| {scene.name} | {scene.group} | {scene.depth_label} | {rel_mse:.2e} | {noise:.1e} | "
                     f"{fmt_rgb(mean_b)} | {fmt_rgb(mean_a)} | {', '.join(f'{100 * x:+.2f}' for x in mean_rel)} | "
                     f"{'pass' if ok else 'FAIL'} |")
         print(rows[-1], file=sys.stderr, flush=True)

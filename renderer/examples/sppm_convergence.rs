@@ -20,6 +20,7 @@ use clap::Parser;
 use renderer::film::with_threads;
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
+use renderer::integrators::RayIntegrator;
 use renderer::scene::Scene;
 
 /// relMSE of every SPPM level against a path-traced reference, per doubling of passes.

@@ -193,6 +193,26 @@ pub struct IntegratorDesc {
     /// `hide_emitters`: as in Mitsuba, the camera sees through area emitters to what lies
     /// behind them and sees the environment black (their reflections and light stay).
     pub hide_emitters: bool,
+    /// `emitter_samples` of `direct`: light samples per camera ray (default `shading_samples`,
+    /// else 1).
+    pub emitter_samples: u32,
+    /// `bsdf_samples` of `direct`: BSDF samples per camera ray (default `shading_samples`,
+    /// else 1).
+    pub bsdf_samples: u32,
+}
+
+impl Default for IntegratorDesc {
+    /// Mitsuba's `path` with its defaults.
+    fn default() -> Self {
+        IntegratorDesc {
+            kind: "path".into(),
+            max_depth: -1,
+            rr_depth: 5,
+            hide_emitters: false,
+            emitter_samples: 1,
+            bsdf_samples: 1,
+        }
+    }
 }
 
 /// A whole scene as data.
@@ -212,6 +232,62 @@ pub struct SceneDescription {
     pub emitters: Vec<EmitterDesc>,
     /// Non-fatal messages from the importer (e.g. an ignored parameter).
     pub warnings: Vec<String>,
+}
+
+/// A square pinhole camera at `origin` looking at `target` (y up) with horizontal field of view
+/// `fov` degrees and a box filter: the camera of the integrators' tests.
+#[cfg(test)]
+pub(crate) fn test_camera(
+    origin: glam::Vec3,
+    target: glam::Vec3,
+    fov: f32,
+    res: u32,
+) -> CameraDesc {
+    CameraDesc {
+        to_world: crate::camera::look_at(origin, target, glam::Vec3::Y),
+        projection: Projection::Perspective,
+        fov,
+        fov_axis: FovAxis::X,
+        near_clip: 0.01,
+        far_clip: 1000.0,
+        aperture_radius: 0.0,
+        focus_distance: 1.0,
+        width: res,
+        height: res,
+        filter: crate::filter::FilterDesc::Box,
+        sample_border: false,
+        crop: None,
+        principal_point: glam::Vec2::ZERO,
+    }
+}
+
+/// A sphere of radius 1 at the origin with material `bsdf`, lit by `emitter` alone, seen by
+/// [`test_camera`] from (0, 0, −4) at `res`²: the integrators' tests' furnace and light scenes.
+#[cfg(test)]
+pub(crate) fn test_sphere_scene(
+    bsdf: crate::bsdf::Bsdf,
+    emitter: EmitterDesc,
+    res: u32,
+) -> SceneDescription {
+    SceneDescription {
+        camera: test_camera(glam::Vec3::new(0.0, 0.0, -4.0), glam::Vec3::ZERO, 40.0, res),
+        sample_count: None,
+        integrator: None,
+        bsdfs: vec![bsdf],
+        shapes: vec![ShapeDesc {
+            name: "ball".into(),
+            geometry: Geometry::Sphere {
+                center: glam::Vec3::ZERO,
+                radius: 1.0,
+                rotation: glam::Mat3::IDENTITY,
+                flip_normals: false,
+            },
+            bsdf: 0,
+            emission: None,
+        }],
+        emitters: vec![emitter],
+        warnings: vec![],
+    }
 }
 
 /// The unit sphere at the origin seen from inside (normals inward), emitting radiance 1, with

@@ -54,17 +54,35 @@ impl UniformSource for Pcg32 {
 
 /// Power heuristic (β = 2) weight of a strategy with density `a` against one with density `b`:
 /// a²/(a² + b²). A strategy that cannot produce the sample (`a` = 0) gets weight 0, also when
-/// `b` = 0; an infinite `a` (a delta strategy) gets weight 1 against any finite `b`.
+/// `b` = 0; an infinite `a` (a delta strategy) gets weight 1 against any finite `b`, ½ against
+/// an infinite one. Densities whose squares would overflow or underflow f32 (beyond ≈ 10¹⁹ or
+/// below ≈ 10⁻¹⁹) are weighed by their ratio, so two such densities still share the weight.
 #[inline]
 pub fn power_heuristic(a: f32, b: f32) -> f32 {
     let (a2, b2) = (a * a, b * b);
-    if a2 == 0.0 {
+    let sum = a2 + b2;
+    // The common case, computed as it always was (images keep their bits).
+    if a2 >= f32::MIN_POSITIVE && sum.is_finite() {
+        return a2 / sum;
+    }
+    power_heuristic_by_ratio(a, b)
+}
+
+/// [`power_heuristic`] for densities whose squares leave the normal f32 range: 1/(1 + (b/a)²).
+#[cold]
+fn power_heuristic_by_ratio(a: f32, b: f32) -> f32 {
+    // Zero, negative or NaN: this strategy cannot have produced the sample.
+    if a.is_nan() || a <= 0.0 {
         return 0.0;
     }
-    if !a2.is_finite() {
-        return 1.0;
+    if a.is_infinite() {
+        return if b.is_infinite() { 0.5 } else { 1.0 };
     }
-    a2 / (a2 + b2)
+    let r = b / a;
+    if r.is_nan() {
+        return 0.0;
+    }
+    1.0 / (1.0 + r * r)
 }
 
 /// Concentric (Shirley–Chiu) map of the unit square to the unit disk (low distortion).
@@ -321,6 +339,27 @@ mod tests {
             let s = power_heuristic(a, b) + power_heuristic(b, a);
             assert!((s - 1.0).abs() < 1e-6, "{a} {b}: weights sum to {s}");
         }
+        // Densities whose squares overflow or underflow f32 share the weight by their ratio
+        // (a²/(a² + b²) gave both 1, or both 0).
+        for (a, b, want) in [
+            (1e20f32, 1e20f32, 0.5f64),
+            (1e20, 1e19, 100.0 / 101.0),
+            (3e25, 1e25, 0.9),
+            (1e-25, 1e-25, 0.5),
+            (1e-25, 3e-25, 0.1),
+            (1e-30, 1e-28, 1.0 / 10_001.0),
+        ] {
+            let got = f64::from(power_heuristic(a, b));
+            assert!(
+                (got - want).abs() <= 1e-6 * want,
+                "power_heuristic({a}, {b}) = {got}, want {want}"
+            );
+            let s = power_heuristic(a, b) + power_heuristic(b, a);
+            assert!((s - 1.0).abs() < 1e-6, "{a} {b}: weights sum to {s}");
+        }
+        assert_eq!(power_heuristic(f32::INFINITY, f32::INFINITY), 0.5);
+        assert_eq!(power_heuristic(f32::NAN, 1.0), 0.0);
+        assert_eq!(power_heuristic(1.0, f32::NAN), 0.0);
         // Neither strategy can produce the sample: no weight (not NaN).
         assert_eq!(power_heuristic(0.0, 0.0), 0.0, "power_heuristic(0, 0)");
         // A delta strategy (infinite density) takes all the weight against a finite one.

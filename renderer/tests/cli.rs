@@ -291,8 +291,16 @@ fn an_option_the_chosen_integrator_would_ignore_is_refused() {
     let out = dir.join("out");
     let out = out.to_str().unwrap();
     // (integrator, the option, what the error must name)
-    let cases: [(&str, &[&str], &str); 7] = [
+    let cases: [(&str, &[&str], &str); 11] = [
         ("path", &["--time", "5"], "--time"),
+        ("path", &["--emitter-samples", "2"], "--emitter-samples"),
+        ("direct", &["--max-depth", "3"], "--max-depth"),
+        ("direct", &["--rr-depth", "3"], "--rr-depth"),
+        (
+            "sppm",
+            &["--passes", "1", "--bsdf-samples", "2"],
+            "--bsdf-samples",
+        ),
         ("path", &["--passes", "4"], "--passes"),
         ("path", &["--photons", "1000"], "--photons"),
         ("path", &["--knn", "10"], "--knn"),
@@ -343,6 +351,103 @@ fn an_option_the_chosen_integrator_would_ignore_is_refused() {
         &[scene, "--out", out, "--spp", "1", "--max-depth", "-1"],
     );
     assert!(unbounded.status.success(), "{}", stderr(&unbounded));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--integrator direct` renders direct light only; a scene file whose integrator is `direct`
+/// is rendered with it (and its sample counts) when no `--integrator` is given, and an option
+/// that integrator would ignore is then refused naming the file.
+#[test]
+fn the_direct_integrator_from_the_command_line_and_from_the_scene_file() {
+    let dir = temp_dir("direct");
+    let scene = write_scene(&dir);
+    let render = |scene: &Path, extra: &[&str], out: &str| {
+        let out = dir.join(out);
+        let mut args = vec![
+            scene.to_str().unwrap(),
+            "--spp",
+            "16",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let result = run(env!("CARGO_BIN_EXE_render"), &args);
+        (result, out)
+    };
+    let (result, direct) = render(
+        &scene,
+        &["--integrator", "direct", "--emitter-samples", "2"],
+        "direct.exr",
+    );
+    let err = stderr(&result);
+    assert!(result.status.success(), "{err}");
+    assert!(
+        err.contains("direct: 16x16 at 16 spp, 2 emitter and 1 BSDF samples"),
+        "{err}"
+    );
+    // Path tracing at max_depth 2 estimates the same direct light.
+    let (result, path2) = render(&scene, &["--max-depth", "2"], "path2.exr");
+    assert!(result.status.success(), "{}", stderr(&result));
+    let mean = |p: &Path| {
+        let (_, _, px) = renderer::image_io::read_rgb_image(p).unwrap();
+        px.iter().map(|v| v.x as f64).sum::<f64>() / px.len() as f64
+    };
+    let (d, p) = (mean(&direct), mean(&path2));
+    assert!(
+        d > 0.05 && ((d - p) / p).abs() < 0.05,
+        "direct {d}, path at depth 2 {p}"
+    );
+
+    // The same scene with `<integrator type="direct">`: chosen without --integrator.
+    let text = std::fs::read_to_string(&scene).unwrap().replace(
+        r#"<integrator type="path"><integer name="max_depth" value="4"/></integrator>"#,
+        r#"<integrator type="direct"><integer name="bsdf_samples" value="3"/></integrator>"#,
+    );
+    let file_direct = dir.join("direct.xml");
+    std::fs::write(&file_direct, text).unwrap();
+    let (result, _) = render(&file_direct, &[], "from-file.exr");
+    let err = stderr(&result);
+    assert!(result.status.success(), "{err}");
+    assert!(
+        err.contains("direct: 16x16 at 16 spp, 1 emitter and 3 BSDF samples"),
+        "{err}"
+    );
+    assert!(!err.contains("warning"), "{err}");
+    // The command line overrides the file.
+    let (result, _) = render(&file_direct, &["--integrator", "path"], "path.exr");
+    let err = stderr(&result);
+    assert!(
+        result.status.success() && err.contains("path: 16x16"),
+        "{err}"
+    );
+    let (result, _) = render(&file_direct, &["--bsdf-samples", "1"], "override.exr");
+    let err = stderr(&result);
+    assert!(err.contains("1 emitter and 1 BSDF samples"), "{err}");
+    // A path-tracer option with the file's direct integrator: refused, naming the file.
+    let (result, _) = render(&file_direct, &["--rr-depth", "3"], "refused.exr");
+    let err = stderr(&result);
+    assert_eq!(result.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("--rr-depth is read by the path tracer only, not by --integrator direct")
+            && err.contains("direct.xml"),
+        "{err}"
+    );
+    assert!(!dir.join("refused.exr").exists());
+    let (result, _) = render(
+        &scene,
+        &[
+            "--integrator",
+            "direct",
+            "--emitter-samples",
+            "0",
+            "--bsdf-samples",
+            "0",
+        ],
+        "none.exr",
+    );
+    let err = stderr(&result);
+    assert_eq!(result.status.code(), Some(1), "{err}");
+    assert!(err.contains("at least one emitter or BSDF sample"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

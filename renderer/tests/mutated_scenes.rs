@@ -7,6 +7,7 @@
 
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::sppm::{render_sppm, SppmSettings, StopCondition};
+use renderer::integrators::RayIntegrator;
 use renderer::scene::Scene;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};

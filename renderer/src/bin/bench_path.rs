@@ -6,6 +6,7 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use renderer::film::with_threads;
 use renderer::integrators::path::PathTracer;
+use renderer::integrators::RayIntegrator;
 use renderer::scene::Scene;
 use std::path::PathBuf;
 use std::process::ExitCode;

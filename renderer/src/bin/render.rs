@@ -1,5 +1,6 @@
-//! `render`: renders a Mitsuba 3 XML scene with the path tracer or (multi-level) SPPM and
-//! writes a float32 RGB EXR and optionally a tone-mapped sRGB PNG.
+//! `render`: renders a Mitsuba 3 XML scene with the path tracer, direct illumination or
+//! (multi-level) SPPM and writes a float32 RGB EXR (SPPM: sample bundles) and optionally a
+//! tone-mapped sRGB PNG.
 
 use anyhow::{bail, Context, Result};
 use clap::error::ErrorKind;
@@ -9,7 +10,9 @@ use cli_output::paths::{check_distinct, check_extension, check_not_directory, ex
 use indicatif::{ProgressBar, ProgressStyle};
 use renderer::film::{with_threads, Film};
 use renderer::image_io::{write_png_srgb, write_rgb_exr};
+use renderer::integrators::direct::DirectIntegrator;
 use renderer::integrators::path::PathTracer;
+use renderer::integrators::RayIntegrator;
 use renderer::scene::Scene;
 use renderer::state_file::StateFile;
 use std::path::{Path, PathBuf};
@@ -21,6 +24,9 @@ use std::time::Instant;
 enum IntegratorKind {
     /// Unidirectional path tracer with NEE + MIS (Mitsuba's `path`).
     Path,
+    /// Direct illumination only: light and BSDF samples at the first surface, combined by MIS
+    /// (Mitsuba's `direct`).
+    Direct,
     /// Single-level stochastic progressive photon mapping (the baseline).
     Sppm,
     /// Multi-level SPPM: writes sample bundles with five bandwidths.
@@ -33,10 +39,11 @@ enum IntegratorKind {
 struct Cli {
     /// The scene file (Mitsuba 3 XML).
     scene: PathBuf,
-    /// Light-transport algorithm.
-    #[arg(long, value_enum, default_value_t = IntegratorKind::Path)]
-    integrator: IntegratorKind,
-    /// Output: an RGB EXR for `path` (its name ends in `.exr` or has no extension); for the
+    /// Light-transport algorithm. Default: the scene file's integrator when it is `direct`,
+    /// else `path`.
+    #[arg(long, value_enum)]
+    integrator: Option<IntegratorKind>,
+    /// Output: an RGB EXR for `path` and `direct` (its name ends in `.exr` or has no extension); for the
     /// SPPM integrators the prefix of the bundles `<prefix>_p<passes>.exr` (a trailing `.exr` is
     /// dropped: `b.exr` gives `b_p0064.exr`). Missing folders are created.
     #[arg(long, visible_alias = "output", value_name = "PATH")]
@@ -81,9 +88,19 @@ struct Cli {
     )]
     state_interval: f64,
 
-    /// Path tracer: samples per pixel. Default: the file's sampler `sample_count`, else 16.
+    /// Path tracer and direct: samples per pixel. Default: the file's sampler `sample_count`,
+    /// else 16.
     #[arg(long, help_heading = "Path tracer")]
     spp: Option<u32>,
+
+    /// Direct: light samples per pixel sample (Mitsuba's `emitter_samples`). Default: the
+    /// file's `direct` integrator's, else 1.
+    #[arg(long, help_heading = "Direct")]
+    emitter_samples: Option<u32>,
+    /// Direct: BSDF samples per pixel sample (Mitsuba's `bsdf_samples`). Default: the file's
+    /// `direct` integrator's, else 1.
+    #[arg(long, help_heading = "Direct")]
+    bsdf_samples: Option<u32>,
 
     /// SPPM: photons traced per pass.
     #[arg(long, default_value_t = 100_000, help_heading = "SPPM")]
@@ -113,48 +130,96 @@ fn main() -> ExitCode {
     }
 }
 
-/// Options that only the path tracer reads, by their clap ids.
-const PATH_ONLY: [&str; 2] = ["spp", "rr_depth"];
-/// Options that only the SPPM integrators read.
+/// Options that only the SPPM integrators read, by their clap ids.
 const SPPM_ONLY: [&str; 5] = ["photons", "passes", "time", "knn", "max_radius"];
+/// Options that only the direct integrator reads.
+const DIRECT_ONLY: [&str; 2] = ["emitter_samples", "bsdf_samples"];
+
+impl IntegratorKind {
+    /// The command-line options (clap ids) this integrator ignores, and who reads them.
+    fn ignored_options(self) -> Vec<(&'static str, &'static str)> {
+        let sppm = SPPM_ONLY.map(|id| (id, "the SPPM integrators (sppm, sppm-ml)"));
+        let direct = DIRECT_ONLY.map(|id| (id, "the direct integrator"));
+        match self {
+            IntegratorKind::Path => [&sppm[..], &direct[..]].concat(),
+            IntegratorKind::Direct => {
+                let path = [
+                    ("max_depth", "path and SPPM"),
+                    ("rr_depth", "the path tracer"),
+                ];
+                [&sppm[..], &path[..]].concat()
+            }
+            IntegratorKind::Sppm | IntegratorKind::SppmMl => {
+                let path = [("spp", "path and direct"), ("rr_depth", "the path tracer")];
+                [&path[..], &direct[..]].concat()
+            }
+        }
+    }
+
+    /// Whether it writes one image (`path`, `direct`) rather than SPPM bundles.
+    fn writes_image(self) -> bool {
+        matches!(self, IntegratorKind::Path | IntegratorKind::Direct)
+    }
+
+    /// Its `--integrator` value.
+    fn name(self) -> String {
+        let value = self.to_possible_value().expect("no skipped variants");
+        value.get_name().to_owned()
+    }
+}
 
 /// The command line, refused (usage error, exit code 2) when it sets an option that the chosen
 /// integrator would ignore: `--time` with the path tracer would otherwise render the default
 /// 16 spp without a word.
-fn parse_cli() -> Cli {
+fn parse_cli() -> (Cli, ArgMatches) {
     let matches = Cli::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-    let (ignored, reader) = match cli.integrator {
-        IntegratorKind::Path => (&SPPM_ONLY[..], "the SPPM integrators (sppm, sppm-ml)"),
-        IntegratorKind::Sppm | IntegratorKind::SppmMl => (&PATH_ONLY[..], "the path tracer"),
-    };
-    if let Some(flag) = given_on_command_line(&matches, ignored) {
-        let integrator = cli
-            .integrator
-            .to_possible_value()
-            .expect("no skipped variants");
-        Cli::command()
-            .error(
-                ErrorKind::ArgumentConflict,
-                format!(
-                    "{flag} is read by {reader} only, not by --integrator {}",
-                    integrator.get_name()
-                ),
-            )
-            .exit();
+    if let Some(kind) = cli.integrator {
+        if let Some(conflict) = ignored_option_given(&matches, kind) {
+            Cli::command()
+                .error(ErrorKind::ArgumentConflict, conflict)
+                .exit();
+        }
     }
-    cli
+    (cli, matches)
 }
 
-/// The first of `ids` set on the command line, as its `--long-name`.
-fn given_on_command_line(matches: &ArgMatches, ids: &[&str]) -> Option<String> {
-    ids.iter()
-        .find(|id| matches.value_source(id) == Some(ValueSource::CommandLine))
-        .map(|id| format!("--{}", id.replace('_', "-")))
+/// The message for the first option on the command line that integrator `kind` would ignore.
+fn ignored_option_given(matches: &ArgMatches, kind: IntegratorKind) -> Option<String> {
+    kind.ignored_options()
+        .into_iter()
+        .find(|(id, _)| matches.value_source(id) == Some(ValueSource::CommandLine))
+        .map(|(id, reader)| {
+            format!(
+                "--{} is read by {reader} only, not by --integrator {}",
+                id.replace('_', "-"),
+                kind.name()
+            )
+        })
+}
+
+/// The integrator to run: `--integrator`, else the scene file's `direct`, else `path`. When it
+/// comes from the file, an option given for another integrator is refused here, as
+/// [`parse_cli`] refuses it for an `--integrator` given on the command line.
+fn chosen_integrator(cli: &Cli, matches: &ArgMatches, scene: &Scene) -> Result<IntegratorKind> {
+    if let Some(kind) = cli.integrator {
+        return Ok(kind);
+    }
+    let kind = match scene.integrator.as_ref().map(|i| i.kind.as_str()) {
+        Some("direct") => IntegratorKind::Direct,
+        _ => IntegratorKind::Path,
+    };
+    if let Some(conflict) = ignored_option_given(matches, kind) {
+        bail!(
+            "{conflict} (the integrator of {}; choose one with --integrator)",
+            cli.scene.display()
+        );
+    }
+    Ok(kind)
 }
 
 fn run() -> Result<()> {
-    let cli = parse_cli();
+    let (cli, matches) = parse_cli();
     // Everything about the outputs that can be known without the scene is checked first, so a
     // bad name fails at once instead of after the render.
     let outputs = check_outputs(&cli)?;
@@ -174,8 +239,9 @@ fn run() -> Result<()> {
         scene.lights.len(),
         t0.elapsed().as_secs_f64()
     );
-    with_threads(cli.threads, || match cli.integrator {
-        IntegratorKind::Path => run_path(&cli, &scene),
+    let integrator = chosen_integrator(&cli, &matches, &scene)?;
+    with_threads(cli.threads, || match integrator {
+        IntegratorKind::Path | IntegratorKind::Direct => run_image(&cli, &scene, integrator),
         IntegratorKind::Sppm => run_sppm(&cli, &scene, false),
         IntegratorKind::SppmMl => run_sppm(&cli, &scene, true),
     })?
@@ -200,13 +266,15 @@ fn check_outputs(cli: &Cli) -> Result<Vec<(&'static str, PathBuf)>> {
     // (what names it, path) of every file this run writes or reads
     let mut files: Vec<(String, PathBuf)> = Vec::new();
     let mut folders = Vec::new();
-    match cli.integrator {
-        IntegratorKind::Path => {
+    // Without --integrator it is `path` or the file's `direct`: both write one image.
+    let writes_image = cli.integrator.is_none_or(IntegratorKind::writes_image);
+    match writes_image {
+        true => {
             check_not_directory("--out", &cli.out).map_err(anyhow::Error::msg)?;
             files.push(("--out".into(), cli.out.clone()));
             folders.push(("--out", cli.out.clone()));
         }
-        IntegratorKind::Sppm | IntegratorKind::SppmMl => {
+        false => {
             if cli.passes.is_empty() && cli.time.is_none() {
                 bail!("SPPM needs --passes N[,N…] and/or --time SECONDS");
             }
@@ -249,12 +317,12 @@ fn check_outputs(cli: &Cli) -> Result<Vec<(&'static str, PathBuf)>> {
     }
     files.push(("the scene".into(), cli.scene.clone()));
     check_distinct(&files).map_err(anyhow::Error::msg)?;
-    if cli.integrator == IntegratorKind::Path {
+    if writes_image {
         check_extension(
             "--out",
             &cli.out,
             "exr",
-            "the path tracer writes an OpenEXR image",
+            "the path tracer and the direct integrator write an OpenEXR image",
         )
         .map_err(anyhow::Error::msg)?;
     }
@@ -315,13 +383,22 @@ fn state_file(cli: &Cli) -> Result<Option<StateFile>> {
     StateFile::for_scene(path, interval, &cli.scene, &cli.define, lenient).map(Some)
 }
 
-/// The `path` integrator.
-fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
+/// Sample counts of the direct integrator: command line, else the scene file's `direct`
+/// integrator, else Mitsuba's defaults (1 and 1).
+fn direct_settings(cli: &Cli, scene: &Scene) -> Result<DirectIntegrator> {
+    let file = scene.integrator.as_ref().filter(|i| i.kind == "direct");
+    let emitter = cli.emitter_samples.or(file.map(|i| i.emitter_samples));
+    let bsdf = cli.bsdf_samples.or(file.map(|i| i.bsdf_samples));
+    DirectIntegrator::new(emitter.unwrap_or(1), bsdf.unwrap_or(1))
+        .context("--emitter-samples and --bsdf-samples")
+}
+
+/// The `path` and `direct` integrators: one image of `spp` samples per pixel.
+fn run_image(cli: &Cli, scene: &Scene, kind: IntegratorKind) -> Result<()> {
     let spp = cli.spp.or(scene.sample_count).unwrap_or(16);
     if spp == 0 {
         bail!("--spp must be at least 1");
     }
-    let (max_depth, rr_depth) = depths(cli, scene);
     let res = scene.camera.resolution();
     // The film, its copy for the EXR writer and the PNG (12 + 12 + 4 bytes per pixel); a state
     // file adds its encoded copy.
@@ -330,18 +407,32 @@ fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
         &format!("a {}x{} image", res.x, res.y),
         res.x as u64 * res.y as u64 * per_pixel,
     )?;
-    let total = res.x as u64 * res.y as u64 * spp as u64;
-    let bar = progress_bar(total, "samples");
-    let t = Instant::now();
-    let tracer = PathTracer {
-        max_depth,
-        rr_depth,
+    let direct = match kind {
+        IntegratorKind::Direct => Some(direct_settings(cli, scene)?),
+        _ => None,
+    };
+    let (max_depth, rr_depth) = depths(cli, scene);
+    let settings = match direct {
+        Some(d) => format!(
+            "{} emitter and {} BSDF samples",
+            d.emitter_samples, d.bsdf_samples
+        ),
+        None => format!("max_depth {max_depth}"),
     };
     // Rows restored from a state file were not rendered now: no throughput for this session.
     let resumed = cli.state.as_ref().is_some_and(|p| p.exists());
-    let film = match state_file(cli)? {
-        Some(state) => tracer.render_resumable(scene, spp, cli.seed, Some(&bar), &state)?,
-        None => tracer.render(scene, spp, cli.seed, Some(&bar)),
+    let total = res.x as u64 * res.y as u64 * spp as u64;
+    let bar = progress_bar(total, "samples");
+    let t = Instant::now();
+    let film = match direct {
+        Some(d) => render_image(cli, scene, &d, spp, &bar)?,
+        None => {
+            let tracer = PathTracer {
+                max_depth,
+                rr_depth,
+            };
+            render_image(cli, scene, &tracer, spp, &bar)?
+        }
     };
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
@@ -351,12 +442,27 @@ fn run_path(cli: &Cli, scene: &Scene) -> Result<()> {
         format!("{:.2} M samples/s", total as f64 / secs / 1e6)
     };
     eprintln!(
-        "path: {}x{} at {spp} spp, max_depth {max_depth}, in {secs:.2} s ({rate}); mean RGB {:?}",
+        "{}: {}x{} at {spp} spp, {settings}, in {secs:.2} s ({rate}); mean RGB {:?}",
+        kind.name(),
         res.x,
         res.y,
         film.mean().to_array()
     );
     write_outputs(&film, &cli.out, cli.png.as_deref())
+}
+
+/// Renders the image with `integrator`, resuming from `--state` when it names a file.
+fn render_image(
+    cli: &Cli,
+    scene: &Scene,
+    integrator: &impl RayIntegrator,
+    spp: u32,
+    bar: &ProgressBar,
+) -> Result<Film> {
+    Ok(match state_file(cli)? {
+        Some(state) => integrator.render_resumable(scene, spp, cli.seed, Some(bar), &state)?,
+        None => integrator.render(scene, spp, cli.seed, Some(bar)),
+    })
 }
 
 // ---------------------------------------------------------------------------------------------

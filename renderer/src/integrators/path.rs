@@ -3,15 +3,12 @@
 //! by NEE only, Russian roulette from `rr_depth` on with probability min(max(β)·η², 0.95), and
 //! `max_depth` counted as Mitsuba does (1: emitters seen directly; 2: direct lighting; …).
 
+use super::RayIntegrator;
 use crate::bsdf::TransportMode;
-use crate::film::{render_pixels, render_pixels_resumable, Film};
 use crate::math::Ray;
-use crate::sampling::{power_heuristic, rng_for, Pcg32, UniformSource};
+use crate::sampling::{power_heuristic, Pcg32, UniformSource};
 use crate::scene::{EmitterHit, Scene, SurfaceInteraction};
 use crate::spectrum::Rgb;
-use crate::state_file::StateFile;
-use glam::UVec2;
-use indicatif::ProgressBar;
 
 /// Settings of the path tracer.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,9 +28,9 @@ impl Default for PathTracer {
     }
 }
 
-impl PathTracer {
+impl RayIntegrator for PathTracer {
     /// Radiance arriving along `ray`, estimated with one path drawn from `rng`.
-    pub fn li(&self, scene: &Scene, mut ray: Ray, rng: &mut Pcg32) -> Rgb {
+    fn li(&self, scene: &Scene, mut ray: Ray, rng: &mut Pcg32) -> Rgb {
         if self.max_depth == 0 {
             return Rgb::ZERO;
         }
@@ -157,65 +154,11 @@ impl PathTracer {
         result
     }
 
-    /// Mean of `spp` path samples through pixel (x, y) drawn from the pixel's own stream
-    /// `rng_for(seed, pass, y·width + x)`. Non-finite samples (numerical accidents) are dropped.
-    #[inline]
-    pub fn pixel(&self, scene: &Scene, x: u32, y: u32, spp: u32, seed: u64, pass: u64) -> Rgb {
-        let res = scene.camera.resolution();
-        let mut rng = rng_for(seed, pass, y as u64 * res.x as u64 + x as u64);
-        let mut sum = Rgb::ZERO;
-        for _ in 0..spp {
-            let u_film = rng.next_2d();
-            let u_lens = rng.next_2d();
-            let sample = scene.camera.sample_ray(UVec2::new(x, y), u_film, u_lens);
-            let l = self.li(scene, sample.ray, &mut rng) * sample.weight;
-            if l.is_finite() {
-                sum += l;
-            }
-        }
-        sum / spp.max(1) as f32
-    }
-
-    /// [`PathTracer::render`] that keeps its finished rows in `state` and resumes from it (see
-    /// [`render_pixels_resumable`]); the image is bit-identical to an uninterrupted run's.
-    pub fn render_resumable(
-        &self,
-        scene: &Scene,
-        spp: u32,
-        seed: u64,
-        progress: Option<&ProgressBar>,
-        state: &StateFile,
-    ) -> anyhow::Result<Film> {
-        let res = scene.camera.resolution();
-        let identity = serde_json::json!({
+    fn identity(&self) -> serde_json::Value {
+        serde_json::json!({
             "integrator": "path",
-            "spp": spp,
-            "seed": seed,
             "max_depth": self.max_depth,
             "rr_depth": self.rr_depth,
-        });
-        render_pixels_resumable(
-            res.x,
-            res.y,
-            progress,
-            spp as u64,
-            |x, y| self.pixel(scene, x, y, spp, seed, 0),
-            state,
-            &identity,
-        )
-    }
-
-    /// Renders the whole image with `spp` samples per pixel in the current rayon pool.
-    pub fn render(
-        &self,
-        scene: &Scene,
-        spp: u32,
-        seed: u64,
-        progress: Option<&ProgressBar>,
-    ) -> Film {
-        let res = scene.camera.resolution();
-        render_pixels(res.x, res.y, progress, spp as u64, |x, y| {
-            self.pixel(scene, x, y, spp, seed, 0)
         })
     }
 }
@@ -225,30 +168,11 @@ mod tests {
     use super::*;
     use crate::bsdf::{Bsdf, Diffuse};
     use crate::description::{
-        CameraDesc, EmitterDesc, FovAxis, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
+        test_camera, EmitterDesc, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
     };
-    use crate::film::with_threads;
+    use crate::film::{with_threads, Film};
     use crate::texture::Texture;
     use glam::Vec3;
-
-    fn camera(origin: Vec3, target: Vec3, res: u32) -> CameraDesc {
-        CameraDesc {
-            to_world: crate::camera::look_at(origin, target, Vec3::Y),
-            projection: crate::description::Projection::Perspective,
-            fov: 40.0,
-            fov_axis: FovAxis::X,
-            near_clip: 0.01,
-            far_clip: 1000.0,
-            aperture_radius: 0.0,
-            focus_distance: 1.0,
-            width: res,
-            height: res,
-            filter: crate::filter::FilterDesc::Box,
-            sample_border: false,
-            crop: None,
-            principal_point: glam::Vec2::ZERO,
-        }
-    }
 
     fn diffuse(r: f32) -> Bsdf {
         Bsdf::Diffuse(Diffuse {
@@ -268,33 +192,14 @@ mod tests {
 
     /// A sphere of material `bsdf` seen from outside, lit by `emitter` alone.
     fn sphere_of(bsdf: Bsdf, emitter: EmitterDesc) -> Scene {
-        let desc = SceneDescription {
-            camera: camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 8),
-            sample_count: None,
-            integrator: None,
-            bsdfs: vec![bsdf],
-            shapes: vec![ShapeDesc {
-                name: "ball".into(),
-                geometry: Geometry::Sphere {
-                    center: Vec3::ZERO,
-                    radius: 1.0,
-                    rotation: glam::Mat3::IDENTITY,
-                    flip_normals: false,
-                },
-                bsdf: 0,
-                emission: None,
-            }],
-            emitters: vec![emitter],
-            warnings: vec![],
-        };
-        Scene::build(&desc).unwrap()
+        Scene::build(&crate::description::test_sphere_scene(bsdf, emitter, 8)).unwrap()
     }
 
     /// The camera inside a closed sphere whose inner surface has albedo `rho` and emits radiance 1:
     /// the radiance everywhere is Σ_{k<D} ρᵏ for max_depth D.
     fn emitting_enclosure(rho: f32) -> Scene {
         let desc = SceneDescription {
-            camera: camera(Vec3::new(0.1, 0.2, 0.0), Vec3::new(0.0, 0.0, 1.0), 4),
+            camera: test_camera(Vec3::new(0.1, 0.2, 0.0), Vec3::new(0.0, 0.0, 1.0), 40.0, 4),
             sample_count: None,
             integrator: None,
             bsdfs: vec![diffuse(rho)],
@@ -398,6 +303,7 @@ mod tests {
             max_depth: -1,
             rr_depth: 5,
             hide_emitters: true,
+            ..Default::default()
         });
         let hidden = PathTracer::default().render(&scene, 64, 1, None);
         // Corner pixels see only the environment; the centre sees only the sphere.
@@ -429,13 +335,14 @@ mod tests {
             emission: emission.map(Texture::Constant),
         };
         let desc = |hide: bool| SceneDescription {
-            camera: camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 8),
+            camera: test_camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 40.0, 8),
             sample_count: None,
             integrator: Some(crate::description::IntegratorDesc {
                 kind: "path".into(),
                 max_depth: -1,
                 rr_depth: 5,
                 hide_emitters: hide,
+                ..Default::default()
             }),
             bsdfs: vec![diffuse(1.0), diffuse(0.5)],
             // The ball (radius 0.5 at the origin) and, in front of it, a larger emitter that
@@ -455,7 +362,10 @@ mod tests {
         assert_eq!(behind.shape, 0);
         assert!((behind.p.z + 0.5).abs() < 1e-4, "{:?}", behind.p);
         // A ray that passes the emitter and then escapes finds nothing.
-        let past = Ray::new(Vec3::new(0.0, 0.0, -4.0), Vec3::new(0.5, 0.0, 1.5).normalize());
+        let past = Ray::new(
+            Vec3::new(0.0, 0.0, -4.0),
+            Vec3::new(0.5, 0.0, 1.5).normalize(),
+        );
         assert_eq!(hidden_scene.intersect(&past).unwrap().shape, 1);
         assert!(hidden_scene.intersect_behind_emitters(&past).is_none());
 
@@ -581,7 +491,7 @@ mod tests {
         };
         let tent = FilterDesc::Tent { radius: 1.5 };
         for filter in crate::filter::TEST_FILTERS.into_iter().chain([tent]) {
-            let mut cam = camera(Vec3::ZERO, Vec3::Z, width);
+            let mut cam = test_camera(Vec3::ZERO, Vec3::Z, 40.0, width);
             cam.height = height;
             cam.projection = crate::description::Projection::Orthographic;
             cam.filter = filter;

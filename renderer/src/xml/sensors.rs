@@ -396,7 +396,39 @@ fn build_sampler<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<u32, SceneE
     Ok(count)
 }
 
-/// `<integrator>`: the plugin name, `max_depth` and `rr_depth`.
+/// `direct`'s `emitter_samples` and `bsdf_samples`, as Mitsuba reads them: each defaults to
+/// `shading_samples` (default 1), which must not be given together with either; not both 0.
+fn direct_sample_counts(p: &mut Props, el: &Element) -> Result<(u32, u32), SceneError> {
+    let mut count = |name: &str| -> Result<Option<u32>, SceneError> {
+        let at = p.element_of(name);
+        match p.int(name)? {
+            None => Ok(None),
+            Some(v) if (0..=i64::from(u32::MAX)).contains(&v) => Ok(Some(v as u32)),
+            Some(v) => Err(at.error(format!("\"{name}\" must be >= 0, got {v}"))),
+        }
+    };
+    let shading = count("shading_samples")?;
+    let emitter = count("emitter_samples")?;
+    let bsdf = count("bsdf_samples")?;
+    if shading.is_some() && (emitter.is_some() || bsdf.is_some()) {
+        return Err(el.error(
+            "\"shading_samples\" sets both \"emitter_samples\" and \"bsdf_samples\"; give \
+             either it or them"
+                .to_owned(),
+        ));
+    }
+    let shading = shading.unwrap_or(1);
+    let counts = (emitter.unwrap_or(shading), bsdf.unwrap_or(shading));
+    if counts == (0, 0) {
+        return Err(
+            el.error("the direct integrator needs at least one emitter or BSDF sample".to_owned())
+        );
+    }
+    Ok(counts)
+}
+
+/// `<integrator>`: the plugin name, `max_depth`, `rr_depth`, `hide_emitters` and `direct`'s
+/// sample counts.
 pub(super) fn build_integrator<'a>(
     b: &mut Builder<'a>,
     el: &'a Element,
@@ -412,14 +444,7 @@ pub(super) fn build_integrator<'a>(
         b.diag.unknown(err)?;
     }
     // `volpath` without media (which the importer refuses) is `path`; `sppm` is the integrator
-    // chosen on the command line anyway. `direct` is the one that would give another image.
-    if kind == "direct" {
-        b.diag.warn(
-            el,
-            "rendered with the integrator chosen on the command line (default `path`, all \
-             bounces up to max_depth); Mitsuba's `direct` gives direct light only",
-        );
-    }
+    // chosen on the command line anyway.
     let mut p = Props::parse(b, el)?;
     let depth_el = p.element_of("max_depth");
     let max_depth = match p.int("max_depth")? {
@@ -438,6 +463,7 @@ pub(super) fn build_integrator<'a>(
         Some(v) => return Err(rr_el.error(format!("\"rr_depth\" must be >= 0, got {v}"))),
     };
     let hide_emitters = p.bool_or("hide_emitters", false)?;
+    let (emitter_samples, bsdf_samples) = direct_sample_counts(&mut p, el)?;
     p.ignore(
         b,
         &[
@@ -445,8 +471,6 @@ pub(super) fn build_integrator<'a>(
             "initial_radius",
             "alpha",
             "samples_per_pass",
-            "emitter_samples",
-            "bsdf_samples",
         ],
         "set on the command line / in the config instead",
     );
@@ -456,5 +480,7 @@ pub(super) fn build_integrator<'a>(
         max_depth,
         rr_depth,
         hide_emitters,
+        emitter_samples,
+        bsdf_samples,
     })
 }

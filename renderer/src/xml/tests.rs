@@ -927,23 +927,20 @@ fn spectra_emitters_and_cameras() {
         Some((8, 5))
     );
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
-    // `volpath` renders as `path` (no media); `direct` would differ from Mitsuba's: a warning.
-    for (kind, warned) in [("volpath", false), ("direct", true)] {
+    // `volpath` renders as `path` (no media); `direct` is its own integrator: no warnings.
+    for kind in ["volpath", "direct"] {
         let other = body.replace(
             r#"<integrator type="path">"#,
             &format!(r#"<integrator type="{kind}">"#),
         );
         let scene = load(&write_scene(&dir, &format!("{kind}.xml"), &other)).unwrap();
-        assert_eq!(scene.integrator.as_ref().map(|i| i.max_depth), Some(8));
+        let integrator = scene.integrator.as_ref().unwrap();
+        assert_eq!((integrator.kind.as_str(), integrator.max_depth), (kind, 8));
         assert_eq!(
-            scene
-                .warnings
-                .iter()
-                .any(|w| w.contains("direct light only")),
-            warned,
-            "{kind}: {:?}",
-            scene.warnings
+            (integrator.emitter_samples, integrator.bsdf_samples),
+            (1, 1)
         );
+        assert!(scene.warnings.is_empty(), "{kind}: {:?}", scene.warnings);
     }
     assert_eq!(c.filter, FilterDesc::Gaussian { stddev: 0.5 });
     // A constant reflectance spectrum of one is white.
@@ -2403,4 +2400,67 @@ fn mesh_attribute_radiance_is_read_where_the_light_is_sampled() {
             "{seen} vs {radiance}"
         );
     }
+}
+
+/// `direct`'s sample counts, read as Mitsuba reads them: `shading_samples` sets both,
+/// `emitter_samples` / `bsdf_samples` each one; mixing them, negative counts and no samples at
+/// all are errors naming file and line.
+#[test]
+fn direct_sample_counts_and_their_errors() {
+    let dir = temp_dir("direct-samples");
+    let with =
+        |props: &str| format!("{SENSOR}\n<integrator type=\"direct\">\n{props}\n</integrator>");
+    let counts = |file: &str, props: &str| {
+        let scene = load(&write_scene(&dir, file, &with(props))).unwrap();
+        let i = scene.integrator.unwrap();
+        (i.emitter_samples, i.bsdf_samples)
+    };
+    assert_eq!(counts("none.xml", ""), (1, 1));
+    assert_eq!(
+        counts(
+            "shading.xml",
+            r#"<integer name="shading_samples" value="4"/>"#
+        ),
+        (4, 4)
+    );
+    assert_eq!(
+        counts(
+            "emitter.xml",
+            r#"<integer name="emitter_samples" value="3"/>"#
+        ),
+        (3, 1)
+    );
+    assert_eq!(
+        counts(
+            "both.xml",
+            r#"<integer name="emitter_samples" value="0"/><integer name="bsdf_samples" value="2"/>"#
+        ),
+        (0, 2)
+    );
+    let body = with(
+        r#"<integer name="shading_samples" value="2"/><integer name="bsdf_samples" value="2"/>"#,
+    );
+    assert_body_error_at(
+        &dir,
+        "mixed.xml",
+        &body,
+        "<integrator",
+        "give either it or them",
+    );
+    let body = with(r#"<integer name="shading_samples" value="0"/>"#);
+    assert_body_error_at(
+        &dir,
+        "zero.xml",
+        &body,
+        "<integrator",
+        "at least one emitter or BSDF sample",
+    );
+    let body = with(r#"<integer name="emitter_samples" value="-1"/>"#);
+    assert_body_error_at(
+        &dir,
+        "negative.xml",
+        &body,
+        "value=\"-1\"",
+        "\"emitter_samples\" must be >= 0, got -1",
+    );
 }

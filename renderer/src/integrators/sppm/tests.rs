@@ -3,30 +3,12 @@
 
 use super::*;
 use crate::bsdf::{Bsdf, Diffuse, TransportMode};
+use crate::description::test_camera as camera;
 use crate::description::{
-    CameraDesc, EmitterDesc, FovAxis, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
+    CameraDesc, EmitterDesc, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
 };
 use crate::texture::Texture;
 use glam::Vec3;
-
-fn camera(origin: Vec3, target: Vec3, fov: f32, res: u32) -> CameraDesc {
-    CameraDesc {
-        to_world: crate::camera::look_at(origin, target, Vec3::Y),
-        projection: crate::description::Projection::Perspective,
-        fov,
-        fov_axis: FovAxis::X,
-        near_clip: 0.01,
-        far_clip: 1000.0,
-        aperture_radius: 0.0,
-        focus_distance: 1.0,
-        width: res,
-        height: res,
-        filter: crate::filter::FilterDesc::Box,
-        sample_border: false,
-        crop: None,
-        principal_point: glam::Vec2::ZERO,
-    }
-}
 
 fn diffuse(r: f32) -> Bsdf {
     Bsdf::Diffuse(Diffuse {
@@ -631,6 +613,7 @@ fn assert_disk_in_lit_enclosure_matches_the_path_tracer(material: Bsdf) {
 /// [`assert_disk_in_lit_enclosure_matches_the_path_tracer`] after `passes` passes.
 fn assert_disk_in_lit_enclosure_matches_the_path_tracer_after(material: Bsdf, passes: u32) {
     use crate::integrators::path::PathTracer;
+    use crate::integrators::RayIntegrator;
     let res = 8;
     let scene = scene(
         camera(Vec3::new(0.0, 0.45, 0.65), Vec3::ZERO, 20.0, res),
@@ -921,6 +904,7 @@ fn hidden_emitters_are_seen_through_by_the_eye_path() {
         max_depth: -1,
         rr_depth: 5,
         hide_emitters: true,
+        ..Default::default()
     });
     let hidden = trace(&scene);
     let on_ceiling = hidden.vp.expect("a visible point behind the light");
@@ -930,5 +914,9 @@ fn hidden_emitters_are_seen_through_by_the_eye_path() {
     // The G-buffer describes the ceiling: its albedo and its depth from the camera.
     assert_eq!(hidden.gbuffer.albedo, Rgb::splat(0.7));
     let depth = scene.camera.depth_of(Vec3::new(0.01, 1.0, 0.02));
-    assert!((hidden.gbuffer.depth - depth).abs() < 1e-4, "{}", hidden.gbuffer.depth);
+    assert!(
+        (hidden.gbuffer.depth - depth).abs() < 1e-4,
+        "{}",
+        hidden.gbuffer.depth
+    );
 }
