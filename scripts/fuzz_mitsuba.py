@@ -19,6 +19,14 @@ Mitsuba is a development tool only (`pip install mitsuba`, variant llvm_ad_rgb).
 
     python3 scripts/fuzz_mitsuba.py --count 40 --seed 1
     python3 scripts/fuzz_mitsuba.py --count 1 --seed 1 --first 17 --keep   # scene 17 again
+    python3 scripts/fuzz_mitsuba.py --count 40 --seed 1 --direct --hide-emitters
+
+`--direct` renders the same scenes with both renderers' `direct` integrator instead (one emitter
+sample, as Mitsuba 3.9 weighs delta lights wrongly for more: mitsuba3 issue #1861; 1-3 BSDF
+samples). `--hide-emitters` sets the integrator's `hide_emitters` and leaves `mask` out of the
+scenes: with it, Mitsuba 3.9.1's `path` drops the light a mask reflects whenever the camera path
+then passes through the mask (its `valid_ray` starts false, the quirk described at `material`).
+Without --hide-emitters a seed's scenes stay the ones earlier runs saw.
 """
 
 import argparse
@@ -171,10 +179,10 @@ def light(r, allow_environment=True, area_only=False):
     return f'<emitter type="constant"><rgb name="radiance" value="{rgb(r, 0.1, 1)}"/></emitter>'
 
 
-def scene_xml(seed, index, lights="all", delta_materials=True):
+def scene_xml(seed, index, lights="all", delta_materials=True, masks=True):
     """Scene `index` of generator seed `seed`; `lights="area"`: area lights and a sky only;
     without `delta_materials` no smooth (delta) BSDF, so that every light path is one a path
-    tracer can find."""
+    tracer can find; without `masks` no `mask` BSDF."""
     r = random.Random(seed * 1_000_003 + index)
     area_only = lights == "area"
     elev, azim, dist = r.uniform(10, 55), r.uniform(0, 360), r.uniform(3.5, 6)
@@ -183,7 +191,7 @@ def scene_xml(seed, index, lights="all", delta_materials=True):
     # Mitsuba allows one environment emitter per scene.
     first = light(r, True, area_only)
     lights = [first] + [light(r, "constant" not in first, area_only) for _ in range(r.randint(0, 1))]
-    environment = any("constant" in l for l in lights)
+    environment = any("constant" in l for l in lights) and masks
     lights = "\n    ".join(lights)
     floor = material(r, allow_delta=False, allow_mask=environment)
     objects = "\n    ".join(shape(r, material(r, delta_materials, environment))
@@ -205,11 +213,30 @@ def scene_xml(seed, index, lights="all", delta_materials=True):
 """
 
 
-def render_mitsuba(xml, spp, max_depth):
+def integrator_variant(xml_text, seed, index, direct, hide):
+    """The scene's `<integrator>` replaced for --direct / --hide-emitters, and the Mitsuba
+    integrator dict that matches it. The BSDF sample count comes from its own random stream."""
+    max_depth = int(xml_text.split('name="max_depth" value="')[1].split('"')[0])
+    old = f'<integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>'
+    hide_xml = '<boolean name="hide_emitters" value="true"/>' if hide else ""
+    if direct:
+        bsdf_samples = random.Random(seed * 7_919 + index).randint(1, 3)
+        new = (f'<integrator type="direct"><integer name="emitter_samples" value="1"/>'
+               f'<integer name="bsdf_samples" value="{bsdf_samples}"/>{hide_xml}</integrator>')
+        params = {"type": "direct", "emitter_samples": 1, "bsdf_samples": bsdf_samples, "hide_emitters": hide}
+    else:
+        new = f'<integrator type="path"><integer name="max_depth" value="{max_depth}"/>{hide_xml}</integrator>'
+        params = {"type": "path", "max_depth": max_depth, "hide_emitters": hide}
+    return xml_text.replace(old, new), params
+
+
+def render_mitsuba(xml, spp, params):
+    """Mitsuba's image of `xml` with the integrator `params` (a `mi.load_dict` dict), in CHUNKS
+    runs of spp/CHUNKS samples: (mean, stacked chunks)."""
     mi = mitsuba()
     mi.set_variant("llvm_ad_rgb")
     sc = mi.load_file(str(xml), spp=spp // CHUNKS, res=RES)
-    integrator = mi.load_dict({"type": "path", "max_depth": max_depth})
+    integrator = mi.load_dict(params)
     chunks = [np.array(mi.render(sc, integrator=integrator, spp=spp // CHUNKS, seed=7000 + k),
                        dtype=np.float64)[..., :3] for k in range(CHUNKS)]
     return np.mean(chunks, axis=0), np.stack(chunks)
@@ -235,13 +262,13 @@ def run_render(cmd):
         raise RuntimeError(done.stderr.strip()[-400:])
 
 
-def render_path_chunks(binary, xml, spp, out_dir, prefix, *extra):
-    """Our path tracer on `xml` in CHUNKS runs of spp/CHUNKS samples (seeds 1..CHUNKS, images
-    `<prefix>_<k>.exr` in `out_dir`), stacked: their spread is our noise."""
+def render_path_chunks(binary, xml, spp, out_dir, prefix, *extra, integrator="path"):
+    """Our path tracer (or `integrator`) on `xml` in CHUNKS runs of spp/CHUNKS samples (seeds
+    1..CHUNKS, images `<prefix>_<k>.exr` in `out_dir`), stacked: their spread is our noise."""
     chunks = []
     for k in range(CHUNKS):
         exr = out_dir / f"{prefix}_{k}.exr"
-        run_render([binary, xml, "--integrator", "path", *extra, "--spp", spp // CHUNKS,
+        run_render([binary, xml, "--integrator", integrator, *extra, "--spp", spp // CHUNKS,
                     "--seed", k + 1, "--out", exr])
         chunks.append(read_exr(exr))
     return np.stack(chunks)
@@ -264,22 +291,27 @@ def finish(out, rows, flagged, count):
 
 
 def main():
-    args = fuzz_arguments(__doc__.split("\n")[0], 1024, "samples per pixel, both renderers",
-                          "fuzz").parse_args()
+    ap = fuzz_arguments(__doc__.split("\n")[0], 1024, "samples per pixel, both renderers", "fuzz")
+    ap.add_argument("--direct", action="store_true", help="compare the `direct` integrators instead of `path`")
+    ap.add_argument("--hide-emitters", action="store_true", help="set the integrator's hide_emitters")
+    args = ap.parse_args()
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
     for index, d, xml in scene_dirs(args):
-        xml.write_text(scene_xml(args.seed, index))
-        max_depth = int(xml.read_text().split('name="max_depth" value="')[1].split('"')[0])
+        text, params = integrator_variant(scene_xml(args.seed, index, masks=not args.hide_emitters),
+                                          args.seed, index,
+                                          args.direct, args.hide_emitters)
+        xml.write_text(text)
         try:
-            ref, ref_chunks = render_mitsuba(xml, args.spp, max_depth)
+            ref, ref_chunks = render_mitsuba(xml, args.spp, params)
         except RuntimeError as e:  # a generator mistake, not a finding about our renderer
             sys.exit(f"{index:4d}: Mitsuba refused the scene {xml}: {e}")
         # Ours in as many independent chunks, so that the noise estimate sees each renderer's
         # own variance (their sampling strategies differ).
         try:
-            ours_chunks = render_path_chunks(args.bin, xml, args.spp, d, "ours")
+            ours_chunks = render_path_chunks(args.bin, xml, args.spp, d, "ours",
+                                             integrator="direct" if args.direct else "path")
         except RuntimeError as e:
             flagged.append(index)
             rows.append({"index": index, "error": str(e)})

@@ -191,7 +191,8 @@ pub struct IntegratorDesc {
     /// `rr_depth` (Mitsuba's default 5).
     pub rr_depth: u32,
     /// `hide_emitters`: as in Mitsuba, the camera sees through area emitters to what lies
-    /// behind them and sees the environment black (their reflections and light stay).
+    /// behind them and sees the environment black, also through surfaces it passes straight
+    /// through (masks, thin glass); reflections and the light they cast stay.
     pub hide_emitters: bool,
     /// `emitter_samples` of `direct`: light samples per camera ray (default `shading_samples`,
     /// else 1).

@@ -119,6 +119,16 @@ pub struct BsdfSample {
     pub eta: f32,
 }
 
+impl BsdfSample {
+    /// Whether the sample passes straight through the surface (`wi = −wo` exactly: a mask's
+    /// pass-through, a thin dielectric's transmission — Mitsuba's "null" interactions), so
+    /// that what lies beyond is seen as if the surface were not there.
+    #[inline]
+    pub fn passes_through(&self, wo: Vec3) -> bool {
+        self.delta && self.wi == -wo
+    }
+}
+
 /// How an SPPM eye path treats a surface.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Lobe {

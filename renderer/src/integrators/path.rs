@@ -47,11 +47,13 @@ impl RayIntegrator for PathTracer {
         let mut prev_p = ray.o;
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
-        // Mitsuba's `hide_emitters`: the camera ray sees through area emitters and not the
-        // environment; reflections of both stay.
+        // Mitsuba's `hide_emitters`: what the camera sees directly — also through surfaces it
+        // passes straight through (masks, thin glass) — is hidden: area emitters are seen
+        // through and the environment is black; reflections of both stay.
         let hide_direct = scene.hide_emitters();
+        let mut seen_directly = true;
         loop {
-            let hidden = hide_direct && depth == 0;
+            let hidden = hide_direct && seen_directly;
             // Emission found by BSDF sampling (or seen from the camera), MIS-weighted against
             // light sampling from the previous vertex.
             let environment = |ray: &Ray| {
@@ -130,6 +132,7 @@ impl RayIntegrator for PathTracer {
             let Some(bs) = bsdf.sample(wo, &sp, u_lobe, u_bsdf, TransportMode::Radiance) else {
                 break;
             };
+            seen_directly &= bs.passes_through(wo);
             let wi_world = si.to_world(bs.wi);
             ray = si.spawn_ray(wi_world);
             throughput *= bs.weight;
@@ -403,6 +406,59 @@ mod tests {
             }
         }
         assert!(through_to_environment >= 4, "{through_to_environment}");
+    }
+
+    /// `hide_emitters` also hides what the camera sees through surfaces it passes straight
+    /// through (Mitsuba's null interactions): a black masked sphere in a constant environment
+    /// renders black, although half the light passes each of its surfaces; a thin glass
+    /// sphere shows only what it reflects.
+    #[test]
+    fn hide_emitters_hides_the_environment_seen_through_masks_and_thin_glass() {
+        use crate::bsdf::{Mask, ThinDielectric};
+        let hide = |mut scene: Scene| {
+            scene.integrator = Some(crate::description::IntegratorDesc {
+                hide_emitters: true,
+                ..Default::default()
+            });
+            scene
+        };
+        let mask = || {
+            Bsdf::Mask(Mask {
+                opacity: Texture::Constant(Rgb::splat(0.5)),
+                nested: Box::new(diffuse(0.0)),
+            })
+        };
+        let environment = EmitterDesc::Constant { radiance: Rgb::ONE };
+        let shown =
+            PathTracer::default().render(&sphere_of(mask(), environment.clone()), 64, 1, None);
+        assert!(shown.get(4, 4).min_element() > 0.1, "{:?}", shown.get(4, 4));
+        let hidden = PathTracer::default().render(
+            &hide(sphere_of(mask(), environment.clone())),
+            64,
+            1,
+            None,
+        );
+        assert!(
+            hidden.pixels.iter().all(|p| *p == Rgb::ZERO),
+            "{:?}",
+            hidden.mean()
+        );
+
+        let glass = Bsdf::ThinDielectric(ThinDielectric {
+            eta: 1.5,
+            specular_reflectance: Texture::Constant(Rgb::ONE),
+            specular_transmittance: Texture::Constant(Rgb::ONE),
+        });
+        let scene = hide(sphere_of(glass, environment));
+        let film = PathTracer::default().render(&scene, 1024, 1, None);
+        // The centre pixels see the sphere head-on: each of its two surfaces reflects about
+        // 2R/(1 + R) ≈ 8 % of the light at normal incidence; the 92 % passing straight through
+        // both is hidden.
+        let centre = film.get(4, 4);
+        assert!(
+            centre.max_element() < 0.3 && centre.min_element() > 0.02,
+            "{centre:?}"
+        );
     }
 
     #[test]

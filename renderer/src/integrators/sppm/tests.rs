@@ -920,3 +920,37 @@ fn hidden_emitters_are_seen_through_by_the_eye_path() {
         hidden.gbuffer.depth
     );
 }
+
+/// `hide_emitters` also hides what an eye path sees through a surface it passes straight
+/// through: through a black masked quad the environment is not seen (without the flag it is).
+#[test]
+fn hidden_emitters_stay_hidden_through_a_mask() {
+    use crate::bsdf::Mask;
+    let mask = Bsdf::Mask(Mask {
+        opacity: Texture::Constant(Rgb::splat(0.5)),
+        nested: Box::new(diffuse(0.0)),
+    });
+    let panel = quad("panel", Vec3::ZERO, Vec3::X, Vec3::Y, 0, None);
+    let mut scene = scene(
+        camera(Vec3::new(0.0, 0.0, -2.0), Vec3::ZERO, 30.0, 4),
+        vec![mask],
+        vec![panel],
+        vec![EmitterDesc::Constant { radiance: Rgb::ONE }],
+    );
+    let through_the_panel = |scene: &Scene| {
+        (0..256u64)
+            .map(|i| {
+                let mut rng = rng_for(5, 0, i);
+                let ray = crate::math::Ray::new(Vec3::new(0.1, 0.1, -2.0), Vec3::Z);
+                trace_eye_path(scene, ray, &mut rng, 8).direct
+            })
+            .fold(Rgb::ZERO, |a, b| a + b)
+    };
+    assert!(through_the_panel(&scene).min_element() > 10.0);
+    scene.integrator = Some(crate::description::IntegratorDesc {
+        kind: "sppm".into(),
+        hide_emitters: true,
+        ..Default::default()
+    });
+    assert_eq!(through_the_panel(&scene), Rgb::ZERO);
+}

@@ -239,11 +239,13 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
         pdf: 1.0,
         delta: true,
     };
-    // Mitsuba's `hide_emitters`: the camera ray sees through area emitters and not the
-    // environment; reflections of both stay.
+    // Mitsuba's `hide_emitters`: what the camera sees directly — also through surfaces it
+    // passes straight through (masks, thin glass) — is hidden: area emitters are seen through
+    // and the environment is black; reflections of both stay.
     let hide_direct = scene.hide_emitters();
+    let mut seen_directly = true;
     for depth in 0..=max_depth {
-        let hidden = hide_direct && depth == 0;
+        let hidden = hide_direct && seen_directly;
         let hit = if hidden {
             scene.intersect_behind_emitters(&ray)
         } else {
@@ -301,6 +303,7 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                     if depth == max_depth || !scatter(&si, &bs, &mut beta, &mut last, &mut ray) {
                         break;
                     }
+                    seen_directly &= bs.passes_through(wo);
                     continue;
                 }
                 if p_delta >= 1.0 {
@@ -336,6 +339,8 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                 {
                     break;
                 }
+                // A glossy bounce: what follows is a reflection, not seen directly.
+                seen_directly = false;
                 emission_counted = true;
                 continue;
             }
@@ -362,6 +367,7 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
         if !scatter(&si, &bs, &mut beta, &mut last, &mut ray) {
             break;
         }
+        seen_directly &= bs.passes_through(wo);
     }
     out
 }
