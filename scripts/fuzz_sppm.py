@@ -15,7 +15,8 @@ A scene is flagged when the image mean of any level (y, z1..z4) differs from the
 by more than max(5 sigma, --tol) in any channel (sigma from the path tracer's run-to-run spread
 and the bundle's stored variances). The worst 8x8-pixel block of the sharpest
 level is printed too, for a look (kernel bias at edges makes it larger than the image mean's).
-Flagged scenes keep their XML and images under out/fuzz-sppm/<seed>/.
+Flagged scenes keep their XML and images under out/fuzz-sppm/<seed>/. `--hide-emitters` sets
+the scenes' `hide_emitters` (both renderers read it from the file).
 
     python3 scripts/fuzz_sppm.py --count 40 --seed 1 --bin target/release/render
 """
@@ -28,7 +29,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from fuzz_mitsuba import (  # noqa: E402
-    CHUNKS, finish, fuzz_arguments, render_path_chunks, run_render, scene_dirs, scene_xml)
+    CHUNKS, finish, fuzz_arguments, integrator_variant, render_path_chunks, run_render, scene_dirs,
+    scene_xml)
 from validate_pt import mitsuba  # noqa: E402
 
 LEVELS = ["y", "z1", "z2", "z3", "z4"]
@@ -54,15 +56,19 @@ def main():
     ap.add_argument("--tol", type=float, default=0.02, help="relative tolerance of the image mean")
     ap.add_argument("--delta-lights", action="store_true",
                     help="every light type, no smooth materials (default: area lights and sky)")
+    ap.add_argument("--hide-emitters", action="store_true", help="set the scenes' hide_emitters")
     args = ap.parse_args()
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
     for index, d, xml in scene_dirs(args):
         if args.delta_lights:
-            xml.write_text(scene_xml(args.seed, index, lights="all", delta_materials=False))
+            text = scene_xml(args.seed, index, lights="all", delta_materials=False)
         else:
-            xml.write_text(scene_xml(args.seed, index, lights="area"))
+            text = scene_xml(args.seed, index, lights="area")
+        if args.hide_emitters:
+            text = integrator_variant(text, args.seed, index, direct=False, hide=True)[0]
+        xml.write_text(text)
         try:
             chunks = render_path_chunks(args.bin, xml, args.spp, d, "path", "--max-depth", -1)
             run_render([args.bin, xml, "--integrator", "sppm-ml", "--photons", args.photons, "--passes",

@@ -43,9 +43,9 @@ struct Cli {
     /// else `path`.
     #[arg(long, value_enum)]
     integrator: Option<IntegratorKind>,
-    /// Output: an RGB EXR for `path` and `direct` (its name ends in `.exr` or has no extension); for the
-    /// SPPM integrators the prefix of the bundles `<prefix>_p<passes>.exr` (a trailing `.exr` is
-    /// dropped: `b.exr` gives `b_p0064.exr`). Missing folders are created.
+    /// Output: an RGB EXR for `path` and `direct` (its name ends in `.exr` or has no
+    /// extension); for the SPPM integrators the prefix of the bundles `<prefix>_p<passes>.exr`
+    /// (a trailing `.exr` is dropped: `b.exr` gives `b_p0064.exr`). Missing folders are created.
     #[arg(long, visible_alias = "output", value_name = "PATH")]
     out: PathBuf,
     /// Also write a tone-mapped (clamped, sRGB) PNG preview here (a name ending in `.png` or
@@ -268,43 +268,40 @@ fn check_outputs(cli: &Cli) -> Result<Vec<(&'static str, PathBuf)>> {
     let mut folders = Vec::new();
     // Without --integrator it is `path` or the file's `direct`: both write one image.
     let writes_image = cli.integrator.is_none_or(IntegratorKind::writes_image);
-    match writes_image {
-        true => {
-            check_not_directory("--out", &cli.out).map_err(anyhow::Error::msg)?;
-            files.push(("--out".into(), cli.out.clone()));
-            folders.push(("--out", cli.out.clone()));
+    if writes_image {
+        check_not_directory("--out", &cli.out).map_err(anyhow::Error::msg)?;
+        files.push(("--out".into(), cli.out.clone()));
+        folders.push(("--out", cli.out.clone()));
+    } else {
+        if cli.passes.is_empty() && cli.time.is_none() {
+            bail!("SPPM needs --passes N[,N…] and/or --time SECONDS");
         }
-        false => {
-            if cli.passes.is_empty() && cli.time.is_none() {
-                bail!("SPPM needs --passes N[,N…] and/or --time SECONDS");
-            }
-            if cli.passes.contains(&0) {
-                bail!("--passes values must be at least 1");
-            }
-            if let Some(ext) = extension(&cli.out).filter(|e| IMAGE_EXTENSIONS.contains(&&**e)) {
+        if cli.passes.contains(&0) {
+            bail!("--passes values must be at least 1");
+        }
+        if let Some(ext) = extension(&cli.out).filter(|e| IMAGE_EXTENSIONS.contains(&&**e)) {
+            bail!(
+                "--out {}: the SPPM integrators write EXR bundles <prefix>_p<passes>.exr, \
+                 not a .{ext} image; give a prefix (or a name ending in .exr), and --png \
+                 for a preview",
+                cli.out.display()
+            );
+        }
+        // Also the folder of a run stopped by --time only.
+        folders.push(("--out", bundle_path(&cli.out, 1)));
+        let mut passes = cli.passes.clone();
+        passes.sort_unstable();
+        passes.dedup();
+        for n in passes {
+            let path = bundle_path(&cli.out, n);
+            if path.is_dir() {
                 bail!(
-                    "--out {}: the SPPM integrators write EXR bundles <prefix>_p<passes>.exr, \
-                     not a .{ext} image; give a prefix (or a name ending in .exr), and --png \
-                     for a preview",
+                    "{} (the bundle of pass {n} of --out {}) is a directory",
+                    path.display(),
                     cli.out.display()
                 );
             }
-            // Also the folder of a run stopped by --time only.
-            folders.push(("--out", bundle_path(&cli.out, 1)));
-            let mut passes = cli.passes.clone();
-            passes.sort_unstable();
-            passes.dedup();
-            for n in passes {
-                let path = bundle_path(&cli.out, n);
-                if path.is_dir() {
-                    bail!(
-                        "{} (the bundle of pass {n} of --out {}) is a directory",
-                        path.display(),
-                        cli.out.display()
-                    );
-                }
-                files.push((format!("the pass-{n} bundle of --out"), path));
-            }
+            files.push((format!("the pass-{n} bundle of --out"), path));
         }
     }
     if let Some(png) = &cli.png {
