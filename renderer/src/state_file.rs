@@ -172,13 +172,16 @@ pub fn load<H: DeserializeOwned>(path: &Path, magic: &str) -> Result<Option<(H, 
 }
 
 /// Compares the identity saved in a state file (`saved`) with this run's (`here`), field by
-/// field: an error naming the file and the first field that differs.
+/// field: an error naming the file and the first field that differs — the integrator first,
+/// when it differs (the other fields then differ because of it).
 pub fn check_identity<I: Serialize>(path: &Path, saved: &I, here: &I) -> Result<()> {
     let (saved, here) = (serde_json::to_value(saved)?, serde_json::to_value(here)?);
     let (Some(a), Some(b)) = (saved.as_object(), here.as_object()) else {
         bail!("run identities must be JSON objects");
     };
-    for (key, value) in b {
+    let mut fields: Vec<_> = b.iter().collect();
+    fields.sort_by_key(|(key, _)| key.as_str() != "integrator");
+    for (key, value) in fields {
         let old = a.get(key).unwrap_or(&serde_json::Value::Null);
         if old != value {
             let hint = if key == "scene_fingerprint" {

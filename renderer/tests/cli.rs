@@ -448,6 +448,23 @@ fn the_direct_integrator_from_the_command_line_and_from_the_scene_file() {
     let err = stderr(&result);
     assert_eq!(result.status.code(), Some(1), "{err}");
     assert!(err.contains("at least one emitter or BSDF sample"), "{err}");
+    // A path tracer's run state is not resumed by the direct integrator: refused, naming the
+    // integrator (not a setting that differs because of it).
+    let state = dir.join("run.state");
+    let state = state.to_str().unwrap();
+    let (result, _) = render(&scene, &["--state", state], "state-path.exr");
+    assert!(result.status.success(), "{}", stderr(&result));
+    let (result, _) = render(
+        &scene,
+        &["--integrator", "direct", "--state", state],
+        "state-direct.exr",
+    );
+    let err = stderr(&result);
+    assert_eq!(result.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(r#"integrator: "path" in the file, "direct" in this run"#),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
