@@ -202,6 +202,17 @@ pub struct IntegratorDesc {
     pub bsdf_samples: u32,
 }
 
+#[cfg(test)]
+impl IntegratorDesc {
+    /// Mitsuba's `path` with `hide_emitters` on (the integrators' tests of the flag).
+    pub(crate) fn hiding_emitters() -> Self {
+        IntegratorDesc {
+            hide_emitters: true,
+            ..Default::default()
+        }
+    }
+}
+
 impl Default for IntegratorDesc {
     /// Mitsuba's `path` with its defaults.
     fn default() -> Self {

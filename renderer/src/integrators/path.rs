@@ -301,13 +301,7 @@ mod tests {
     fn hide_emitters_blacks_out_only_the_directly_seen_environment() {
         let mut scene = sphere_in_environment(1.0);
         let shown = PathTracer::default().render(&scene, 64, 1, None);
-        scene.integrator = Some(crate::description::IntegratorDesc {
-            kind: "path".into(),
-            max_depth: -1,
-            rr_depth: 5,
-            hide_emitters: true,
-            ..Default::default()
-        });
+        scene.integrator = Some(crate::description::IntegratorDesc::hiding_emitters());
         let hidden = PathTracer::default().render(&scene, 64, 1, None);
         // Corner pixels see only the environment; the centre sees only the sphere.
         assert_eq!(shown.get(0, 0), Rgb::ONE);
@@ -340,13 +334,7 @@ mod tests {
         let desc = |hide: bool| SceneDescription {
             camera: test_camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 40.0, 8),
             sample_count: None,
-            integrator: Some(crate::description::IntegratorDesc {
-                kind: "path".into(),
-                max_depth: -1,
-                rr_depth: 5,
-                hide_emitters: hide,
-                ..Default::default()
-            }),
+            integrator: hide.then(crate::description::IntegratorDesc::hiding_emitters),
             bsdfs: vec![diffuse(1.0), diffuse(0.5)],
             // The ball (radius 0.5 at the origin) and, in front of it, a larger emitter that
             // covers the ball and some environment around it in the central pixels.
@@ -416,10 +404,7 @@ mod tests {
     fn hide_emitters_hides_the_environment_seen_through_masks_and_thin_glass() {
         use crate::bsdf::{Mask, ThinDielectric};
         let hide = |mut scene: Scene| {
-            scene.integrator = Some(crate::description::IntegratorDesc {
-                hide_emitters: true,
-                ..Default::default()
-            });
+            scene.integrator = Some(crate::description::IntegratorDesc::hiding_emitters());
             scene
         };
         let mask = || {

@@ -363,6 +363,23 @@ impl<'a> Props<'a> {
         }
     }
 
+    /// An integer parameter that must be a `u32` of at least `min`: otherwise an error at its
+    /// element, "must be positive" (`min` 1) or "must be >= min", with the value.
+    pub fn count(&mut self, name: &str, min: u32) -> Result<Option<u32>, SceneError> {
+        let at = self.element_of(name);
+        match self.int(name)? {
+            None => Ok(None),
+            Some(v) if (i64::from(min)..=i64::from(u32::MAX)).contains(&v) => Ok(Some(v as u32)),
+            Some(v) => {
+                let bound = match min {
+                    1 => "positive".to_owned(),
+                    _ => format!(">= {min}"),
+                };
+                Err(at.error(format!("\"{name}\" must be {bound}, got {v}")))
+            }
+        }
+    }
+
     /// A boolean parameter with a default.
     pub fn bool_or(&mut self, name: &str, default: bool) -> Result<bool, SceneError> {
         match self.take(name) {

@@ -379,14 +379,7 @@ fn build_sampler<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<u32, SceneE
         b.diag.warn(el, "sampler treated as \"independent\"");
     }
     let mut p = Props::parse(b, el)?;
-    let count_el = p.element_of("sample_count");
-    let count = match p.int("sample_count")? {
-        None => 4,
-        Some(v) if (1..=i64::from(u32::MAX)).contains(&v) => v as u32,
-        Some(v) => {
-            return Err(count_el.error(format!("\"sample_count\" must be positive, got {v}")))
-        }
-    };
+    let count = p.count("sample_count", 1)?.unwrap_or(4);
     p.ignore(
         b,
         &["seed", "jitter", "strength", "dimension"],
@@ -399,17 +392,9 @@ fn build_sampler<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<u32, SceneE
 /// `direct`'s `emitter_samples` and `bsdf_samples`, as Mitsuba reads them: each defaults to
 /// `shading_samples` (default 1), which must not be given together with either; not both 0.
 fn direct_sample_counts(p: &mut Props, el: &Element) -> Result<(u32, u32), SceneError> {
-    let mut count = |name: &str| -> Result<Option<u32>, SceneError> {
-        let at = p.element_of(name);
-        match p.int(name)? {
-            None => Ok(None),
-            Some(v) if (0..=i64::from(u32::MAX)).contains(&v) => Ok(Some(v as u32)),
-            Some(v) => Err(at.error(format!("\"{name}\" must be >= 0, got {v}"))),
-        }
-    };
-    let shading = count("shading_samples")?;
-    let emitter = count("emitter_samples")?;
-    let bsdf = count("bsdf_samples")?;
+    let shading = p.count("shading_samples", 0)?;
+    let emitter = p.count("emitter_samples", 0)?;
+    let bsdf = p.count("bsdf_samples", 0)?;
     if shading.is_some() && (emitter.is_some() || bsdf.is_some()) {
         return Err(el.error(
             "\"shading_samples\" sets both \"emitter_samples\" and \"bsdf_samples\"; give \
@@ -456,12 +441,7 @@ pub(super) fn build_integrator<'a>(
             )))
         }
     };
-    let rr_el = p.element_of("rr_depth");
-    let rr_depth = match p.int("rr_depth")? {
-        None => 5,
-        Some(v) if v >= 0 && v <= i64::from(u32::MAX) => v as u32,
-        Some(v) => return Err(rr_el.error(format!("\"rr_depth\" must be >= 0, got {v}"))),
-    };
+    let rr_depth = p.count("rr_depth", 0)?.unwrap_or(5);
     let hide_emitters = p.bool_or("hide_emitters", false)?;
     let (emitter_samples, bsdf_samples) = direct_sample_counts(&mut p, el)?;
     p.ignore(

@@ -899,13 +899,7 @@ fn hidden_emitters_are_seen_through_by_the_eye_path() {
     assert!((on_light.p.y - 0.99).abs() < 1e-4, "{:?}", on_light.p);
     assert!(shown.direct.min_element() >= 8.0, "{:?}", shown.direct);
 
-    scene.integrator = Some(crate::description::IntegratorDesc {
-        kind: "sppm".into(),
-        max_depth: -1,
-        rr_depth: 5,
-        hide_emitters: true,
-        ..Default::default()
-    });
+    scene.integrator = Some(crate::description::IntegratorDesc::hiding_emitters());
     let hidden = trace(&scene);
     let on_ceiling = hidden.vp.expect("a visible point behind the light");
     assert!((on_ceiling.p.y - 1.0).abs() < 1e-4, "{:?}", on_ceiling.p);
@@ -947,10 +941,6 @@ fn hidden_emitters_stay_hidden_through_a_mask() {
             .fold(Rgb::ZERO, |a, b| a + b)
     };
     assert!(through_the_panel(&scene).min_element() > 10.0);
-    scene.integrator = Some(crate::description::IntegratorDesc {
-        kind: "sppm".into(),
-        hide_emitters: true,
-        ..Default::default()
-    });
+    scene.integrator = Some(crate::description::IntegratorDesc::hiding_emitters());
     assert_eq!(through_the_panel(&scene), Rgb::ZERO);
 }
