@@ -27,6 +27,12 @@ samples). `--hide-emitters` sets the integrator's `hide_emitters` and leaves `ma
 scenes: with it, Mitsuba 3.9.1's `path` drops the light a mask reflects whenever the camera path
 then passes through the mask (its `valid_ray` starts false, the quirk described at `material`).
 Without --hide-emitters a seed's scenes stay the ones earlier runs saw.
+
+`--extended` draws the scenes from scripts/fuzz_extended.py instead: bitmap textures on every
+parameter that takes one, normal and bump maps, anisotropic and Beckmann microfacets, named and
+explicit IORs, `<spectrum>` values, OBJ/PLY meshes, instances, `matrix` transforms, an envmap,
+thin-lens / orthographic / off-centre cameras and other filters, with the images and meshes each
+scene needs written next to it.
 """
 
 import argparse
@@ -148,16 +154,22 @@ def shape(r, bsdf):
             f'<translate x="{x:.3f}" y="{r.uniform(0.3, 1.0):.3f}" z="{z:.3f}"/></transform>{bsdf}</shape>')
 
 
+def area_rectangle(r, radiance):
+    """A downward-facing rectangular area light above the scene; `radiance()` gives its
+    radiance element (called after the placement is drawn)."""
+    s = r.uniform(0.3, 1.0)
+    place = (f'<transform name="to_world"><scale value="{s:.3f}"/><rotate x="1" angle="90"/>'
+             f'<translate x="{r.uniform(-1, 1):.3f}" y="{r.uniform(2.5, 3.5):.3f}" '
+             f'z="{r.uniform(-1, 1):.3f}"/></transform>')
+    return f'<shape type="rectangle">{place}<emitter type="area">{radiance()}</emitter></shape>'
+
+
 def light(r, allow_environment=True, area_only=False):
     """A random light; with `area_only` an area light or a constant sky (no delta lights)."""
     kinds = ["area", "area-sphere"] if area_only else ["area", "area-sphere", "point", "spot", "directional"]
     k = r.choice(kinds + ["constant"] if allow_environment else kinds)
     if k == "area":
-        s = r.uniform(0.3, 1.0)
-        return (f'<shape type="rectangle"><transform name="to_world"><scale value="{s:.3f}"/>'
-                f'<rotate x="1" angle="90"/><translate x="{r.uniform(-1, 1):.3f}" y="{r.uniform(2.5, 3.5):.3f}" '
-                f'z="{r.uniform(-1, 1):.3f}"/></transform>'
-                f'<emitter type="area"><rgb name="radiance" value="{rgb(r, 3, 12)}"/></emitter></shape>')
+        return area_rectangle(r, lambda: f'<rgb name="radiance" value="{rgb(r, 3, 12)}"/>')
     if k == "area-sphere":
         return (f'<shape type="sphere"><point name="center" x="{r.uniform(-1.5, 1.5):.3f}" '
                 f'y="{r.uniform(1.5, 3):.3f}" z="{r.uniform(-1.5, 1.5):.3f}"/>'
@@ -294,14 +306,20 @@ def main():
     ap = fuzz_arguments(__doc__.split("\n")[0], 1024, "samples per pixel, both renderers", "fuzz")
     ap.add_argument("--direct", action="store_true", help="compare the `direct` integrators instead of `path`")
     ap.add_argument("--hide-emitters", action="store_true", help="set the integrator's hide_emitters")
+    ap.add_argument("--extended", action="store_true",
+                    help="scenes with textures, normal/bump maps, meshes, instances, envmaps, other "
+                         "cameras and filters (scripts/fuzz_extended.py)")
     args = ap.parse_args()
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
     for index, d, xml in scene_dirs(args):
-        text, params = integrator_variant(scene_xml(args.seed, index, masks=not args.hide_emitters),
-                                          args.seed, index,
-                                          args.direct, args.hide_emitters)
+        if args.extended:
+            from fuzz_extended import extended_scene_xml
+            text = extended_scene_xml(args.seed, index, d, masks=not args.hide_emitters)
+        else:
+            text = scene_xml(args.seed, index, masks=not args.hide_emitters)
+        text, params = integrator_variant(text, args.seed, index, args.direct, args.hide_emitters)
         xml.write_text(text)
         try:
             ref, ref_chunks = render_mitsuba(xml, args.spp, params)

@@ -16,7 +16,9 @@ by more than max(5 sigma, --tol) in any channel (sigma from the path tracer's ru
 and the bundle's stored variances). The worst 8x8-pixel block of the sharpest
 level is printed too, for a look (kernel bias at edges makes it larger than the image mean's).
 Flagged scenes keep their XML and images under out/fuzz-sppm/<seed>/. `--hide-emitters` sets
-the scenes' `hide_emitters` (both renderers read it from the file).
+the scenes' `hide_emitters` (both renderers read it from the file); `--extended` draws the scenes
+from fuzz_mitsuba.py's extended generator (textures, normal and bump maps, meshes, instances,
+envmaps, other cameras and filters) under the same rules.
 
     python3 scripts/fuzz_sppm.py --count 40 --seed 1 --bin target/release/render
 """
@@ -57,15 +59,21 @@ def main():
     ap.add_argument("--delta-lights", action="store_true",
                     help="every light type, no smooth materials (default: area lights and sky)")
     ap.add_argument("--hide-emitters", action="store_true", help="set the scenes' hide_emitters")
+    ap.add_argument("--extended", action="store_true",
+                    help="the scenes of fuzz_mitsuba.py --extended (scripts/fuzz_extended.py)")
     args = ap.parse_args()
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
     for index, d, xml in scene_dirs(args):
+        make = scene_xml
+        if args.extended:
+            from fuzz_extended import extended_scene_xml
+            make = lambda *a, **k: extended_scene_xml(*a[:2], d, **k)  # noqa: E731
         if args.delta_lights:
-            text = scene_xml(args.seed, index, lights="all", delta_materials=False)
+            text = make(args.seed, index, lights="all", delta_materials=False)
         else:
-            text = scene_xml(args.seed, index, lights="area")
+            text = make(args.seed, index, lights="area")
         if args.hide_emitters:
             text = integrator_variant(text, args.seed, index, direct=False, hide=True)[0]
         xml.write_text(text)

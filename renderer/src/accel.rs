@@ -412,6 +412,7 @@ mod tests {
             normals: None,
             uvs: None,
             indices: vec![[0, 1, 2], [0, 2, 3]],
+            flipped: false,
         };
         let shapes = vec![
             Shape::Sphere(Sphere::new(Vec3::new(0.0, 0.0, 6.0), 1.0, false)),
@@ -457,6 +458,7 @@ mod tests {
             normals: None,
             uvs: None,
             indices,
+            flipped: false,
         };
         vec![
             Shape::Mesh(Mesh::new(&soup)),
@@ -576,6 +578,7 @@ mod tests {
             normals: None,
             uvs: None,
             indices: vec![[0, 1, 2]; copies as usize],
+            flipped: false,
         };
         shapes.push(Shape::Mesh(Mesh::new(&tri)));
         // Before the grouping this build took minutes (quadratic in the copies).

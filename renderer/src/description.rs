@@ -14,8 +14,14 @@ pub struct TriangleMesh {
     pub normals: Option<Vec<Vec3>>,
     /// Per-vertex texture coordinates, if any.
     pub uvs: Option<Vec<Vec2>>,
-    /// Triangles as vertex indices, counter-clockwise seen from the front (normal) side.
+    /// Triangles as vertex indices, counter-clockwise seen from the front (normal) side, or
+    /// clockwise when `flipped`.
     pub indices: Vec<[u32; 3]>,
+    /// `flip_normals`: the face normals point against the winding. Mitsuba keeps the vertex
+    /// order of a flipped mesh and negates its normals, and a mesh without texture
+    /// coordinates is parameterised by the vertex order (uv = barycentrics, ∂p/∂u = p₁ − p₀),
+    /// so reversing the winding instead would move its textures and tangents.
+    pub flipped: bool,
 }
 
 /// The geometry of one shape.

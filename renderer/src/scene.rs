@@ -806,6 +806,7 @@ mod tests {
                 normals: None,
                 uvs: None,
                 indices: vec![[0, 1, 2], [0, 2, 3]],
+                flipped: false,
             }),
             bsdf: 0,
             emission: Some(Texture::Constant(Rgb::new(1.0, 2.0, 3.0))),

@@ -529,6 +529,7 @@ mod tests {
             normals: None,
             uvs: None,
             indices: vec![[0, 1, 2], [2, 3, 0]],
+            flipped: false,
         };
         let tent = FilterDesc::Tent { radius: 1.5 };
         for filter in crate::filter::TEST_FILTERS.into_iter().chain([tent]) {

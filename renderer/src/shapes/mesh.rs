@@ -106,10 +106,11 @@ impl Mesh {
             })
             .collect();
         let area = areas.iter().map(|&a| a as f64).sum::<f64>() as f32;
+        let side = if data.flipped { -1.0 } else { 1.0 };
         let face_normals = (0..data.indices.len())
             .map(|i| {
                 let [p0, p1, p2] = Self::corners(&data, i as u32);
-                (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Z)
+                side * (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Z)
             })
             .collect::<Vec<Vec3>>();
         let smooth = data.normals.as_ref().is_some_and(|n| {
@@ -196,6 +197,9 @@ impl Mesh {
                 let det = d1.x * d2.y - d1.y * d2.x;
                 let (dpdu, dpdv) = if det != 0.0 {
                     ((e1 * d2.y - e2 * d1.y) / det, (e2 * d1.x - e1 * d2.x) / det)
+                } else if self.data.flipped {
+                    // Mitsuba picks the basis before it flips the normal.
+                    coordinate_system(-ng)
                 } else {
                     coordinate_system(ng)
                 };
@@ -292,6 +296,7 @@ mod tests {
             normals: Some(vec![Vec3::Z, Vec3::Z, Vec3::new(0.0, 1.0, 1.0).normalize()]),
             uvs: Some(vec![Vec2::ZERO, Vec2::X, Vec2::Y]),
             indices: vec![[0, 1, 2]],
+            flipped: false,
         };
         let m = Mesh::new(&data);
         assert!((m.area() - 0.5).abs() < 1e-6);
@@ -319,6 +324,7 @@ mod tests {
             normals: None,
             uvs: Some(uvs.clone()),
             indices: vec![[0, 1, 2]],
+            flipped: false,
         });
         let ray = Ray::new(Vec3::new(0.4, 0.5, 1.0), -Vec3::Z);
         let g = with_uvs.hit_geometry(0, &ray, 1.0);
@@ -337,12 +343,44 @@ mod tests {
             normals: None,
             uvs: None,
             indices: vec![[0, 1, 2]],
+            flipped: false,
         });
         let g = without.hit_geometry(0, &ray, 1.0);
         assert_eq!(
             (g.dpdu, g.dpdv),
             (Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 3.0, 0.0))
         );
+    }
+
+    #[test]
+    fn flipped_mesh_keeps_its_parameterisation() {
+        // `flip_normals` on a mesh without uvs, as Mitsuba 3: the normals turn around, the
+        // barycentric uvs and ∂p/∂u = p₁ − p₀, ∂p/∂v = p₂ − p₀ stay those of the file's vertex
+        // order (reversing the winding instead swapped u with v and ∂p/∂u with ∂p/∂v, which
+        // moves textures and turns anisotropic highlights).
+        let tri = |flipped| TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            normals: None,
+            uvs: None,
+            indices: vec![[0, 1, 2]],
+            flipped,
+        };
+        let ray = Ray::new(Vec3::new(0.2, 0.3, 1.0), -Vec3::Z);
+        let front = Mesh::new(&tri(false)).hit_geometry(0, &ray, 1.0);
+        let back = Mesh::new(&tri(true)).hit_geometry(0, &ray, 1.0);
+        assert_eq!(front.ng, Vec3::Z);
+        assert_eq!(back.ng, -Vec3::Z);
+        assert_eq!(back.ns, -Vec3::Z);
+        for g in [front, back] {
+            assert!((g.uv - Vec2::new(0.2, 0.3)).length() < 1e-6, "{}", g.uv);
+            assert_eq!((g.dpdu, g.dpdv), (Vec3::X, Vec3::Y));
+        }
+        let mesh = Mesh::new(&tri(true));
+        let s = mesh.sample_area(0.5, Vec2::new(0.3, 0.6));
+        assert_eq!(s.n, -Vec3::Z);
+        // A light sample's uv is its barycentrics in the file's order too.
+        let b = s.p.truncate();
+        assert!((s.uv - b).length() < 1e-6, "{} at {}", s.uv, s.p);
     }
 
     #[test]
@@ -360,6 +398,7 @@ mod tests {
             ]),
             uvs: None,
             indices: vec![[0, 1, 2], [0, 2, 3]],
+            flipped: false,
         };
         let flat = Mesh::new(&quad(0.0));
         assert!(!flat.smooth);

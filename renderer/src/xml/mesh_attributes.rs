@@ -232,7 +232,7 @@ impl RawAttribute {
 pub(crate) struct MeshAttributes {
     /// The attributes, in file order.
     pub(super) attributes: Vec<RawAttribute>,
-    /// The mesh's final triangles (after fan triangulation and `flip_normals`).
+    /// The mesh's final triangles (after fan triangulation).
     pub(super) triangles: Vec<[u32; 3]>,
     /// For each triangle, the file polygon it was cut from.
     pub(super) polygon_of: Vec<u32>,

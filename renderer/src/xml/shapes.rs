@@ -5,7 +5,8 @@
 //! Mitsuba 3's loaders: polygons fan-triangulated around their first corner, file normals used
 //! when present, otherwise angle-weighted smooth vertex normals computed in world space unless
 //! `face_normals` is true; OBJ texture coordinates stored as (u, 1 − v) (`flip_tex_coords`,
-//! default true for OBJ, false for PLY); `flip_normals` reverses the winding and the normals.
+//! default true for OBJ, false for PLY); `flip_normals` negates the normals and keeps the vertex
+//! order (`TriangleMesh::flipped`).
 //! Extra PLY properties become mesh attributes (`mesh_attributes.rs`), which the `mesh_attribute`
 //! textures of the shape's BSDF and area emitter read.
 
@@ -58,12 +59,24 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
         None => own_to_world,
     };
     let flip_normals = p.bool_or("flip_normals", false)?;
+    // Mitsuba transforms an instanced mesh's normals by the instance's inverse transpose, so a
+    // mirroring instance keeps the side its group's mesh faces; normals taken from the winding
+    // of world-space triangles would turn around with it.
+    let mirrored_instance = b
+        .instance
+        .as_ref()
+        .is_some_and(|(m, _)| Mat3::from_mat4(*m).determinant() < 0.0);
 
     // The attributes a PLY file carries (read by the shape's `mesh_attribute` textures).
     let mut file_attributes = None;
     let geometry = match kind {
         "rectangle" => Geometry::Mesh(rectangle(to_world, flip_normals)),
-        "cube" => Geometry::Mesh(cube(to_world, flip_normals)),
+        "cube" => {
+            let mut mesh = cube(to_world, flip_normals);
+            // Its vertex normals went through the inverse transpose: only the faces turn.
+            mesh.flipped ^= mirrored_instance;
+            Geometry::Mesh(mesh)
+        }
         "disk" => Geometry::Disk {
             to_world,
             flip_normals,
@@ -145,8 +158,21 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
                 file_el.error(format!("cannot load mesh \"{}\": {m}", path.display()))
             })?;
             let loaded = std::mem::take(&mut raw.attributes);
+            let computed_normals = !face_normals && !raw.has_usable_normals();
             let (mesh, polygon_of) =
                 finish_mesh(raw, to_world, face_normals, flip_normals, flip_tex)
+                    .map(|(mut mesh, polygon_of)| {
+                        if mirrored_instance {
+                            mesh.flipped ^= true;
+                            if computed_normals {
+                                // Computed from the world-space winding, as the face normals.
+                                for n in mesh.normals.iter_mut().flatten() {
+                                    *n = -*n;
+                                }
+                            }
+                        }
+                        (mesh, polygon_of)
+                    })
                     .map_err(|m| file_el.error(format!("mesh \"{}\": {m}", path.display())))?;
             if !loaded.is_empty() {
                 file_attributes = Some(MeshAttributes {
@@ -313,6 +339,7 @@ fn rectangle(to_world: Mat4, flip_normals: bool) -> TriangleMesh {
         normals: None,
         uvs: Some(uvs),
         indices: vec![[0, 1, 2], [2, 3, 0]],
+        flipped: false,
     };
     let mirrored = Mat3::from_mat4(to_world).determinant() < 0.0;
     if mirrored != flip_normals {
@@ -381,7 +408,19 @@ pub(super) struct RawMesh {
     attributes: Vec<RawAttribute>,
 }
 
+/// Whether a file's vertex normals can be used (all finite and non-zero).
+fn usable_normals(normals: &[Vec3]) -> bool {
+    normals
+        .iter()
+        .all(|v| v.is_finite() && v.length_squared() > 0.0)
+}
+
 impl RawMesh {
+    /// Whether the file gave vertex normals `finish_mesh` keeps (else it computes them).
+    fn has_usable_normals(&self) -> bool {
+        self.normals.as_deref().is_some_and(usable_normals)
+    }
+
     /// Makes room for `n` more polygons of (mostly) three corners.
     fn reserve_polygons(&mut self, n: usize) {
         self.corners.reserve(3 * n);
@@ -454,13 +493,14 @@ fn finish_mesh(
     });
     // Unit-length file normals (zero or non-finite ones make the set unusable: recompute).
     let file_normals = normals
-        .filter(|ns| ns.iter().all(|v| v.is_finite() && v.length_squared() > 0.0))
+        .filter(|ns| usable_normals(ns))
         .map(|ns| ns.into_iter().map(Vec3::normalize).collect());
     let mut mesh = TriangleMesh {
         positions,
         normals: file_normals,
         uvs,
         indices,
+        flipped: false,
     };
     transform_mesh(&mut mesh, to_world);
     if face_normals {
@@ -526,9 +566,10 @@ fn reverse_winding(mesh: &mut TriangleMesh) {
     }
 }
 
-/// `flip_normals`: the other side becomes the front.
+/// `flip_normals`: the other side becomes the front; the vertex order stays (see
+/// [`TriangleMesh::flipped`]).
 fn flip(mesh: &mut TriangleMesh) {
-    reverse_winding(mesh);
+    mesh.flipped = !mesh.flipped;
     if let Some(ns) = mesh.normals.as_mut() {
         for v in ns.iter_mut() {
             *v = -*v;

@@ -589,14 +589,16 @@ fn obj_without_normals_gets_angle_weighted_smooth_normals() {
         r#"<boolean name="face_normals" value="true"/>"#,
     );
     assert!(m.normals.is_none());
-    // flip_normals reverses the winding and the normals.
+    // flip_normals negates the normals and keeps the vertex order, as Mitsuba (the order
+    // parameterises meshes without uvs: shapes::mesh's `flipped_mesh_keeps_its_parameterisation`).
     let m = load_mesh(
         &dir,
         "quad.obj",
         QUAD_OBJ,
         r#"<boolean name="flip_normals" value="true"/>"#,
     );
-    assert_eq!(m.indices, vec![[0, 2, 1], [0, 3, 2]]);
+    assert_eq!(m.indices, vec![[0, 1, 2], [0, 2, 3]]);
+    assert!(m.flipped);
     assert!((m.normals.unwrap()[1] + Vec3::Z).length() < 1e-6);
 }
 
@@ -1259,6 +1261,57 @@ fn default_bsdf_is_black_for_emitters() {
 
 /// `shapegroup` + `instance`: each instance builds the group's shapes with its `to_world`
 /// applied after theirs; a group alone builds nothing; misuse is reported at its line.
+#[test]
+fn mirroring_instances_keep_the_side_their_meshes_face() {
+    // Mitsuba transforms an instanced mesh's normals by the instance's inverse transpose, so a
+    // mirrored copy faces the way the group's mesh does: its face normal is not the world-space
+    // winding's. Both normals of the group are +z: a uv-less triangle (normals computed from
+    // the winding) and a cube's +z face (normals from the cube's own list).
+    use crate::math::Ray;
+    use crate::shapes::Mesh;
+    let dir = temp_dir("instancing-mirror");
+    std::fs::write(dir.join("tri.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let group = "<shape type=\"shapegroup\" id=\"g\">\n\
+                 <shape type=\"obj\"><string name=\"filename\" value=\"tri.obj\"/></shape>\n\
+                 <shape type=\"cube\"><transform name=\"to_world\"><translate z=\"-3\"/></transform></shape>\n\
+                 </shape>";
+    for (scale, flipped) in [("x=\"-1\"", true), ("x=\"-1\" y=\"-1\"", false)] {
+        let body = format!(
+            "{SENSOR}\n{group}\n<shape type=\"instance\"><ref id=\"g\"/><transform name=\"to_world\"><scale {scale}/></transform></shape>"
+        );
+        let desc = load(&write_scene(&dir, "mirror.xml", &body)).unwrap();
+        let meshes: Vec<&TriangleMesh> = desc
+            .shapes
+            .iter()
+            .map(|s| match &s.geometry {
+                Geometry::Mesh(m) => m,
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        assert_eq!(
+            meshes.iter().map(|m| m.flipped).collect::<Vec<_>>(),
+            [flipped; 2]
+        );
+        // The triangle: both normals +z (scale keeps z).
+        let tri = Mesh::new(meshes[0]);
+        let centre = tri.triangle(0).iter().sum::<Vec3>() / 3.0;
+        let ray = Ray::new(centre + Vec3::Z, -Vec3::Z);
+        let g = tri.hit_geometry(0, &ray, 1.0);
+        assert!((g.ng - Vec3::Z).length() < 1e-6, "{}", g.ng);
+        assert!((g.ns - Vec3::Z).length() < 1e-6, "{}", g.ns);
+        // The cube's top face (z = −2) faces +z.
+        let cube = Mesh::new(meshes[1]);
+        let top = (0..cube.triangle_count() as u32)
+            .find(|&t| cube.triangle(t).iter().all(|p| (p.z + 2.0).abs() < 1e-6))
+            .unwrap();
+        let centre = cube.triangle(top).iter().sum::<Vec3>() / 3.0;
+        let ray = Ray::new(centre + Vec3::Z, -Vec3::Z);
+        let g = cube.hit_geometry(top, &ray, 1.0);
+        assert!((g.ng - Vec3::Z).length() < 1e-6, "{}", g.ng);
+        assert!((g.ns - Vec3::Z).length() < 1e-6, "{}", g.ns);
+    }
+}
+
 #[test]
 fn instances_copy_their_group_with_the_instance_transform() {
     let dir = temp_dir("instancing");

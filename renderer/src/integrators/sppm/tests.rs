@@ -25,6 +25,7 @@ fn quad(name: &str, c: Vec3, u: Vec3, v: Vec3, bsdf: usize, emission: Option<Rgb
             normals: None,
             uvs: None,
             indices: vec![[0, 1, 2], [0, 2, 3]],
+            flipped: false,
         }),
         bsdf,
         emission: emission.map(Texture::Constant),
