@@ -21,7 +21,8 @@ import random
 import numpy as np
 
 from fuzz_mitsuba import RES, area_rectangle, light, material, rgb, shape
-from make_scene_assets import icosphere, grid, write_exr_rgb32, write_obj, write_ply_binary, write_png_rgb8
+from make_scene_assets import (icosphere, grid, write_exr_rgb32, write_obj, write_ply_binary, write_ply_properties,
+                                write_png_rgb8, write_serialized)
 
 TEX = 32  # texture side (pixels)
 
@@ -117,12 +118,30 @@ class Assets:
         write_exr_rgb32(self.folder / path, w, h, pixel)
         return path
 
-    def sphere_mesh(self):
-        """An icosphere OBJ (with uvs from the sphere's angles; normals or not) or PLY."""
+    def sphere_mesh(self, colours=False):
+        """An icosphere: OBJ (with uvs from the sphere's angles; normals or not), PLY
+        (normals, no uvs) or Mitsuba `.serialized` (normals and uvs or not); with `colours` a
+        PLY with float vertex colours (`vertex_color` for `mesh_attribute`) instead."""
         r = self.r
         pos, tris = icosphere(r.randint(1, 2))
         uv = [(0.5 + math.atan2(p[0], p[2]) / (2 * math.pi), math.acos(max(-1, min(1, p[1]))) / math.pi) for p in pos]
-        if r.random() < 0.5:
+        if colours:
+            f, g = self.field(), self.field()
+            values = [[f((x + 1) / 2, (y + 1) / 2) for x, y, _ in pos], [g((x + 1) / 2, (z + 1) / 2) for x, _, z in pos],
+                      [f((z + 1) / 2, (y + 1) / 2) for _, y, z in pos]]
+            path = self.name("ply")
+            write_ply_properties(self.folder / path, pos, tris,
+                                 [("float", c, v) for c, v in zip(("red", "green", "blue"), values)], [],
+                                 "fuzz icosphere with vertex colours")
+            return "ply", path
+        kind = r.choice(["obj", "ply", "serialized"])
+        if kind == "serialized":
+            path = self.name("serialized")
+            with_attrs = r.random() < 0.5
+            write_serialized(self.folder / path, [("s", pos, pos if with_attrs else None, uv if with_attrs else None,
+                                                   tris, False)])
+            return "serialized", path
+        if kind == "obj":
             path = self.name("obj")
             write_obj(self.folder / path, pos, pos, uv, tris, "fuzz icosphere")
             if r.random() < 0.5:  # no normals: the file's faces without the /vn part
@@ -272,7 +291,11 @@ def ext_shape(a, bsdf, ids):
     x, z = r.uniform(-1.2, 1.2), r.uniform(-1.2, 1.2)
     k = r.choice(["sphere-mesh", "terrain", "instances", "matrix-cube", "base"])
     if k == "sphere-mesh":
-        kind, path = a.sphere_mesh()
+        colours = r.random() < 0.25
+        kind, path = a.sphere_mesh(colours)
+        if colours:
+            bsdf = ('<bsdf type="diffuse"><texture type="mesh_attribute" name="reflectance">'
+                    '<string name="name" value="vertex_color"/></texture></bsdf>')
         s = r.uniform(0.25, 0.5)
         flags = ""
         if r.random() < 0.3:
@@ -321,7 +344,10 @@ def ext_shape(a, bsdf, ids):
         m4[:3, :3], m4[:3, 3] = m, [x, r.uniform(0.6, 1.0), z]
         values = " ".join(f"{v:.6f}" for v in m4.flatten())
         return f'<shape type="cube"><transform name="to_world"><matrix value="{values}"/></transform>{bsdf}</shape>'
-    return shape(r, bsdf)
+    base = shape(r, bsdf)
+    if r.random() < 0.2:  # the inside becomes the outside (glass turns inside out, ...)
+        base = base.replace(">", '><boolean name="flip_normals" value="true"/>', 1)
+    return base
 
 
 def ext_light(a, allow_environment, area_only=False):
@@ -346,16 +372,20 @@ def sensor(r):
     look = (f'<lookat origin="{origin[0]:.3f}, {origin[1]:.3f}, {origin[2]:.3f}" target="0, 0.3, 0" up="0, 1, 0"/>')
     kind = r.choice(["perspective", "thinlens", "orthographic"])
     params = ""
+    if r.random() < 0.3:  # may cut into the objects nearest the camera
+        params += f'<float name="near_clip" value="{r.uniform(0.01, 0.8) * dist:.3f}"/>'
+    if kind != "orthographic" and r.random() < 0.4:
+        params += f'<string name="fov_axis" value="{r.choice(["x", "y", "diagonal", "smaller", "larger"])}"/>'
     if kind == "perspective":
-        params = f'<float name="fov" value="{r.uniform(30, 60):.1f}"/>'
+        params += f'<float name="fov" value="{r.uniform(30, 60):.1f}"/>'
         if r.random() < 0.5:
             params += (f'<float name="principal_point_offset_x" value="{r.uniform(-0.2, 0.2):.3f}"/>'
                        f'<float name="principal_point_offset_y" value="{r.uniform(-0.2, 0.2):.3f}"/>')
         transform = look
     elif kind == "thinlens":
-        params = (f'<float name="fov" value="{r.uniform(30, 60):.1f}"/>'
-                  f'<float name="aperture_radius" value="{r.uniform(0.02, 0.15):.3f}"/>'
-                  f'<float name="focus_distance" value="{dist * r.uniform(0.7, 1.2):.3f}"/>')
+        params += (f'<float name="fov" value="{r.uniform(30, 60):.1f}"/>'
+                   f'<float name="aperture_radius" value="{r.uniform(0.02, 0.15):.3f}"/>'
+                   f'<float name="focus_distance" value="{dist * r.uniform(0.7, 1.2):.3f}"/>')
         transform = look
     else:
         s = r.uniform(1.2, 2.2)
@@ -363,11 +393,17 @@ def sensor(r):
     rfilter = r.choice(['<rfilter type="box"/>'] * 3 + [
         f'<rfilter type="gaussian"><float name="stddev" value="{r.uniform(0.3, 0.6):.2f}"/></rfilter>',
         '<rfilter type="tent"/>', '<rfilter type="mitchell"/>'])
+    film = ""
+    if r.random() < 0.2:
+        film += '<boolean name="sample_border" value="true"/>'
+    if r.random() < 0.2:  # a crop window (a multiple of 4 pixels wide, for the comparison)
+        film += (f'<integer name="crop_offset_x" value="{r.randint(0, 8)}"/><integer name="crop_offset_y" value="{r.randint(0, 8)}"/>'
+                 f'<integer name="crop_width" value="{4 * r.randint(4, 6)}"/><integer name="crop_height" value="{4 * r.randint(4, 6)}"/>')
     return f"""<sensor type="{kind}">
         {params}
         <transform name="to_world">{transform}</transform>
         <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
-        <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="$res"/>{rfilter}</film>
+        <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="$res"/>{film}{rfilter}</film>
     </sensor>"""
 
 
