@@ -206,11 +206,12 @@ def ext_material(a, environment, allow_delta=True):
     sometimes one of the base generator's."""
     r = a.r
     kinds = ["bitmap", "spectrum", "aniso", "textured-rough", "eta-k", "named-ior", "rough-ior",
-             "plastic-nonlinear", "principled-tex", "blend-tex", "normalmap", "bumpmap", "base"]
+             "plastic-nonlinear", "principled-tex", "blend-tex", "normalmap", "bumpmap", "base",
+             "specular-tex", "twosided-two"]
     if environment:
         kinds.append("mask-tex")
     k = r.choice(kinds)
-    if not allow_delta and k in ("eta-k", "named-ior", "plastic-nonlinear"):
+    if not allow_delta and k in ("eta-k", "named-ior", "plastic-nonlinear", "specular-tex"):
         k = "bitmap"
     if k == "bitmap":
         return f'<bsdf type="diffuse">{bitmap(a, "reflectance", a.colour_png())}</bsdf>'
@@ -262,6 +263,29 @@ def ext_material(a, environment, allow_delta=True):
         y = (f'<bsdf type="roughconductor">{distribution(r)}'
              f'<float name="alpha" value="{r.uniform(0.05, 0.4):.3f}"/></bsdf>')
         return f'<bsdf type="blendbsdf">{grey(a, "weight", 0.1, 0.9)}{x}{y}</bsdf>'
+    if k == "specular-tex":
+        # Colour textures on the specular terms (Mitsuba reads plastics' by their mean).
+        kind = r.choice(["dielectric", "thindielectric", "roughdielectric", "conductor", "plastic"])
+        tex = bitmap(a, "specular_reflectance", a.colour_png())
+        if kind == "conductor":
+            return f'<bsdf type="conductor"><string name="material" value="Au"/>{tex}</bsdf>'
+        if kind == "plastic":
+            return f'<bsdf type="plastic"><rgb name="diffuse_reflectance" value="{rgb(r)}"/>{tex}</bsdf>'
+        extra = bitmap(a, "specular_transmittance", a.colour_png()) if r.random() < 0.7 else ""
+        if kind == "roughdielectric":
+            extra += (f'{distribution(r)}<float name="alpha_u" value="{r.uniform(0.05, 0.4):.3f}"/>'
+                      f'<float name="alpha_v" value="{r.uniform(0.05, 0.4):.3f}"/>'
+                      f'<boolean name="sample_visible" value="{r.choice(["true", "false"])}"/>')
+        return f'<bsdf type="{kind}"><float name="int_ior" value="{r.uniform(1.3, 1.7):.3f}"/>{tex}{extra}</bsdf>'
+    if k == "twosided-two":
+        # A different model on each side (neither may transmit, as in Mitsuba).
+        front = ext_material(a, False, allow_delta=False)
+        back = ext_material(a, False, allow_delta=False)
+        if any(t in front + back for t in ("dielectric", "twosided", "mask", "spec_trans", "blendbsdf")):
+            front = f'<bsdf type="diffuse"><rgb name="reflectance" value="{rgb(r)}"/></bsdf>'
+            back = (f'<bsdf type="roughconductor">{distribution(r)}'
+                    f'<float name="alpha" value="{r.uniform(0.05, 0.4):.3f}"/></bsdf>')
+        return f'<bsdf type="twosided">{front}{back}</bsdf>'
     if k == "mask-tex":
         inner = ext_material(a, False, allow_delta=False)
         return f'<bsdf type="mask">{grey(a, "opacity", 0.2, 1.0)}{inner}</bsdf>'
@@ -354,7 +378,15 @@ def ext_light(a, allow_environment, area_only=False):
     """A textured area light, an envmap, or a base light (with `area_only`: no delta light)."""
     r = a.r
     kinds = ["textured-area", "base"] + (["envmap"] if allow_environment else [])
+    if not area_only:
+        kinds.append("textured-spot")
     k = r.choice(kinds)
+    if k == "textured-spot":  # a slide projected by a spot (the cutoff cone spans the texture)
+        return (f'<emitter type="spot"><transform name="to_world"><rotate z="1" angle="{r.uniform(0, 360):.1f}"/>'
+                f'<lookat origin="{r.uniform(-2, 2):.3f}, {r.uniform(2, 3.5):.3f}, {r.uniform(-2, 2):.3f}" target="0, 0, 0"/></transform>'
+                f'<rgb name="intensity" value="{rgb(r, 5, 30)}"/>'
+                f'<float name="cutoff_angle" value="{r.uniform(20, 45):.1f}"/>'
+                f'<float name="beam_width" value="{r.uniform(10, 19):.1f}"/>{bitmap(a, "texture", a.colour_png())}</emitter>')
     if k == "textured-area":
         return area_rectangle(r, lambda: bitmap(a, "radiance", a.radiance_exr(1, 12)))
     if k == "envmap":

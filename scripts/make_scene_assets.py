@@ -367,6 +367,8 @@ def main():
     write_png_rgb8(SCENES / "validation" / "bumpmap" / "textures" / "heights.png", 64, 64,
                    bump_height_pixel)
     mesh_attribute_assets(SCENES / "validation" / "mesh-attribute" / "meshes")
+    write_png_rgb8(SCENES / "validation" / "projected-texture" / "textures" / "slide.png", 64, 64,
+                   texture_pixel)
 
 
 if __name__ == "__main__":

@@ -92,6 +92,8 @@ pub enum EmitterDesc {
         cutoff_angle: f32,
         /// `beam_width` in degrees (default 3/4 of the cutoff angle).
         beam_width: f32,
+        /// `texture`: an image projected along the beam (the cutoff cone spans its uv square).
+        texture: Option<crate::texture::Texture>,
     },
     /// `directional`: `irradiance` arriving along `direction` (the direction light travels).
     Directional {

@@ -308,6 +308,7 @@ impl Scene {
                     intensity,
                     cutoff_angle,
                     beam_width,
+                    texture,
                 } => {
                     let cutoff_ok = cutoff_angle > 0.0 && cutoff_angle <= 180.0;
                     if !finite_rgb(intensity)
@@ -317,11 +318,18 @@ impl Scene {
                     {
                         bail!("spot emitter #{i}: invalid intensity, cutoff_angle {cutoff_angle} or beam_width {beam_width}");
                     }
+                    if texture
+                        .as_ref()
+                        .is_some_and(|t| !t.is_finite_non_negative())
+                    {
+                        bail!("spot emitter #{i}: its texture has a negative or non-finite value");
+                    }
                     Light::Spot(SpotLight::new(
                         to_world,
                         intensity,
                         cutoff_angle,
                         beam_width,
+                        texture.clone(),
                     ))
                 }
                 EmitterDesc::Directional {
@@ -1029,6 +1037,20 @@ mod tests {
                 intensity: Rgb::splat(5.0),
                 cutoff_angle: 30.0,
                 beam_width: 20.0,
+                texture: None,
+            },
+            // A projected texture: its power is integrated over the cone at build time.
+            EmitterDesc::Spot {
+                to_world: Mat4::from_translation(Vec3::new(0.3, 0.5, 0.0))
+                    * Mat4::from_rotation_x(1.0),
+                intensity: Rgb::splat(3.0),
+                cutoff_angle: 40.0,
+                beam_width: 25.0,
+                texture: Some(Texture::Checkerboard {
+                    color0: Rgb::new(0.9, 0.1, 0.0),
+                    color1: Rgb::new(0.2, 0.3, 0.6),
+                    to_uv: glam::Mat3::from_scale(glam::Vec2::new(3.0, 1.7)),
+                }),
             },
         ];
         let scene = Scene::build(&desc(vec![ceiling_light()], emitters)).unwrap();
@@ -1065,6 +1087,7 @@ mod tests {
             intensity: Rgb::splat(5.0),
             cutoff_angle: 30.0,
             beam_width: 20.0,
+            texture: None,
         };
         let with_sky = |sky: f32| {
             let sky = EmitterDesc::Constant {

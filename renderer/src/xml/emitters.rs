@@ -59,11 +59,29 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
                     .element_of("beam_width")
                     .error(format!("beam_width must be positive, got {beam_width}")));
             }
+            // Mitsuba: a texture projected along the beam; it must vary (a bitmap, a
+            // checkerboard; a mesh_attribute is refused where it is read: no mesh here).
+            let texture_el = p.element_of("texture");
+            let texture = p.texture(b, "texture", SpectrumKind::Reflectance)?;
+            match &texture {
+                Some(Texture::Constant(_)) => {
+                    return Err(texture_el.error(
+                        "the parameter \"texture\" must be spatially varying (e.g. a bitmap), as in Mitsuba",
+                    ))
+                }
+                Some(t) if !t.is_finite_non_negative() => {
+                    return Err(texture_el.error(
+                        "\"texture\" must be finite and non-negative (a texel is not)",
+                    ))
+                }
+                _ => {}
+            }
             EmitterDesc::Spot {
                 to_world,
                 intensity,
                 cutoff_angle: cutoff_angle as f32,
                 beam_width: beam_width.min(cutoff_angle) as f32,
+                texture,
             }
         }
         "directional" => {

@@ -2517,3 +2517,36 @@ fn direct_sample_counts_and_their_errors() {
         "\"emitter_samples\" must be >= 0, got -1",
     );
 }
+
+#[test]
+fn spot_lights_project_a_texture_and_refuse_a_constant_one() {
+    let dir = temp_dir("spot-texture");
+    let spot = |inner: &str| {
+        format!("{SENSOR}\n<emitter type=\"spot\"><rgb name=\"intensity\" value=\"2\"/>\n{inner}\n</emitter>")
+    };
+    let body = spot("<texture type=\"checkerboard\" name=\"texture\"/>");
+    let desc = load(&write_scene(&dir, "ok.xml", &body)).unwrap();
+    match &desc.emitters[..] {
+        [EmitterDesc::Spot {
+            texture: Some(crate::texture::Texture::Checkerboard { .. }),
+            ..
+        }] => {}
+        other => panic!("{other:?}"),
+    }
+    let body = spot("<rgb name=\"texture\" value=\"0.5\"/>");
+    assert_body_error_at(
+        &dir,
+        "constant.xml",
+        &body,
+        "name=\"texture\"",
+        "must be spatially varying",
+    );
+    let body = spot("<texture type=\"mesh_attribute\" name=\"texture\"><string name=\"name\" value=\"vertex_color\"/></texture>");
+    assert_body_error_at(
+        &dir,
+        "attr.xml",
+        &body,
+        "mesh_attribute",
+        "can only be used by a shape's BSDF or area emitter",
+    );
+}
