@@ -539,6 +539,46 @@ fn transforms_compose_in_file_order() {
         &mut diag,
     );
     assert_mat_close(m, Mat4::from_translation(Vec3::Y) * expected);
+    // Without `up`, or with a zero one, Mitsuba's parser completes the view direction with its
+    // coordinate_system: the frame (and so a camera's picture, a spot's slide) is Mitsuba's.
+    // Rows of the 3×4 part as Mitsuba 3.9.1 loads them (`sensor.world_transform()`).
+    for (op, rows) in [
+        (
+            r#"<lookat origin="0.374, 2.820, 0.452" target="0, 0, 0"/>"#,
+            [
+                [-0.10988, 0.985427, -0.129844, 0.374],
+                [0.171496, -0.10988, -0.979038, 2.82],
+                [-0.979038, -0.129844, -0.156924, 0.452],
+            ],
+        ),
+        (
+            r#"<lookat origin="1, -2, 3" target="0.5, 0.5, -1"/>"#,
+            [
+                [0.03014, 0.993972, -0.105409, 1.0],
+                [0.849302, 0.03014, 0.527046, -2.0],
+                [0.527046, -0.105409, -0.843274, 3.0],
+            ],
+        ),
+        (
+            r#"<lookat origin="0, 0, 0" target="0.2, 0.3, -5" up="0, 0, 0"/>"#,
+            [
+                [-0.001195, 0.999203, 0.039896, 0.0],
+                [0.998207, -0.001195, 0.059845, 0.0],
+                [0.059845, 0.039896, -0.99741, 0.0],
+            ],
+        ),
+    ] {
+        let m = parse(op, &mut diag);
+        for (r, row) in rows.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                assert!(
+                    (m.col(c)[r] - v).abs() < 2e-6,
+                    "{op}: [{r}][{c}] {} vs {v}",
+                    m.col(c)[r]
+                );
+            }
+        }
+    }
     assert!(diag.warnings.is_empty());
     // Through a whole scene: the camera's to_world and a rectangle's corners agree.
     let m = transform_of(r#"<rotate x="1" angle="30"/><translate x="1" y="-2"/>"#);

@@ -93,8 +93,22 @@ fn look_at(
     let dir = (target - origin)
         .try_normalize()
         .ok_or_else(|| op.error("lookat: origin and target coincide"))?;
-    // Without an `up`, any vector perpendicular to the view direction will do.
-    let up = up.unwrap_or_else(|| dir.any_orthonormal_vector());
+    // Without an `up` (or with a zero one) Mitsuba takes the first vector of its
+    // `coordinate_system(dir)` (`crate::math::coordinate_system`, here in double precision as
+    // its parser computes it). Any perpendicular vector makes a valid frame, but the frame
+    // orients the picture: a camera's image, a spot light's projected texture.
+    let up = match up {
+        Some(up) if up != DVec3::ZERO => up,
+        _ => {
+            let sign = 1.0f64.copysign(dir.z);
+            let a = -1.0 / (sign + dir.z);
+            DVec3::new(
+                1.0 + sign * dir.x * dir.x * a,
+                sign * dir.x * dir.y * a,
+                -sign * dir.x,
+            )
+        }
+    };
     look_at_matrix(origin, target, up)
         .ok_or_else(|| op.error("lookat: the up vector is parallel to the view direction"))
 }
