@@ -101,7 +101,8 @@ class Scene:
         """Hash of the XML, every file next to it (meshes, textures) and the settings."""
         h = hashlib.sha256(json.dumps(extra, sort_keys=True).encode())
         for p in sorted(self.xml.parent.rglob("*")):
-            if p.is_file() and p.suffix.lower() in (".xml", ".obj", ".ply", ".png", ".exr", ".jpg"):
+            if p.is_file() and p.suffix.lower() in (".xml", ".obj", ".ply", ".serialized", ".png", ".exr", ".jpg",
+                                                        ".jpeg", ".hdr", ".tga", ".bmp"):
                 if p.name.startswith("reference"):
                     continue
                 h.update(str(p.relative_to(self.xml.parent)).encode())

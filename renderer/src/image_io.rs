@@ -1,7 +1,9 @@
-//! Reading and writing plain RGB images: PNG (sRGB-encoded) and OpenEXR (linear float).
+//! Reading and writing plain RGB images: PNG (sRGB-encoded) and OpenEXR (linear float) both
+//! ways; JPEG, TGA, BMP (sRGB-encoded) and Radiance HDR (linear) read only, for textures.
 //!
-//! Everything here works in linear sRGB: PNGs are decoded through the sRGB transfer curve
-//! (unless read "raw", as Mitsuba's `bitmap` with `raw=true`), EXRs are taken as they are.
+//! Everything here works in linear sRGB: encoded images are decoded through the sRGB transfer
+//! curve (unless read "raw", as Mitsuba's `bitmap` with `raw=true`), HDR and EXR are taken as
+//! they are.
 //! Writers are atomic: the image goes to a temporary file next to the target, which is then
 //! renamed over it, so a reader never sees a half-written file.
 
@@ -37,8 +39,20 @@ pub enum ImageIoError {
         /// The underlying error.
         error: image::ImageError,
     },
-    /// The file name has an extension other than `.png` or `.exr`.
-    #[error("{path}: unsupported image format (expected .png or .exr)")]
+    /// Decoding an image other than OpenEXR failed (corrupt or truncated file, …).
+    #[error("{path}: {format}: {error}")]
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// The format its extension names ("JPEG", "Radiance HDR", …).
+        format: &'static str,
+        /// The underlying error.
+        error: image::ImageError,
+    },
+    /// The file name has an extension this module does not read.
+    #[error(
+        "{path}: unsupported image format (expected .png, .jpg, .jpeg, .tga, .bmp, .hdr or .exr)"
+    )]
     UnsupportedFormat {
         /// The file.
         path: PathBuf,
@@ -60,10 +74,15 @@ pub enum ImageIoError {
 /// A decoded image: width, height and row-major linear-RGB pixels (row 0 is the top row).
 pub type RgbImage = (u32, u32, Vec<Rgb>);
 
-/// The file formats this module knows, chosen by file extension.
+/// The file formats this module knows, chosen by file extension (Mitsuba's `bitmap` reads
+/// the same ones, but PFM and PPM).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Format {
-    Png,
+    /// 8- or 16-bit sRGB-encoded images: PNG (also written), JPEG, TGA, BMP.
+    Encoded(&'static str),
+    /// Radiance RGBE (`.hdr`): linear.
+    Hdr,
+    /// OpenEXR: linear (also written).
     Exr,
 }
 
@@ -73,7 +92,11 @@ fn format_of(path: &Path) -> Result<Format, ImageIoError> {
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     match ext.as_str() {
-        "png" => Ok(Format::Png),
+        "png" => Ok(Format::Encoded("PNG")),
+        "jpg" | "jpeg" => Ok(Format::Encoded("JPEG")),
+        "tga" => Ok(Format::Encoded("TGA")),
+        "bmp" => Ok(Format::Encoded("BMP")),
+        "hdr" => Ok(Format::Hdr),
         "exr" => Ok(Format::Exr),
         _ => Err(ImageIoError::UnsupportedFormat {
             path: path.to_owned(),
@@ -100,41 +123,58 @@ pub fn linear_to_srgb(v: f32) -> f32 {
     }
 }
 
-/// Reads a PNG (sRGB → linear) or EXR (linear) image as linear RGB. Alpha is ignored;
-/// grey-scale PNGs are expanded to three equal channels.
+/// Reads a PNG, JPEG, TGA or BMP (sRGB → linear), Radiance HDR or EXR (linear) image as
+/// linear RGB. Alpha is ignored; grey-scale images are expanded to three equal channels.
 pub fn read_rgb_image(path: &Path) -> Result<RgbImage, ImageIoError> {
     read_rgb_image_encoded(path, false)
 }
 
-/// Like [`read_rgb_image`], but with `raw = true` PNG values are taken as they are (no sRGB
-/// decoding), as Mitsuba's `bitmap` does with `raw="true"` (e.g. for roughness or normal maps).
-/// EXRs are always linear.
+/// Like [`read_rgb_image`], but with `raw = true` the values of sRGB-encoded formats are
+/// taken as they are (no decoding), as Mitsuba's `bitmap` does with `raw="true"` (e.g. for
+/// roughness or normal maps). HDR and EXR images are always linear.
 pub fn read_rgb_image_encoded(path: &Path, raw: bool) -> Result<RgbImage, ImageIoError> {
     match format_of(path)? {
-        Format::Png => read_png(path, raw),
+        Format::Encoded(name) => read_with_image_crate(path, name, raw),
+        Format::Hdr => read_with_image_crate(path, "Radiance HDR", true),
         Format::Exr => read_exr(path),
     }
 }
 
-fn read_png(path: &Path, raw: bool) -> Result<RgbImage, ImageIoError> {
-    let png_err = |error| ImageIoError::Png {
+/// Decodes with the `image` crate; `linear`: the values are used as they are, else they are
+/// sRGB-decoded.
+fn read_with_image_crate(
+    path: &Path,
+    format: &'static str,
+    linear: bool,
+) -> Result<RgbImage, ImageIoError> {
+    let io_err = |error| ImageIoError::Io {
         path: path.to_owned(),
         error,
     };
-    let reader = image::ImageReader::open(path).map_err(|error| ImageIoError::Io {
+    let decode_err = |error| ImageIoError::Decode {
         path: path.to_owned(),
+        format,
         error,
-    })?;
-    let reader = reader
-        .with_guessed_format()
-        .map_err(|error| ImageIoError::Io {
-            path: path.to_owned(),
-            error,
-        })?;
-    let decoded = reader.decode().map_err(png_err)?;
+    };
+    let decoded = if format == "Radiance HDR" {
+        // Mitsuba writes (and it, stb_image and Radiance read) the signature "#?RGBE" as well
+        // as "#?RADIANCE"; the `image` crate knows only the second.
+        let mut bytes = std::fs::read(path).map_err(io_err)?;
+        if let Some(rest) = bytes.strip_prefix(b"#?RGBE") {
+            bytes = [b"#?RADIANCE".as_slice(), rest].concat();
+        }
+        image::load_from_memory_with_format(&bytes, image::ImageFormat::Hdr).map_err(decode_err)?
+    } else {
+        image::ImageReader::open(path)
+            .map_err(io_err)?
+            .with_guessed_format()
+            .map_err(io_err)?
+            .decode()
+            .map_err(decode_err)?
+    };
     let rgb = decoded.to_rgb32f();
     let (width, height) = rgb.dimensions();
-    let decode = |v: f32| if raw { v } else { srgb_to_linear(v) };
+    let decode = |v: f32| if linear { v } else { srgb_to_linear(v) };
     let pixels = rgb
         .pixels()
         .map(|p| Rgb::new(decode(p.0[0]), decode(p.0[1]), decode(p.0[2])))
@@ -394,6 +434,84 @@ mod tests {
     }
 
     #[test]
+    fn jpeg_tga_bmp_are_srgb_and_hdr_is_linear() {
+        // Written by the `image` crate's encoders: 8×8 blocks of flat sRGB colours (JPEG keeps
+        // flat blocks within a step or two at quality 100), and linear floats as RGBE.
+        let dir = temp_dir("formats");
+        let (w, h) = (16u32, 8u32);
+        let encoded = |x: u32| {
+            if x < 8 {
+                [200u8, 100, 30]
+            } else {
+                [20, 240, 128]
+            }
+        };
+        let rgb8 = image::RgbImage::from_fn(w, h, |x, _| image::Rgb(encoded(x)));
+        let expect = |x: u32| {
+            let e = encoded(x).map(|c| srgb_to_linear(c as f32 / 255.0));
+            Rgb::new(e[0], e[1], e[2])
+        };
+        for (name, tolerance) in [("a.tga", 1e-6), ("a.bmp", 1e-6), ("a.jpg", 0.02)] {
+            let path = dir.join(name);
+            if name.ends_with("jpg") {
+                let mut file = std::fs::File::create(&path).unwrap();
+                image::codecs::jpeg::JpegEncoder::new_with_quality(&mut file, 100)
+                    .encode_image(&rgb8)
+                    .unwrap();
+            } else {
+                rgb8.save(&path).unwrap();
+            }
+            let (rw, rh, px) = read_rgb_image(&path).unwrap();
+            assert_eq!((rw, rh), (w, h), "{name}");
+            for (i, p) in px.iter().enumerate() {
+                let want = expect(i as u32 % w);
+                assert!(
+                    (*p - want).abs().max_element() < tolerance,
+                    "{name}: {p} vs {want}"
+                );
+            }
+            // `raw`: the encoded values.
+            let (_, _, raw) = read_rgb_image_encoded(&path, true).unwrap();
+            assert!(
+                (raw[0].x - 200.0 / 255.0).abs() < tolerance.max(1e-6) * 4.0,
+                "{name}"
+            );
+        }
+        let linear: Vec<image::Rgb<f32>> = (0..w * h)
+            .map(|i| image::Rgb([0.25 * i as f32, 3.5, 1e-3 * (i + 1) as f32]))
+            .collect();
+        let path = dir.join("a.hdr");
+        image::codecs::hdr::HdrEncoder::new(std::fs::File::create(&path).unwrap())
+            .encode(&linear, w as usize, h as usize)
+            .unwrap();
+        // The same file with the signature Mitsuba writes ("#?RGBE").
+        let bytes = std::fs::read(&path).unwrap();
+        let rgbe = dir.join("rgbe.hdr");
+        let body = bytes
+            .strip_prefix(b"#?RADIANCE".as_slice())
+            .expect("signature");
+        std::fs::write(&rgbe, [b"#?RGBE".as_slice(), body].concat()).unwrap();
+        for (path, raw) in [(&path, false), (&path, true), (&rgbe, false)] {
+            let (_, _, px) = read_rgb_image_encoded(path, raw).unwrap();
+            for (p, q) in px.iter().zip(&linear) {
+                let want = Rgb::new(q.0[0], q.0[1], q.0[2]);
+                // RGBE keeps 8 bits of mantissa under a shared exponent: ~1 % of the largest
+                // channel.
+                let scale = want.max_element();
+                assert!(
+                    (*p - want).abs().max_element() <= 0.01 * scale,
+                    "{p} vs {want}"
+                );
+            }
+        }
+        // A corrupt JPEG names the file and the format.
+        let bad = dir.join("bad.jpg");
+        std::fs::write(&bad, b"\xff\xd8 not really").unwrap();
+        let e = read_rgb_image(&bad).unwrap_err().to_string();
+        assert!(e.contains("bad.jpg") && e.contains("JPEG"), "{e}");
+    }
+
+    #[test]
     fn srgb_curve_round_trips() {
         for i in 0..=100 {
             let v = i as f32 / 100.0;
@@ -424,6 +542,7 @@ mod tests {
             ("garbage.exr", read_rgb_image(&garbage_exr).unwrap_err()),
             ("garbage.png", read_rgb_image(&garbage_png).unwrap_err()),
             ("x.jpg", read_rgb_image(&dir.join("x.jpg")).unwrap_err()),
+            ("x.pfm", read_rgb_image(&dir.join("x.pfm")).unwrap_err()),
             (
                 "short.exr",
                 write_rgb_exr(&dir.join("short.exr"), 2, 2, &[Rgb::ZERO; 3]).unwrap_err(),

@@ -1,4 +1,4 @@
-//! `<texture>` plugins: `checkerboard`, `bitmap` (PNG or EXR, paths relative to the XML file)
+//! `<texture>` plugins: `checkerboard`, `bitmap` (PNG, JPEG, TGA, BMP, HDR or EXR: `image_io`; paths relative to the XML file)
 //! and `mesh_attribute` (bound to the mesh of the shape being built).
 
 use super::props::Props;
