@@ -401,7 +401,9 @@ def sensor(r):
     elev, azim, dist = r.uniform(10, 55), r.uniform(0, 360), r.uniform(3.5, 6)
     e, az = math.radians(elev), math.radians(azim)
     origin = (dist * math.cos(e) * math.sin(az), dist * math.sin(e), dist * math.cos(e) * math.cos(az))
-    look = (f'<lookat origin="{origin[0]:.3f}, {origin[1]:.3f}, {origin[2]:.3f}" target="0, 0.3, 0" up="0, 1, 0"/>')
+    # Without `up` Mitsuba completes the view direction to a frame of its own choosing.
+    up = "" if r.random() < 0.2 else ' up="0, 1, 0"'
+    look = f'<lookat origin="{origin[0]:.3f}, {origin[1]:.3f}, {origin[2]:.3f}" target="0, 0.3, 0"{up}/>'
     kind = r.choice(["perspective", "thinlens", "orthographic"])
     params = ""
     if r.random() < 0.3:  # may cut into the objects nearest the camera
