@@ -109,6 +109,10 @@ impl SpotLight {
             Some(t) => {
                 let l = self.to_local * d;
                 let scale = 0.5 / (l.z * self.uv_factor);
+                if !scale.is_finite() {
+                    // Perpendicular to the beam (a cutoff of 90° or more): off the slide.
+                    return Rgb::ZERO;
+                }
                 t.eval(Vec2::new(0.5 + l.x * scale, 0.5 + l.y * scale))
             }
         }

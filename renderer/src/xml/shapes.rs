@@ -158,22 +158,13 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
                 file_el.error(format!("cannot load mesh \"{}\": {m}", path.display()))
             })?;
             let loaded = std::mem::take(&mut raw.attributes);
-            let computed_normals = !face_normals && !raw.has_usable_normals();
-            let (mesh, polygon_of) =
-                finish_mesh(raw, to_world, face_normals, flip_normals, flip_tex)
-                    .map(|(mut mesh, polygon_of)| {
-                        if mirrored_instance {
-                            mesh.flipped ^= true;
-                            if computed_normals {
-                                // Computed from the world-space winding, as the face normals.
-                                for n in mesh.normals.iter_mut().flatten() {
-                                    *n = -*n;
-                                }
-                            }
-                        }
-                        (mesh, polygon_of)
-                    })
-                    .map_err(|m| file_el.error(format!("mesh \"{}\": {m}", path.display())))?;
+            let sides = MeshSides {
+                face_normals,
+                flip_normals,
+                mirrored_instance,
+            };
+            let (mesh, polygon_of) = finish_mesh(raw, to_world, sides, flip_tex)
+                .map_err(|m| file_el.error(format!("mesh \"{}\": {m}", path.display())))?;
             if !loaded.is_empty() {
                 file_attributes = Some(MeshAttributes {
                     attributes: loaded,
@@ -408,19 +399,18 @@ pub(super) struct RawMesh {
     attributes: Vec<RawAttribute>,
 }
 
-/// Whether a file's vertex normals can be used (all finite and non-zero).
-fn usable_normals(normals: &[Vec3]) -> bool {
-    normals
-        .iter()
-        .all(|v| v.is_finite() && v.length_squared() > 0.0)
+/// Which way a loaded mesh's normals point.
+#[derive(Debug, Clone, Copy)]
+struct MeshSides {
+    /// `face_normals`: no vertex normals (flat shading).
+    face_normals: bool,
+    /// `flip_normals`.
+    flip_normals: bool,
+    /// Built for an instance whose `to_world` mirrors (negative determinant).
+    mirrored_instance: bool,
 }
 
 impl RawMesh {
-    /// Whether the file gave vertex normals `finish_mesh` keeps (else it computes them).
-    fn has_usable_normals(&self) -> bool {
-        self.normals.as_deref().is_some_and(usable_normals)
-    }
-
     /// Makes room for `n` more polygons of (mostly) three corners.
     fn reserve_polygons(&mut self, n: usize) {
         self.corners.reserve(3 * n);
@@ -447,8 +437,7 @@ impl RawMesh {
 fn finish_mesh(
     raw: RawMesh,
     to_world: Mat4,
-    face_normals: bool,
-    flip_normals: bool,
+    sides: MeshSides,
     flip_tex: bool,
 ) -> Result<(TriangleMesh, Vec<u32>), String> {
     let n = raw.positions.len();
@@ -493,7 +482,7 @@ fn finish_mesh(
     });
     // Unit-length file normals (zero or non-finite ones make the set unusable: recompute).
     let file_normals = normals
-        .filter(|ns| usable_normals(ns))
+        .filter(|ns| ns.iter().all(|v| v.is_finite() && v.length_squared() > 0.0))
         .map(|ns| ns.into_iter().map(Vec3::normalize).collect());
     let mut mesh = TriangleMesh {
         positions,
@@ -503,12 +492,23 @@ fn finish_mesh(
         flipped: false,
     };
     transform_mesh(&mut mesh, to_world);
-    if face_normals {
+    let computed = mesh.normals.is_none();
+    if sides.face_normals {
         mesh.normals = None;
-    } else if mesh.normals.is_none() {
+    } else if computed {
         mesh.normals = Some(smooth_normals(&mesh.positions, &mesh.indices));
     }
-    if flip_normals {
+    if sides.mirrored_instance {
+        // Face normals (and normals computed here) come from the world-space winding, which
+        // the mirror turned around; file normals went through the inverse transpose.
+        mesh.flipped ^= true;
+        if computed {
+            for n in mesh.normals.iter_mut().flatten() {
+                *n = -*n;
+            }
+        }
+    }
+    if sides.flip_normals {
         flip(&mut mesh);
     }
     Ok((mesh, polygon_of))
