@@ -428,16 +428,18 @@ def sensor(r):
         f'<rfilter type="gaussian"><float name="stddev" value="{r.uniform(0.3, 0.6):.2f}"/></rfilter>',
         '<rfilter type="tent"/>', '<rfilter type="mitchell"/>'])
     film = ""
+    # Non-square films (where fov_axis x / y / smaller / larger differ), 4-pixel multiples.
+    height = "$res" if r.random() < 0.6 else str(r.choice([20, 24, 40, 48]))
     if r.random() < 0.2:
         film += '<boolean name="sample_border" value="true"/>'
     if r.random() < 0.2:  # a crop window (a multiple of 4 pixels wide, for the comparison)
-        film += (f'<integer name="crop_offset_x" value="{r.randint(0, 8)}"/><integer name="crop_offset_y" value="{r.randint(0, 8)}"/>'
-                 f'<integer name="crop_width" value="{4 * r.randint(4, 6)}"/><integer name="crop_height" value="{4 * r.randint(4, 6)}"/>')
+        film += (f'<integer name="crop_offset_x" value="{r.randint(0, 8)}"/><integer name="crop_offset_y" value="{r.randint(0, 4)}"/>'
+                 f'<integer name="crop_width" value="{4 * r.randint(4, 6)}"/><integer name="crop_height" value="{4 * r.randint(3, 4)}"/>')
     return f"""<sensor type="{kind}">
         {params}
         <transform name="to_world">{transform}</transform>
         <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
-        <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="$res"/>{film}{rfilter}</film>
+        <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="{height}"/>{film}{rfilter}</film>
     </sensor>"""
 
 
