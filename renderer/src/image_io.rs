@@ -1,5 +1,5 @@
 //! Reading and writing plain RGB images: PNG (sRGB-encoded) and OpenEXR (linear float) both
-//! ways; JPEG, TGA, BMP (sRGB-encoded) and Radiance HDR (linear) read only, for textures.
+//! ways; JPEG, TGA, BMP (sRGB-encoded), Radiance HDR and PFM (linear) read only, for textures.
 //!
 //! Everything here works in linear sRGB: encoded images are decoded through the sRGB transfer
 //! curve (unless read "raw", as Mitsuba's `bitmap` with `raw=true`), HDR and EXR are taken as
@@ -49,9 +49,17 @@ pub enum ImageIoError {
         /// The underlying error.
         error: image::ImageError,
     },
+    /// A portable float map is malformed.
+    #[error("{path}: PFM: {why}")]
+    Pfm {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
     /// The file name has an extension this module does not read.
     #[error(
-        "{path}: unsupported image format (expected .png, .jpg, .jpeg, .tga, .bmp, .hdr or .exr)"
+        "{path}: unsupported image format (expected .png, .jpg, .jpeg, .tga, .bmp, .hdr, .pfm or .exr)"
     )]
     UnsupportedFormat {
         /// The file.
@@ -75,13 +83,15 @@ pub enum ImageIoError {
 pub type RgbImage = (u32, u32, Vec<Rgb>);
 
 /// The file formats this module knows, chosen by file extension (Mitsuba's `bitmap` reads
-/// the same ones, but PFM and PPM).
+/// the same ones, but PPM).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Format {
     /// 8- or 16-bit sRGB-encoded images: PNG (also written), JPEG, TGA, BMP.
     Encoded(&'static str),
     /// Radiance RGBE (`.hdr`): linear.
     Hdr,
+    /// Portable float map (`.pfm`, colour `PF` or grey `Pf`): linear.
+    Pfm,
     /// OpenEXR: linear (also written).
     Exr,
 }
@@ -97,6 +107,7 @@ fn format_of(path: &Path) -> Result<Format, ImageIoError> {
         "tga" => Ok(Format::Encoded("TGA")),
         "bmp" => Ok(Format::Encoded("BMP")),
         "hdr" => Ok(Format::Hdr),
+        "pfm" => Ok(Format::Pfm),
         "exr" => Ok(Format::Exr),
         _ => Err(ImageIoError::UnsupportedFormat {
             path: path.to_owned(),
@@ -136,6 +147,7 @@ pub fn read_rgb_image_encoded(path: &Path, raw: bool) -> Result<RgbImage, ImageI
     match format_of(path)? {
         Format::Encoded(name) => read_with_image_crate(path, name, raw),
         Format::Hdr => read_with_image_crate(path, "Radiance HDR", true),
+        Format::Pfm => read_pfm(path),
         Format::Exr => read_exr(path),
     }
 }
@@ -179,6 +191,89 @@ fn read_with_image_crate(
         .pixels()
         .map(|p| Rgb::new(decode(p.0[0]), decode(p.0[1]), decode(p.0[2])))
         .collect();
+    Ok((width, height, pixels))
+}
+
+/// A portable float map: a text header `PF` (RGB) or `Pf` (grey), `width height`, and a scale
+/// whose sign gives the byte order (negative: little-endian), then rows of 32-bit floats from
+/// the **bottom** row up.
+fn read_pfm(path: &Path) -> Result<RgbImage, ImageIoError> {
+    let bytes = std::fs::read(path).map_err(|error| ImageIoError::Io {
+        path: path.to_owned(),
+        error,
+    })?;
+    let bad = |why: String| ImageIoError::Pfm {
+        path: path.to_owned(),
+        why,
+    };
+    // Three whitespace-separated header fields (the size counts as two), each token ending
+    // in one whitespace byte; the data follows the scale's terminator.
+    let mut tokens = Vec::with_capacity(4);
+    let mut at = 0;
+    while tokens.len() < 4 {
+        while at < bytes.len() && bytes[at].is_ascii_whitespace() {
+            at += 1;
+        }
+        let start = at;
+        while at < bytes.len() && !bytes[at].is_ascii_whitespace() {
+            at += 1;
+        }
+        if start == at || at >= bytes.len() {
+            return Err(bad("truncated header".into()));
+        }
+        tokens.push(String::from_utf8_lossy(&bytes[start..at]).into_owned());
+        at += 1;
+    }
+    let channels = match tokens[0].as_str() {
+        "PF" => 3,
+        "Pf" => 1,
+        other => return Err(bad(format!("not a PFM file (starts with {other:?})"))),
+    };
+    let dim = |t: &str, name: &str| -> Result<u32, ImageIoError> {
+        t.parse::<u32>()
+            .ok()
+            .filter(|&v| v > 0)
+            .ok_or_else(|| bad(format!("bad {name} {t:?}")))
+    };
+    let (width, height) = (dim(&tokens[1], "width")?, dim(&tokens[2], "height")?);
+    let scale: f32 = tokens[3]
+        .parse()
+        .ok()
+        .filter(|v: &f32| *v != 0.0 && v.is_finite())
+        .ok_or_else(|| bad(format!("bad scale {:?}", tokens[3])))?;
+    let count = width as u64 * height as u64 * channels;
+    let data = &bytes[at..];
+    if (data.len() as u64) < 4 * count {
+        return Err(bad(format!(
+            "{} bytes of pixel data for a {width}x{height} image of {channels} channel(s)",
+            data.len()
+        )));
+    }
+    let value = |i: usize| {
+        let b = [
+            data[4 * i],
+            data[4 * i + 1],
+            data[4 * i + 2],
+            data[4 * i + 3],
+        ];
+        if scale < 0.0 {
+            f32::from_le_bytes(b)
+        } else {
+            f32::from_be_bytes(b)
+        }
+    };
+    let (w, h, c) = (width as usize, height as usize, channels as usize);
+    let mut pixels = Vec::with_capacity(w * h);
+    for row in (0..h).rev() {
+        for x in 0..w {
+            let i = (row * w + x) * c;
+            pixels.push(if c == 3 {
+                Rgb::new(value(i), value(i + 1), value(i + 2))
+            } else {
+                Rgb::splat(value(i))
+            });
+        }
+    }
     Ok((width, height, pixels))
 }
 
@@ -512,6 +607,70 @@ mod tests {
     }
 
     #[test]
+    fn pfm_rows_run_bottom_up_in_either_byte_order() {
+        let dir = temp_dir("pfm");
+        // A 2×2 colour map: file rows bottom-up, so the first triple is the bottom-left pixel.
+        let values: [f32; 12] = [
+            1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.5, -0.25, 1e6,
+        ];
+        let file = |header: &str, big: bool| {
+            let mut bytes = header.as_bytes().to_vec();
+            for v in values {
+                bytes.extend(if big {
+                    v.to_be_bytes()
+                } else {
+                    v.to_le_bytes()
+                });
+            }
+            bytes
+        };
+        let want = [
+            Rgb::new(7.0, 8.0, 9.0),
+            Rgb::new(10.5, -0.25, 1e6),
+            Rgb::new(1.0, 2.0, 3.0),
+            Rgb::new(4.0, 5.0, 6.0),
+        ];
+        for (name, header, big) in [
+            ("le.pfm", "PF\n2 2\n-1.0\n", false),
+            ("be.pfm", "PF\n2 2\n1.0\n", true),
+        ] {
+            let path = dir.join(name);
+            std::fs::write(&path, file(header, big)).unwrap();
+            // `raw` makes no difference: floats are linear.
+            for raw in [false, true] {
+                let (w, h, px) = read_rgb_image_encoded(&path, raw).unwrap();
+                assert_eq!((w, h), (2, 2));
+                assert_eq!(px, want, "{name}");
+            }
+        }
+        // Grey: one channel, expanded.
+        let path = dir.join("grey.pfm");
+        let mut bytes = b"Pf 3 1 -1\n".to_vec();
+        for v in [0.5f32, 1.5, 2.5] {
+            bytes.extend(v.to_le_bytes());
+        }
+        std::fs::write(&path, bytes).unwrap();
+        let (_, _, px) = read_rgb_image(&path).unwrap();
+        assert_eq!(px, vec![Rgb::splat(0.5), Rgb::splat(1.5), Rgb::splat(2.5)]);
+        // Malformed files name the file and what is wrong.
+        for (name, bytes, needle) in [
+            (
+                "short.pfm",
+                b"PF\n2 2\n-1.0\n\0\0\0\0".to_vec(),
+                "bytes of pixel data",
+            ),
+            ("magic.pfm", b"P6\n2 2\n255\n".to_vec(), "not a PFM"),
+            ("size.pfm", b"PF\n0 2\n-1\n".to_vec(), "bad width"),
+            ("header.pfm", b"PF\n2".to_vec(), "truncated header"),
+        ] {
+            let path = dir.join(name);
+            std::fs::write(&path, bytes).unwrap();
+            let e = read_rgb_image(&path).unwrap_err().to_string();
+            assert!(e.contains(name) && e.contains(needle), "{e}");
+        }
+    }
+
+    #[test]
     fn srgb_curve_round_trips() {
         for i in 0..=100 {
             let v = i as f32 / 100.0;
@@ -542,7 +701,7 @@ mod tests {
             ("garbage.exr", read_rgb_image(&garbage_exr).unwrap_err()),
             ("garbage.png", read_rgb_image(&garbage_png).unwrap_err()),
             ("x.jpg", read_rgb_image(&dir.join("x.jpg")).unwrap_err()),
-            ("x.pfm", read_rgb_image(&dir.join("x.pfm")).unwrap_err()),
+            ("x.ppm", read_rgb_image(&dir.join("x.ppm")).unwrap_err()),
             (
                 "short.exr",
                 write_rgb_exr(&dir.join("short.exr"), 2, 2, &[Rgb::ZERO; 3]).unwrap_err(),
