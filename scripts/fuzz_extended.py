@@ -20,7 +20,7 @@ import random
 
 import numpy as np
 
-from fuzz_mitsuba import RES, area_rectangle, light, material, rgb, shape
+from fuzz_mitsuba import RES, area_rectangle, light, material, rgb, shape, spot_light
 from make_scene_assets import (icosphere, grid, write_exr_rgb32, write_obj, write_ply_binary, write_ply_properties,
                                 write_png_rgb8, write_serialized)
 
@@ -143,13 +143,8 @@ class Assets:
             return "serialized", path
         if kind == "obj":
             path = self.name("obj")
-            write_obj(self.folder / path, pos, pos, uv, tris, "fuzz icosphere")
-            if r.random() < 0.5:  # no normals: the file's faces without the /vn part
-                text = (self.folder / path).read_text().splitlines()
-                text = [ln for ln in text if not ln.startswith("vn ")]
-                text = [" ".join(["f"] + [t.rsplit("/", 1)[0] for t in ln.split()[1:]]) if ln.startswith("f ") else ln
-                        for ln in text]
-                (self.folder / path).write_text("\n".join(text) + "\n")
+            normals = pos if r.random() >= 0.5 else None
+            write_obj(self.folder / path, pos, normals, uv, tris, "fuzz icosphere")
             return "obj", path
         path = self.name("ply")
         write_ply_binary(self.folder / path, pos, pos, tris, "fuzz icosphere")
@@ -162,12 +157,7 @@ class Assets:
         pos = [(x, y, 0.3 * f((x + 1) / 2, (y + 1) / 2)) for x, y, _ in pos]
         uv = [((x + 1) / 2, (y + 1) / 2) for x, y, _ in pos]
         path = self.name("obj")
-        nrm = [(0.0, 0.0, 1.0)] * len(pos)
-        write_obj(self.folder / path, pos, nrm, uv, tris, "fuzz terrain")
-        text = [ln for ln in (self.folder / path).read_text().splitlines() if not ln.startswith("vn ")]
-        text = [" ".join(["f"] + [t.rsplit("/", 1)[0] for t in ln.split()[1:]]) if ln.startswith("f ") else ln
-                for ln in text]
-        (self.folder / path).write_text("\n".join(text) + "\n")
+        write_obj(self.folder / path, pos, None, uv, tris, "fuzz terrain")
         return path
 
 
@@ -382,11 +372,7 @@ def ext_light(a, allow_environment, area_only=False):
         kinds.append("textured-spot")
     k = r.choice(kinds)
     if k == "textured-spot":  # a slide projected by a spot (the cutoff cone spans the texture)
-        return (f'<emitter type="spot"><transform name="to_world"><rotate z="1" angle="{r.uniform(0, 360):.1f}"/>'
-                f'<lookat origin="{r.uniform(-2, 2):.3f}, {r.uniform(2, 3.5):.3f}, {r.uniform(-2, 2):.3f}" target="0, 0, 0"/></transform>'
-                f'<rgb name="intensity" value="{rgb(r, 5, 30)}"/>'
-                f'<float name="cutoff_angle" value="{r.uniform(20, 45):.1f}"/>'
-                f'<float name="beam_width" value="{r.uniform(10, 19):.1f}"/>{bitmap(a, "texture", a.colour_png())}</emitter>')
+        return spot_light(r, turn=True, slide=lambda: bitmap(a, "texture", a.colour_png()))
     if k == "textured-area":
         return area_rectangle(r, lambda: bitmap(a, "radiance", a.radiance_exr(1, 12)))
     if k == "envmap":

@@ -164,6 +164,17 @@ def area_rectangle(r, radiance):
     return f'<shape type="rectangle">{place}<emitter type="area">{radiance()}</emitter></shape>'
 
 
+def spot_light(r, turn=False, slide=lambda: ""):
+    """A spot aimed at the origin from above; with `turn` rotated about its beam first, `slide()`
+    an extra element (a projected texture, drawn last)."""
+    spin = f'<rotate z="1" angle="{r.uniform(0, 360):.1f}"/>' if turn else ""
+    return (f'<emitter type="spot"><transform name="to_world">{spin}<lookat origin="{r.uniform(-2, 2):.3f}, '
+            f'{r.uniform(2, 3.5):.3f}, {r.uniform(-2, 2):.3f}" target="0, 0, 0"/></transform>'
+            f'<rgb name="intensity" value="{rgb(r, 5, 30)}"/>'
+            f'<float name="cutoff_angle" value="{r.uniform(20, 45):.1f}"/>'
+            f'<float name="beam_width" value="{r.uniform(10, 19):.1f}"/>{slide()}</emitter>')
+
+
 def light(r, allow_environment=True, area_only=False):
     """A random light; with `area_only` an area light or a constant sky (no delta lights)."""
     kinds = ["area", "area-sphere"] if area_only else ["area", "area-sphere", "point", "spot", "directional"]
@@ -180,11 +191,7 @@ def light(r, allow_environment=True, area_only=False):
                 f'y="{r.uniform(1.5, 3):.3f}" z="{r.uniform(-1.5, 1.5):.3f}"/>'
                 f'<rgb name="intensity" value="{rgb(r, 3, 15)}"/></emitter>')
     if k == "spot":
-        return (f'<emitter type="spot"><transform name="to_world"><lookat origin="{r.uniform(-2, 2):.3f}, '
-                f'{r.uniform(2, 3.5):.3f}, {r.uniform(-2, 2):.3f}" target="0, 0, 0"/></transform>'
-                f'<rgb name="intensity" value="{rgb(r, 5, 30)}"/>'
-                f'<float name="cutoff_angle" value="{r.uniform(20, 45):.1f}"/>'
-                f'<float name="beam_width" value="{r.uniform(10, 19):.1f}"/></emitter>')
+        return spot_light(r)
     if k == "directional":
         return (f'<emitter type="directional"><vector name="direction" x="{r.uniform(-1, 1):.3f}" y="-1" '
                 f'z="{r.uniform(-1, 1):.3f}"/><rgb name="irradiance" value="{rgb(r, 0.5, 3)}"/></emitter>')

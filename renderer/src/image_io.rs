@@ -145,53 +145,64 @@ pub fn read_rgb_image(path: &Path) -> Result<RgbImage, ImageIoError> {
 /// roughness or normal maps). HDR and EXR images are always linear.
 pub fn read_rgb_image_encoded(path: &Path, raw: bool) -> Result<RgbImage, ImageIoError> {
     match format_of(path)? {
-        Format::Encoded(name) => read_with_image_crate(path, name, raw),
-        Format::Hdr => read_with_image_crate(path, "Radiance HDR", true),
+        Format::Encoded(name) => read_encoded(path, name, raw),
+        Format::Hdr => read_hdr(path),
         Format::Pfm => read_pfm(path),
         Format::Exr => read_exr(path),
     }
 }
 
-/// Decodes with the `image` crate; `linear`: the values are used as they are, else they are
-/// sRGB-decoded.
-fn read_with_image_crate(
-    path: &Path,
-    format: &'static str,
-    linear: bool,
-) -> Result<RgbImage, ImageIoError> {
+/// An sRGB-encoded image (PNG, JPEG, TGA, BMP) decoded by the `image` crate; `raw`: the
+/// encoded values as they are.
+fn read_encoded(path: &Path, format: &'static str, raw: bool) -> Result<RgbImage, ImageIoError> {
     let io_err = |error| ImageIoError::Io {
         path: path.to_owned(),
         error,
     };
-    let decode_err = |error| ImageIoError::Decode {
+    let decoded = image::ImageReader::open(path)
+        .map_err(io_err)?
+        .with_guessed_format()
+        .map_err(io_err)?
+        .decode()
+        .map_err(|error| ImageIoError::Decode {
+            path: path.to_owned(),
+            format,
+            error,
+        })?;
+    Ok(rgb_image(decoded, !raw))
+}
+
+/// A Radiance RGBE image (linear). Mitsuba writes (and it, stb_image and Radiance read) the
+/// signature "#?RGBE" as well as "#?RADIANCE"; the `image` crate knows only the second.
+fn read_hdr(path: &Path) -> Result<RgbImage, ImageIoError> {
+    let mut bytes = std::fs::read(path).map_err(|error| ImageIoError::Io {
         path: path.to_owned(),
-        format,
         error,
-    };
-    let decoded = if format == "Radiance HDR" {
-        // Mitsuba writes (and it, stb_image and Radiance read) the signature "#?RGBE" as well
-        // as "#?RADIANCE"; the `image` crate knows only the second.
-        let mut bytes = std::fs::read(path).map_err(io_err)?;
-        if let Some(rest) = bytes.strip_prefix(b"#?RGBE") {
-            bytes = [b"#?RADIANCE".as_slice(), rest].concat();
-        }
-        image::load_from_memory_with_format(&bytes, image::ImageFormat::Hdr).map_err(decode_err)?
-    } else {
-        image::ImageReader::open(path)
-            .map_err(io_err)?
-            .with_guessed_format()
-            .map_err(io_err)?
-            .decode()
-            .map_err(decode_err)?
-    };
+    })?;
+    if let Some(rest) = bytes.strip_prefix(b"#?RGBE") {
+        bytes = [b"#?RADIANCE".as_slice(), rest].concat();
+    }
+    let decoded =
+        image::load_from_memory_with_format(&bytes, image::ImageFormat::Hdr).map_err(|error| {
+            ImageIoError::Decode {
+                path: path.to_owned(),
+                format: "Radiance HDR",
+                error,
+            }
+        })?;
+    Ok(rgb_image(decoded, false))
+}
+
+/// A decoded image as linear RGB, through the sRGB curve when `srgb`.
+fn rgb_image(decoded: image::DynamicImage, srgb: bool) -> RgbImage {
     let rgb = decoded.to_rgb32f();
     let (width, height) = rgb.dimensions();
-    let decode = |v: f32| if linear { v } else { srgb_to_linear(v) };
+    let decode = |v: f32| if srgb { srgb_to_linear(v) } else { v };
     let pixels = rgb
         .pixels()
         .map(|p| Rgb::new(decode(p.0[0]), decode(p.0[1]), decode(p.0[2])))
         .collect();
-    Ok((width, height, pixels))
+    (width, height, pixels)
 }
 
 /// A portable float map: a text header `PF` (RGB) or `Pf` (grey), `width height`, and a scale
