@@ -31,7 +31,7 @@ use crate::bsdf::{Bsdf, Diffuse};
 use crate::description::{CameraDesc, EmitterDesc, IntegratorDesc, SceneDescription, ShapeDesc};
 use crate::spectrum::Rgb;
 use crate::texture::{Bitmap, Texture};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -495,6 +495,8 @@ pub(crate) struct Builder<'a> {
     pub diag: Diagnostics,
     /// Every element with an `id`.
     ids: HashMap<String, &'a Element>,
+    /// Every id some `<ref>` names.
+    referenced: HashSet<String>,
     /// Already built BSDFs with an id → index into `bsdfs`.
     bsdf_ids: HashMap<String, usize>,
     /// Already built textures with an id.
@@ -536,26 +538,31 @@ impl<'a> Builder<'a> {
     /// Indexes every `id` in the tree (duplicates are an error).
     fn new(root: &'a Element, diag: Diagnostics) -> Result<Self, SceneError> {
         let mut ids = HashMap::new();
+        let mut referenced = HashSet::new();
         fn collect<'a>(
             el: &'a Element,
             ids: &mut HashMap<String, &'a Element>,
+            referenced: &mut HashSet<String>,
         ) -> Result<(), SceneError> {
-            if el.tag != "ref" {
-                if let Some(id) = el.attr("id") {
-                    if let Some(prev) = ids.insert(id.to_owned(), el) {
-                        return Err(el.error(format!(
-                            "duplicate id \"{id}\" (first defined at {})",
-                            prev.location
-                        )));
-                    }
+            if el.tag == "ref" {
+                referenced.extend(el.attr("id").map(str::to_owned));
+            } else if let Some(id) = el.attr("id") {
+                if let Some(prev) = ids.insert(id.to_owned(), el) {
+                    return Err(el.error(format!(
+                        "duplicate id \"{id}\" (first defined at {})",
+                        prev.location
+                    )));
                 }
             }
-            el.children.iter().try_for_each(|c| collect(c, ids))
+            el.children
+                .iter()
+                .try_for_each(|c| collect(c, ids, referenced))
         }
-        collect(root, &mut ids)?;
+        collect(root, &mut ids, &mut referenced)?;
         Ok(Self {
             diag,
             ids,
+            referenced,
             bsdf_ids: HashMap::new(),
             texture_ids: HashMap::new(),
             building: Vec::new(),
@@ -570,6 +577,11 @@ impl<'a> Builder<'a> {
             instance: None,
             mesh_scope: None,
         })
+    }
+
+    /// Whether some `<ref>` of the scene names `id`.
+    pub fn is_referenced(&self, id: &str) -> bool {
+        self.referenced.contains(id)
     }
 
     /// The element a `<ref id="…">` points to.
@@ -765,6 +777,7 @@ impl<'a> Builder<'a> {
                     }
                 }
                 "integrator" => self.integrator = Some(sensors::build_integrator(self, el)?),
+                "film" | "sampler" | "rfilter" => sensors::build_detached(self, el)?,
                 "ref" => {
                     let err = el.error("top-level <ref> is not supported: reference objects from inside a shape or BSDF");
                     self.diag.unknown(err)?;

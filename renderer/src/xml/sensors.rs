@@ -70,11 +70,19 @@ pub(super) fn build_sensor<'a>(
         sample_border: false,
         crop: None,
     };
-    for el in p.objects(&["film"]) {
-        film = build_film(b, el)?;
-    }
-    for sampler in p.objects(&["sampler"]) {
-        b.sample_count = Some(build_sampler(b, sampler)?);
+    // Declared here, or elsewhere with an id and named by a `<ref>`.
+    for obj in p.objects(&["film", "sampler", "ref"]) {
+        let target = b.deref(obj)?;
+        match target.tag.as_str() {
+            "film" => film = build_film(b, target)?,
+            "sampler" => b.sample_count = Some(build_sampler(b, target)?),
+            _ => {
+                return Err(obj.error(format!(
+                    "a sensor refers to a <film> or a <sampler>, not {}",
+                    target.describe()
+                )))
+            }
+        }
     }
 
     let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
@@ -214,6 +222,34 @@ fn parse_fov(p: &mut Props) -> Result<(f64, FovAxis), SceneError> {
     Ok((fov, axis))
 }
 
+/// A `<film>`, `<sampler>` or `<rfilter>` declared outside a sensor, as Mitsuba allows. One that
+/// a `<ref>` names is built where it is referenced; any other is checked (its errors are
+/// reported, as Mitsuba instantiates it) and ignored with a warning (Mitsuba ignores it silently).
+pub(super) fn build_detached<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneError> {
+    if el.attr("id").is_some_and(|id| b.is_referenced(id)) {
+        return Ok(());
+    }
+    match el.tag.as_str() {
+        "film" => {
+            build_film(b, el)?;
+        }
+        "sampler" => {
+            build_sampler(b, el)?;
+        }
+        _ => {
+            build_rfilter(b, el)?;
+        }
+    }
+    b.diag.warn(
+        el,
+        format!(
+            "a <{}> outside a <sensor> that no <ref> names: ignored",
+            el.tag
+        ),
+    );
+    Ok(())
+}
+
 /// `hdrfilm`: width, height, the reconstruction filter and `sample_border`.
 fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Film, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
@@ -238,8 +274,15 @@ fn build_film<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Film, SceneErr
     let width = side("width", DEFAULT_WIDTH)?;
     let height = side("height", DEFAULT_HEIGHT)?;
     let mut filter = FilterDesc::MITSUBA_DEFAULT;
-    for f in p.objects(&["rfilter"]) {
-        filter = build_rfilter(b, f)?;
+    for obj in p.objects(&["rfilter", "ref"]) {
+        let target = b.deref(obj)?;
+        if target.tag != "rfilter" {
+            return Err(obj.error(format!(
+                "a film refers to an <rfilter>, not {}",
+                target.describe()
+            )));
+        }
+        filter = build_rfilter(b, target)?;
     }
     let sample_border = p.bool_or("sample_border", false)?;
     p.ignore(

@@ -2590,3 +2590,62 @@ fn spot_lights_project_a_texture_and_refuse_a_constant_one() {
         "can only be used by a shape's BSDF or area emitter",
     );
 }
+
+/// Mitsuba lets a film, sampler or reconstruction filter be declared at the top level with an
+/// id and named by a `<ref>` where it is used; one that nothing names is ignored.
+#[test]
+fn films_samplers_and_filters_declared_outside_the_sensor() {
+    let dir = temp_dir("detached");
+    let body = r#"<sampler type="independent" id="spp"><integer name="sample_count" value="24"/></sampler>
+<rfilter type="tent" id="filter"><float name="radius" value="1.5"/></rfilter>
+<film type="hdrfilm" id="film"><integer name="width" value="20"/><integer name="height" value="10"/><ref id="filter"/></film>
+<sensor type="perspective"><ref id="film"/><ref id="spp"/></sensor>"#;
+    let scene = load(&write_scene(&dir, "refs.xml", body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert_eq!(scene.sample_count, Some(24));
+    let c = &scene.camera;
+    assert_eq!((c.width, c.height), (20, 10));
+    assert_eq!(c.filter, FilterDesc::Tent { radius: 1.5 });
+
+    // Unnamed by any `<ref>`: checked, ignored with a warning, the sensor's own settings stand.
+    let body = r#"<sampler type="independent" id="unused"><integer name="sample_count" value="24"/></sampler>
+<rfilter type="box"/>
+<sensor type="perspective"><sampler type="independent"><integer name="sample_count" value="3"/></sampler></sensor>"#;
+    let scene = load(&write_scene(&dir, "unused.xml", body)).unwrap();
+    assert_eq!(scene.sample_count, Some(3));
+    assert_eq!(scene.camera.filter, FilterDesc::Gaussian { stddev: 0.5 });
+    assert_eq!(scene.warnings.len(), 2, "{:?}", scene.warnings);
+    assert!(scene.warnings.iter().all(|w| w.contains("no <ref> names")));
+    // ... but checked as Mitsuba instantiates it.
+    let body = r#"<film type="hdrfilm"><integer name="width" value="-2"/></film>
+<shape type="sphere"/>"#;
+    assert_body_error_at(&dir, "bad.xml", body, "width", "\"width\" must be in");
+
+    // A reference to something else is an error at the reference.
+    let body = r#"<bsdf type="diffuse" id="m"/>
+<sensor type="perspective"><ref id="m"/></sensor>"#;
+    assert_body_error_at(
+        &dir,
+        "wrong.xml",
+        body,
+        "<sensor",
+        "refers to a <film> or a <sampler>",
+    );
+    let body = r#"<bsdf type="diffuse" id="m"/>
+<sensor type="perspective"><film type="hdrfilm"><ref id="m"/></film></sensor>"#;
+    assert_body_error_at(
+        &dir,
+        "wrong2.xml",
+        body,
+        "<sensor",
+        "refers to an <rfilter>",
+    );
+    let body = r#"<sensor type="perspective"><ref id="nowhere"/></sensor>"#;
+    assert_body_error_at(
+        &dir,
+        "dangling.xml",
+        body,
+        "<sensor",
+        "unknown id \"nowhere\"",
+    );
+}
