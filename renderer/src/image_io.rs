@@ -44,7 +44,7 @@ pub enum ImageIoError {
     Decode {
         /// The file.
         path: PathBuf,
-        /// The format its extension names ("JPEG", "Radiance HDR", …).
+        /// The format its first bytes name ("JPEG", "Radiance HDR", …).
         format: &'static str,
         /// The underlying error.
         error: image::ImageError,
@@ -57,9 +57,9 @@ pub enum ImageIoError {
         /// What is wrong.
         why: String,
     },
-    /// The file name has an extension this module does not read.
+    /// The file is in none of the formats this module reads.
     #[error(
-        "{path}: unsupported image format (expected .png, .jpg, .jpeg, .tga, .bmp, .hdr, .pfm or .exr)"
+        "{path}: unsupported image format (not a PNG, JPEG, TGA, BMP, PPM, Radiance HDR, PFM or OpenEXR file)"
     )]
     UnsupportedFormat {
         /// The file.
@@ -82,12 +82,14 @@ pub enum ImageIoError {
 /// A decoded image: width, height and row-major linear-RGB pixels (row 0 is the top row).
 pub type RgbImage = (u32, u32, Vec<Rgb>);
 
-/// The file formats this module knows, chosen by file extension (Mitsuba's `bitmap` reads
-/// the same ones, but PPM).
+/// The file formats this module knows, recognised as Mitsuba's `bitmap` does by the first
+/// bytes of the file, and by the name's extension only where those say nothing (TGA files
+/// without a version-2 footer, damaged files).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Format {
-    /// 8- or 16-bit sRGB-encoded images: PNG (also written), JPEG, TGA, BMP.
-    Encoded(&'static str),
+    /// 8- or 16-bit sRGB-encoded images: PNG (also written), JPEG, TGA, BMP, binary PPM —
+    /// named, and decoded by the `image` crate.
+    Encoded(&'static str, image::ImageFormat),
     /// Radiance RGBE (`.hdr`): linear.
     Hdr,
     /// Portable float map (`.pfm`, colour `PF` or grey `Pf`): linear.
@@ -96,16 +98,55 @@ enum Format {
     Exr,
 }
 
+/// The format of the image in `path`: by its signature (as Mitsuba's
+/// `Bitmap::detect_file_format`), else by the TGA footer, else by the name's extension.
 fn format_of(path: &Path) -> Result<Format, ImageIoError> {
+    use std::io::{Read, Seek, SeekFrom};
+    let io_err = |error| ImageIoError::Io {
+        path: path.to_owned(),
+        error,
+    };
+    let mut file = std::fs::File::open(path).map_err(io_err)?;
+    let mut start = Vec::with_capacity(8);
+    (&mut file)
+        .take(8)
+        .read_to_end(&mut start)
+        .map_err(io_err)?;
+    let sniffed = match start.as_slice() {
+        [b'B', b'M', ..] => Some(Format::Encoded("BMP", image::ImageFormat::Bmp)),
+        [b'#', b'?', ..] => Some(Format::Hdr),
+        [b'P', b'F' | b'f', ..] => Some(Format::Pfm),
+        [b'P', b'6', ..] => Some(Format::Encoded("PPM", image::ImageFormat::Pnm)),
+        [0xFF, 0xD8, ..] => Some(Format::Encoded("JPEG", image::ImageFormat::Jpeg)),
+        [0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A] => {
+            Some(Format::Encoded("PNG", image::ImageFormat::Png))
+        }
+        [0x76, 0x2F, 0x31, 0x01, ..] => Some(Format::Exr),
+        _ => None,
+    };
+    if let Some(format) = sniffed {
+        return Ok(format);
+    }
+    // A TGA (version 2) ends with an 18-byte footer; version 1 files are known by name only.
+    let mut footer = [0u8; 18];
+    if file.seek(SeekFrom::End(-18)).is_ok()
+        && file.read_exact(&mut footer).is_ok()
+        && footer.starts_with(b"TRUEVISION-XFILE.")
+        && footer[17] == 0
+    {
+        return Ok(Format::Encoded("TGA", image::ImageFormat::Tga));
+    }
+    // Otherwise the extension decides, so that a damaged file gets its decoder's diagnosis.
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     match ext.as_str() {
-        "png" => Ok(Format::Encoded("PNG")),
-        "jpg" | "jpeg" => Ok(Format::Encoded("JPEG")),
-        "tga" => Ok(Format::Encoded("TGA")),
-        "bmp" => Ok(Format::Encoded("BMP")),
+        "png" => Ok(Format::Encoded("PNG", image::ImageFormat::Png)),
+        "jpg" | "jpeg" => Ok(Format::Encoded("JPEG", image::ImageFormat::Jpeg)),
+        "tga" => Ok(Format::Encoded("TGA", image::ImageFormat::Tga)),
+        "bmp" => Ok(Format::Encoded("BMP", image::ImageFormat::Bmp)),
+        "ppm" => Ok(Format::Encoded("PPM", image::ImageFormat::Pnm)),
         "hdr" => Ok(Format::Hdr),
         "pfm" => Ok(Format::Pfm),
         "exr" => Ok(Format::Exr),
@@ -145,30 +186,30 @@ pub fn read_rgb_image(path: &Path) -> Result<RgbImage, ImageIoError> {
 /// roughness or normal maps). HDR and EXR images are always linear.
 pub fn read_rgb_image_encoded(path: &Path, raw: bool) -> Result<RgbImage, ImageIoError> {
     match format_of(path)? {
-        Format::Encoded(name) => read_encoded(path, name, raw),
+        Format::Encoded(name, format) => read_encoded(path, (name, format), raw),
         Format::Hdr => read_hdr(path),
         Format::Pfm => read_pfm(path),
         Format::Exr => read_exr(path),
     }
 }
 
-/// An sRGB-encoded image (PNG, JPEG, TGA, BMP) decoded by the `image` crate; `raw`: the
+/// An sRGB-encoded image (PNG, JPEG, TGA, BMP, PPM) decoded by the `image` crate; `raw`: the
 /// encoded values as they are.
-fn read_encoded(path: &Path, format: &'static str, raw: bool) -> Result<RgbImage, ImageIoError> {
-    let io_err = |error| ImageIoError::Io {
+fn read_encoded(
+    path: &Path,
+    (name, format): (&'static str, image::ImageFormat),
+    raw: bool,
+) -> Result<RgbImage, ImageIoError> {
+    let mut reader = image::ImageReader::open(path).map_err(|error| ImageIoError::Io {
         path: path.to_owned(),
         error,
-    };
-    let decoded = image::ImageReader::open(path)
-        .map_err(io_err)?
-        .with_guessed_format()
-        .map_err(io_err)?
-        .decode()
-        .map_err(|error| ImageIoError::Decode {
-            path: path.to_owned(),
-            format,
-            error,
-        })?;
+    })?;
+    reader.set_format(format);
+    let decoded = reader.decode().map_err(|error| ImageIoError::Decode {
+        path: path.to_owned(),
+        format: name,
+        error,
+    })?;
     Ok(rgb_image(decoded, !raw))
 }
 
@@ -557,9 +598,16 @@ mod tests {
             let e = encoded(x).map(|c| srgb_to_linear(c as f32 / 255.0));
             Rgb::new(e[0], e[1], e[2])
         };
-        for (name, tolerance) in [("a.tga", 1e-6), ("a.bmp", 1e-6), ("a.jpg", 0.02)] {
+        for (name, tolerance) in [
+            ("a.tga", 1e-6),
+            ("a.bmp", 1e-6),
+            ("a.ppm", 1e-6),
+            ("a.jpg", 0.02),
+        ] {
             let path = dir.join(name);
-            if name.ends_with("jpg") {
+            if name.ends_with("ppm") {
+                write_binary_ppm(&path, &rgb8);
+            } else if name.ends_with("jpg") {
                 let mut file = std::fs::File::create(&path).unwrap();
                 image::codecs::jpeg::JpegEncoder::new_with_quality(&mut file, 100)
                     .encode_image(&rgb8)
@@ -617,6 +665,78 @@ mod tests {
         assert!(e.contains("bad.jpg") && e.contains("JPEG"), "{e}");
     }
 
+    /// Writes a binary PPM (`P6`), the one kind Mitsuba reads (the `image` crate writes PAM).
+    fn write_binary_ppm(path: &Path, image: &image::RgbImage) {
+        use image::codecs::pnm::{PnmEncoder, PnmSubtype, SampleEncoding};
+        let file = std::fs::File::create(path).unwrap();
+        PnmEncoder::new(file)
+            .with_subtype(PnmSubtype::Pixmap(SampleEncoding::Binary))
+            .encode(
+                image.as_raw().as_slice(),
+                image.width(),
+                image.height(),
+                image::ExtendedColorType::Rgb8,
+            )
+            .unwrap();
+        assert!(std::fs::read(path).unwrap().starts_with(b"P6"));
+    }
+
+    /// As Mitsuba, the first bytes of a file decide its format, not its name; the name decides
+    /// only where they say nothing.
+    #[test]
+    fn formats_are_known_by_their_contents() {
+        let dir = temp_dir("sniff");
+        let rgb8 =
+            image::RgbImage::from_fn(3, 2, |x, y| image::Rgb([40 * x as u8, 90 * y as u8, 7]));
+        let expect = |i: usize| {
+            let (x, y) = ((i % 3) as f32, (i / 3) as f32);
+            Rgb::new(40.0 * x, 90.0 * y, 7.0) / 255.0
+        };
+        let tga = dir.join("a.tga");
+        rgb8.save(&tga).unwrap();
+        let tga_bytes = std::fs::read(&tga).unwrap();
+        for (name, format) in [
+            ("png.exr", image::ImageFormat::Png),
+            ("jpeg.png", image::ImageFormat::Jpeg),
+            ("bmp.texture", image::ImageFormat::Bmp),
+            ("ppm", image::ImageFormat::Pnm),
+        ] {
+            let path = dir.join(name);
+            if format == image::ImageFormat::Pnm {
+                write_binary_ppm(&path, &rgb8);
+            } else {
+                rgb8.save_with_format(&path, format).unwrap();
+            }
+            let (w, h, px) = read_rgb_image_encoded(&path, true).unwrap();
+            assert_eq!((w, h), (3, 2), "{name}");
+            let tolerance = if format == image::ImageFormat::Jpeg {
+                0.1
+            } else {
+                1e-6
+            };
+            for (i, p) in px.iter().enumerate() {
+                assert!(
+                    (*p - expect(i)).abs().max_element() < tolerance,
+                    "{name}: {p}"
+                );
+            }
+        }
+        // A TGA is known by its version-2 footer, or else by its name.
+        let footer = b"\0\0\0\0\0\0\0\0TRUEVISION-XFILE.\0";
+        let v2 = dir.join("v2.image");
+        std::fs::write(&v2, [tga_bytes.as_slice(), footer].concat()).unwrap();
+        let v1 = dir.join("v1.image");
+        std::fs::write(&v1, &tga_bytes).unwrap();
+        assert_eq!(read_rgb_image_encoded(&v2, true).unwrap().2[5], expect(5));
+        let e = read_rgb_image(&v1).unwrap_err().to_string();
+        assert!(e.contains("v1.image: unsupported image format"), "{e}");
+        // A damaged file whose first bytes say nothing is diagnosed by its name's decoder.
+        let damaged = dir.join("damaged.exr");
+        std::fs::write(&damaged, b"not an exr").unwrap();
+        let e = read_rgb_image(&damaged).unwrap_err().to_string();
+        assert!(e.contains("damaged.exr: OpenEXR"), "{e}");
+    }
+
     #[test]
     fn pfm_rows_run_bottom_up_in_either_byte_order() {
         let dir = temp_dir("pfm");
@@ -670,7 +790,7 @@ mod tests {
                 b"PF\n2 2\n-1.0\n\0\0\0\0".to_vec(),
                 "bytes of pixel data",
             ),
-            ("magic.pfm", b"P6\n2 2\n255\n".to_vec(), "not a PFM"),
+            ("magic.pfm", b"P7\n2 2\n255\n".to_vec(), "not a PFM"),
             ("size.pfm", b"PF\n0 2\n-1\n".to_vec(), "bad width"),
             ("header.pfm", b"PF\n2".to_vec(), "truncated header"),
         ] {
