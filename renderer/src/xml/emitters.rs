@@ -114,7 +114,7 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
             let to_world_el = p.element_of("to_world");
             let to_world = Mat3::from_mat4(p.transform("to_world")?.unwrap_or(Mat4::IDENTITY));
             let image = super::textures::load_bitmap(b, file_el, filename, false)?;
-            let path = file_el.resolve_path(filename);
+            let path = file_el.resolve_path(filename, &b.diag.search_paths);
             match EnvmapLight::check(&image, to_world, scale) {
                 Ok(()) => {}
                 Err(e @ EnvmapError::BadScale(_)) => return Err(scale_el.error(e.to_string())),

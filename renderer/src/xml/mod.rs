@@ -60,6 +60,8 @@ const LEAF_TAGS: &[&str] = &[
     "matrix",
     "ref",
     "default",
+    "path",
+    "alias",
 ];
 
 /// One XML element after `$name` substitution and `<include>` expansion.
@@ -110,14 +112,19 @@ impl Element {
         self.location.file.parent().unwrap_or(Path::new(""))
     }
 
-    /// Resolves a path attribute value relative to this element's file.
-    pub fn resolve_path(&self, value: &str) -> PathBuf {
+    /// Resolves a file name written in this element: an absolute one as it is, a relative one
+    /// in the first of the `<path>` folders `search` (the latest first, as Mitsuba's file
+    /// resolver) that has it, else relative to this element's file.
+    pub fn resolve_path(&self, value: &str, search: &[PathBuf]) -> PathBuf {
         let p = Path::new(value);
         if p.is_absolute() {
-            p.to_owned()
-        } else {
-            self.directory().join(p)
+            return p.to_owned();
         }
+        search
+            .iter()
+            .map(|dir| dir.join(p))
+            .find(|candidate| candidate.exists())
+            .unwrap_or_else(|| self.directory().join(p))
     }
 
     /// Checks attributes: every attribute must be in `allowed` (unknown ones are reported
@@ -142,7 +149,8 @@ impl Element {
     }
 }
 
-/// Collects warnings and decides whether unknown plugins/parameters are fatal.
+/// What reading a scene keeps besides its tree: warnings (and whether unknown plugins and
+/// parameters are fatal), the files read, the parameters used and the `<path>` folders.
 #[derive(Debug, Default)]
 pub(crate) struct Diagnostics {
     /// Turn unknown plugins, parameters and attributes into warnings.
@@ -153,6 +161,9 @@ pub(crate) struct Diagnostics {
     pub files_read: Vec<PathBuf>,
     /// Every parameter some `$name` has been replaced by.
     pub params_used: std::collections::HashSet<String>,
+    /// The folders `<path>` elements named so far, the latest first: relative file names are
+    /// looked up there before the folder of the file that names them.
+    pub search_paths: Vec<PathBuf>,
 }
 
 impl Diagnostics {
@@ -249,7 +260,7 @@ pub fn scene_files(path: &Path, defaults: &[(String, String)]) -> Result<Vec<Pat
     let mut params: HashMap<String, String> = defaults.iter().cloned().collect();
     let root = read_file(path, &mut params, 0, &mut diag)?;
     let mut files = std::mem::take(&mut diag.files_read);
-    collect_named_files(&root, &mut files);
+    collect_named_files(&root, &diag.search_paths, &mut files);
     let mut seen = std::collections::HashSet::new();
     files.retain(|f| seen.insert(f.clone()));
     Ok(files)
@@ -257,17 +268,17 @@ pub fn scene_files(path: &Path, defaults: &[(String, String)]) -> Result<Vec<Pat
 
 /// Appends the files named in `el` and its descendants: `<string name="filename">` values and
 /// `<spectrum filename>` attributes, resolved against the file each element is written in.
-fn collect_named_files(el: &Element, out: &mut Vec<PathBuf>) {
+fn collect_named_files(el: &Element, search: &[PathBuf], out: &mut Vec<PathBuf>) {
     let named = match el.tag.as_str() {
         "string" if el.attr("name") == Some("filename") => el.attr("value"),
         "spectrum" => el.attr("filename"),
         _ => None,
     };
     if let Some(value) = named {
-        out.push(el.resolve_path(value));
+        out.push(el.resolve_path(value, search));
     }
     for child in &el.children {
-        collect_named_files(child, out);
+        collect_named_files(child, search, out);
     }
 }
 
@@ -403,9 +414,29 @@ impl Reader<'_, '_> {
                     .or_insert_with(|| el.attr("value").unwrap_or_default().to_owned());
                 Ok(Vec::new())
             }
+            "path" => {
+                // Mitsuba's `<path value>`: a folder where file names are looked up first.
+                el.check_attributes(&["value"], &["value"], self.diag)?;
+                if self.nesting != 1 {
+                    return Err(el.error("<path> can only be a child of <scene>"));
+                }
+                let value = el.attr("value").unwrap_or_default();
+                let mut dir = el.resolve_path(value, &[]);
+                if !dir.is_dir() {
+                    dir = el.resolve_path(value, &self.diag.search_paths);
+                }
+                if !dir.is_dir() {
+                    return Err(el.error(format!("folder \"{}\" not found", dir.display())));
+                }
+                self.diag.search_paths.insert(0, dir);
+                Ok(Vec::new())
+            }
             "include" => {
                 el.check_attributes(&["filename", "name"], &["filename"], self.diag)?;
-                let path = el.resolve_path(el.attr("filename").unwrap_or_default());
+                let path = el.resolve_path(
+                    el.attr("filename").unwrap_or_default(),
+                    &self.diag.search_paths,
+                );
                 if !path.is_file() {
                     return Err(el.error(format!("included file \"{}\" not found", path.display())));
                 }
@@ -543,9 +574,33 @@ impl<'a> Builder<'a> {
             el: &'a Element,
             ids: &mut HashMap<String, &'a Element>,
             referenced: &mut HashSet<String>,
+            aliases: &mut Vec<(String, String)>,
         ) -> Result<(), SceneError> {
             if el.tag == "ref" {
                 referenced.extend(el.attr("id").map(str::to_owned));
+            } else if el.tag == "alias" {
+                // `<alias id="a" as="b"/>`: "b" names what "a" names, from here on (Mitsuba
+                // reads ids in document order, so the source must come first).
+                let (Some(source), Some(alias)) = (el.attr("id"), el.attr("as")) else {
+                    return Err(el.error("<alias> needs the attributes \"id\" and \"as\""));
+                };
+                if let Some(prev) = ids.get(alias) {
+                    return Err(el.error(format!(
+                        "alias \"{alias}\" already names {} at {}",
+                        prev.describe(),
+                        prev.location
+                    )));
+                }
+                let Some(&target) = ids.get(source) else {
+                    return Err(el.error(format!(
+                        "alias source id \"{source}\" not found (before this line)"
+                    )));
+                };
+                ids.insert(alias.to_owned(), target);
+                aliases.push((
+                    target.attr("id").unwrap_or_default().to_owned(),
+                    alias.to_owned(),
+                ));
             } else if let Some(id) = el.attr("id") {
                 if let Some(prev) = ids.insert(id.to_owned(), el) {
                     return Err(el.error(format!(
@@ -556,9 +611,16 @@ impl<'a> Builder<'a> {
             }
             el.children
                 .iter()
-                .try_for_each(|c| collect(c, ids, referenced))
+                .try_for_each(|c| collect(c, ids, referenced, aliases))
         }
-        collect(root, &mut ids, &mut referenced)?;
+        let mut aliases = Vec::new();
+        collect(root, &mut ids, &mut referenced, &mut aliases)?;
+        // A reference through an alias refers to the aliased element.
+        for (id, alias) in aliases {
+            if referenced.contains(&alias) {
+                referenced.insert(id);
+            }
+        }
         Ok(Self {
             diag,
             ids,
@@ -778,6 +840,8 @@ impl<'a> Builder<'a> {
                 }
                 "integrator" => self.integrator = Some(sensors::build_integrator(self, el)?),
                 "film" | "sampler" | "rfilter" => sensors::build_detached(self, el)?,
+                // Read with the ids (Builder::new).
+                "alias" => {}
                 "ref" => {
                     let err = el.error("top-level <ref> is not supported: reference objects from inside a shape or BSDF");
                     self.diag.unknown(err)?;

@@ -251,7 +251,9 @@ impl<'a> Props<'a> {
                 el.check_attributes(&["name", "value", "filename"], &["name"], d)?;
                 match (el.attr("value"), el.attr("filename")) {
                     (Some(v), None) => Value::Spectrum(parse_spectrum(el, v)?),
-                    (None, Some(f)) => Value::Spectrum(read_spd(el, &el.resolve_path(f))?),
+                    (None, Some(f)) => {
+                        Value::Spectrum(read_spd(el, &el.resolve_path(f, &d.search_paths))?)
+                    }
                     _ => {
                         return Err(el
                             .error("<spectrum> needs either \"value\" or \"filename\" (not both)"))

@@ -148,7 +148,7 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
             } else {
                 0
             };
-            let path = file_el.resolve_path(filename);
+            let path = file_el.resolve_path(filename, &b.diag.search_paths);
             let raw = match kind {
                 "obj" => super::obj::load_obj(&path),
                 "ply" => load_ply(&path),

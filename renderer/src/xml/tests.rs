@@ -2649,3 +2649,91 @@ fn films_samplers_and_filters_declared_outside_the_sensor() {
         "unknown id \"nowhere\"",
     );
 }
+
+/// Mitsuba's `<path value>` adds a folder where file names are looked up first (the latest
+/// first), for plugins and includes alike; `<alias id as>` gives an element a second id.
+#[test]
+fn path_folders_and_aliases_as_mitsuba() {
+    let dir = temp_dir("path-alias");
+    write_part_triangle(&dir);
+    let triangle = |file: &str, size: u32| {
+        let path = dir.join(file);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(
+            path,
+            format!("v 0 0 0\nv {size} 0 0\nv 0 {size} 0\nf 1 2 3\n"),
+        )
+        .unwrap();
+    };
+    // Files of the same name in the scene's folder and in search folders.
+    triangle("tri.obj", 5);
+    triangle("other/tri.obj", 2);
+    triangle("meshes/tri.obj", 3);
+    std::fs::create_dir_all(dir.join("other/meshes")).unwrap();
+    std::fs::write(
+        dir.join("other/part.xml"),
+        "<scene version=\"3.0.0\">\n<shape type=\"obj\" id=\"inc\"><string name=\"filename\" value=\"tri.obj\"/></shape>\n</scene>\n",
+    )
+    .unwrap();
+    let body = r#"<sensor type="perspective"/>
+<path value="parts/meshes"/>
+<path value="other"/>
+<include filename="part.xml"/>
+<bsdf type="diffuse" id="red"><rgb name="reflectance" value="0.8, 0.1, 0.1"/></bsdf>
+<alias id="red" as="crimson"/>
+<shape type="obj" id="a"><string name="filename" value="tri.obj"/><ref id="crimson"/></shape>
+<shape type="obj" id="b"><string name="filename" value="meshes/tri.obj"/><ref id="red"/></shape>"#;
+    let path = write_scene(&dir, "scene.xml", body);
+    let scene = load(&path).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let shape = |name: &str| {
+        let shape = scene.shapes.iter().find(|s| s.name == name).unwrap();
+        let Geometry::Mesh(m) = &shape.geometry else {
+            panic!("{name}: not a mesh")
+        };
+        (m.positions[1].x, shape.bsdf)
+    };
+    // "other" was named last, so it is searched first (size 2), before parts/meshes (1) and
+    // the scene's own folder (5); the include is looked up the same way (other/part.xml).
+    assert_eq!(shape("a").0, 2.0);
+    assert_eq!(shape("inc").0, 2.0);
+    // A name no search folder has falls back to the scene's folder.
+    assert_eq!(shape("b").0, 3.0);
+    // The alias and the id name one BSDF, built once.
+    assert_eq!(shape("a").1, shape("b").1);
+    // The file list of the scene follows the same lookup.
+    let files = scene_files(&path, &[]).unwrap();
+    for f in ["other/part.xml", "other/tri.obj", "meshes/tri.obj"] {
+        assert!(files.contains(&dir.join(f)), "{f}: {files:?}");
+    }
+
+    // Errors: a missing folder, a nested <path>, an alias before its source or of a taken id.
+    assert_body_error_at(
+        &dir,
+        "e1.xml",
+        r#"<path value="nowhere"/>"#,
+        "<path",
+        "folder",
+    );
+    assert_body_error_at(
+        &dir,
+        "e2.xml",
+        "<shape type=\"sphere\">\n<path value=\"other\"/>\n</shape>",
+        "<path",
+        "only be a child of <scene>",
+    );
+    assert_body_error_at(
+        &dir,
+        "e3.xml",
+        "<alias id=\"m\" as=\"n\"/>\n<bsdf type=\"diffuse\" id=\"m\"/>",
+        "<alias",
+        "alias source id \"m\" not found",
+    );
+    assert_body_error_at(
+        &dir,
+        "e4.xml",
+        "<bsdf type=\"diffuse\" id=\"m\"/>\n<bsdf type=\"diffuse\" id=\"n\"/>\n<alias id=\"m\" as=\"n\"/>",
+        "<alias",
+        "already names",
+    );
+}

@@ -108,7 +108,7 @@ pub(super) fn load_bitmap<'a>(
     filename: &str,
     raw: bool,
 ) -> Result<Arc<Bitmap>, SceneError> {
-    let path = file_el.resolve_path(filename);
+    let path = file_el.resolve_path(filename, &b.diag.search_paths);
     let key = (path.clone(), raw);
     if let Some(img) = b.bitmaps.get(&key) {
         return Ok(img.clone());
