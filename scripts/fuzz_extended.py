@@ -22,7 +22,7 @@ import numpy as np
 
 from fuzz_mitsuba import RES, area_rectangle, light, material, rgb, shape, spot_light
 from make_scene_assets import (icosphere, grid, write_exr_rgb32, write_obj, write_ply_binary, write_ply_properties,
-                                write_png_rgb8, write_serialized)
+                                write_png_rgb8, write_ppm_rgb8, write_serialized)
 
 TEX = 32  # texture side (pixels)
 
@@ -59,8 +59,14 @@ class Assets:
                 return (15, 15, 15)
             t = f((x + 0.5) / TEX, (y + 0.5) / TEX)
             return tuple(round(a + (b - a) * t) for a, b in zip(c0, c1))
-        path = self.name("png")
-        write_png_rgb8(self.folder / path, TEX, TEX, pixel)
+        # Every third asset a binary PPM: the same 8-bit sRGB texels in Mitsuba's other
+        # container (chosen by the asset count, so the random stream stays as it was).
+        if self.count % 3 == 2:
+            path = self.name("ppm")
+            write_ppm_rgb8(self.folder / path, TEX, TEX, pixel)
+        else:
+            path = self.name("png")
+            write_png_rgb8(self.folder / path, TEX, TEX, pixel)
         return path
 
     def grey_png(self, lo=0, hi=255):

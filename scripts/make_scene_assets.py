@@ -79,6 +79,15 @@ def write_ply_binary(path: Path, pos, nrm, faces, comment: str):
     path.write_bytes(header.encode("ascii") + bytes(body))
 
 
+def write_ppm_rgb8(path: Path, width: int, height: int, pixel):
+    """8-bit binary PPM (P6, the kind Mitsuba reads) from pixel(x, y) -> (r, g, b) in 0..255."""
+    data = bytearray(f"P6\n{width} {height}\n255\n".encode())
+    for y in range(height):
+        for x in range(width):
+            data += bytes(pixel(x, y))
+    path.write_bytes(bytes(data))
+
+
 def write_png_rgb8(path: Path, width: int, height: int, pixel):
     """8-bit sRGB PNG from pixel(x, y) -> (r, g, b) in 0..255 (row 0 = top of the image)."""
     raw = bytearray()

@@ -24,6 +24,7 @@ mod sensors;
 mod shapes;
 mod textures;
 pub mod transform;
+mod upgrade;
 
 pub use error::{Location, SceneError};
 
@@ -310,12 +311,17 @@ pub(crate) fn read_file(
             message: e.to_string(),
         }
     })?;
+    let legacy = doc
+        .root_element()
+        .attribute("version")
+        .is_some_and(upgrade::is_legacy);
     let mut reader = Reader {
         doc: &doc,
         file,
         params,
         depth,
         nesting: 0,
+        legacy,
         diag,
     };
     let mut out = reader.convert(doc.root_element())?;
@@ -343,6 +349,8 @@ struct Reader<'d, 'p> {
     depth: usize,
     /// Ancestors of the element being converted, within this file.
     nesting: usize,
+    /// The file is of a scene version before 2.0: its names are upgraded (`upgrade`).
+    legacy: bool,
     diag: &'p mut Diagnostics,
 }
 
@@ -376,6 +384,9 @@ impl Reader<'_, '_> {
             ));
         }
         el.attrs = substituted;
+        if self.legacy {
+            upgrade::rename_parameter(&mut el);
+        }
 
         let child_element = node.children().find(|c| c.is_element());
         if let Some(child) = child_element.filter(|_| LEAF_TAGS.contains(&el.tag.as_str())) {
@@ -474,6 +485,9 @@ impl Reader<'_, '_> {
                         };
                         self.diag.unknown(err)?;
                     }
+                }
+                if self.legacy {
+                    upgrade::upgrade_plugin(&mut el)?;
                 }
                 Ok(vec![el])
             }
