@@ -389,7 +389,10 @@ impl Reader<'_, '_> {
         }
 
         let child_element = node.children().find(|c| c.is_element());
-        if let Some(child) = child_element.filter(|_| LEAF_TAGS.contains(&el.tag.as_str())) {
+        // A `<spectrum type="…">` is a plugin with parameters, `<spectrum value="…">` a value.
+        let leaf = LEAF_TAGS.contains(&el.tag.as_str())
+            && !(el.tag == "spectrum" && el.attr("type").is_some());
+        if let Some(child) = child_element.filter(|_| leaf) {
             let p = self.doc.text_pos_at(child.range().start);
             let err = SceneError::Element {
                 location: Location {

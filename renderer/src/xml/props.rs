@@ -172,6 +172,71 @@ fn read_spd(el: &Element, path: &std::path::Path) -> Result<SpectrumValue, Scene
     Ok(SpectrumValue::Pairs(pairs))
 }
 
+/// A `<spectrum type="…">` plugin, as Mitsuba's RGB variants evaluate it: `uniform` (`value`)
+/// is a grey, `srgb` (`color`, in [0, 1] unless `unbounded`) its colour, `d65` (`scale`,
+/// optional `color`) the colour times the scale (white by default). The measured spectra
+/// (`blackbody`, `regular`, `irregular`) have no RGB form: Mitsuba's RGB variants refuse them too.
+fn typed_spectrum<'a>(
+    b: &mut Builder<'a>,
+    el: &'a Element,
+) -> Result<Option<Value<'a>>, SceneError> {
+    el.check_attributes(&["type", "name", "id"], &["type"], &mut b.diag)?;
+    let kind = el.attr("type").unwrap_or_default();
+    if ["blackbody", "regular", "irregular"].contains(&kind) {
+        return Err(el.error(format!(
+            "spectrum \"{kind}\" has no RGB form (Mitsuba's RGB variants refuse it too): give the colour as <rgb> or <spectrum value=\"…\">"
+        )));
+    }
+    if !["uniform", "srgb", "d65"].contains(&kind) {
+        b.diag.unknown(el.error(format!(
+            "unknown plugin \"{kind}\" (supported spectra: uniform, srgb, d65)"
+        )))?;
+        return Ok(None);
+    }
+    let mut p = Props::parse(b, el)?;
+    let colour = |p: &mut Props<'a>, name: &str| -> Result<Option<Rgb>, SceneError> {
+        let e = p.element_of(name);
+        match p.take(name) {
+            None => Ok(None),
+            Some((Value::Rgb(c), _)) => Ok(Some(c)),
+            Some((Value::Float(v), _)) => Ok(Some(Rgb::splat(v as f32))),
+            Some((v, _)) => Err(Props::wrong_type(e, name, "rgb", &v)),
+        }
+    };
+    let value = match kind {
+        "uniform" => {
+            let Some(v) = p.float("value")? else {
+                return Err(el.error("missing parameter \"value\""));
+            };
+            // Bounds of the wavelength range; an RGB renderer has no wavelengths to bound.
+            p.ignore(
+                b,
+                &["wavelength_min", "wavelength_max"],
+                "RGB rendering has no wavelengths",
+            );
+            Rgb::splat(v as f32)
+        }
+        "srgb" => {
+            let Some(c) = colour(&mut p, "color")? else {
+                return Err(el.error("missing parameter \"color\""));
+            };
+            let unbounded = p.bool_or("unbounded", false)?;
+            if !unbounded && (c.min_element() < 0.0 || c.max_element() > 1.0) {
+                return Err(p.element_of("color").error(format!(
+                    "an srgb colour must be in [0, 1], got {c} (set \"unbounded\" for a larger one)"
+                )));
+            }
+            c
+        }
+        _ => {
+            let scale = p.float_or("scale", 1.0)? as f32;
+            colour(&mut p, "color")?.unwrap_or(Rgb::ONE) * scale
+        }
+    };
+    p.finish(b)?;
+    Ok(Some(Value::Rgb(value)))
+}
+
 impl<'a> Props<'a> {
     /// Parses every child of `owner` as a parameter or nested plugin.
     pub fn parse(b: &mut Builder<'a>, owner: &'a Element) -> Result<Self, SceneError> {
@@ -200,6 +265,9 @@ impl<'a> Props<'a> {
     }
 
     fn parse_value(b: &mut Builder<'a>, el: &'a Element) -> Result<Option<Value<'a>>, SceneError> {
+        if el.tag == "spectrum" && el.attr("type").is_some() {
+            return typed_spectrum(b, el);
+        }
         let d = &mut b.diag;
         let tag = el.tag.as_str();
         let value_attr = || el.attr("value").unwrap_or_default();

@@ -2804,3 +2804,62 @@ fn scenes_before_version_2_are_upgraded_as_mitsuba_does() {
     .unwrap();
     assert_error_at(&path, 3, "\"uscale\" must be a <float>");
 }
+
+/// `<spectrum type="…">` plugins as Mitsuba's RGB variants evaluate them (each value checked
+/// against Mitsuba 3.9.1 `scalar_rgb` renders of an emitting sphere).
+#[test]
+fn typed_spectra_as_mitsubas_rgb_variants() {
+    let dir = temp_dir("typed-spectra");
+    let emitted = |spectrum: &str| {
+        let body = format!(
+            "{SENSOR}\n<shape type=\"sphere\"><emitter type=\"area\">\n{spectrum}\n</emitter></shape>"
+        );
+        let scene = load(&write_scene(&dir, "s.xml", &body))?;
+        Ok::<_, SceneError>(format!("{:?}", scene.shapes[0].emission))
+    };
+    let constant = |c: Rgb| format!("{:?}", Some(Texture::Constant(c)));
+    let cases = [
+        (
+            r#"<spectrum type="uniform" name="radiance"><float name="value" value="2"/></spectrum>"#,
+            Rgb::splat(2.0),
+        ),
+        (
+            r#"<spectrum type="srgb" name="radiance"><rgb name="color" value="0.5, 0.2, 0.1"/></spectrum>"#,
+            Rgb::new(0.5, 0.2, 0.1),
+        ),
+        (
+            r#"<spectrum type="srgb" name="radiance"><rgb name="color" value="5, 0.2, 0.1"/><boolean name="unbounded" value="true"/></spectrum>"#,
+            Rgb::new(5.0, 0.2, 0.1),
+        ),
+        (r#"<spectrum type="d65" name="radiance"/>"#, Rgb::ONE),
+        (
+            r#"<spectrum type="d65" name="radiance"><rgb name="color" value="0.5, 0.2, 0.1"/><float name="scale" value="3"/></spectrum>"#,
+            Rgb::new(1.5, 0.6, 0.3),
+        ),
+    ];
+    for (spectrum, want) in cases {
+        assert_eq!(emitted(spectrum).unwrap(), constant(want), "{spectrum}");
+    }
+    // Refused, as by Mitsuba: a bounded srgb colour above 1, the measured spectra.
+    for (spectrum, needle) in [
+        (
+            r#"<spectrum type="srgb" name="radiance"><rgb name="color" value="5, 0.2, 0.1"/></spectrum>"#,
+            "must be in [0, 1]",
+        ),
+        (
+            r#"<spectrum type="blackbody" name="radiance"><float name="temperature" value="3000"/></spectrum>"#,
+            "has no RGB form",
+        ),
+        (
+            r#"<spectrum type="uniform" name="radiance"/>"#,
+            "missing parameter \"value\"",
+        ),
+        (
+            r#"<spectrum type="uniform" name="radiance"><float name="value" value="1"/><float name="scael" value="2"/></spectrum>"#,
+            "unknown parameter \"scael\"",
+        ),
+    ] {
+        let err = emitted(spectrum).unwrap_err().to_string();
+        assert!(err.contains(needle) && err.contains("s.xml:"), "{err}");
+    }
+}
