@@ -11,7 +11,7 @@ use crate::spectrum::{Rgb, SpectrumKind};
 use crate::texture::Texture;
 
 /// The BSDF plugins this importer knows.
-const BSDF_PLUGINS: [&str; 14] = [
+const BSDF_PLUGINS: [&str; 15] = [
     "diffuse",
     "conductor",
     "roughconductor",
@@ -26,6 +26,7 @@ const BSDF_PLUGINS: [&str; 14] = [
     "bumpmap",
     "blendbsdf",
     "mask",
+    "null",
 ];
 
 /// Builds the BSDF declared by a `<bsdf>` element.
@@ -228,6 +229,15 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
                 nested: Box::new(inner),
             })
         }
+        // Mitsuba's `null` (no parameters): light passes straight through, as through a mask
+        // of opacity 0 — which is what Mitsuba's `path` renders for it too (shadow rays are
+        // blocked by the shape, paths continue through it).
+        "null" => Bsdf::Mask(Mask {
+            opacity: Texture::Constant(Rgb::ZERO),
+            nested: Box::new(Bsdf::Diffuse(Diffuse {
+                reflectance: Texture::Constant(Rgb::ZERO),
+            })),
+        }),
         _ => unreachable_plugin(el)?,
     };
     p.finish(b)?;

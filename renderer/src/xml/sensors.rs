@@ -463,7 +463,15 @@ pub(super) fn build_integrator<'a>(
 ) -> Result<IntegratorDesc, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
-    const INTEGRATORS: [&str; 4] = ["path", "sppm", "volpath", "direct"];
+    const INTEGRATORS: [&str; 7] = [
+        "path",
+        "sppm",
+        "volpath",
+        "volpathmis",
+        "prb",
+        "prb_basic",
+        "direct",
+    ];
     if !INTEGRATORS.contains(&kind) {
         let err = el.error(format!(
             "unknown plugin \"{kind}\" (supported integrators: {})",
@@ -471,8 +479,9 @@ pub(super) fn build_integrator<'a>(
         ));
         b.diag.unknown(err)?;
     }
-    // `volpath` without media (which the importer refuses) is `path`; `sppm` is the integrator
-    // chosen on the command line anyway.
+    // `volpath` and `volpathmis` without media (which the importer refuses) are `path`, and so
+    // are the differentiable `prb` and `prb_basic` when rendering forward; `sppm` is the
+    // integrator chosen on the command line anyway.
     let mut p = Props::parse(b, el)?;
     let depth_el = p.element_of("max_depth");
     let max_depth = match p.int("max_depth")? {
