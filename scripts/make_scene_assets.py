@@ -81,6 +81,7 @@ def write_ply_binary(path: Path, pos, nrm, faces, comment: str):
 
 def write_ppm_rgb8(path: Path, width: int, height: int, pixel):
     """8-bit binary PPM (P6, the kind Mitsuba reads) from pixel(x, y) -> (r, g, b) in 0..255."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     data = bytearray(f"P6\n{width} {height}\n255\n".encode())
     for y in range(height):
         for x in range(width):
@@ -380,6 +381,10 @@ def main():
     mesh_attribute_assets(SCENES / "validation" / "mesh-attribute" / "meshes")
     write_png_rgb8(SCENES / "validation" / "projected-texture" / "textures" / "slide.png", 64, 64,
                    texture_pixel)
+    # The projector's slide: the same pattern stretched to 96x64 (the projector's aspect ratio
+    # is the image's), as a binary PPM.
+    write_ppm_rgb8(SCENES / "validation" / "projector" / "textures" / "slide.ppm", 96, 64,
+                   lambda x, y: texture_pixel(x * 63 // 95, y))
 
 
 if __name__ == "__main__":

@@ -95,6 +95,18 @@ pub enum EmitterDesc {
         /// `texture`: an image projected along the beam (the cutoff cone spans its uv square).
         texture: Option<crate::texture::Texture>,
     },
+    /// `projector`: a pinhole at the origin of `to_world` projecting `irradiance` along its +z.
+    Projector {
+        /// Object-to-world transform (position and orientation).
+        to_world: Mat4,
+        /// Irradiance on the image plane at unit distance (a colour or an image).
+        irradiance: crate::texture::Texture,
+        /// `scale`: a factor on the irradiance.
+        scale: f32,
+        /// Horizontal field of view in degrees (from `fov`, `fov_axis` or `focal_length` and
+        /// the image's aspect ratio).
+        fov_x: f32,
+    },
     /// `directional`: `irradiance` arriving along `direction` (the direction light travels).
     Directional {
         /// Unit direction of propagation.

@@ -9,7 +9,7 @@ use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription
 use crate::frame::Frame;
 use crate::lights::{
     channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, EnvmapLight, Light,
-    LightSample, PointLight, SceneSphere, SpotLight,
+    LightSample, PointLight, ProjectorLight, SceneSphere, SpotLight,
 };
 use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
 use crate::sampling::Distribution1D;
@@ -332,6 +332,27 @@ impl Scene {
                         texture.clone(),
                     ))
                 }
+                EmitterDesc::Projector {
+                    to_world,
+                    irradiance,
+                    scale,
+                    fov_x,
+                } => {
+                    let valid = irradiance.is_finite_non_negative()
+                        && scale.is_finite()
+                        && scale >= 0.0
+                        && fov_x > 0.0
+                        && fov_x < 180.0;
+                    if !valid {
+                        bail!("projector emitter #{i}: invalid irradiance, scale {scale} or fov {fov_x}");
+                    }
+                    Light::Projector(ProjectorLight::new(
+                        to_world,
+                        irradiance.clone(),
+                        scale,
+                        fov_x,
+                    ))
+                }
                 EmitterDesc::Directional {
                     direction,
                     irradiance,
@@ -633,6 +654,7 @@ impl Scene {
             Light::Area(a) => a.sample_li(&self.shapes[a.shape as usize], p, u_rest, u)?,
             Light::Point(l) => l.sample_li(p)?,
             Light::Spot(l) => l.sample_li(p)?,
+            Light::Projector(l) => l.sample_li(p)?,
             Light::Directional(l) => l.sample_li(p, &self.sphere),
             Light::Constant(l) => l.sample_li(p, u, &self.sphere),
             Light::Envmap(l) => l.sample_li(p, u, &self.sphere)?,
@@ -689,6 +711,7 @@ impl Scene {
             }
             Light::Point(l) => l.sample_emission(u_dir),
             Light::Spot(l) => l.sample_emission(u_dir),
+            Light::Projector(l) => l.sample_emission(u_dir),
             Light::Directional(l) => l.sample_emission(u_pos, &self.sphere),
             Light::Constant(l) => l.sample_emission(u_dir, u_pos, &self.sphere),
             Light::Envmap(l) => l.sample_emission(u_dir, u_pos, &self.sphere),
@@ -754,6 +777,7 @@ fn light_power(l: &Light, shapes: &[Shape], sphere: &SceneSphere) -> Rgb {
         Light::Area(a) => a.power(&shapes[a.shape as usize]),
         Light::Point(p) => p.power(),
         Light::Spot(s) => s.power(),
+        Light::Projector(p) => p.power(),
         Light::Directional(d) => d.power(sphere),
         Light::Constant(c) => c.power(sphere),
         Light::Envmap(m) => m.power(sphere),

@@ -1,5 +1,5 @@
 //! Light sources (Mitsuba 3's emitters): area lights attached to shapes (front side only),
-//! point, spot, directional, constant-environment and environment-map lights, each with
+//! point, spot, projector, directional, constant-environment and environment-map lights, each with
 //! - `sample_li`: a direction towards the light from a reference point, for next-event estimation,
 //! - `pdf_li`: the solid-angle density of that strategy, for MIS with BSDF sampling,
 //! - `sample_emission`: a ray leaving the light with its flux weight, for photon tracing,
@@ -15,6 +15,7 @@ pub mod envmap;
 #[cfg(test)]
 mod envmap_reference;
 pub mod point;
+pub mod projector;
 pub mod spot;
 
 pub use area::AreaLight;
@@ -22,6 +23,7 @@ pub use constant::ConstantLight;
 pub use directional::DirectionalLight;
 pub use envmap::{EnvmapError, EnvmapLight};
 pub use point::PointLight;
+pub use projector::ProjectorLight;
 pub use spot::SpotLight;
 
 use crate::math::{coordinate_system, Ray};
@@ -93,6 +95,8 @@ pub enum Light {
     Point(PointLight),
     /// Spot light with Mitsuba's linear angular falloff.
     Spot(SpotLight),
+    /// A pinhole projecting an image.
+    Projector(ProjectorLight),
     /// Distant light.
     Directional(DirectionalLight),
     /// Uniform environment.
@@ -115,7 +119,7 @@ impl Light {
     pub fn is_delta(&self) -> bool {
         matches!(
             self,
-            Light::Point(_) | Light::Spot(_) | Light::Directional(_)
+            Light::Point(_) | Light::Spot(_) | Light::Projector(_) | Light::Directional(_)
         )
     }
 }

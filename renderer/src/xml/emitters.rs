@@ -1,5 +1,5 @@
-//! `<emitter>` plugins: `area` (inside a shape), `point`, `spot`, `directional`, `constant`,
-//! `envmap`.
+//! `<emitter>` plugins: `area` (inside a shape), `point`, `spot`, `projector`, `directional`,
+//! `constant`, `envmap`.
 //! Emission spectra are converted without D65 weighting, as Mitsuba's RGB variants do.
 
 use super::props::Props;
@@ -19,9 +19,18 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
     if kind == "area" {
         return Err(el.error("an area emitter must be nested inside a <shape>"));
     }
-    if !["point", "spot", "directional", "constant", "envmap"].contains(&kind) {
+    if ![
+        "point",
+        "spot",
+        "projector",
+        "directional",
+        "constant",
+        "envmap",
+    ]
+    .contains(&kind)
+    {
         let err = el.error(format!(
-            "unknown plugin \"{kind}\" (supported emitters: area, point, spot, directional, constant, envmap)"
+            "unknown plugin \"{kind}\" (supported emitters: area, point, spot, projector, directional, constant, envmap)"
         ));
         return b.diag.unknown(err);
     }
@@ -82,6 +91,33 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
                 cutoff_angle: cutoff_angle as f32,
                 beam_width: beam_width.min(cutoff_angle) as f32,
                 texture,
+            }
+        }
+        "projector" => {
+            let irradiance_el = p.element_of("irradiance");
+            let irradiance = p.texture_or(b, "irradiance", EMISSION, 1.0)?;
+            if !irradiance.is_finite_non_negative() {
+                return Err(irradiance_el
+                    .error("\"irradiance\" must be finite and non-negative (a value is not)"));
+            }
+            let scale_el = p.element_of("scale");
+            let scale = p.float_or("scale", 1.0)?;
+            if scale < 0.0 {
+                return Err(scale_el.error(format!("\"scale\" must not be negative, got {scale}")));
+            }
+            let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+            // The perspective camera's field of view, over the image's aspect ratio (Mitsuba:
+            // the texture's resolution; 1 × 1 for a constant).
+            let (fov, axis) = super::sensors::parse_fov(&mut p)?;
+            let aspect = match &irradiance {
+                Texture::Bitmap { image, .. } => image.width as f32 / image.height as f32,
+                _ => 1.0,
+            };
+            EmitterDesc::Projector {
+                to_world,
+                irradiance,
+                scale: scale as f32,
+                fov_x: crate::camera::horizontal_fov(fov as f32, axis, aspect),
             }
         }
         "directional" => {

@@ -170,7 +170,7 @@ pub(super) fn build_sensor<'a>(
 }
 
 /// `fov` + `fov_axis`, or a 35 mm-equivalent `focal_length` (default "50mm") as Mitsuba.
-fn parse_fov(p: &mut Props) -> Result<(f64, FovAxis), SceneError> {
+pub(super) fn parse_fov(p: &mut Props) -> Result<(f64, FovAxis), SceneError> {
     if p.has("fov") && p.has("focal_length") {
         return Err(p
             .element_of("focal_length")

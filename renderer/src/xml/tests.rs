@@ -2885,3 +2885,56 @@ fn null_bsdf_is_a_fully_transparent_mask() {
         "unknown parameter \"opacity\"",
     );
 }
+
+/// `projector`: the perspective camera's field of view over the image's aspect ratio, a
+/// constant irradiance of 1 by default, and its values checked.
+#[test]
+fn projectors_take_the_cameras_field_of_view_over_their_image() {
+    let dir = temp_dir("projector");
+    std::fs::create_dir_all(dir.join("tex")).unwrap();
+    image::RgbImage::new(40, 20)
+        .save(dir.join("tex/wide.png"))
+        .unwrap();
+    let projector = |inner: &str| {
+        let body = format!("{SENSOR}\n<emitter type=\"projector\">\n{inner}\n</emitter>");
+        load(&write_scene(&dir, "p.xml", &body))
+    };
+    let fov_of = |scene: &SceneDescription| match &scene.emitters[0] {
+        EmitterDesc::Projector {
+            fov_x,
+            scale,
+            irradiance,
+            ..
+        } => (*fov_x, *scale, format!("{irradiance:?}")),
+        e => panic!("{e:?}"),
+    };
+    // A constant: aspect 1, irradiance 1, scale 1; Mitsuba's default focal length 50 mm.
+    let (fov, scale, irradiance) = fov_of(&projector("").unwrap());
+    assert_eq!(scale, 1.0);
+    assert_eq!(irradiance, format!("{:?}", Texture::Constant(Rgb::ONE)));
+    let diagonal_50mm = 2.0 * (43.2666f64 / 2.0 / 50.0).atan().to_degrees() as f32;
+    let want = crate::camera::horizontal_fov(diagonal_50mm, FovAxis::Diagonal, 1.0);
+    assert!((fov - want).abs() < 1e-3, "{fov} vs {want}");
+    // A 40x20 image with 30° on its smaller (vertical) axis: tan(x/2) = 2·tan(15°).
+    let inner = r#"<texture type="bitmap" name="irradiance"><string name="filename" value="tex/wide.png"/></texture>
+<float name="fov" value="30"/><string name="fov_axis" value="smaller"/><float name="scale" value="2"/>"#;
+    let (fov, scale, _) = fov_of(&projector(inner).unwrap());
+    let want = 2.0 * (2.0 * 15f32.to_radians().tan()).atan().to_degrees();
+    assert!((fov - want).abs() < 1e-3 && scale == 2.0, "{fov} vs {want}");
+    // Errors name the parameter's line.
+    for (inner, needle) in [
+        (
+            r#"<float name="scale" value="-1"/>"#,
+            "must not be negative",
+        ),
+        (r#"<rgb name="irradiance" value="-1"/>"#, "non-negative"),
+        (r#"<float name="fov" value="180"/>"#, "field of view"),
+        (
+            r#"<float name="fov" value="30"/><string name="focal_length" value="35mm"/>"#,
+            "not both",
+        ),
+    ] {
+        let err = projector(inner).unwrap_err().to_string();
+        assert!(err.contains(needle) && err.contains("p.xml:5:"), "{err}");
+    }
+}
