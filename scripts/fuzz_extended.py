@@ -49,24 +49,24 @@ class Assets:
             return min(max(s / 1.5, 0.0), 1.0)
         return f
 
-    def colour_png(self):
+    def colour_png(self, width=TEX, height=TEX):
         """An sRGB colour pattern: two random colours mixed by a smooth field, with a dark grid."""
         f, c0, c1 = self.field(), [self.r.randint(20, 235) for _ in range(3)], [self.r.randint(20, 235) for _ in range(3)]
         cells = self.r.choice([0, 4, 8])
 
         def pixel(x, y):
-            if cells and (x % (TEX // cells) == 0 or y % (TEX // cells) == 0):
+            if cells and (x % (width // cells) == 0 or y % (height // cells) == 0):
                 return (15, 15, 15)
-            t = f((x + 0.5) / TEX, (y + 0.5) / TEX)
+            t = f((x + 0.5) / width, (y + 0.5) / height)
             return tuple(round(a + (b - a) * t) for a, b in zip(c0, c1))
         # Every third asset a binary PPM: the same 8-bit sRGB texels in Mitsuba's other
         # container (chosen by the asset count, so the random stream stays as it was).
         if self.count % 3 == 2:
             path = self.name("ppm")
-            write_ppm_rgb8(self.folder / path, TEX, TEX, pixel)
+            write_ppm_rgb8(self.folder / path, width, height, pixel)
         else:
             path = self.name("png")
-            write_png_rgb8(self.folder / path, TEX, TEX, pixel)
+            write_png_rgb8(self.folder / path, width, height, pixel)
         return path
 
     def grey_png(self, lo=0, hi=255):
@@ -375,10 +375,12 @@ def ext_light(a, allow_environment, area_only=False):
     r = a.r
     kinds = ["textured-area", "base"] + (["envmap"] if allow_environment else [])
     if not area_only:
-        kinds.append("textured-spot")
+        kinds += ["textured-spot", "projector"]
     k = r.choice(kinds)
     if k == "textured-spot":  # a slide projected by a spot (the cutoff cone spans the texture)
         return spot_light(r, turn=True, slide=lambda: bitmap(a, "texture", a.colour_png()))
+    if k == "projector":  # a pinhole projecting an image, the perspective camera's reciprocal
+        return projector(a)
     if k == "textured-area":
         return area_rectangle(r, lambda: bitmap(a, "radiance", a.radiance_exr(1, 12)))
     if k == "envmap":
@@ -386,6 +388,28 @@ def ext_light(a, allow_environment, area_only=False):
                 f'<float name="scale" value="{r.uniform(0.3, 1.5):.3f}"/>'
                 f'<transform name="to_world"><rotate y="1" angle="{r.uniform(0, 360):.1f}"/></transform></emitter>')
     return light(r, allow_environment, area_only)
+
+
+def projector(a):
+    """Mitsuba's `projector`: a turned pinhole above the scene aimed at the origin, projecting a
+    colour image (its aspect ratio sets the frustum's) or a constant, with a field of view on a
+    random axis or a focal length."""
+    r = a.r
+    spin = f'<rotate z="1" angle="{r.uniform(0, 360):.1f}"/>'
+    look = (f'<lookat origin="{r.uniform(-2, 2):.3f}, {r.uniform(2, 3.5):.3f}, {r.uniform(-2, 2):.3f}" '
+            f'target="{r.uniform(-0.5, 0.5):.3f}, 0, {r.uniform(-0.5, 0.5):.3f}"/>')
+    if r.random() < 0.8:
+        width, height = r.choice([(TEX, TEX), (TEX, TEX // 2), (TEX // 2, TEX), (TEX, 3 * TEX // 4)])
+        irradiance = bitmap(a, "irradiance", a.colour_png(width, height))
+    else:
+        irradiance = f'<rgb name="irradiance" value="{rgb(r, 0.3, 1)}"/>'
+    if r.random() < 0.8:
+        fov = (f'<float name="fov" value="{r.uniform(20, 60):.1f}"/>'
+               f'<string name="fov_axis" value="{r.choice(["x", "y", "smaller", "larger", "diagonal"])}"/>')
+    else:
+        fov = f'<string name="focal_length" value="{r.uniform(25, 80):.0f}mm"/>'
+    return (f'<emitter type="projector"><transform name="to_world">{spin}{look}</transform>{irradiance}'
+            f'<float name="scale" value="{r.uniform(1, 6):.3f}"/>{fov}</emitter>')
 
 
 def sensor(r):

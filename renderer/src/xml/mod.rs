@@ -114,8 +114,10 @@ impl Element {
     }
 
     /// Resolves a file name written in this element: an absolute one as it is, a relative one
-    /// in the first of the `<path>` folders `search` (the latest first, as Mitsuba's file
-    /// resolver) that has it, else relative to this element's file.
+    /// in the first folder of `search` that has it — for plugins the `<path>` folders (the
+    /// latest first) and then the scene file's folder, as Mitsuba's file resolver — else
+    /// relative to this element's own file (which Mitsuba does not try for a file named in an
+    /// `<include>`d file: kept as a last resort).
     pub fn resolve_path(&self, value: &str, search: &[PathBuf]) -> PathBuf {
         let p = Path::new(value);
         if p.is_absolute() {
@@ -162,8 +164,9 @@ pub(crate) struct Diagnostics {
     pub files_read: Vec<PathBuf>,
     /// Every parameter some `$name` has been replaced by.
     pub params_used: std::collections::HashSet<String>,
-    /// The folders `<path>` elements named so far, the latest first: relative file names are
-    /// looked up there before the folder of the file that names them.
+    /// Where relative file names are looked up, in order: the folders `<path>` elements named
+    /// so far (the latest first), then the scene file's folder (Mitsuba's file resolver; the
+    /// folder of the file naming them comes last, [`Element::resolve_path`]).
     pub search_paths: Vec<PathBuf>,
 }
 
@@ -206,6 +209,11 @@ pub fn parse_define(s: &str) -> Result<(String, String), String> {
     }
 }
 
+/// The folder of scene file `path`, where its relative file names are looked up.
+fn scene_folder(path: &Path) -> PathBuf {
+    path.parent().unwrap_or(Path::new("")).to_owned()
+}
+
 /// Loads a Mitsuba 3 XML scene.
 ///
 /// `defaults` are `name=value` parameters from the command line (`-D`); they override the
@@ -218,6 +226,7 @@ pub fn load_scene(
 ) -> Result<SceneDescription, SceneError> {
     let mut diag = Diagnostics {
         lenient,
+        search_paths: vec![scene_folder(path)],
         ..Diagnostics::default()
     };
     let mut params: HashMap<String, String> = defaults.iter().cloned().collect();
@@ -256,6 +265,7 @@ pub fn load_scene(
 pub fn scene_files(path: &Path, defaults: &[(String, String)]) -> Result<Vec<PathBuf>, SceneError> {
     let mut diag = Diagnostics {
         lenient: true,
+        search_paths: vec![scene_folder(path)],
         ..Diagnostics::default()
     };
     let mut params: HashMap<String, String> = defaults.iter().cloned().collect();
@@ -447,10 +457,14 @@ impl Reader<'_, '_> {
             }
             "include" => {
                 el.check_attributes(&["filename", "name"], &["filename"], self.diag)?;
-                let path = el.resolve_path(
-                    el.attr("filename").unwrap_or_default(),
-                    &self.diag.search_paths,
-                );
+                // Mitsuba: the including file's folder first, then the file resolver's.
+                let filename = el.attr("filename").unwrap_or_default();
+                let own = el.resolve_path(filename, &[]);
+                let path = if own.is_file() {
+                    own
+                } else {
+                    el.resolve_path(filename, &self.diag.search_paths)
+                };
                 if !path.is_file() {
                     return Err(el.error(format!("included file \"{}\" not found", path.display())));
                 }

@@ -786,7 +786,8 @@ fn write_part_triangle(dir: &Path) {
 fn include_and_references_across_files() {
     let dir = temp_dir("include");
     write_part_triangle(&dir);
-    // The included file's relative paths resolve against its own folder.
+    // A name in the included file that only its own folder has is found there (as a last
+    // resort: names_in_included_files_resolve_against_the_scene_folder).
     std::fs::write(
         dir.join("parts/materials.xml"),
         "<scene version=\"3.0.0\">\n<bsdf type=\"conductor\" id=\"gold\"><string name=\"material\" value=\"Au\"/></bsdf>\n<shape type=\"obj\"><string name=\"filename\" value=\"meshes/tri.obj\"/><ref id=\"gold\"/></shape>\n</scene>\n",
@@ -2937,4 +2938,43 @@ fn projectors_take_the_cameras_field_of_view_over_their_image() {
         let err = projector(inner).unwrap_err().to_string();
         assert!(err.contains(needle) && err.contains("p.xml:5:"), "{err}");
     }
+}
+
+/// A file named inside an `<include>`d file is looked up as Mitsuba 3.9.1 looks it up: in the
+/// scene file's folder (the file resolver's), not the included file's — which is tried last,
+/// where Mitsuba reports the file missing.
+#[test]
+fn names_in_included_files_resolve_against_the_scene_folder() {
+    let dir = temp_dir("include-lookup");
+    std::fs::create_dir_all(dir.join("sub")).unwrap();
+    let triangle = |file: &str, size: u32| {
+        std::fs::write(
+            dir.join(file),
+            format!("v 0 0 0\nv {size} 0 0\nv 0 {size} 0\nf 1 2 3\n"),
+        )
+        .unwrap();
+    };
+    std::fs::write(
+        dir.join("sub/part.xml"),
+        "<scene version=\"3.0.0\">\n<shape type=\"obj\" id=\"inc\"><string name=\"filename\" value=\"tri.obj\"/></shape>\n</scene>\n",
+    )
+    .unwrap();
+    let body = format!("{SENSOR}\n<include filename=\"sub/part.xml\"/>");
+    let path = write_scene(&dir, "scene.xml", &body);
+    let size = || {
+        let scene = load(&path).unwrap();
+        let Geometry::Mesh(m) = &scene.shapes[0].geometry else {
+            panic!()
+        };
+        m.positions[1].x
+    };
+    // Only next to the scene (Mitsuba's layout): found there.
+    triangle("tri.obj", 7);
+    assert_eq!(size(), 7.0);
+    // Next to both: the scene's folder wins, as in Mitsuba.
+    triangle("sub/tri.obj", 2);
+    assert_eq!(size(), 7.0);
+    // Only next to the included file: found as a last resort (Mitsuba: file not found).
+    std::fs::remove_file(dir.join("tri.obj")).unwrap();
+    assert_eq!(size(), 2.0);
 }
