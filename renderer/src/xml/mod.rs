@@ -278,7 +278,7 @@ pub fn scene_files(path: &Path, defaults: &[(String, String)]) -> Result<Vec<Pat
 }
 
 /// Appends the files named in `el` and its descendants: `<string name="filename">` values and
-/// `<spectrum filename>` attributes, resolved against the file each element is written in.
+/// `<spectrum filename>` attributes, resolved in `search` as the scene's load resolves them.
 fn collect_named_files(el: &Element, search: &[PathBuf], out: &mut Vec<PathBuf>) {
     let named = match el.tag.as_str() {
         "string" if el.attr("name") == Some("filename") => el.attr("value"),
@@ -597,7 +597,8 @@ pub(crate) struct MeshScope<'a> {
 }
 
 impl<'a> Builder<'a> {
-    /// Indexes every `id` in the tree (duplicates are an error).
+    /// Indexes every `id` in the tree (duplicates are an error) and every `<alias>` (in document
+    /// order, as Mitsuba), and notes the ids `<ref>`s name.
     fn new(root: &'a Element, diag: Diagnostics) -> Result<Self, SceneError> {
         let mut ids = HashMap::new();
         let mut referenced = HashSet::new();

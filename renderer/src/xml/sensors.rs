@@ -1,5 +1,6 @@
 //! `<sensor>` (`perspective`, `thinlens`, `orthographic`) with its `<film>` (`hdrfilm`), `<rfilter>` and
-//! `<sampler>`, and the `<integrator>`.
+//! `<sampler>` (declared inside it, or at the top level and named by a `<ref>`), and the
+//! `<integrator>`.
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
