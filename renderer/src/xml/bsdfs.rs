@@ -133,11 +133,17 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
         "principled" => Bsdf::Principled(principled(b, &mut p)?),
         "twosided" => {
             let nested = p.objects(&["bsdf", "ref"]);
+            let allow_transmission = p.bool_or("allow_transmission", false)?;
             let mut sides = Vec::with_capacity(2);
             for n in &nested {
                 let side = b.bsdf_value(n)?;
                 if matches!(side, Bsdf::TwoSided { .. }) {
                     return Err(n.error("a twosided BSDF cannot contain another twosided BSDF"));
+                }
+                if !allow_transmission && has_transmission(&side) {
+                    return Err(n.error(
+                        "a twosided BSDF's models must not transmit light (as in Mitsuba); set \"allow_transmission\" to true to nest this one",
+                    ));
                 }
                 sides.push(side);
             }
@@ -242,6 +248,29 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
     };
     p.finish(b)?;
     Ok(bsdf)
+}
+
+/// Whether a model has a transmission component in Mitsuba's sense (its `BSDFFlags::Transmission`,
+/// the pass-through of a mask or `null` included), which `twosided` refuses unless
+/// `allow_transmission`.
+fn has_transmission(bsdf: &Bsdf) -> bool {
+    match bsdf {
+        Bsdf::Diffuse(_)
+        | Bsdf::Conductor(_)
+        | Bsdf::RoughConductor(_)
+        | Bsdf::Plastic(_)
+        | Bsdf::RoughPlastic(_) => false,
+        Bsdf::Dielectric(_)
+        | Bsdf::ThinDielectric(_)
+        | Bsdf::RoughDielectric(_)
+        | Bsdf::Mask(_) => true,
+        // Mitsuba flags transmission whenever `spec_trans` is given.
+        Bsdf::Principled(p) => p.transmits(),
+        Bsdf::TwoSided { front, back } => has_transmission(front) || has_transmission(back),
+        Bsdf::NormalMap(b) => has_transmission(&b.nested),
+        Bsdf::BumpMap(b) => has_transmission(&b.nested),
+        Bsdf::Blend(b) => b.nested.iter().any(has_transmission),
+    }
 }
 
 /// Exactly `N` nested `<bsdf>`s (or `<ref>`s to them), in file order; `count` spells `N` for

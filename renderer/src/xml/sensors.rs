@@ -504,9 +504,11 @@ pub(super) fn build_integrator<'a>(
             "initial_radius",
             "alpha",
             "samples_per_pass",
+            "timeout",
         ],
         "set on the command line / in the config instead",
     );
+    p.ignore(b, &["block_size"], "the renderer schedules its own work");
     p.finish(b)?;
     Ok(IntegratorDesc {
         kind: kind.to_owned(),

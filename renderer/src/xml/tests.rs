@@ -2978,3 +2978,78 @@ fn names_in_included_files_resolve_against_the_scene_folder() {
     std::fs::remove_file(dir.join("tri.obj")).unwrap();
     assert_eq!(size(), 2.0);
 }
+
+/// `twosided` refuses models that transmit light unless `allow_transmission`, as Mitsuba 3.9.1
+/// does (with it, both render the same: docs/formats.md).
+#[test]
+fn twosided_transmission_needs_allow_transmission() {
+    let dir = temp_dir("twosided-transmission");
+    let scene = |inner: &str, allow: bool| {
+        let flag = if allow {
+            r#"<boolean name="allow_transmission" value="true"/>"#
+        } else {
+            ""
+        };
+        let body = format!(
+            "{SENSOR}\n<shape type=\"sphere\"><bsdf type=\"twosided\">{flag}\n{inner}</bsdf></shape>"
+        );
+        load(&write_scene(&dir, "t.xml", &body))
+    };
+    for inner in [
+        r#"<bsdf type="dielectric"/>"#,
+        r#"<bsdf type="roughdielectric"/>"#,
+        r#"<bsdf type="null"/>"#,
+        r#"<bsdf type="mask"><bsdf type="diffuse"/></bsdf>"#,
+        r#"<bsdf type="principled"><float name="spec_trans" value="0.5"/></bsdf>"#,
+        r#"<bsdf type="diffuse"/><bsdf type="thindielectric"/>"#,
+        r#"<bsdf type="blendbsdf"><bsdf type="diffuse"/><bsdf type="dielectric"/></bsdf>"#,
+    ] {
+        let err = scene(inner, false).unwrap_err().to_string();
+        assert!(
+            err.contains("t.xml:5:") && err.contains("allow_transmission"),
+            "{inner}: {err}"
+        );
+        let loaded = scene(inner, true).unwrap();
+        assert!(matches!(
+            loaded.bsdfs[loaded.shapes[0].bsdf],
+            Bsdf::TwoSided { .. }
+        ));
+    }
+    // Reflection only: no flag needed.
+    for inner in [
+        r#"<bsdf type="diffuse"/>"#,
+        r#"<bsdf type="roughplastic"/><bsdf type="conductor"/>"#,
+        r#"<bsdf type="principled"/>"#,
+    ] {
+        assert!(scene(inner, false).is_ok(), "{inner}");
+    }
+}
+
+/// A bitmap's storage `format` and `accel` (Mitsuba's) are accepted; a bad format is refused.
+#[test]
+fn bitmap_storage_options_are_accepted() {
+    let dir = temp_dir("bitmap-format");
+    std::fs::create_dir_all(dir.join("tex")).unwrap();
+    image::RgbImage::new(4, 4)
+        .save(dir.join("tex/a.png"))
+        .unwrap();
+    let scene = |extra: &str| {
+        let body = format!(
+            "{SENSOR}\n<shape type=\"sphere\"><bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\"><string name=\"filename\" value=\"tex/a.png\"/>\n{extra}</texture></bsdf></shape>"
+        );
+        load(&write_scene(&dir, "b.xml", &body))
+    };
+    let quiet =
+        scene(r#"<string name="format" value="variant"/><boolean name="accel" value="false"/>"#)
+            .unwrap();
+    assert!(quiet.warnings.is_empty(), "{:?}", quiet.warnings);
+    let half = scene(r#"<string name="format" value="float16"/>"#).unwrap();
+    assert!(half.warnings.iter().any(|w| w.contains("single precision")));
+    let err = scene(r#"<string name="format" value="float64"/>"#)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("b.xml:5:") && err.contains("invalid format"),
+        "{err}"
+    );
+}

@@ -1,4 +1,4 @@
-//! `<texture>` plugins: `checkerboard`, `bitmap` (PNG, JPEG, TGA, BMP, HDR or EXR: `image_io`; paths relative to the XML file)
+//! `<texture>` plugins: `checkerboard`, `bitmap` (PNG, JPEG, TGA, BMP, PPM, HDR, PFM or EXR: `image_io`; paths looked up as Mitsuba's file resolver does)
 //! and `mesh_attribute` (bound to the mesh of the shape being built).
 
 use super::props::Props;
@@ -60,6 +60,22 @@ pub(super) fn build_texture<'a>(
                 }
             };
             let to_uv = to_uv(&mut p)?;
+            // Mitsuba's storage precision and GPU texture units: the texels are kept in single
+            // precision here, and filtered in software.
+            let format_el = p.element_of("format");
+            match p.string("format")? {
+                None | Some("auto" | "variant") => {}
+                Some(f @ ("float16" | "fp16" | "uint8")) => b.diag.warn(
+                    format_el,
+                    format!("format \"{f}\" ignored: texels are stored in single precision"),
+                ),
+                Some(other) => {
+                    return Err(format_el.error(format!(
+                        "invalid format \"{other}\" (use \"auto\", \"variant\", \"float16\" or \"uint8\")"
+                    )))
+                }
+            }
+            p.bool_or("accel", true)?;
             let image = load_bitmap(b, file_el, filename, raw)?;
             Texture::Bitmap {
                 image,
