@@ -130,3 +130,14 @@ impl Light {
 pub fn channel_mean(c: Rgb) -> f32 {
     (c.x + c.y + c.z) / 3.0
 }
+
+/// A red and blue Mitsuba checkerboard (2×2 cells over the unit square: red where u and v fall
+/// in the same half, blue elsewhere), for the projected-image tests of spots and projectors.
+#[cfg(test)]
+pub(crate) fn test_checker() -> crate::texture::Texture {
+    crate::texture::Texture::Checkerboard {
+        color0: Rgb::new(1.0, 0.0, 0.0),
+        color1: Rgb::new(0.0, 0.0, 1.0),
+        to_uv: glam::Mat3::IDENTITY,
+    }
+}

@@ -144,17 +144,8 @@ impl ProjectorLight {
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_checker as checker;
     use super::*;
-
-    /// Mitsuba's checkerboard (2×2 cells over the unit square): `color0` where u and v fall in
-    /// the same half, `color1` elsewhere.
-    fn checker() -> Texture {
-        Texture::Checkerboard {
-            color0: Rgb::new(1.0, 0.0, 0.0),
-            color1: Rgb::new(0.0, 0.0, 1.0),
-            to_uv: Mat3::IDENTITY,
-        }
-    }
 
     #[test]
     fn a_constant_image_lights_the_plane_at_unit_distance_evenly() {

@@ -178,17 +178,8 @@ impl SpotLight {
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_checker as checker;
     use super::*;
-
-    /// Mitsuba's checkerboard (2×2 cells over the unit square): `color0` where u and v fall in
-    /// the same half, `color1` elsewhere.
-    fn checker() -> Texture {
-        Texture::Checkerboard {
-            color0: Rgb::new(1.0, 0.0, 0.0),
-            color1: Rgb::new(0.0, 0.0, 1.0),
-            to_uv: Mat3::IDENTITY,
-        }
-    }
 
     #[test]
     fn a_texture_is_projected_along_to_worlds_own_axes() {
