@@ -59,6 +59,9 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
         None => own_to_world,
     };
     let flip_normals = p.bool_or("flip_normals", false)?;
+    // Mitsuba's weight for sampling silhouettes in differentiable rendering: no effect on an
+    // image rendered forward.
+    p.float("silhouette_sampling_weight")?;
     // Mitsuba transforms an instanced mesh's normals by the instance's inverse transpose, so a
     // mirroring instance keeps the side its group's mesh faces; normals taken from the winding
     // of world-space triangles would turn around with it.
