@@ -11,10 +11,13 @@
 //! π · scale · irradiance(u, v) / cos³θ (θ from the axis), so that the projection of a constant
 //! image onto the plane z = 1 is the constant irradiance π · scale · irradiance; the image
 //! point of a local position (x, y, z) is u = ½ − ½·x/(z·tan(fov_x/2)),
-//! v = ½ − ½·aspect·y/(z·tan(fov_x/2)) (Mitsuba's `perspective_projection`).
+//! v = ½ − ½·aspect·y/(z·tan(fov_x/2)) (Mitsuba's `perspective_projection`). Photons leave
+//! through image points chosen by the image's brightness (a grid of cells, with a uniform share
+//! that keeps every lit point reachable), so a mostly dark slide does not waste them.
 
-use super::{EmissionSample, LightSample};
+use super::{channel_mean, EmissionSample, LightSample};
 use crate::math::Ray;
+use crate::sampling::Distribution1D;
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Mat3, Mat4, Vec2, Vec3};
@@ -43,7 +46,17 @@ pub struct ProjectorLight {
     image_area: f32,
     /// Mean of the irradiance over the image (for the power).
     mean_irradiance: Rgb,
+    /// Where photons leave: cells of an `IMAGE_CELLS`² grid over the image, by the brightest
+    /// irradiance in each (with a uniform share); `None` for a constant image (uniform).
+    photon_cells: Option<Distribution1D>,
 }
+
+/// Cells per side of the grid photons are importance-sampled by.
+const IMAGE_CELLS: usize = 64;
+
+/// The share of the photons spread uniformly over the image, so that every point where the
+/// (filtered) image is not black keeps a non-zero density.
+const UNIFORM_SHARE: f32 = 0.1;
 
 impl ProjectorLight {
     /// Builds the light from `to_world`, the image, `scale` and the horizontal field of view in
@@ -65,6 +78,7 @@ impl ProjectorLight {
             aspect,
             image_area: 4.0 * tan_half_fov * tan_half_fov / aspect,
             mean_irradiance: Rgb::ZERO,
+            photon_cells: None,
         };
         light.mean_irradiance = match &light.irradiance {
             Texture::Constant(c) => *c,
@@ -82,7 +96,60 @@ impl ProjectorLight {
                 (acc / (n * n) as f64).as_vec3()
             }
         };
+        if !matches!(light.irradiance, Texture::Constant(_)) {
+            light.photon_cells = Some(light.cell_distribution());
+        }
         light
+    }
+
+    /// The photon distribution over the image's cells: each cell weighs the brightest of a 3×3
+    /// stencil of its points (a mean would miss small bright features), mixed with a uniform
+    /// share.
+    fn cell_distribution(&self) -> Distribution1D {
+        let n = IMAGE_CELLS;
+        let mut brightest = Vec::with_capacity(n * n);
+        for j in 0..n {
+            for i in 0..n {
+                let mut m = 0.0f32;
+                for a in 0..3 {
+                    for b in 0..3 {
+                        let uv = Vec2::new(
+                            (i as f32 + (a as f32 + 0.5) / 3.0) / n as f32,
+                            (j as f32 + (b as f32 + 0.5) / 3.0) / n as f32,
+                        );
+                        m = m.max(channel_mean(self.irradiance.eval(uv)));
+                    }
+                }
+                brightest.push(m);
+            }
+        }
+        let total: f32 = brightest.iter().sum();
+        let uniform = UNIFORM_SHARE / (n * n) as f32;
+        let weights: Vec<f32> = brightest
+            .iter()
+            .map(|&m| {
+                if total > 0.0 {
+                    (1.0 - UNIFORM_SHARE) * m / total + uniform
+                } else {
+                    uniform
+                }
+            })
+            .collect();
+        Distribution1D::new(&weights)
+    }
+
+    /// An image point for `u` and its density over the image's unit square.
+    fn sample_image(&self, u: Vec2) -> (Vec2, f32) {
+        match &self.photon_cells {
+            None => (u, 1.0),
+            Some(cells) => {
+                let n = IMAGE_CELLS;
+                let (k, pmf, u_rest) = cells.sample(u.x);
+                let (i, j) = (k % n, k / n);
+                let uv = Vec2::new((i as f32 + u_rest) / n as f32, (j as f32 + u.y) / n as f32);
+                (uv, pmf * (n * n) as f32)
+            }
+        }
     }
 
     /// The image point of a local position, if it lies in front of the pinhole and inside the
@@ -120,18 +187,20 @@ impl ProjectorLight {
         })
     }
 
-    /// A photon through image point `u` (uniform over the image): flux π · scale ·
-    /// irradiance(u) · image area (the intensity over the density of its direction).
+    /// A photon through an image point sampled by `u` (by the image's brightness, as Mitsuba
+    /// samples it, with a uniform share): flux π · scale · irradiance · image area / density
+    /// (the intensity over the density of its direction).
     pub fn sample_emission(&self, u: Vec2) -> EmissionSample {
+        let (uv, pdf) = self.sample_image(u);
         let local = Vec3::new(
-            (1.0 - 2.0 * u.x) * self.tan_half_fov,
-            (1.0 - 2.0 * u.y) * self.tan_half_fov / self.aspect,
+            (1.0 - 2.0 * uv.x) * self.tan_half_fov,
+            (1.0 - 2.0 * uv.y) * self.tan_half_fov / self.aspect,
             1.0,
         );
         let d = (self.to_world_dir * local).normalize();
         EmissionSample {
             ray: Ray::new(self.position, d),
-            flux: self.irradiance.eval(u) * (PI * self.scale * self.image_area),
+            flux: self.irradiance.eval(uv) * (PI * self.scale * self.image_area / pdf),
             light: 0,
         }
     }
@@ -190,15 +259,60 @@ mod tests {
         // (−0.5, −0.25) → uv (0.75, 0.625): same half → color0 (red).
         let red = light.sample_li(Vec3::new(-0.5, -0.25, 1.0)).unwrap().weight;
         assert!(red.x > 0.0 && red.z == 0.0, "{red}");
-        // Photons leave through the image point they carry: the direction maps back to u.
+        // Photons leave through the image point they carry: the direction maps back to it,
+        // and the flux is π·scale·E·area over the point's density.
         for k in 0..64 {
             let u = Vec2::new((k % 8) as f32 / 8.0 + 0.06, (k / 8) as f32 / 8.0 + 0.06);
+            let (uv, pdf) = light.sample_image(u);
             let e = light.sample_emission(u);
             let back = light.image_point(e.ray.d).unwrap();
-            assert!((back - u).abs().max_element() < 1e-5, "{back} vs {u}");
-            let want = checker().eval(u) * (PI * light.image_area);
-            assert!((e.flux - want).abs().max_element() < 1e-4);
+            assert!((back - uv).abs().max_element() < 1e-5, "{back} vs {uv}");
+            let want = checker().eval(uv) * (PI * light.image_area / pdf);
+            assert!((e.flux - want).abs().max_element() < 1e-4 * want.max_element());
         }
+    }
+
+    #[test]
+    fn photons_follow_the_image_and_carry_its_power() {
+        // A slide dark but for a bright spot in one corner: most photons leave through the
+        // spot, and their mean flux is still the light's power.
+        let mut texels = vec![Rgb::ZERO; 16 * 8];
+        texels[8 + 16 * 2] = Rgb::new(8.0, 4.0, 2.0);
+        let image = std::sync::Arc::new(crate::texture::Bitmap {
+            width: 16,
+            height: 8,
+            texels,
+        });
+        let slide = Texture::Bitmap {
+            image,
+            filter: crate::texture::BitmapFilter::Nearest,
+            wrap: crate::texture::BitmapWrap::Clamp,
+            to_uv: Mat3::IDENTITY,
+        };
+        let light = ProjectorLight::new(Mat4::IDENTITY, slide, 2.0, 50.0);
+        assert_eq!(light.aspect, 2.0);
+        // Stratified: fine in u.x, which picks the cell (the count of photons in the spot's
+        // cells is what the estimate rests on), coarse in u.y.
+        let (nx, ny) = (4096, 16);
+        let mut sum = Rgb::ZERO;
+        let mut lit = 0;
+        for i in 0..nx {
+            for j in 0..ny {
+                let u = Vec2::new((i as f32 + 0.5) / nx as f32, (j as f32 + 0.5) / ny as f32);
+                let e = light.sample_emission(u);
+                sum += e.flux;
+                lit += usize::from(e.flux.max_element() > 0.0);
+            }
+        }
+        let mean = sum / (nx * ny) as f32;
+        let power = light.power();
+        assert!(
+            (mean - power).abs().max_element() < 2e-3 * power.max_element(),
+            "{mean} vs {power}"
+        );
+        // The spot covers 1/128 of the image; about 90 % of the photons leave through it.
+        let share = lit as f32 / (nx * ny) as f32;
+        assert!(share > 0.85 && share < 0.95, "{share}");
     }
 
     #[test]
