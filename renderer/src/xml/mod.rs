@@ -874,9 +874,22 @@ impl<'a> Builder<'a> {
                 "film" | "sampler" | "rfilter" => sensors::build_detached(self, el)?,
                 // Read with the ids (Builder::new).
                 "alias" => {}
+                // Mitsuba adds the referenced object to the scene once more: a shape or an
+                // emitter counts twice; a BSDF or texture is a declaration either way.
                 "ref" => {
-                    let err = el.error("top-level <ref> is not supported: reference objects from inside a shape or BSDF");
-                    self.diag.unknown(err)?;
+                    let target = self.deref(el)?;
+                    match target.tag.as_str() {
+                        "shape" => shapes::build_shape(self, target)?,
+                        "emitter" => emitters::build_emitter(self, target)?,
+                        "bsdf" | "texture" => {}
+                        _ => {
+                            let err = el.error(format!(
+                                "a top-level <ref> to {} is not supported (only shapes, emitters, BSDFs and textures)",
+                                target.describe()
+                            ));
+                            self.diag.unknown(err)?;
+                        }
+                    }
                 }
                 _ => {
                     let err = el.error(format!("unexpected element <{}> in <scene>", el.tag));

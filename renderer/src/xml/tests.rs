@@ -3053,3 +3053,21 @@ fn bitmap_storage_options_are_accepted() {
         "{err}"
     );
 }
+
+/// A `<ref>` at the top level adds the object once more, as Mitsuba 3.9.1 does (its scene then
+/// holds two emitters and two shapes for the file below); a BSDF stays a declaration.
+#[test]
+fn top_level_references_add_the_object_again() {
+    let dir = temp_dir("top-level-ref");
+    let body = format!(
+        "{SENSOR}\n<emitter type=\"point\" id=\"l\"><point name=\"position\" value=\"0, 2, 0\"/></emitter>\n<ref id=\"l\"/>\n<bsdf type=\"diffuse\" id=\"m\"/>\n<ref id=\"m\"/>\n<shape type=\"sphere\" id=\"s\"><ref id=\"m\"/></shape>\n<ref id=\"s\"/>"
+    );
+    let scene = load(&write_scene(&dir, "r.xml", &body)).unwrap();
+    assert_eq!((scene.emitters.len(), scene.shapes.len()), (2, 2));
+    assert_eq!(scene.bsdfs.len(), 1);
+    // Anything else is refused at the reference; a dangling one too.
+    let body = format!("{SENSOR}\n<integrator type=\"path\" id=\"i\"/>\n<ref id=\"i\"/>");
+    assert_body_error_at(&dir, "i.xml", &body, "<ref", "not supported");
+    let body = format!("{SENSOR}\n<ref id=\"nowhere\"/>");
+    assert_body_error_at(&dir, "d.xml", &body, "<ref", "unknown id");
+}
