@@ -37,6 +37,7 @@ scene needs written next to it.
 
 import argparse
 import json
+import re
 import random
 import shutil
 import subprocess
@@ -309,6 +310,18 @@ def finish(out, rows, flagged, count):
     sys.exit(1 if flagged else 0)
 
 
+def legacy_names(text):
+    """The scene as a Mitsuba 0.6 file: version 0.6.0 and every parameter name in camelCase
+    (`int_ior` -> `intIor`), which Mitsuba 3 turns back (`camel_to_underscore_case`);
+    `<default>` names are `$` parameters and stay."""
+    def camel(m):
+        head, name = m.group(1), m.group(2)
+        parts = name.split("_")
+        return head + parts[0] + "".join(p[:1].upper() + p[1:] for p in parts[1:]) + '"'
+    text = re.sub(r'(<(?!default\b)[a-z]+\b[^>]*?\sname=")([A-Za-z0-9_]+)"', camel, text)
+    return text.replace('<scene version="3.0.0">', '<scene version="0.6.0">', 1)
+
+
 def main():
     ap = fuzz_arguments(__doc__.split("\n")[0], 1024, "samples per pixel, both renderers", "fuzz")
     ap.add_argument("--direct", action="store_true", help="compare the `direct` integrators instead of `path`")
@@ -316,6 +329,9 @@ def main():
     ap.add_argument("--extended", action="store_true",
                     help="scenes with textures, normal/bump maps, meshes, instances, envmaps, other "
                          "cameras and filters (scripts/fuzz_extended.py)")
+    ap.add_argument("--legacy", action="store_true",
+                    help="write each scene as a Mitsuba 0.6 file (version 0.6.0, camelCase parameter "
+                         "names), which both renderers must upgrade alike")
     args = ap.parse_args()
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
@@ -327,6 +343,8 @@ def main():
         else:
             text = scene_xml(args.seed, index, masks=not args.hide_emitters)
         text, params = integrator_variant(text, args.seed, index, args.direct, args.hide_emitters)
+        if args.legacy:
+            text = legacy_names(text)
         xml.write_text(text)
         try:
             ref, ref_chunks = render_mitsuba(xml, args.spp, params)
