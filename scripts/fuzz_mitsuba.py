@@ -310,6 +310,33 @@ def finish(out, rows, flagged, count):
     sys.exit(1 if flagged else 0)
 
 
+def restyled(text, folder):
+    """The same scene in Mitsuba's other spellings: the sensor's sampler and the film's rfilter
+    declared at the top level and named by a <ref>, every <rgb> value as an unbounded
+    <spectrum type="srgb">, and the scene's own files (textures, meshes) moved into an
+    `assets` subfolder that a <path> names."""
+    top = []
+    for tag, ident in (("sampler", "fuzz_sampler"), ("rfilter", "fuzz_rfilter")):
+        m = re.search(rf'<{tag}\b[^>]*?(/>|>.*?</{tag}>)', text, re.S)
+        if m:
+            element = m.group(0)
+            top.append(element.replace(f"<{tag} ", f'<{tag} id="{ident}" ', 1))
+            text = text.replace(element, f'<ref id="{ident}"/>', 1)
+    text = re.sub(r'<rgb name="([A-Za-z0-9_]+)" value="([^"]*)"/>',
+                  r'<spectrum type="srgb" name="\1"><rgb name="color" value="\2"/>'
+                  r'<boolean name="unbounded" value="true"/></spectrum>', text)
+    assets = [f for f in folder.iterdir() if f.is_file() and f.suffix != ".xml"]
+    if assets:
+        (folder / "assets").mkdir(exist_ok=True)
+        for f in assets:
+            f.rename(folder / "assets" / f.name)
+        top.insert(0, '<path value="assets"/>')
+    # After the <default>s: a `$name` is substituted only once its default has been read.
+    anchor = list(re.finditer(r"<default [^>]*/>", text)) or [re.search(r"<scene[^>]*>", text)]
+    at = anchor[-1].end()
+    return text[:at] + "\n    " + "\n    ".join(top) + text[at:]
+
+
 def legacy_names(text):
     """The scene as a Mitsuba 0.6 file: version 0.6.0 and every parameter name in camelCase
     (`int_ior` -> `intIor`), which Mitsuba 3 turns back (`camel_to_underscore_case`);
@@ -329,6 +356,10 @@ def main():
     ap.add_argument("--extended", action="store_true",
                     help="scenes with textures, normal/bump maps, meshes, instances, envmaps, other "
                          "cameras and filters (scripts/fuzz_extended.py)")
+    ap.add_argument("--restyle", action="store_true",
+                    help="write each scene in Mitsuba's other spellings: the sampler and rfilter at "
+                         "the top level named by <ref>, colours as <spectrum type=\"srgb\">, the "
+                         "scene's files in a subfolder found through <path>")
     ap.add_argument("--legacy", action="store_true",
                     help="write each scene as a Mitsuba 0.6 file (version 0.6.0, camelCase parameter "
                          "names), which both renderers must upgrade alike")
@@ -345,6 +376,8 @@ def main():
         text, params = integrator_variant(text, args.seed, index, args.direct, args.hide_emitters)
         if args.legacy:
             text = legacy_names(text)
+        if args.restyle:
+            text = restyled(text, d)
         xml.write_text(text)
         try:
             ref, ref_chunks = render_mitsuba(xml, args.spp, params)

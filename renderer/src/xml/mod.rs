@@ -512,8 +512,8 @@ impl Reader<'_, '_> {
     }
 }
 
-/// Replaces every `$name` in `value` by the parameter's value, noting the name in `used`. A `$`
-/// not followed by a known parameter name is an error, as in Mitsuba.
+/// Replaces every `$name` in `value` by the parameter's value, noting the name in `used`; `\$`
+/// is a literal `$`. A `$` not followed by a known parameter name is an error, as in Mitsuba.
 fn substitute(
     value: &str,
     params: &HashMap<String, String>,
@@ -525,25 +525,34 @@ fn substitute(
     let mut out = String::with_capacity(value.len());
     let mut rest = value;
     while let Some(i) = rest.find('$') {
-        out.push_str(&rest[..i]);
+        let before = &rest[..i];
         let after = &rest[i + 1..];
-        let len = after
+        // `\$` is a literal dollar sign (Mitsuba's escape).
+        if let Some(kept) = before.strip_suffix('\\') {
+            out.push_str(kept);
+            out.push('$');
+            rest = after;
+            continue;
+        }
+        out.push_str(before);
+        let run = after
             .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
             .unwrap_or(after.len());
-        let name = &after[..len];
-        if name.is_empty() {
+        if run == 0 {
             return Err(format!(
-                "a \"$\" must be followed by a parameter name in \"{value}\""
+                "a \"$\" must be followed by a parameter name in \"{value}\" (\\$ for a dollar sign)"
             ));
         }
-        match params.get(name) {
-            Some(v) => {
-                out.push_str(v);
-                if !used.contains(name) {
-                    used.insert(name.to_owned());
-                }
-            }
-            None => return Err(format!("undefined parameter \"${name}\" (add <default name=\"{name}\" value=\"...\"/> or -D {name}=...)")),
+        // Mitsuba replaces `$name` as a substring, longest names first: the longest parameter
+        // whose name begins the run (`$spp2` with only `spp` defined is its value then "2").
+        let Some(len) = (1..=run).rev().find(|&l| params.contains_key(&after[..l])) else {
+            let name = &after[..run];
+            return Err(format!("undefined parameter \"${name}\" (add <default name=\"{name}\" value=\"...\"/> or -D {name}=...)"));
+        };
+        let name = &after[..len];
+        out.push_str(&params[name]);
+        if !used.contains(name) {
+            used.insert(name.to_owned());
         }
         rest = &after[len..];
     }

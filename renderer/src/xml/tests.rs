@@ -3071,3 +3071,31 @@ fn top_level_references_add_the_object_again() {
     let body = format!("{SENSOR}\n<ref id=\"nowhere\"/>");
     assert_body_error_at(&dir, "d.xml", &body, "<ref", "unknown id");
 }
+
+/// `$` substitution as Mitsuba 3.9.1's parser does it: `\$` is a literal dollar sign, and a
+/// parameter name is matched as the longest defined name at the `$` (`$spp2` with only `spp`
+/// defined reads as its value followed by "2").
+#[test]
+fn dollar_escapes_and_longest_parameter_names() {
+    let mut used = std::collections::HashSet::new();
+    let params: HashMap<String, String> = [("spp", "64"), ("spp_max", "128"), ("a", "x")]
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let sub =
+        |v: &str, used: &mut std::collections::HashSet<String>| super::substitute(v, &params, used);
+    assert_eq!(sub(r"price\$5", &mut used).unwrap(), "price$5");
+    assert_eq!(sub(r"\$spp is $spp", &mut used).unwrap(), "$spp is 64");
+    assert_eq!(sub("$spp2", &mut used).unwrap(), "642");
+    assert_eq!(sub("$spp_max/$spp_min", &mut used).unwrap(), "128/64_min");
+    assert_eq!(sub("$spp_max,$a", &mut used).unwrap(), "128,x");
+    assert!(sub("cost: $", &mut used)
+        .unwrap_err()
+        .contains("followed by a parameter name"));
+    assert!(sub("$nope", &mut used)
+        .unwrap_err()
+        .contains("undefined parameter \"$nope\""));
+    let mut names: Vec<_> = used.into_iter().collect();
+    names.sort();
+    assert_eq!(names, ["a", "spp", "spp_max"]);
+}
