@@ -199,6 +199,15 @@ pub enum Texture {
 }
 
 impl Texture {
+    /// Width over height of the texture's image (Mitsuba's `resolution()` ratio): a bitmap's
+    /// own, 1 for any other texture.
+    pub fn aspect_ratio(&self) -> f32 {
+        match self {
+            Texture::Bitmap { image, .. } => image.width as f32 / image.height as f32,
+            _ => 1.0,
+        }
+    }
+
     /// Whether every value the texture can take is finite and non-negative (a valid emitted
     /// radiance).
     pub fn is_finite_non_negative(&self) -> bool {

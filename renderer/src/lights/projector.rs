@@ -62,10 +62,7 @@ impl ProjectorLight {
     /// Builds the light from `to_world`, the image, `scale` and the horizontal field of view in
     /// degrees.
     pub fn new(to_world: Mat4, irradiance: Texture, scale: f32, fov_x_deg: f32) -> Self {
-        let aspect = match &irradiance {
-            Texture::Bitmap { image, .. } => image.width as f32 / image.height as f32,
-            _ => 1.0,
-        };
+        let aspect = irradiance.aspect_ratio();
         let tan_half_fov = (0.5 * fov_x_deg).to_radians().tan();
         let mut light = ProjectorLight {
             position: to_world.transform_point3(Vec3::ZERO),

@@ -109,10 +109,7 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
             // The perspective camera's field of view, over the image's aspect ratio (Mitsuba:
             // the texture's resolution; 1 × 1 for a constant).
             let (fov, axis) = super::sensors::parse_fov(&mut p)?;
-            let aspect = match &irradiance {
-                Texture::Bitmap { image, .. } => image.width as f32 / image.height as f32,
-                _ => 1.0,
-            };
+            let aspect = irradiance.aspect_ratio();
             EmitterDesc::Projector {
                 to_world,
                 irradiance,

@@ -46,10 +46,9 @@ pub(super) fn rename_parameter(el: &mut Element) {
     if el.tag == "default" {
         return;
     }
-    for (key, value) in &mut el.attrs {
-        if key == "name" {
-            *value = snake_case(value);
-        }
+    if let Some(name) = el.attr("name") {
+        let renamed = snake_case(name);
+        set_name(el, &renamed);
     }
 }
 
