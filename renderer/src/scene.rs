@@ -1,12 +1,15 @@
 //! The renderable scene: shapes in a BVH, their materials and emission, the light list with
-//! power-proportional selection, the camera, and the queries integrators make (closest hit,
-//! occlusion, emitted radiance, light sampling for NEE and photon emission).
+//! its selection (photons by power, NEE by power and by where the light comes from), the
+//! camera, and the queries integrators make (closest hit, occlusion, emitted radiance, light
+//! sampling for NEE and photon emission).
 
 use crate::accel::{Accel, Bvh4Accel, PrimitiveHit};
 use crate::bsdf::{Bsdf, ShadingPoint};
 use crate::camera::Camera;
 use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription};
 use crate::frame::Frame;
+use crate::lights::bounds::LightBounds;
+use crate::lights::selection::LightSelection;
 use crate::lights::{
     channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, EnvmapLight, Light,
     LightSample, PointLight, ProjectorLight, SceneSphere, SpotLight,
@@ -131,11 +134,11 @@ pub struct Scene {
     pub bsdfs: Vec<Bsdf>,
     /// All lights; area lights refer to their shape.
     pub lights: Vec<Light>,
-    /// Light selection for next-event estimation: [`nee_light_weights`].
-    light_selection: Distribution1D,
-    /// Light selection for photon emission, proportional to power, when it differs from
-    /// `light_selection` (boxed: the hot fields of the scene keep their place).
-    photon_selection: Option<Box<Distribution1D>>,
+    /// Light selection for next-event estimation.
+    light_selection: LightSelection,
+    /// Light selection for photon emission, proportional to power (boxed: the hot fields of
+    /// the scene keep their place).
+    photon_selection: Box<Distribution1D>,
     /// Indices of environment lights (constant and map).
     environment_lights: Vec<u32>,
     /// Sum of the constant environment lights' radiance.
@@ -427,16 +430,15 @@ impl Scene {
             .iter()
             .map(|l| channel_mean(light_power(l, &shapes, &sphere)))
             .collect();
-        let infinite: Vec<bool> = lights.iter().map(Light::is_infinite).collect();
-        let nee_weights = nee_light_weights(&powers, &infinite);
+        let bounds: Vec<Option<LightBounds>> =
+            lights.iter().map(|l| light_bounds(l, &shapes)).collect();
         Ok(Scene {
             camera,
             shapes,
             shape_info,
             bsdfs: desc.bsdfs.clone(),
-            light_selection: Distribution1D::new(&nee_weights),
-            photon_selection: (nee_weights != powers)
-                .then(|| Box::new(Distribution1D::new(&powers))),
+            light_selection: LightSelection::new(&powers, &bounds),
+            photon_selection: Box::new(Distribution1D::new(&powers)),
             lights,
             environment_lights,
             environment_radiance,
@@ -612,10 +614,12 @@ impl Scene {
         radiance
     }
 
-    /// Probability of selecting light `i` for next-event estimation ([`Self::sample_li`]).
+    /// Probability of selecting light `i` for next-event estimation ([`Self::sample_li`]) at
+    /// point `p` with geometric normal `n` (`Vec3::ZERO`: none; the point matters for finite
+    /// lights only, see [`LightSelection`]).
     #[inline]
-    pub fn light_pmf(&self, i: u32) -> f32 {
-        self.light_selection.pmf(i as usize)
+    pub fn light_pmf(&self, p: Vec3, n: Vec3, i: u32) -> f32 {
+        self.light_selection.pmf(p, n, i)
     }
 
     /// Probability of selecting light `i` to emit a photon ([`Self::sample_emission`]): its
@@ -628,9 +632,7 @@ impl Scene {
     /// The photons' light selection (by power).
     #[inline]
     fn photon_selection(&self) -> &Distribution1D {
-        self.photon_selection
-            .as_deref()
-            .unwrap_or(&self.light_selection)
+        &self.photon_selection
     }
 
     /// Emitted power of light `i`.
@@ -638,15 +640,16 @@ impl Scene {
         light_power(&self.lights[i as usize], &self.shapes, &self.sphere)
     }
 
-    /// Samples a light ([`nee_light_weights`]) and a direction towards it from point `p`.
-    /// `u_sel` picks the light (and, rescaled, the triangle of a mesh light), `u` the
-    /// point/direction. The returned `pdf` and `weight` include the selection probability.
+    /// Samples a light ([`LightSelection`]) and a direction towards it from point `p` with
+    /// geometric normal `n` (`Vec3::ZERO`: none). `u_sel` picks the light (and, rescaled, the
+    /// triangle of a mesh light), `u` the point/direction. The returned `pdf` and `weight`
+    /// include the selection probability.
     #[inline(always)]
-    pub fn sample_li(&self, p: Vec3, u_sel: f32, u: Vec2) -> Option<LightSample> {
+    pub fn sample_li(&self, p: Vec3, n: Vec3, u_sel: f32, u: Vec2) -> Option<LightSample> {
         if self.lights.is_empty() {
             return None;
         }
-        let (i, pmf, u_rest) = self.light_selection.sample(u_sel);
+        let (i, pmf, u_rest) = self.light_selection.sample(p, n, u_sel);
         if pmf == 0.0 {
             return None;
         }
@@ -666,14 +669,15 @@ impl Scene {
     }
 
     /// Solid-angle density (selection included) with which [`Self::sample_li`] from `p_ref`
-    /// would produce the direction that hit the area light at `si`.
+    /// with geometric normal `n_ref` would produce the direction that hit the area light at
+    /// `si`.
     #[inline]
-    pub fn pdf_li_surface(&self, p_ref: Vec3, si: &SurfaceInteraction) -> f32 {
+    pub fn pdf_li_surface(&self, p_ref: Vec3, n_ref: Vec3, si: &SurfaceInteraction) -> f32 {
         match si.light {
             Some(l) => match &self.lights[l as usize] {
                 Light::Area(a) => {
                     a.pdf_li(&self.shapes[a.shape as usize], p_ref, si.p, si.frame.n)
-                        * self.light_pmf(l)
+                        * self.light_pmf(p_ref, n_ref, l)
                 }
                 _ => 0.0,
             },
@@ -688,8 +692,8 @@ impl Scene {
         self.environment_lights
             .iter()
             .map(|&i| match &self.lights[i as usize] {
-                Light::Constant(c) => c.pdf_li() * self.light_pmf(i),
-                Light::Envmap(m) => m.pdf_li(d) * self.light_pmf(i),
+                Light::Constant(c) => c.pdf_li() * self.light_pmf(Vec3::ZERO, Vec3::ZERO, i),
+                Light::Envmap(m) => m.pdf_li(d) * self.light_pmf(Vec3::ZERO, Vec3::ZERO, i),
                 _ => 0.0,
             })
             .sum()
@@ -722,54 +726,16 @@ impl Scene {
     }
 }
 
-/// Selection weights of the lights for next-event estimation: proportional to power, as photons
-/// are emitted, except that the infinite lights (directional, constant, environment map)
-/// together get at most the share n∞/(n∞ + 1) when finite lights (area, point, spot) are
-/// present too — ½ for one sky — each kind split by power within it (the cap is pbrt-v4's
-/// fixed share for infinite lights).
-///
-/// Why: the power of an infinite light is its flux through the scene's whole bounding disk,
-/// most of which reaches no surface a camera sees. Against it a spot or a small area light has
-/// little power however much it lights, and was drawn for NEE rarely, with a large weight: on
-/// a floor lit by a spot under a dim constant sky the path tracer had 50–80× the per-pixel
-/// variance of Mitsuba 3's (which draws emitters uniformly). Below the cap nothing changes, so
-/// scenes whose sky is weak by power render exactly as before. Any selection with a non-zero
-/// probability for every light gives the same expected image.
-fn nee_light_weights(powers: &[f32], infinite: &[bool]) -> Vec<f32> {
-    let clean = |p: f32| {
-        if p.is_finite() && p > 0.0 {
-            p as f64
-        } else {
-            0.0
-        }
-    };
-    let total = |inf: bool| -> f64 {
-        powers
-            .iter()
-            .zip(infinite)
-            .filter(|(_, &i)| i == inf)
-            .map(|(&p, _)| clean(p))
-            .sum()
-    };
-    let (finite_total, infinite_total) = (total(false), total(true));
-    let n_infinite = infinite.iter().filter(|&&i| i).count() as f64;
-    let cap = n_infinite / (n_infinite + 1.0);
-    if finite_total <= 0.0 || infinite_total <= cap / (1.0 - cap) * finite_total {
-        // One kind only, or the infinite lights' power share is within the cap: by power.
-        return powers.to_vec();
+/// The emission bounds of a finite light (`None` for infinite lights), for the spatial light
+/// selection.
+fn light_bounds(l: &Light, shapes: &[Shape]) -> Option<LightBounds> {
+    match l {
+        Light::Area(a) => Some(a.bounds(&shapes[a.shape as usize])),
+        Light::Point(p) => Some(p.bounds()),
+        Light::Spot(s) => Some(s.bounds()),
+        Light::Projector(p) => Some(p.bounds()),
+        Light::Directional(_) | Light::Constant(_) | Light::Envmap(_) => None,
     }
-    powers
-        .iter()
-        .zip(infinite)
-        .map(|(&p, &inf)| {
-            let share = if inf {
-                cap / infinite_total
-            } else {
-                (1.0 - cap) / finite_total
-            };
-            (clean(p) * share) as f32
-        })
-        .collect()
 }
 
 fn light_power(l: &Light, shapes: &[Shape], sphere: &SceneSphere) -> Rgb {
@@ -866,7 +832,7 @@ mod tests {
         for _ in 0..n {
             let d = square_to_uniform_sphere(rng.next_2d());
             if let Some(si) = scene.intersect(&Ray::new(p, d)) {
-                acc += (scene.pdf_li_surface(p, &si) / UNIFORM_SPHERE_PDF) as f64;
+                acc += (scene.pdf_li_surface(p, Vec3::ZERO, &si) / UNIFORM_SPHERE_PDF) as f64;
             }
         }
         acc / n as f64
@@ -985,10 +951,13 @@ mod tests {
         .unwrap();
         assert_eq!(scene.lights.len(), 2);
         let p = Vec3::new(0.2, 0.0, 0.1);
+        // Two finite lights: the selection depends on the point and its normal.
+        assert!(scene.light_selection.is_spatial());
+        let n = Vec3::new(0.3, 1.0, 0.0).normalize();
         let mut rng = rng_for(5, 0, 0);
         let mut checked = 0;
         for _ in 0..2000 {
-            let Some(ls) = scene.sample_li(p, rng.next_f32(), rng.next_2d()) else {
+            let Some(ls) = scene.sample_li(p, n, rng.next_f32(), rng.next_2d()) else {
                 continue;
             };
             let si = scene
@@ -996,7 +965,7 @@ mod tests {
                 .expect("the sampled light is visible");
             assert_eq!(si.light, Some(ls.light));
             assert!((si.t - ls.dist).abs() < 1e-3 * ls.dist);
-            let pdf = scene.pdf_li_surface(p, &si);
+            let pdf = scene.pdf_li_surface(p, n, &si);
             // Near a silhouette the cosine at the light loses relative precision.
             let cos_l = si.frame.n.dot(-ls.wi);
             let tol = if cos_l > 0.05 { 1e-3 } else { 0.05 };
@@ -1037,7 +1006,8 @@ mod tests {
         let n = 400_000;
         let mut acc = 0.0f64;
         for _ in 0..n {
-            if let Some(ls) = scene.sample_li(Vec3::ZERO, rng.next_f32(), rng.next_2d()) {
+            if let Some(ls) = scene.sample_li(Vec3::ZERO, Vec3::ZERO, rng.next_f32(), rng.next_2d())
+            {
                 acc += 1.0 / ls.pdf as f64;
             }
         }
@@ -1138,9 +1108,24 @@ mod tests {
                     (false, _) => scene.photon_light_pmf(i),
                 };
                 assert!(
-                    (scene.light_pmf(i) - want).abs() < 1e-6,
+                    (scene.light_selection.by_power().pmf(i as usize) - want).abs() < 1e-6,
                     "sky {sky}, light {i}"
                 );
+            }
+            // With two finite lights the selection depends on the point, but the infinite
+            // light keeps its share everywhere and the finite lights share the rest.
+            assert!(scene.light_selection.is_spatial());
+            for p in [
+                Vec3::ZERO,
+                Vec3::new(0.5, 0.9, 0.2),
+                Vec3::new(-3.0, -2.0, 1.0),
+            ] {
+                let n = Vec3::Y;
+                let sky_pmf = scene.light_pmf(p, n, 2);
+                let want = if capped { 0.5 } else { power(2) / total };
+                assert!((sky_pmf - want).abs() < 1e-6, "sky {sky} at {p}: {sky_pmf}");
+                let sum: f32 = (0..3).map(|i| scene.light_pmf(p, n, i)).sum();
+                assert!((sum - 1.0).abs() < 1e-6, "sky {sky} at {p}: {sum}");
             }
         }
         // Two strong infinite lights share 2/3 by their power.
@@ -1152,9 +1137,9 @@ mod tests {
             radiance: Rgb::splat(50.0),
         };
         let both = Scene::build(&desc(vec![ceiling_light()], vec![spot, sun, sky])).unwrap();
-        let sky_and_sun: f32 = (2..4).map(|i| both.light_pmf(i)).sum();
+        let sky_and_sun: f32 = (2..4).map(|i| both.light_pmf(Vec3::ZERO, Vec3::Y, i)).sum();
         assert!((sky_and_sun - 2.0 / 3.0).abs() < 1e-6);
-        let ratio = both.light_pmf(2) / both.light_pmf(3);
+        let ratio = both.light_pmf(Vec3::ZERO, Vec3::Y, 2) / both.light_pmf(Vec3::ZERO, Vec3::Y, 3);
         let power_ratio = channel_mean(both.light_power(2)) / channel_mean(both.light_power(3));
         assert!((ratio / power_ratio - 1.0).abs() < 1e-5);
         // NEE stays unbiased: irradiance at a point facing up under a uniform sky L and a
@@ -1180,13 +1165,70 @@ mod tests {
         let n = 400_000;
         let mut e = 0.0f64;
         for _ in 0..n {
-            if let Some(ls) = unbiased.sample_li(Vec3::ZERO, rng.next_f32(), rng.next_2d()) {
+            if let Some(ls) =
+                unbiased.sample_li(Vec3::ZERO, Vec3::ZERO, rng.next_f32(), rng.next_2d())
+            {
                 e += (ls.weight.x * ls.wi.y.max(0.0)) as f64;
             }
         }
         let want = std::f64::consts::PI * 0.5 + 8.0 / 4.0;
         let got = e / n as f64;
         assert!((got - want).abs() < 0.01 * want, "{got} vs {want}");
+    }
+
+    /// With several finite lights NEE picks them by their importance at the point, and the
+    /// estimate stays unbiased: the irradiance on a surface under two point lights and a spot
+    /// (full beam there) is Σ I·cos θ / d², whatever the normal.
+    #[test]
+    fn spatial_light_selection_keeps_nee_unbiased() {
+        let spot = EmitterDesc::Spot {
+            to_world: Mat4::from_rotation_translation(
+                glam::Quat::from_rotation_arc(
+                    Vec3::Z,
+                    (Vec3::new(0.4, 0.0, 0.1) - Vec3::new(0.5, 3.0, 0.0)).normalize(),
+                ),
+                Vec3::new(0.5, 3.0, 0.0),
+            ),
+            intensity: Rgb::splat(20.0),
+            cutoff_angle: 20.0,
+            beam_width: 15.0,
+            texture: None,
+        };
+        let point = |x: f32, y: f32, i: f32| EmitterDesc::Point {
+            position: Vec3::new(x, y, 0.0),
+            intensity: Rgb::splat(i),
+        };
+        let scene = Scene::build(&desc(
+            vec![],
+            vec![point(0.0, 2.0, 8.0), point(-6.0, 1.0, 300.0), spot],
+        ))
+        .unwrap();
+        assert!(scene.light_selection.is_spatial());
+        let p = Vec3::new(0.4, 0.0, 0.1);
+        for n in [Vec3::Y, Vec3::new(0.6, 0.8, 0.0), Vec3::new(-0.8, 0.6, 0.0)] {
+            let mut want = 0.0f64;
+            for (q, i) in [
+                (Vec3::new(0.0, 2.0, 0.0), 8.0f32),
+                (Vec3::new(-6.0, 1.0, 0.0), 300.0),
+                (Vec3::new(0.5, 3.0, 0.0), 20.0),
+            ] {
+                let d = q - p;
+                want += (i * n.dot(d.normalize()).max(0.0) / d.length_squared()) as f64;
+            }
+            let mut rng = rng_for(9, 0, 0);
+            let count = 200_000;
+            let mut got = 0.0f64;
+            for _ in 0..count {
+                if let Some(ls) = scene.sample_li(p, n, rng.next_f32(), rng.next_2d()) {
+                    got += (ls.weight.x * ls.wi.dot(n).max(0.0)) as f64;
+                }
+            }
+            got /= count as f64;
+            assert!(
+                (got - want).abs() < 0.01 * want,
+                "normal {n}: {got} vs {want}"
+            );
+        }
     }
 
     #[test]
@@ -1197,7 +1239,7 @@ mod tests {
         }];
         let scene = Scene::build(&desc(vec![], emitters)).unwrap();
         let ls = scene
-            .sample_li(Vec3::ZERO, 0.3, glam::Vec2::splat(0.5))
+            .sample_li(Vec3::ZERO, Vec3::ZERO, 0.3, glam::Vec2::splat(0.5))
             .unwrap();
         assert!(ls.delta && (ls.wi - Vec3::Y).length() < 1e-6);
         assert!((ls.weight - Rgb::splat(2.0)).abs().max_element() < 1e-5);
@@ -1246,7 +1288,7 @@ mod tests {
         let p = Vec3::new(0.3, 0.0, 0.1);
         let mut e_nee = glam::DVec3::ZERO;
         for _ in 0..n {
-            if let Some(ls) = scene.sample_li(p, rng.next_f32(), rng.next_2d()) {
+            if let Some(ls) = scene.sample_li(p, Vec3::ZERO, rng.next_f32(), rng.next_2d()) {
                 e_nee += (ls.weight * ls.wi.y.max(0.0)).as_dvec3();
             }
         }

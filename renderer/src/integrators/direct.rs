@@ -83,7 +83,7 @@ impl RayIntegrator for DirectIntegrator {
             for _ in 0..self.emitter_samples {
                 let u_light = rng.next_f32();
                 let u_light2 = rng.next_2d();
-                let Some(ls) = scene.sample_li(si.p, u_light, u_light2) else {
+                let Some(ls) = scene.sample_li(si.p, si.ng, u_light, u_light2) else {
                     continue;
                 };
                 let wi = si.to_local(ls.wi);
@@ -121,7 +121,7 @@ impl RayIntegrator for DirectIntegrator {
                         if bs.delta {
                             0.0
                         } else {
-                            scene.pdf_li_surface(si.p, &e)
+                            scene.pdf_li_surface(si.p, si.ng, &e)
                         },
                     )
                 }

@@ -45,6 +45,7 @@ impl RayIntegrator for PathTracer {
         let mut depth = 0u32;
         // The previous scattering vertex, for MIS of emission found by BSDF sampling.
         let mut prev_p = ray.o;
+        let mut prev_n = glam::Vec3::ZERO;
         let mut prev_pdf = 1.0f32;
         let mut prev_delta = true;
         // Mitsuba's `hide_emitters`: what the camera sees directly — also through surfaces it
@@ -72,7 +73,7 @@ impl RayIntegrator for PathTracer {
                 let w = if prev_delta {
                     1.0
                 } else {
-                    power_heuristic(prev_pdf, scene.pdf_li_surface(prev_p, si))
+                    power_heuristic(prev_pdf, scene.pdf_li_surface(prev_p, prev_n, si))
                 };
                 throughput * le * w
             };
@@ -112,7 +113,7 @@ impl RayIntegrator for PathTracer {
             let u_light = rng.next_f32();
             let u_light2 = rng.next_2d();
             if bsdf.has_non_delta() {
-                if let Some(ls) = scene.sample_li(si.p, u_light, u_light2) {
+                if let Some(ls) = scene.sample_li(si.p, si.ng, u_light, u_light2) {
                     let wi = si.to_local(ls.wi);
                     let f = bsdf.eval(wo, wi, &sp, TransportMode::Radiance);
                     if f.max_element() > 0.0 && !scene.light_occluded(si.p, si.ng, &ls) {
@@ -138,6 +139,7 @@ impl RayIntegrator for PathTracer {
             throughput *= bs.weight;
             eta *= bs.eta;
             prev_p = si.p;
+            prev_n = si.ng;
             prev_pdf = bs.pdf;
             prev_delta = bs.delta;
             depth += 1;

@@ -1,6 +1,8 @@
 //! Area light (Mitsuba's `area`): radiance leaving the front side of a shape, a colour or a
 //! texture over the shape's uvs (points are sampled uniformly by area either way, as Mitsuba).
 
+use super::bounds::{bounding_sphere, LightBounds};
+use super::channel_mean;
 use super::{EmissionSample, LightSample};
 use crate::frame::Frame;
 use crate::math::{coordinate_system, spawn_ray};
@@ -129,6 +131,22 @@ impl AreaLight {
             ray: spawn_ray(s.p, s.n, d),
             flux: self.radiance.eval(s.tex()) * (PI / s.pdf),
             light: 0,
+        }
+    }
+
+    /// Emission bounds for light selection: the shape's bounding sphere and cone of normals,
+    /// each normal's emission falling off to zero at 90°. The intensity along the strongest
+    /// direction is L·A for a flat emitter and L·A/4 for a sphere; in between by the spread of
+    /// the normals.
+    pub fn bounds(&self, shape: &Shape) -> LightBounds {
+        let (lo, hi) = shape.bounds();
+        let (center, radius) = bounding_sphere(lo, hi);
+        let (axis, cos_o) = shape.normal_cone();
+        let intensity = channel_mean(self.radiance.mean()) * shape.area() * cos_o.max(0.25);
+        if cos_o <= -1.0 {
+            LightBounds::omnidirectional(center, radius, intensity)
+        } else {
+            LightBounds::cone(center, radius, intensity, axis, cos_o, 0.0)
         }
     }
 

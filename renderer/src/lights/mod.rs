@@ -9,6 +9,7 @@
 //! scene ([`crate::scene::Scene`]) folds that in.
 
 pub mod area;
+pub mod bounds;
 pub mod constant;
 pub mod directional;
 pub mod envmap;
@@ -16,6 +17,7 @@ pub mod envmap;
 mod envmap_reference;
 pub mod point;
 pub mod projector;
+pub mod selection;
 pub mod spot;
 
 pub use area::AreaLight;

@@ -1,5 +1,7 @@
 //! Point light (Mitsuba's `point`): radiant intensity I (W/sr) from one position.
 
+use super::bounds::LightBounds;
+use super::channel_mean;
 use super::{EmissionSample, LightSample};
 use crate::math::Ray;
 use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
@@ -44,6 +46,11 @@ impl PointLight {
             flux: self.intensity / UNIFORM_SPHERE_PDF,
             light: 0,
         }
+    }
+
+    /// Emission bounds for light selection: intensity I into every direction.
+    pub fn bounds(&self) -> LightBounds {
+        LightBounds::omnidirectional(self.position, 0.0, channel_mean(self.intensity))
     }
 
     /// Power 4πI.

@@ -15,6 +15,7 @@
 //! through image points chosen by the image's brightness (a grid of cells, with a uniform share
 //! that keeps every lit point reachable), so a mostly dark slide does not waste them.
 
+use super::bounds::LightBounds;
 use super::{channel_mean, EmissionSample, LightSample};
 use crate::math::Ray;
 use crate::sampling::Distribution1D;
@@ -200,6 +201,29 @@ impl ProjectorLight {
             flux: self.irradiance.eval(uv) * (PI * self.scale * self.image_area / pdf),
             light: 0,
         }
+    }
+
+    /// Emission bounds for light selection: the power spread over the frustum's solid angle,
+    /// within the narrowest cone about the axis that holds the frustum's corners, nothing
+    /// outside it.
+    pub fn bounds(&self) -> LightBounds {
+        let (a, b) = (self.tan_half_fov, self.tan_half_fov / self.aspect);
+        let solid_angle = 4.0 * (a * b / (1.0 + a * a + b * b).sqrt()).atan();
+        let intensity = channel_mean(self.power()) / solid_angle;
+        let axis = self.axis.normalize_or(Vec3::Z);
+        // The frustum is the convex cone of its corner rays: a cone about `axis` narrower than
+        // a hemisphere holds it when it holds the corners.
+        let cos_o = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
+            .iter()
+            .map(|&(x, y)| {
+                let corner = self.to_world_dir * Vec3::new(x * a, y * b, 1.0);
+                axis.dot(corner.normalize_or_zero())
+            })
+            .fold(1.0f32, f32::min);
+        if cos_o <= 0.0 || !cos_o.is_finite() {
+            return LightBounds::omnidirectional(self.position, 0.0, intensity);
+        }
+        LightBounds::cone(self.position, 0.0, intensity, axis, cos_o - 1e-5, 1.0)
     }
 
     /// Emitted power: π · scale · image area · mean irradiance.

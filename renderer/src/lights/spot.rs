@@ -2,12 +2,15 @@
 //! inside `beam_width`, falling off linearly in angle to zero at `cutoff_angle`, optionally
 //! projecting a `texture` (a slide: the cutoff cone maps onto the texture's unit square).
 
+use super::bounds::LightBounds;
+use super::channel_mean;
 use super::{EmissionSample, LightSample};
 use crate::math::Ray;
 use crate::sampling::{square_to_uniform_cone, uniform_cone_pdf};
 use crate::spectrum::Rgb;
 use crate::texture::Texture;
 use glam::{Mat3, Mat4, Vec2, Vec3};
+use std::f32::consts::PI;
 
 /// A spot light.
 #[derive(Debug, Clone)]
@@ -168,6 +171,22 @@ impl SpotLight {
             flux,
             light: 0,
         }
+    }
+
+    /// Emission bounds for light selection: the power spread over the cutoff cone's solid
+    /// angle, about the beam axis, full within the beam width and gone at the cutoff.
+    pub fn bounds(&self) -> LightBounds {
+        let solid_angle = 2.0 * PI * (1.0 - self.cos_cutoff);
+        let intensity = channel_mean(self.power()) / solid_angle;
+        let beam = self.cos_beam.clamp(-1.0, 1.0).acos();
+        LightBounds::cone(
+            self.position,
+            0.0,
+            intensity,
+            self.frame.z_axis,
+            self.cos_beam,
+            (self.cutoff - beam).cos(),
+        )
     }
 
     /// Emitted power I·∫falloff·texture dω.

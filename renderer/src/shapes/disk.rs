@@ -46,6 +46,11 @@ impl Disk {
         (Vec3A::from(c - ext), Vec3A::from(c + ext))
     }
 
+    /// Unit normal of the front side.
+    pub fn normal(&self) -> Vec3 {
+        self.normal
+    }
+
     /// Area.
     pub fn area(&self) -> f32 {
         self.area

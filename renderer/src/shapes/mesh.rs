@@ -144,6 +144,19 @@ impl Mesh {
         ]
     }
 
+    /// The normals the surface has: its faces' (degenerate ones left out) and, where shading
+    /// interpolates them, its vertex normals.
+    pub fn normals(&self) -> impl Iterator<Item = Vec3> + Clone + '_ {
+        let faces = (0..self.data.indices.len())
+            .filter(|&i| {
+                let [a, b, c] = Self::corners(&self.data, i as u32);
+                (b - a).cross(c - a) != Vec3::ZERO
+            })
+            .map(|i| self.face_normals[i]);
+        let vertices = self.vertex_normals().unwrap_or(&[]).iter();
+        faces.chain(vertices.filter_map(|n| n.try_normalize()))
+    }
+
     /// Vertex positions of triangle `tri`.
     #[inline]
     pub fn triangle(&self, tri: u32) -> [Vec3; 3] {

@@ -130,6 +130,27 @@ impl Shape {
         }
     }
 
+    /// Bounding box (min, max) of the whole shape.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        (0..self.primitive_count() as u32).fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), p| {
+                let (a, b) = self.primitive_bounds(p);
+                (lo.min(a.into()), hi.max(b.into()))
+            },
+        )
+    }
+
+    /// A cone (axis, cos θₒ) containing every normal the surface has (the side it emits from
+    /// as an area light); cos θₒ = −1 when they do not fit in a hemisphere.
+    pub fn normal_cone(&self) -> (Vec3, f32) {
+        match self {
+            Shape::Mesh(m) => normal_cone(m.normals()),
+            Shape::Disk(d) => (d.normal(), 1.0),
+            Shape::Sphere(_) | Shape::Cylinder(_) => (Vec3::Z, -1.0),
+        }
+    }
+
     /// Surface area.
     pub fn area(&self) -> f32 {
         match self {
@@ -163,6 +184,22 @@ impl Shape {
             Shape::Disk(d) => d.sample_area(u),
             Shape::Cylinder(c) => c.sample_area(u),
         }
+    }
+}
+
+/// The narrowest cone about the normalised mean of `normals` containing them all, as (axis,
+/// cos θₒ); (+z, −1) — every direction — when they do not fit in a hemisphere about their mean.
+pub fn normal_cone(normals: impl Iterator<Item = Vec3> + Clone) -> (Vec3, f32) {
+    let sum: Vec3 = normals.clone().sum();
+    let Some(axis) = sum.try_normalize() else {
+        return (Vec3::Z, -1.0);
+    };
+    let cos_o = normals.fold(1.0f32, |c, n| c.min(axis.dot(n)));
+    if cos_o <= 0.0 {
+        (Vec3::Z, -1.0)
+    } else {
+        // Rounding of the normals must not put one just outside the cone.
+        (axis, (cos_o - 1e-5).max(0.0))
     }
 }
 
@@ -244,5 +281,16 @@ mod tests {
             }
         }
         assert!(checked > 30, "{checked}");
+    }
+
+    #[test]
+    fn normal_cones() {
+        let flat = [Vec3::Z; 3];
+        assert_eq!(normal_cone(flat.iter().copied()), (Vec3::Z, 1.0 - 1e-5));
+        let s = 0.5f32.sqrt();
+        let (axis, cos_o) = normal_cone([Vec3::new(s, 0.0, s), Vec3::new(-s, 0.0, s)].into_iter());
+        assert!((axis - Vec3::Z).length() < 1e-6 && (cos_o - s).abs() < 2e-5);
+        let closed = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
+        assert_eq!(normal_cone(closed.iter().copied()).1, -1.0);
     }
 }

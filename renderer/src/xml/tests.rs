@@ -2476,7 +2476,12 @@ fn mesh_attribute_radiance_is_read_where_the_light_is_sampled() {
         .enumerate()
     {
         let ls = scene
-            .sample_li(from, (i as f32 + 0.5) / 4.0, Vec2::new(u.0, u.1))
+            .sample_li(
+                from,
+                Vec3::ZERO,
+                (i as f32 + 0.5) / 4.0,
+                Vec2::new(u.0, u.1),
+            )
             .expect("a light sample");
         let radiance = ls.weight * ls.pdf;
         let want = expected(ls.p.x, ls.p.y);

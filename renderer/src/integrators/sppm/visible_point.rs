@@ -114,6 +114,8 @@ pub struct EyePath {
 struct LastScatter {
     /// Position of the scattering vertex.
     p: Vec3,
+    /// Its geometric normal (`Vec3::ZERO` for the camera), for the light selection's density.
+    n: Vec3,
     /// Solid-angle density of the sampled direction (unused when `delta`).
     pdf: f32,
     /// The direction came from a delta lobe or from the camera: emission counts fully.
@@ -148,7 +150,7 @@ fn emission_along(
             if le == Rgb::ZERO {
                 return le;
             }
-            le * bsdf_mis(last, || scene.pdf_li_surface(last.p, si))
+            le * bsdf_mis(last, || scene.pdf_li_surface(last.p, last.n, si))
         }
         None => {
             if !scene.has_environment() {
@@ -171,7 +173,7 @@ fn direct_light(
 ) -> Rgb {
     let u_sel = rng.next_f32();
     let u = rng.next_2d();
-    let Some(ls) = scene.sample_li(si.p, u_sel, u) else {
+    let Some(ls) = scene.sample_li(si.p, si.ng, u_sel, u) else {
         return Rgb::ZERO;
     };
     let wi = si.to_local(ls.wi);
@@ -193,6 +195,7 @@ fn probe_emission(scene: &Scene, si: &SurfaceInteraction, bs: &BsdfSample) -> Rg
     let probe = si.spawn_ray(si.to_world(bs.wi));
     let probe_last = LastScatter {
         p: si.p,
+        n: si.ng,
         pdf: bs.pdf,
         delta: bs.delta,
     };
@@ -236,6 +239,7 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
     let mut path_length = 0.0f32;
     let mut last = LastScatter {
         p: ray.o,
+        n: Vec3::ZERO,
         pdf: 1.0,
         delta: true,
     };
@@ -387,6 +391,7 @@ fn scatter(
     }
     *last = LastScatter {
         p: si.p,
+        n: si.ng,
         pdf: bs.pdf,
         delta: bs.delta,
     };

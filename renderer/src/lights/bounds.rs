@@ -1,0 +1,296 @@
+//! Bounds of a finite light's emission, for choosing lights by how much they can light a given
+//! point (pbrt-v4's light bounds): where the light is (a bounding sphere), how strongly it
+//! radiates (a radiant intensity), and into which directions (a cone of emission axes widened
+//! by a falloff angle). [`LightBounds::importance`] turns them into a conservative estimate of
+//! the irradiance the light can deliver to a point: zero only where the light provably sends
+//! nothing (behind a one-sided emitter, outside a spot's cutoff or a projector's frustum).
+
+use glam::Vec3;
+
+/// What bounds a finite light's emission.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightBounds {
+    /// Centre of a sphere containing every emitting point.
+    center: Vec3,
+    /// Its radius (0 for point-like lights).
+    radius: f32,
+    /// Radiant intensity (channel mean, W/sr) along the strongest direction: the scale of the
+    /// importance.
+    intensity: f32,
+    /// Axis of the cone of emission axes (surface normals, beam axes); unused when
+    /// `cos_o` is −1.
+    axis: Vec3,
+    /// cos θₒ: every emission axis lies within θₒ of `axis`; −1 for all directions.
+    cos_o: f32,
+    /// sin θₒ.
+    sin_o: f32,
+    /// cos θₑ: emission falls off to zero θₑ beyond the axes (π/2 for a surface, a spot's
+    /// transition angle, 0 for a sharp-edged beam).
+    cos_e: f32,
+}
+
+/// The falloff factor a light keeps however far off its axes a receiver lies, as long as it
+/// can receive anything at all: the cosine approximation of a falloff reaches zero where the
+/// true emission may not (a spot's linear falloff), so the estimate must not.
+const MIN_FALLOFF: f32 = 0.05;
+
+/// An intensity the importance can scale by: NaN, infinite and negative ones count as zero (as
+/// such powers do in the selection by power).
+fn usable(intensity: f32) -> f32 {
+    if intensity.is_finite() && intensity > 0.0 {
+        intensity
+    } else {
+        0.0
+    }
+}
+
+impl LightBounds {
+    /// A light radiating `intensity` into every direction from points within `radius` of
+    /// `center` (points, spheres, closed or curved surfaces).
+    pub fn omnidirectional(center: Vec3, radius: f32, intensity: f32) -> Self {
+        LightBounds {
+            center,
+            radius,
+            intensity: usable(intensity),
+            axis: Vec3::Z,
+            cos_o: -1.0,
+            sin_o: 0.0,
+            cos_e: -1.0,
+        }
+    }
+
+    /// A light whose emission axes lie within θₒ = acos(`cos_o`) of the unit `axis` and whose
+    /// emission reaches zero θₑ = acos(`cos_e`) beyond them.
+    pub fn cone(
+        center: Vec3,
+        radius: f32,
+        intensity: f32,
+        axis: Vec3,
+        cos_o: f32,
+        cos_e: f32,
+    ) -> Self {
+        let cos_o = cos_o.clamp(-1.0, 1.0);
+        LightBounds {
+            center,
+            radius,
+            intensity: usable(intensity),
+            axis,
+            cos_o,
+            sin_o: (1.0 - cos_o * cos_o).max(0.0).sqrt(),
+            cos_e: cos_e.clamp(-1.0, 1.0),
+        }
+    }
+
+    /// A conservative estimate of the irradiance the light delivers at `p` on a surface with
+    /// unit normal `n` (either side; `Vec3::ZERO` for no surface): intensity / distance²,
+    /// times the cosine of the smallest angle the bounds allow between the emission axes and
+    /// the direction to `p` (zero when it lies beyond the falloff), times the cosine of the
+    /// smallest angle between `n` and a direction towards the light.
+    #[inline]
+    pub fn importance(&self, p: Vec3, n: Vec3) -> f32 {
+        if self.intensity <= 0.0 {
+            return 0.0;
+        }
+        let to_p = p - self.center;
+        let d2 = to_p.length_squared();
+        let r2 = self.radius * self.radius;
+        if d2 <= r2 {
+            // Inside the bounds: any direction and any distance down to zero are possible; the
+            // radius caps the estimate.
+            return self.intensity / r2.max(f32::MIN_POSITIVE);
+        }
+        let d = d2.sqrt();
+        let wi = to_p / d;
+        // θ_b: the half-angle the bounding sphere subtends from `p`.
+        let sin2_b = r2 / d2;
+        let cos_b = (1.0 - sin2_b).max(0.0).sqrt();
+        let sin_b = sin2_b.sqrt();
+        let mut estimate = self.intensity / d2;
+        if self.cos_o > -1.0 {
+            let cos_w = self.axis.dot(wi).clamp(-1.0, 1.0);
+            if cos_w < self.cos_o {
+                // θ_w − θ_o > 0, then less θ_b.
+                let sin_w = (1.0 - cos_w * cos_w).max(0.0).sqrt();
+                let cos_x = cos_w * self.cos_o + sin_w * self.sin_o;
+                let sin_x = (sin_w * self.cos_o - cos_w * self.sin_o).max(0.0);
+                if cos_x < cos_b {
+                    let cos_off = cos_x * cos_b + sin_x * sin_b;
+                    if cos_off <= self.cos_e {
+                        return 0.0;
+                    }
+                    estimate *= cos_off.max(MIN_FALLOFF);
+                }
+            }
+        }
+        if n != Vec3::ZERO {
+            let cos_i = n.dot(wi).abs().min(1.0);
+            if cos_i < cos_b {
+                let sin_i = (1.0 - cos_i * cos_i).max(0.0).sqrt();
+                estimate *= cos_i * cos_b + sin_i * sin_b;
+            }
+        }
+        estimate
+    }
+}
+
+/// A sphere (centre, radius) containing the box `lo`..`hi`.
+pub fn bounding_sphere(lo: Vec3, hi: Vec3) -> (Vec3, f32) {
+    (0.5 * (lo + hi), 0.5 * (hi - lo).length())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_point_light_falls_off_with_distance_squared_and_receiver_cosine() {
+        let b = LightBounds::omnidirectional(Vec3::ZERO, 0.0, 4.0);
+        assert_eq!(b.importance(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO), 1.0);
+        // Receiver normal at 60° to the direction towards the light.
+        let n = Vec3::new(3f32.sqrt() / 2.0, 0.0, 0.5);
+        let got = b.importance(Vec3::new(0.0, 0.0, 2.0), n);
+        assert!((got - 0.5).abs() < 1e-6, "{got}");
+        // Either side of the receiving surface.
+        assert_eq!(got, b.importance(Vec3::new(0.0, 0.0, 2.0), -n));
+    }
+
+    #[test]
+    fn a_one_sided_emitter_gives_nothing_behind_itself_and_more_in_front() {
+        // A unit disk facing +z: bounding sphere radius 1.
+        let b = LightBounds::cone(Vec3::ZERO, 1.0, 1.0, Vec3::Z, 1.0, 0.0);
+        let front = b.importance(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO);
+        let side = b.importance(Vec3::new(5.0, 0.0, 0.0), Vec3::ZERO);
+        let behind = b.importance(Vec3::new(0.0, 0.0, -5.0), Vec3::ZERO);
+        assert!((front - 1.0 / 25.0).abs() < 1e-7, "{front}");
+        // At the side the disk's edge still faces the point within θ_b: not zero.
+        assert!(side > 0.0 && side < front, "{side}");
+        assert_eq!(behind, 0.0);
+        // Just behind the plane but within the bounds' angular slack: still possible.
+        assert!(b.importance(Vec3::new(5.0, 0.0, -0.5), Vec3::ZERO) > 0.0);
+    }
+
+    #[test]
+    fn a_beam_is_zero_outside_its_cone_and_full_inside() {
+        let cos30 = 30f32.to_radians().cos();
+        let b = LightBounds::cone(Vec3::ZERO, 0.0, 2.0, Vec3::Z, cos30, 1.0);
+        let inside = Vec3::new(20f32.to_radians().tan(), 0.0, 1.0);
+        let outside = Vec3::new(35f32.to_radians().tan(), 0.0, 1.0);
+        let got = b.importance(inside, Vec3::ZERO);
+        assert!((got - 2.0 / inside.length_squared()).abs() < 1e-6, "{got}");
+        assert_eq!(b.importance(outside, Vec3::ZERO), 0.0);
+        // A falloff of 10° beyond the axes lets 35° through, not 45°.
+        let soft = LightBounds::cone(
+            Vec3::ZERO,
+            0.0,
+            2.0,
+            Vec3::Z,
+            cos30,
+            10f32.to_radians().cos(),
+        );
+        assert!(soft.importance(outside, Vec3::ZERO) > 0.0);
+        let far = Vec3::new(45f32.to_radians().tan(), 0.0, 1.0);
+        assert_eq!(soft.importance(far, Vec3::ZERO), 0.0);
+    }
+
+    #[test]
+    fn inside_the_bounds_every_light_stays_possible() {
+        let b = LightBounds::cone(Vec3::ZERO, 1.0, 3.0, Vec3::Z, 1.0, 0.0);
+        assert_eq!(b.importance(Vec3::new(0.0, 0.0, -0.5), Vec3::X), 3.0);
+        let dark = LightBounds::omnidirectional(Vec3::ZERO, 1.0, 0.0);
+        assert_eq!(dark.importance(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO), 0.0);
+    }
+
+    /// The bounds of every kind of finite light are conservative: wherever a light sample
+    /// from a point carries light, the light's importance there is positive.
+    #[test]
+    fn every_lights_bounds_cover_where_it_shines() {
+        use crate::description::TriangleMesh;
+        use crate::lights::{AreaLight, PointLight, ProjectorLight, SpotLight};
+        use crate::sampling::{rng_for, UniformSource};
+        use crate::shapes::{Cylinder, Disk, Mesh, Shape, Sphere};
+        use crate::spectrum::Rgb;
+        use crate::texture::Texture;
+        use glam::{Mat4, Quat};
+
+        let tilt = Mat4::from_rotation_translation(
+            Quat::from_rotation_arc(Vec3::Z, Vec3::new(0.3, -1.0, 0.2).normalize()),
+            Vec3::new(0.2, 1.5, -0.3),
+        );
+        // A curved strip of two triangles at an angle, and a flat quad facing down.
+        let mesh = |positions: Vec<Vec3>, indices| {
+            Shape::Mesh(Mesh::new(&TriangleMesh {
+                positions,
+                normals: None,
+                uvs: None,
+                indices,
+                flipped: false,
+            }))
+        };
+        let strip = mesh(
+            vec![
+                Vec3::new(-1.0, 1.0, 0.0),
+                Vec3::new(0.0, 1.2, 0.0),
+                Vec3::new(0.0, 1.2, 1.0),
+                Vec3::new(1.0, 0.8, 0.5),
+            ],
+            vec![[0, 1, 2], [1, 3, 2]],
+        );
+        let quad = mesh(
+            vec![
+                Vec3::new(-1.0, 2.0, -1.0),
+                Vec3::new(1.0, 2.0, -1.0),
+                Vec3::new(1.0, 2.0, 1.0),
+                Vec3::new(-1.0, 2.0, 1.0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let shapes = [
+            strip,
+            quad,
+            Shape::Sphere(Sphere::new(Vec3::new(0.5, 1.0, 0.0), 0.4, false)),
+            Shape::Disk(Disk::new(tilt, false)),
+            Shape::Cylinder(Cylinder::new(tilt, false).unwrap()),
+        ];
+        let area = AreaLight {
+            shape: 0,
+            radiance: Texture::Constant(Rgb::ONE),
+        };
+        let spot = SpotLight::new(tilt, Rgb::ONE, 25.0, 10.0, None);
+        let projector = ProjectorLight::new(tilt, Texture::Constant(Rgb::ONE), 1.0, 40.0);
+        let point = PointLight {
+            position: Vec3::new(0.1, 0.2, 0.3),
+            intensity: Rgb::ONE,
+        };
+        let mut rng = rng_for(17, 0, 0);
+        let mut lit = [0u32; 8];
+        for _ in 0..20_000 {
+            let p = (rng.next_2d().extend(rng.next_f32()) - 0.5) * 6.0;
+            let (u_sel, u) = (rng.next_f32(), rng.next_2d());
+            let mut check = |k: usize, bounds: LightBounds, shines: bool| {
+                if shines {
+                    lit[k] += 1;
+                    assert!(bounds.importance(p, Vec3::ZERO) > 0.0, "light {k} at {p}");
+                }
+            };
+            for (k, shape) in shapes.iter().enumerate() {
+                let shines = area
+                    .sample_li(shape, p, u_sel, u)
+                    .is_some_and(|ls| ls.weight.max_element() > 0.0);
+                check(k, area.bounds(shape), shines);
+            }
+            let shines = |ls: Option<super::super::LightSample>| {
+                ls.is_some_and(|ls| ls.weight.max_element() > 0.0)
+            };
+            check(5, spot.bounds(), shines(spot.sample_li(p)));
+            check(6, projector.bounds(), shines(projector.sample_li(p)));
+            check(7, point.bounds(), shines(point.sample_li(p)));
+        }
+        // Every light was seen shining, and the one-sided and beamed ones not everywhere.
+        assert!(lit.iter().all(|&n| n > 100), "{lit:?}");
+        // (The quad faces down from y = 2: 5/6 of the cube lies below it.)
+        assert!(
+            lit[1] < 18_000 && lit[5] < 5_000 && lit[6] < 5_000,
+            "{lit:?}"
+        );
+    }
+}
