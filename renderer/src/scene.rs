@@ -8,7 +8,7 @@ use crate::bsdf::{Bsdf, ShadingPoint};
 use crate::camera::Camera;
 use crate::description::{EmitterDesc, Geometry, IntegratorDesc, SceneDescription};
 use crate::frame::Frame;
-use crate::lights::bounds::LightBounds;
+use crate::lights::bounds::EmitterBounds;
 use crate::lights::selection::LightSelection;
 use crate::lights::{
     channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, EnvmapLight, Light,
@@ -430,8 +430,7 @@ impl Scene {
             .iter()
             .map(|l| channel_mean(light_power(l, &shapes, &sphere)))
             .collect();
-        let bounds: Vec<Option<LightBounds>> =
-            lights.iter().map(|l| light_bounds(l, &shapes)).collect();
+        let bounds: Vec<EmitterBounds> = lights.iter().map(|l| light_bounds(l, &shapes)).collect();
         Ok(Scene {
             camera,
             shapes,
@@ -686,14 +685,15 @@ impl Scene {
     }
 
     /// Solid-angle density (selection included) of sampling escaping direction `d` through the
-    /// environment lights.
+    /// environment lights from `p_ref` with geometric normal `n_ref` (the selection may depend
+    /// on the normal when a directional light shares the infinite lights' share).
     #[inline]
-    pub fn pdf_li_environment(&self, d: Vec3) -> f32 {
+    pub fn pdf_li_environment(&self, p_ref: Vec3, n_ref: Vec3, d: Vec3) -> f32 {
         self.environment_lights
             .iter()
             .map(|&i| match &self.lights[i as usize] {
-                Light::Constant(c) => c.pdf_li() * self.light_pmf(Vec3::ZERO, Vec3::ZERO, i),
-                Light::Envmap(m) => m.pdf_li(d) * self.light_pmf(Vec3::ZERO, Vec3::ZERO, i),
+                Light::Constant(c) => c.pdf_li() * self.light_pmf(p_ref, n_ref, i),
+                Light::Envmap(m) => m.pdf_li(d) * self.light_pmf(p_ref, n_ref, i),
                 _ => 0.0,
             })
             .sum()
@@ -726,15 +726,16 @@ impl Scene {
     }
 }
 
-/// The emission bounds of a finite light (`None` for infinite lights), for the spatial light
-/// selection.
-fn light_bounds(l: &Light, shapes: &[Shape]) -> Option<LightBounds> {
+/// The emission bounds of a light, for the light selection.
+fn light_bounds(l: &Light, shapes: &[Shape]) -> EmitterBounds {
     match l {
-        Light::Area(a) => Some(a.bounds(&shapes[a.shape as usize])),
-        Light::Point(p) => Some(p.bounds()),
-        Light::Spot(s) => Some(s.bounds()),
-        Light::Projector(p) => Some(p.bounds()),
-        Light::Directional(_) | Light::Constant(_) | Light::Envmap(_) => None,
+        Light::Area(a) => EmitterBounds::Finite(a.bounds(&shapes[a.shape as usize])),
+        Light::Point(p) => EmitterBounds::Finite(p.bounds()),
+        Light::Spot(s) => EmitterBounds::Finite(s.bounds()),
+        Light::Projector(p) => EmitterBounds::Finite(p.bounds()),
+        Light::Directional(d) => d.bounds(),
+        Light::Constant(c) => c.bounds(),
+        Light::Envmap(m) => m.bounds(),
     }
 }
 
@@ -1139,7 +1140,8 @@ mod tests {
         let both = Scene::build(&desc(vec![ceiling_light()], vec![spot, sun, sky])).unwrap();
         let sky_and_sun: f32 = (2..4).map(|i| both.light_pmf(Vec3::ZERO, Vec3::Y, i)).sum();
         assert!((sky_and_sun - 2.0 / 3.0).abs() < 1e-6);
-        let ratio = both.light_pmf(Vec3::ZERO, Vec3::Y, 2) / both.light_pmf(Vec3::ZERO, Vec3::Y, 3);
+        // The base weights split that share by power.
+        let ratio = both.light_selection.by_power().pmf(2) / both.light_selection.by_power().pmf(3);
         let power_ratio = channel_mean(both.light_power(2)) / channel_mean(both.light_power(3));
         assert!((ratio / power_ratio - 1.0).abs() < 1e-5);
         // NEE stays unbiased: irradiance at a point facing up under a uniform sky L and a
@@ -1176,9 +1178,10 @@ mod tests {
         assert!((got - want).abs() < 0.01 * want, "{got} vs {want}");
     }
 
-    /// With several finite lights NEE picks them by their importance at the point, and the
-    /// estimate stays unbiased: the irradiance on a surface under two point lights and a spot
-    /// (full beam there) is Σ I·cos θ / d², whatever the normal.
+    /// With several finite lights, and a sun next to a sky, NEE picks them by their importance
+    /// at the point, and the estimate stays unbiased: the irradiance on a surface under two
+    /// point lights, a spot (full beam there), a sun and a sky is Σ I·cos θ / d² + E·cos θ +
+    /// π·L, whatever the normal (visibility ignored).
     #[test]
     fn spatial_light_selection_keeps_nee_unbiased() {
         let spot = EmitterDesc::Spot {
@@ -1198,9 +1201,24 @@ mod tests {
             position: Vec3::new(x, y, 0.0),
             intensity: Rgb::splat(i),
         };
+        // A non-emitting quad gives the scene its size (the infinite lights' power grows with
+        // it).
+        let mut quad = ceiling_light();
+        quad.emission = None;
         let scene = Scene::build(&desc(
-            vec![],
-            vec![point(0.0, 2.0, 8.0), point(-6.0, 1.0, 300.0), spot],
+            vec![quad],
+            vec![
+                point(0.0, 2.0, 8.0),
+                point(-6.0, 1.0, 30.0),
+                spot,
+                EmitterDesc::Directional {
+                    direction: Vec3::new(0.6, -0.8, 0.0),
+                    irradiance: Rgb::splat(2.0),
+                },
+                EmitterDesc::Constant {
+                    radiance: Rgb::splat(1.0),
+                },
+            ],
         ))
         .unwrap();
         assert!(scene.light_selection.is_spatial());
@@ -1209,18 +1227,26 @@ mod tests {
             let mut want = 0.0f64;
             for (q, i) in [
                 (Vec3::new(0.0, 2.0, 0.0), 8.0f32),
-                (Vec3::new(-6.0, 1.0, 0.0), 300.0),
+                (Vec3::new(-6.0, 1.0, 0.0), 30.0),
                 (Vec3::new(0.5, 3.0, 0.0), 20.0),
             ] {
                 let d = q - p;
                 want += (i * n.dot(d.normalize()).max(0.0) / d.length_squared()) as f64;
             }
+            // The sun and the sky (π·L on the surface's upper side).
+            want += (2.0 * n.dot(Vec3::new(-0.6, 0.8, 0.0)).max(0.0)) as f64;
+            want += std::f64::consts::PI;
             let mut rng = rng_for(9, 0, 0);
-            let count = 200_000;
+            let count = 400_000;
             let mut got = 0.0f64;
             for _ in 0..count {
                 if let Some(ls) = scene.sample_li(p, n, rng.next_f32(), rng.next_2d()) {
                     got += (ls.weight.x * ls.wi.dot(n).max(0.0)) as f64;
+                    if ls.infinite && !ls.delta {
+                        // The sky's density as MIS sees it from the same point.
+                        let pdf = scene.pdf_li_environment(p, n, ls.wi);
+                        assert!((pdf - ls.pdf).abs() <= 1e-5 * ls.pdf, "{pdf} vs {}", ls.pdf);
+                    }
                 }
             }
             got /= count as f64;

@@ -130,7 +130,7 @@ impl RayIntegrator for DirectIntegrator {
                     let pdf = if bs.delta {
                         0.0
                     } else {
-                        scene.pdf_li_environment(next.d)
+                        scene.pdf_li_environment(si.p, si.ng, next.d)
                     };
                     (le, pdf)
                 }

@@ -61,7 +61,7 @@ impl RayIntegrator for PathTracer {
                 let w = if prev_delta {
                     1.0
                 } else {
-                    power_heuristic(prev_pdf, scene.pdf_li_environment(ray.d))
+                    power_heuristic(prev_pdf, scene.pdf_li_environment(prev_p, prev_n, ray.d))
                 };
                 throughput * scene.environment(ray.d) * w
             };

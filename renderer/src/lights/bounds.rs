@@ -1,8 +1,9 @@
-//! Bounds of a finite light's emission, for choosing lights by how much they can light a given
-//! point (pbrt-v4's light bounds): where the light is (a bounding sphere), how strongly it
-//! radiates (a radiant intensity), and into which directions (a cone of emission axes widened
-//! by a falloff angle). [`LightBounds::importance`] turns them into a conservative estimate of
-//! the irradiance the light can deliver to a point: zero only where the light provably sends
+//! Bounds of a light's emission, for choosing lights by how much they can light a given point
+//! (pbrt-v4's light bounds). A finite light's ([`LightBounds`]): where it is (a bounding
+//! sphere), how strongly it radiates (a radiant intensity), and into which directions (a cone
+//! of emission axes widened by a falloff angle); an infinite light's ([`EmitterBounds`]): the
+//! irradiance it delivers to a surface. Each `importance` is a conservative estimate of the
+//! irradiance the light can deliver to a point: zero only where the light provably sends
 //! nothing (behind a one-sided emitter, outside a spot's cutoff or a projector's frustum).
 
 use glam::Vec3;
@@ -130,6 +131,51 @@ impl LightBounds {
             }
         }
         estimate
+    }
+}
+
+/// What bounds any light's emission.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum EmitterBounds {
+    /// A light at a finite position.
+    Finite(LightBounds),
+    /// A distant light: irradiance `irradiance` (channel mean) on a surface facing `toward`
+    /// (the unit direction towards the light).
+    Directional {
+        /// Unit direction towards the light.
+        toward: Vec3,
+        /// Irradiance on a surface facing the light.
+        irradiance: f32,
+    },
+    /// An environment: `irradiance` is what it delivers to one side of a surface on average
+    /// over orientations (π·L for a constant radiance L).
+    Environment {
+        /// Mean irradiance on one side of a surface.
+        irradiance: f32,
+    },
+}
+
+impl EmitterBounds {
+    /// The importance of the light at `p` with unit normal `n` (`Vec3::ZERO`: none): an
+    /// estimate of the irradiance it delivers there, occlusion ignored.
+    #[inline]
+    pub fn importance(&self, p: Vec3, n: Vec3) -> f32 {
+        match *self {
+            EmitterBounds::Finite(b) => b.importance(p, n),
+            EmitterBounds::Directional { toward, irradiance } => {
+                if n == Vec3::ZERO {
+                    usable(irradiance)
+                } else {
+                    usable(irradiance) * n.dot(toward).abs().min(1.0)
+                }
+            }
+            EmitterBounds::Environment { irradiance } => usable(irradiance),
+        }
+    }
+
+    /// Whether the light is at infinity.
+    pub fn is_infinite(&self) -> bool {
+        !matches!(self, EmitterBounds::Finite(_))
     }
 }
 

@@ -1,5 +1,7 @@
 //! Constant environment (Mitsuba's `constant`): the same radiance from every direction.
 
+use super::bounds::EmitterBounds;
+use super::channel_mean;
 use super::{EmissionSample, LightSample, SceneSphere};
 use crate::math::Ray;
 use crate::sampling::{square_to_uniform_sphere, UNIFORM_SPHERE_PDF};
@@ -48,6 +50,13 @@ impl ConstantLight {
             ray: Ray::new(sphere.photon_origin(d, u_pos), d),
             flux: self.power(sphere),
             light: 0,
+        }
+    }
+
+    /// Emission bounds for light selection: π·L on one side of any surface.
+    pub fn bounds(&self) -> EmitterBounds {
+        EmitterBounds::Environment {
+            irradiance: PI * channel_mean(self.radiance),
         }
     }
 

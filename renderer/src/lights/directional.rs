@@ -1,5 +1,7 @@
 //! Directional light (Mitsuba's `directional`): irradiance E arriving from one direction.
 
+use super::bounds::EmitterBounds;
+use super::channel_mean;
 use super::{EmissionSample, LightSample, SceneSphere};
 use crate::math::Ray;
 use crate::spectrum::Rgb;
@@ -37,6 +39,14 @@ impl DirectionalLight {
             ray: Ray::new(sphere.photon_origin(self.direction, u), self.direction),
             flux: self.irradiance * (PI * sphere.radius * sphere.radius),
             light: 0,
+        }
+    }
+
+    /// Emission bounds for light selection: the irradiance on a surface facing the light.
+    pub fn bounds(&self) -> EmitterBounds {
+        EmitterBounds::Directional {
+            toward: -self.direction,
+            irradiance: channel_mean(self.irradiance),
         }
     }
 

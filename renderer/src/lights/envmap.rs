@@ -13,6 +13,8 @@
 //! solid angle, then a uniform point in it, so every direction with non-zero radiance has a
 //! non-zero density (photons must reach everything the map lights).
 
+use super::bounds::EmitterBounds;
+use super::channel_mean;
 use super::{EmissionSample, LightSample, SceneSphere};
 use crate::math::Ray;
 use crate::sampling::Distribution1D;
@@ -264,6 +266,14 @@ impl EnvmapLight {
             ray: Ray::new(sphere.photon_origin(-wi, u_pos), -wi),
             flux: radiance * (PI * sphere.radius * sphere.radius / pdf),
             light: 0,
+        }
+    }
+
+    /// Emission bounds for light selection: a quarter of ∫L dω, the irradiance on one side of
+    /// a surface averaged over orientations (π·L for a uniform map).
+    pub fn bounds(&self) -> EmitterBounds {
+        EmitterBounds::Environment {
+            irradiance: 0.25 * channel_mean(self.integral),
         }
     }
 

@@ -1,39 +1,43 @@
 //! Which light next-event estimation samples from a point. Lights are chosen by power (SPEC
-//! §3.2), with the infinite lights' share capped ([`nee_light_weights`]); where a scene has
+//! §3.2), with the infinite lights' share capped ([`nee_light_weights`]). Where a scene has
 //! several finite lights, their share is redistributed at each point by how much each can light
-//! it ([`LightBounds::importance`], pbrt-v4's exhaustive light sampler), mixed with the power
-//! proportions so that every light with power keeps a probability of at least
+//! it ([`EmitterBounds::importance`], pbrt-v4's exhaustive light sampler); likewise the
+//! infinite lights' share when a directional light is among them (a sun's irradiance follows
+//! the surface's orientation, a sky's does not). Within each kind the importance is mixed with
+//! the power proportions, so every light with power keeps a probability of at least
 //! [`POWER_SHARE`] times its power share. Any selection that gives every contributing light a
 //! non-zero probability has the same expected image; this one puts the samples where the light
 //! comes from.
 //!
 //! Why: by power alone, a light that radiates mostly into nothing (a far, bright sun-like
-//! sphere; a point light next to a projector) takes most of the samples everywhere, and the
-//! lights that actually light a point are drawn rarely, with large weights (speckles).
+//! sphere; a point light next to a projector; a sky, whose power is its flux through the whole
+//! scene) takes most of the samples everywhere, and the lights that actually light a point are
+//! drawn rarely, with large weights (speckles).
 
-use super::bounds::LightBounds;
+use super::bounds::EmitterBounds;
 use crate::sampling::Distribution1D;
 use glam::Vec3;
 
-/// Most finite lights the spatial selection weighs one by one (every light sample and every
-/// MIS density evaluates each light's importance); scenes with more select by power.
+/// Most lights of one kind (finite or infinite) the selection weighs one by one (every light
+/// sample and every MIS density evaluates each one's importance); with more, that kind is
+/// selected by power.
 pub const MAX_SPATIAL_LIGHTS: usize = 64;
 
-/// The share of the finite lights' probability that stays proportional to power at every point
-/// (a defensive mixture): the importance is an estimate of how much a light delivers, blind to
+/// The share of a kind's probability that stays proportional to power at every point (a
+/// defensive mixture): the importance is an estimate of how much a light delivers, blind to
 /// occlusion and to the BSDF, and a light it underrates must not be sampled with a huge weight.
 pub const POWER_SHARE: f32 = 0.1;
 
 /// The light-selection distribution for next-event estimation.
 #[derive(Debug, Clone)]
 pub struct LightSelection {
-    /// By power, the infinite lights capped: the whole selection without `spatial`.
+    /// By power, the infinite lights capped: the whole selection without `split`.
     by_power: Distribution1D,
-    /// The point-dependent selection, for scenes with 2..=[`MAX_SPATIAL_LIGHTS`] finite lights.
-    spatial: Option<Box<SpatialSelection>>,
+    /// The point-dependent selection, when finite or infinite lights are weighed per point.
+    split: Option<Box<Split>>,
 }
 
-/// Where a light sits in the spatial selection.
+/// Where a light sits in the split selection.
 #[derive(Debug, Clone, Copy)]
 enum Slot {
     /// Index among the finite lights.
@@ -42,23 +46,28 @@ enum Slot {
     Infinite(u32),
 }
 
-/// The point-dependent part: finite lights by importance (mixed with power), infinite lights
-/// by power with a fixed total share.
+/// The lights of one kind, chosen among themselves.
 #[derive(Debug, Clone)]
-struct SpatialSelection {
-    /// Light index of each finite light.
-    finite: Vec<u32>,
-    /// Their emission bounds.
-    bounds: Vec<LightBounds>,
-    /// Each finite light's share of the finite lights' selection weight.
-    power_share: Vec<f32>,
-    /// Light index of each infinite light.
-    infinite: Vec<u32>,
-    /// Selection among the infinite lights, by their weights.
-    infinite_selection: Distribution1D,
+struct Group {
+    /// Light index of each member.
+    lights: Vec<u32>,
+    /// Selection among the members by their weights by power.
+    by_power: Distribution1D,
+    /// The members' emission bounds, when the group is weighed per point.
+    bounds: Option<Vec<EmitterBounds>>,
+}
+
+/// A fixed share for each kind of light, and within each kind a choice that may depend on the
+/// point.
+#[derive(Debug, Clone)]
+struct Split {
+    /// The finite lights.
+    finite: Group,
+    /// The infinite lights.
+    infinite: Group,
     /// Where each light sits.
     slot: Vec<Slot>,
-    /// Probability of choosing a finite light.
+    /// Probability of choosing a finite light (1 without infinite lights).
     finite_pmf: f32,
 }
 
@@ -66,62 +75,65 @@ struct SpatialSelection {
 const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
 
 impl LightSelection {
-    /// Builds the selection from each light's power (channel mean), whether it is infinite,
-    /// and, for finite lights, its emission bounds (`None` for infinite lights).
-    pub fn new(powers: &[f32], bounds: &[Option<LightBounds>]) -> Self {
+    /// Builds the selection from each light's power (channel mean) and emission bounds.
+    pub fn new(powers: &[f32], bounds: &[EmitterBounds]) -> Self {
         debug_assert_eq!(powers.len(), bounds.len());
-        let infinite: Vec<bool> = bounds.iter().map(Option::is_none).collect();
+        let infinite: Vec<bool> = bounds.iter().map(EmitterBounds::is_infinite).collect();
         let by_power = Distribution1D::new(&nee_light_weights(powers, &infinite));
-        let finite: Vec<u32> = (0..bounds.len() as u32)
-            .filter(|&i| bounds[i as usize].is_some())
-            .collect();
-        let finite_pmf: f64 = finite
-            .iter()
-            .map(|&i| by_power.pmf(i as usize) as f64)
-            .sum();
-        if finite.len() < 2 || finite.len() > MAX_SPATIAL_LIGHTS || finite_pmf <= 0.0 {
+        let members = |inf: bool| -> Vec<u32> {
+            (0..bounds.len() as u32)
+                .filter(|&i| infinite[i as usize] == inf)
+                .collect()
+        };
+        let (finite, infinite) = (members(false), members(true));
+        // Finite lights differ in position and direction; infinite ones only matter to each
+        // other when a directional light is among them (environments relate by power).
+        let weigh_finite = (2..=MAX_SPATIAL_LIGHTS).contains(&finite.len());
+        let weigh_infinite = (2..=MAX_SPATIAL_LIGHTS).contains(&infinite.len())
+            && infinite
+                .iter()
+                .any(|&i| matches!(bounds[i as usize], EmitterBounds::Directional { .. }));
+        if !weigh_finite && !weigh_infinite {
             return LightSelection {
                 by_power,
-                spatial: None,
+                split: None,
             };
         }
-        let infinite_lights: Vec<u32> = (0..bounds.len() as u32)
-            .filter(|&i| bounds[i as usize].is_none())
-            .collect();
-        let infinite_weights: Vec<f32> = infinite_lights
-            .iter()
-            .map(|&i| by_power.pmf(i as usize))
-            .collect();
+        let group = |lights: Vec<u32>, weigh: bool| Group {
+            by_power: Distribution1D::new(
+                &lights
+                    .iter()
+                    .map(|&i| by_power.pmf(i as usize))
+                    .collect::<Vec<f32>>(),
+            ),
+            bounds: weigh.then(|| lights.iter().map(|&i| bounds[i as usize]).collect()),
+            lights,
+        };
         let mut slot = vec![Slot::Finite(0); bounds.len()];
         for (k, &i) in finite.iter().enumerate() {
             slot[i as usize] = Slot::Finite(k as u32);
         }
-        for (k, &i) in infinite_lights.iter().enumerate() {
+        for (k, &i) in infinite.iter().enumerate() {
             slot[i as usize] = Slot::Infinite(k as u32);
         }
-        let spatial = SpatialSelection {
-            bounds: finite
-                .iter()
-                .map(|&i| bounds[i as usize].unwrap())
-                .collect(),
-            power_share: finite
-                .iter()
-                .map(|&i| (by_power.pmf(i as usize) as f64 / finite_pmf) as f32)
-                .collect(),
-            finite,
-            infinite: infinite_lights,
-            infinite_selection: Distribution1D::new(&infinite_weights),
+        let finite_pmf: f64 = finite
+            .iter()
+            .map(|&i| by_power.pmf(i as usize) as f64)
+            .sum();
+        let finite_pmf = if infinite.is_empty() {
+            1.0
+        } else {
+            finite_pmf.min(1.0) as f32
+        };
+        let split = Split {
+            finite: group(finite, weigh_finite),
+            infinite: group(infinite, weigh_infinite),
             slot,
-            // Exactly 1 without infinite lights.
-            finite_pmf: if infinite_weights.is_empty() {
-                1.0
-            } else {
-                finite_pmf.min(1.0) as f32
-            },
+            finite_pmf,
         };
         LightSelection {
             by_power,
-            spatial: Some(Box::new(spatial)),
+            split: Some(Box::new(split)),
         }
     }
 
@@ -132,37 +144,57 @@ impl LightSelection {
 
     /// Whether the selection depends on the point.
     pub fn is_spatial(&self) -> bool {
-        self.spatial.is_some()
+        self.split.is_some()
     }
 
     /// Picks a light for a point `p` with unit normal `n` (`Vec3::ZERO`: none) with `u` in
     /// [0, 1); returns (light index, probability, `u` rescaled to [0, 1) within the choice).
     #[inline]
     pub fn sample(&self, p: Vec3, n: Vec3, u: f32) -> (usize, f32, f32) {
-        match &self.spatial {
-            None => self.by_power.sample(u),
-            Some(s) => s.sample(p, n, u),
-        }
+        let Some(s) = &self.split else {
+            return self.by_power.sample(u);
+        };
+        let (group, share, u) = if s.infinite.lights.is_empty() || u < s.finite_pmf {
+            (&s.finite, s.finite_pmf, (u / s.finite_pmf).min(BELOW_ONE))
+        } else {
+            let rest = 1.0 - s.finite_pmf;
+            (
+                &s.infinite,
+                rest,
+                ((u - s.finite_pmf) / rest).clamp(0.0, BELOW_ONE),
+            )
+        };
+        let (k, pmf, u_rest) = group.sample(p, n, u);
+        (group.lights[k] as usize, share * pmf, u_rest)
     }
 
-    /// The probability that [`Self::sample`] picks light `i` at `p` with normal `n` (the point
-    /// matters for finite lights only).
+    /// The probability that [`Self::sample`] picks light `i` at `p` with normal `n`.
     #[inline]
     pub fn pmf(&self, p: Vec3, n: Vec3, i: u32) -> f32 {
-        match &self.spatial {
-            None => self.by_power.pmf(i as usize),
-            Some(s) => s.pmf(p, n, i),
+        let Some(s) = &self.split else {
+            return self.by_power.pmf(i as usize);
+        };
+        match s.slot[i as usize] {
+            Slot::Finite(k) => s.finite_pmf * s.finite.pmf(p, n, k as usize),
+            Slot::Infinite(k) => (1.0 - s.finite_pmf) * s.infinite.pmf(p, n, k as usize),
         }
     }
 }
 
-impl SpatialSelection {
-    /// Each finite light's selection weight at (`p`, `n`) into `w`; returns their sum.
+impl Group {
+    /// Each member's selection weight at (`p`, `n`) into `w`: its importance's share scaled to
+    /// 1 − [`POWER_SHARE`], plus its power share scaled to [`POWER_SHARE`]; returns their sum.
     #[inline]
-    fn weights(&self, p: Vec3, n: Vec3, w: &mut [f32; MAX_SPATIAL_LIGHTS]) -> f32 {
-        let k = self.bounds.len();
+    fn weights(
+        &self,
+        bounds: &[EmitterBounds],
+        p: Vec3,
+        n: Vec3,
+        w: &mut [f32; MAX_SPATIAL_LIGHTS],
+    ) -> f32 {
+        let k = bounds.len();
         let mut importance_sum = 0.0f32;
-        for (w, b) in w.iter_mut().zip(&self.bounds) {
+        for (w, b) in w.iter_mut().zip(bounds) {
             let i = b.importance(p, n);
             *w = if i.is_finite() && i > 0.0 { i } else { 0.0 };
             importance_sum += *w;
@@ -170,72 +202,59 @@ impl SpatialSelection {
         let mut total = 0.0f32;
         if importance_sum > 0.0 && importance_sum.is_finite() {
             let scale = (1.0 - POWER_SHARE) / importance_sum;
-            for (w, share) in w[..k].iter_mut().zip(&self.power_share) {
-                *w = *w * scale + POWER_SHARE * share;
+            for (j, w) in w[..k].iter_mut().enumerate() {
+                *w = *w * scale + POWER_SHARE * self.by_power.pmf(j);
                 total += *w;
             }
         } else {
-            // No light can reach the point by its bounds (or one overflows): by power.
-            for (w, share) in w[..k].iter_mut().zip(&self.power_share) {
-                *w = *share;
+            // No member can reach the point by its bounds (or one overflows): by power.
+            for (j, w) in w[..k].iter_mut().enumerate() {
+                *w = self.by_power.pmf(j);
                 total += *w;
             }
         }
         total
     }
 
+    /// Picks a member: (index in the group, probability within it, `u` rescaled).
     #[inline]
     fn sample(&self, p: Vec3, n: Vec3, u: f32) -> (usize, f32, f32) {
-        if self.infinite.is_empty() || u < self.finite_pmf {
-            let u = (u / self.finite_pmf).min(BELOW_ONE);
-            let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
-            let total = self.weights(p, n, &mut w);
-            let target = u * total;
-            // The first light whose cumulative weight passes the target; rounding can leave
-            // the target past the last one, which then takes it.
-            let k = self.bounds.len();
-            let mut below = 0.0f32;
-            let mut chosen = None;
-            for (j, &wj) in w[..k].iter().enumerate() {
-                if wj > 0.0 {
-                    chosen = Some((j, below));
-                    if target < below + wj {
-                        break;
-                    }
-                    below += wj;
+        let Some(bounds) = &self.bounds else {
+            return self.by_power.sample(u);
+        };
+        let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
+        let total = self.weights(bounds, p, n, &mut w);
+        let target = u * total;
+        // The first member whose cumulative weight passes the target; rounding can leave the
+        // target past the last one, which then takes it.
+        let mut below = 0.0f32;
+        let mut chosen = None;
+        for (j, &wj) in w[..bounds.len()].iter().enumerate() {
+            if wj > 0.0 {
+                chosen = Some((j, below));
+                if target < below + wj {
+                    break;
                 }
+                below += wj;
             }
-            let Some((chosen, below)) = chosen else {
-                return (self.finite[0] as usize, 0.0, 0.0);
-            };
-            let wj = w[chosen];
-            let u_rest = ((target - below) / wj).clamp(0.0, BELOW_ONE);
-            (
-                self.finite[chosen] as usize,
-                self.finite_pmf * (wj / total),
-                u_rest,
-            )
-        } else {
-            let u = ((u - self.finite_pmf) / (1.0 - self.finite_pmf)).clamp(0.0, BELOW_ONE);
-            let (j, pmf, u_rest) = self.infinite_selection.sample(u);
-            (
-                self.infinite[j] as usize,
-                (1.0 - self.finite_pmf) * pmf,
-                u_rest,
-            )
         }
+        let Some((j, below)) = chosen else {
+            return (0, 0.0, 0.0);
+        };
+        let wj = w[j];
+        let u_rest = ((target - below) / wj).clamp(0.0, BELOW_ONE);
+        (j, wj / total, u_rest)
     }
 
+    /// The probability that [`Self::sample`] picks member `k`.
     #[inline]
-    fn pmf(&self, p: Vec3, n: Vec3, i: u32) -> f32 {
-        match self.slot[i as usize] {
-            Slot::Finite(j) => {
-                let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
-                let total = self.weights(p, n, &mut w);
-                self.finite_pmf * (w[j as usize] / total)
-            }
-            Slot::Infinite(j) => (1.0 - self.finite_pmf) * self.infinite_selection.pmf(j as usize),
-        }
+    fn pmf(&self, p: Vec3, n: Vec3, k: usize) -> f32 {
+        let Some(bounds) = &self.bounds else {
+            return self.by_power.pmf(k);
+        };
+        let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
+        let total = self.weights(bounds, p, n, &mut w);
+        w[k] / total
     }
 }
 
@@ -292,19 +311,20 @@ pub fn nee_light_weights(powers: &[f32], infinite: &[bool]) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lights::bounds::LightBounds;
     use crate::sampling::{rng_for, UniformSource};
 
     /// Three finite lights — a point light, a downward-facing disk-like emitter and a narrow
     /// beam — and optionally a sky.
-    fn lights(with_sky: bool) -> (Vec<f32>, Vec<Option<LightBounds>>) {
+    fn lights(with_sky: bool) -> (Vec<f32>, Vec<EmitterBounds>) {
         let mut powers = vec![40.0, 5.0, 2.0];
         let mut bounds = vec![
-            Some(LightBounds::omnidirectional(
+            EmitterBounds::Finite(LightBounds::omnidirectional(
                 Vec3::new(10.0, 10.0, 0.0),
                 0.0,
                 40.0 / (4.0 * std::f32::consts::PI),
             )),
-            Some(LightBounds::cone(
+            EmitterBounds::Finite(LightBounds::cone(
                 Vec3::new(0.0, 2.0, 0.0),
                 0.5,
                 5.0 / std::f32::consts::PI,
@@ -312,7 +332,7 @@ mod tests {
                 1.0,
                 0.0,
             )),
-            Some(LightBounds::cone(
+            EmitterBounds::Finite(LightBounds::cone(
                 Vec3::new(-2.0, 2.0, 0.0),
                 0.0,
                 2.0 / 0.1,
@@ -323,7 +343,7 @@ mod tests {
         ];
         if with_sky {
             powers.push(500.0);
-            bounds.push(None);
+            bounds.push(EmitterBounds::Environment { irradiance: 3.0 });
         }
         (powers, bounds)
     }
@@ -411,12 +431,56 @@ mod tests {
 
     #[test]
     fn one_finite_light_or_too_many_select_by_power() {
-        let one = LightSelection::new(&[3.0, 100.0], &[lights(false).1[0], None]);
+        let sky = EmitterBounds::Environment { irradiance: 3.0 };
+        let one = LightSelection::new(&[3.0, 100.0], &[lights(false).1[0], sky]);
         assert!(!one.is_spatial());
         let many = vec![1.0; MAX_SPATIAL_LIGHTS + 1];
-        let bounds = vec![Some(LightBounds::omnidirectional(Vec3::ZERO, 0.0, 1.0)); many.len()];
+        let point = LightBounds::omnidirectional(Vec3::ZERO, 0.0, 1.0);
+        let bounds = vec![EmitterBounds::Finite(point); many.len()];
         let sel = LightSelection::new(&many, &bounds);
         assert!(!sel.is_spatial());
         assert_eq!(sel.pmf(Vec3::X, Vec3::Y, 3), sel.by_power().pmf(3));
+    }
+
+    #[test]
+    fn a_sun_and_a_sky_share_by_the_irradiance_each_delivers() {
+        // Sun: irradiance 3 from straight above; sky: π·L = 3 on any surface; and one point
+        // light, so the infinite lights have a fixed share (⅔ for two: their power is far
+        // larger).
+        let point = LightBounds::omnidirectional(Vec3::new(0.0, 3.0, 0.0), 0.0, 1.0);
+        let bounds = [
+            EmitterBounds::Finite(point),
+            EmitterBounds::Directional {
+                toward: Vec3::Y,
+                irradiance: 3.0,
+            },
+            EmitterBounds::Environment { irradiance: 3.0 },
+        ];
+        let sel = LightSelection::new(&[12.0, 3000.0, 12000.0], &bounds);
+        assert!(sel.is_spatial());
+        // By power the sky gets 4/5 of the infinite share.
+        assert!((sel.by_power().pmf(2) / sel.by_power().pmf(1) - 4.0).abs() < 1e-4);
+        let p = Vec3::ZERO;
+        let share = 2.0 / 3.0;
+        let facing = sel.pmf(p, Vec3::Y, 1) / share;
+        let grazing = sel.pmf(p, Vec3::new(1.0, 0.01, 0.0).normalize(), 1) / share;
+        // Facing the sun: 0.9·½ + 0.1·⅕; on a wall the sun delivers almost nothing.
+        assert!((facing - (0.45 + 0.02)).abs() < 1e-5, "{facing}");
+        assert!(
+            (grazing - (0.9 * 0.03 / 3.03 + 0.02)).abs() < 1e-4,
+            "{grazing}"
+        );
+        for n in [Vec3::Y, Vec3::X, Vec3::ZERO] {
+            assert!((sel.pmf(p, n, 0) - (1.0 - share)).abs() < 1e-6);
+            let sum: f32 = (0..3).map(|i| sel.pmf(p, n, i)).sum();
+            assert!((sum - 1.0).abs() < 1e-6);
+        }
+        // Two environments relate by power: selected by power, as before.
+        let skies = [
+            EmitterBounds::Finite(point),
+            EmitterBounds::Environment { irradiance: 3.0 },
+            EmitterBounds::Environment { irradiance: 1.0 },
+        ];
+        assert!(!LightSelection::new(&[12.0, 3000.0, 1000.0], &skies).is_spatial());
     }
 }

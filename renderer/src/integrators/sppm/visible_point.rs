@@ -156,7 +156,8 @@ fn emission_along(
             if !scene.has_environment() {
                 return Rgb::ZERO;
             }
-            scene.environment(ray.d) * bsdf_mis(last, || scene.pdf_li_environment(ray.d))
+            scene.environment(ray.d)
+                * bsdf_mis(last, || scene.pdf_li_environment(last.p, last.n, ray.d))
         }
     }
 }
