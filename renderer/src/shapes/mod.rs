@@ -187,8 +187,8 @@ impl Shape {
     }
 }
 
-/// The narrowest cone about the normalised mean of `normals` containing them all, as (axis,
-/// cos θₒ); (+z, −1) — every direction — when they do not fit in a hemisphere about their mean.
+/// The cone about the normalised mean of `normals` that contains them all, as (axis, cos θₒ);
+/// (+z, −1) — every direction — when they do not fit in a hemisphere about their mean.
 pub fn normal_cone(normals: impl Iterator<Item = Vec3> + Clone) -> (Vec3, f32) {
     let sum: Vec3 = normals.clone().sum();
     let Some(axis) = sum.try_normalize() else {

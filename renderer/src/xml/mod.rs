@@ -833,6 +833,20 @@ impl<'a> Builder<'a> {
     /// The texture declared by `el` (a `<texture>` or a `<ref>` to one); built once per id.
     pub fn texture_value(&mut self, el: &'a Element) -> Result<Texture, SceneError> {
         let target = self.deref(el)?;
+        if target.tag == "spectrum" && target.attr("type").is_some() {
+            // A typed spectrum declared at the top level: Mitsuba's spectra are textures.
+            if let Some(t) = target.attr("id").and_then(|id| self.texture_ids.get(id)) {
+                return Ok(t.clone());
+            }
+            let Some(props::Value::Rgb(c)) = props::typed_spectrum(self, target)? else {
+                return Err(el.error(format!("{} has no value to use", target.describe())));
+            };
+            let t = Texture::Constant(c);
+            if let Some(id) = target.attr("id") {
+                self.texture_ids.insert(id.to_owned(), t.clone());
+            }
+            return Ok(t);
+        }
         if target.tag != "texture" {
             return Err(el.error(format!(
                 "expected a <texture>, but this refers to {}",
@@ -865,7 +879,8 @@ impl<'a> Builder<'a> {
                 "bsdf" => {
                     self.bsdf_index(el)?;
                 }
-                "texture" => {
+                // A typed spectrum (Mitsuba: a texture) declared for `<ref>`s.
+                "texture" | "spectrum" if el.tag == "texture" || el.attr("type").is_some() => {
                     self.texture_value(el)?;
                 }
                 "shape" => shapes::build_shape(self, el)?,
@@ -890,7 +905,7 @@ impl<'a> Builder<'a> {
                     match target.tag.as_str() {
                         "shape" => shapes::build_shape(self, target)?,
                         "emitter" => emitters::build_emitter(self, target)?,
-                        "bsdf" | "texture" => {}
+                        "bsdf" | "texture" | "spectrum" => {}
                         _ => {
                             let err = el.error(format!(
                                 "a top-level <ref> to {} is not supported (only shapes, emitters, BSDFs and textures)",

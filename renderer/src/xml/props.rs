@@ -176,7 +176,7 @@ fn read_spd(el: &Element, path: &std::path::Path) -> Result<SpectrumValue, Scene
 /// is a grey, `srgb` (`color`, in [0, 1] unless `unbounded`) its colour, `d65` (`scale`,
 /// optional `color`) the colour times the scale (white by default). The measured spectra
 /// (`blackbody`, `regular`, `irregular`) have no RGB form: Mitsuba's RGB variants refuse them too.
-fn typed_spectrum<'a>(
+pub(crate) fn typed_spectrum<'a>(
     b: &mut Builder<'a>,
     el: &'a Element,
 ) -> Result<Option<Value<'a>>, SceneError> {
