@@ -313,8 +313,9 @@ def finish(out, rows, flagged, count):
 def restyled(text, folder):
     """The same scene in Mitsuba's other spellings: the sensor's sampler and the film's rfilter
     declared at the top level and named by a <ref>, every <rgb> value as an unbounded
-    <spectrum type="srgb">, and the scene's own files (textures, meshes) moved into an
-    `assets` subfolder that a <path> names."""
+    <spectrum type="srgb"> (every second one declared at the top level and named by a <ref>),
+    and the scene's own files (textures, meshes) moved into an `assets` subfolder that a
+    <path> names."""
     top = []
     for tag, ident in (("sampler", "fuzz_sampler"), ("rfilter", "fuzz_rfilter")):
         m = re.search(rf'<{tag}\b[^>]*?(/>|>.*?</{tag}>)', text, re.S)
@@ -322,9 +323,23 @@ def restyled(text, folder):
             element = m.group(0)
             top.append(element.replace(f"<{tag} ", f'<{tag} id="{ident}" ', 1))
             text = text.replace(element, f'<ref id="{ident}"/>', 1)
-    text = re.sub(r'<rgb name="([A-Za-z0-9_]+)" value="([^"]*)"/>',
-                  r'<spectrum type="srgb" name="\1"><rgb name="color" value="\2"/>'
-                  r'<boolean name="unbounded" value="true"/></spectrum>', text)
+    # Every second colour is declared at the top level as a typed spectrum (Mitsuba's spectra
+    # are textures) and named by a <ref> where it was; the others become inline spectra.
+    declared = []
+
+    def colour(m):
+        name, value = m.group(1), m.group(2)
+        spectrum = (f'<rgb name="color" value="{value}"/>'
+                    '<boolean name="unbounded" value="true"/></spectrum>')
+        colour.count += 1
+        if colour.count % 2 == 0:
+            ident = f"fuzz_colour{len(declared)}"
+            declared.append(f'<spectrum type="srgb" id="{ident}">{spectrum}')
+            return f'<ref name="{name}" id="{ident}"/>'
+        return f'<spectrum type="srgb" name="{name}">{spectrum}'
+    colour.count = 0
+    text = re.sub(r'<rgb name="([A-Za-z0-9_]+)" value="([^"]*)"/>', colour, text)
+    top += declared
     assets = [f for f in folder.iterdir() if f.is_file() and f.suffix != ".xml"]
     if assets:
         (folder / "assets").mkdir(exist_ok=True)
