@@ -14,7 +14,7 @@
 //! scene) takes most of the samples everywhere, and the lights that actually light a point are
 //! drawn rarely, with large weights (speckles).
 
-use super::bounds::EmitterBounds;
+use super::bounds::{EmitterBounds, LightBounds4};
 use crate::sampling::Distribution1D;
 use glam::Vec3;
 
@@ -54,7 +54,16 @@ struct Group {
     /// Selection among the members by their weights by power.
     by_power: Distribution1D,
     /// The members' emission bounds, when the group is weighed per point.
-    bounds: Option<Vec<EmitterBounds>>,
+    bounds: Option<Weighing>,
+}
+
+/// What a group weighs its members by.
+#[derive(Debug, Clone)]
+enum Weighing {
+    /// Finite lights, four to a pack (4-wide lanes).
+    Finite(Vec<LightBounds4>),
+    /// Infinite lights, one by one (a sun and a sky or two).
+    Infinite(Vec<EmitterBounds>),
 }
 
 /// A fixed share for each kind of light, and within each kind a choice that may depend on the
@@ -99,15 +108,30 @@ impl LightSelection {
                 split: None,
             };
         }
-        let group = |lights: Vec<u32>, weigh: bool| Group {
-            by_power: Distribution1D::new(
-                &lights
-                    .iter()
-                    .map(|&i| by_power.pmf(i as usize))
-                    .collect::<Vec<f32>>(),
-            ),
-            bounds: weigh.then(|| lights.iter().map(|&i| bounds[i as usize]).collect()),
-            lights,
+        let group = |lights: Vec<u32>, weigh: bool| {
+            let members: Vec<EmitterBounds> = lights.iter().map(|&i| bounds[i as usize]).collect();
+            let finite: Vec<_> = members
+                .iter()
+                .filter_map(|b| match b {
+                    EmitterBounds::Finite(f) => Some(*f),
+                    _ => None,
+                })
+                .collect();
+            let weighing = if finite.len() == members.len() {
+                Weighing::Finite(finite.chunks(4).map(LightBounds4::new).collect())
+            } else {
+                Weighing::Infinite(members)
+            };
+            Group {
+                by_power: Distribution1D::new(
+                    &lights
+                        .iter()
+                        .map(|&i| by_power.pmf(i as usize))
+                        .collect::<Vec<f32>>(),
+                ),
+                bounds: weigh.then_some(weighing),
+                lights,
+            }
         };
         let mut slot = vec![Slot::Finite(0); bounds.len()];
         for (k, &i) in finite.iter().enumerate() {
@@ -187,16 +211,27 @@ impl Group {
     #[inline]
     fn weights(
         &self,
-        bounds: &[EmitterBounds],
+        weighing: &Weighing,
         p: Vec3,
         n: Vec3,
         w: &mut [f32; MAX_SPATIAL_LIGHTS],
     ) -> f32 {
-        let k = bounds.len();
+        let k = self.lights.len();
+        match weighing {
+            Weighing::Finite(packs) => {
+                for (lanes, pack) in w.chunks_exact_mut(4).zip(packs) {
+                    lanes.copy_from_slice(&pack.importance(p, n).to_array());
+                }
+            }
+            Weighing::Infinite(bounds) => {
+                for (w, b) in w.iter_mut().zip(bounds) {
+                    *w = b.importance(p, n);
+                }
+            }
+        }
         let mut importance_sum = 0.0f32;
-        for (w, b) in w.iter_mut().zip(bounds) {
-            let i = b.importance(p, n);
-            *w = if i.is_finite() && i > 0.0 { i } else { 0.0 };
+        for w in &mut w[..k] {
+            *w = if w.is_finite() && *w > 0.0 { *w } else { 0.0 };
             importance_sum += *w;
         }
         let mut total = 0.0f32;
@@ -219,17 +254,17 @@ impl Group {
     /// Picks a member: (index in the group, probability within it, `u` rescaled).
     #[inline]
     fn sample(&self, p: Vec3, n: Vec3, u: f32) -> (usize, f32, f32) {
-        let Some(bounds) = &self.bounds else {
+        let Some(weighing) = &self.bounds else {
             return self.by_power.sample(u);
         };
         let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
-        let total = self.weights(bounds, p, n, &mut w);
+        let total = self.weights(weighing, p, n, &mut w);
         let target = u * total;
         // The first member whose cumulative weight passes the target; rounding can leave the
         // target past the last one, which then takes it.
         let mut below = 0.0f32;
         let mut chosen = None;
-        for (j, &wj) in w[..bounds.len()].iter().enumerate() {
+        for (j, &wj) in w[..self.lights.len()].iter().enumerate() {
             if wj > 0.0 {
                 chosen = Some((j, below));
                 if target < below + wj {
@@ -249,11 +284,11 @@ impl Group {
     /// The probability that [`Self::sample`] picks member `k`.
     #[inline]
     fn pmf(&self, p: Vec3, n: Vec3, k: usize) -> f32 {
-        let Some(bounds) = &self.bounds else {
+        let Some(weighing) = &self.bounds else {
             return self.by_power.pmf(k);
         };
         let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
-        let total = self.weights(bounds, p, n, &mut w);
+        let total = self.weights(weighing, p, n, &mut w);
         w[k] / total
     }
 }
