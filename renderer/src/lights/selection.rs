@@ -80,6 +80,9 @@ struct Split {
     finite_pmf: f32,
 }
 
+/// The largest importance counted (the sum of [`MAX_SPATIAL_LIGHTS`] of them stays finite).
+const IMPORTANCE_CAP: f32 = 1e30;
+
 /// The largest f32 below 1: a rescaled random number must stay in [0, 1).
 const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
 
@@ -231,7 +234,9 @@ impl Group {
         }
         let mut importance_sum = 0.0f32;
         for w in &mut w[..k] {
-            *w = if w.is_finite() && *w > 0.0 { *w } else { 0.0 };
+            // NaN (a degenerate point) counts as nothing; an overflow (a point on top of a
+            // point light) as very much, without overflowing the sum.
+            *w = if *w > 0.0 { w.min(IMPORTANCE_CAP) } else { 0.0 };
             importance_sum += *w;
         }
         let mut total = 0.0f32;
@@ -517,5 +522,22 @@ mod tests {
             EmitterBounds::Environment { irradiance: 1.0 },
         ];
         assert!(!LightSelection::new(&[12.0, 3000.0, 1000.0], &skies).is_spatial());
+    }
+
+    #[test]
+    fn a_point_on_top_of_a_point_light_picks_that_light() {
+        let near = LightBounds::omnidirectional(Vec3::ZERO, 0.0, 1.0);
+        let far = LightBounds::omnidirectional(Vec3::new(5.0, 0.0, 0.0), 0.0, 1.0);
+        let sel = LightSelection::new(
+            &[1.0, 1.0],
+            &[EmitterBounds::Finite(near), EmitterBounds::Finite(far)],
+        );
+        // 1/d² overflows to infinity: the near light takes all but the defensive share.
+        let p = Vec3::new(1e-20, 0.0, 0.0);
+        assert!(near.importance(p, Vec3::ZERO).is_infinite());
+        let want = 1.0 - POWER_SHARE * 0.5;
+        assert!((sel.pmf(p, Vec3::ZERO, 0) - want).abs() < 1e-6);
+        // A NaN point falls back to power.
+        assert_eq!(sel.pmf(Vec3::NAN, Vec3::ZERO, 0), 0.5);
     }
 }
