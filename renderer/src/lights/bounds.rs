@@ -82,6 +82,37 @@ impl LightBounds {
         }
     }
 
+    /// Centre of the bounding sphere.
+    pub fn center(&self) -> Vec3 {
+        self.center
+    }
+
+    /// Bounds of two lights together: a sphere holding both spheres, a cone of axes holding
+    /// both cones, the wider falloff, the summed intensity.
+    pub fn union(&self, other: &LightBounds) -> LightBounds {
+        let (a, b) = (self, other);
+        let d = (b.center - a.center).length();
+        let (center, radius) = if d + b.radius <= a.radius {
+            (a.center, a.radius)
+        } else if d + a.radius <= b.radius {
+            (b.center, b.radius)
+        } else {
+            let r = 0.5 * (d + a.radius + b.radius);
+            (a.center + (b.center - a.center) * ((r - a.radius) / d), r)
+        };
+        // Slack for the rounding of the new centre.
+        let radius = radius * (1.0 + 1e-5) + 1e-6;
+        let (axis, cos_o) = cone_union((a.axis, a.cos_o), (b.axis, b.cos_o));
+        LightBounds::cone(
+            center,
+            radius,
+            a.intensity + b.intensity,
+            axis,
+            cos_o,
+            a.cos_e.min(b.cos_e),
+        )
+    }
+
     /// A conservative estimate of the irradiance the light delivers at `p` on a surface with
     /// unit normal `n` (either side; `Vec3::ZERO` for no surface): intensity / distance²,
     /// times the cosine of the smallest angle the bounds allow between the emission axes and
@@ -265,6 +296,34 @@ impl EmitterBounds {
     pub fn is_infinite(&self) -> bool {
         !matches!(self, EmitterBounds::Finite(_))
     }
+}
+
+/// The narrowest cone holding two cones (axis, cos θ), as pbrt-v4's `Union` of direction
+/// cones; cos θ = −1 for all directions.
+fn cone_union(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
+    use std::f32::consts::PI;
+    let all = (Vec3::Z, -1.0);
+    if a.1 <= -1.0 || b.1 <= -1.0 {
+        return all;
+    }
+    let (theta_a, theta_b) = (a.1.clamp(-1.0, 1.0).acos(), b.1.clamp(-1.0, 1.0).acos());
+    let theta_d = a.0.dot(b.0).clamp(-1.0, 1.0).acos();
+    if (theta_d + theta_b).min(PI) <= theta_a {
+        return a;
+    }
+    if (theta_d + theta_a).min(PI) <= theta_b {
+        return b;
+    }
+    let theta_o = 0.5 * (theta_a + theta_d + theta_b);
+    if theta_o >= PI {
+        return all;
+    }
+    let Some(turn) = a.0.cross(b.0).try_normalize() else {
+        return all;
+    };
+    let axis = glam::Quat::from_axis_angle(turn, theta_o - theta_a) * a.0;
+    // Slack for the rounding of the rotation.
+    (axis, (theta_o.cos() - 1e-5).max(-1.0))
 }
 
 /// A sphere (centre, radius) containing the box `lo`..`hi`.
@@ -473,5 +532,47 @@ mod tests {
             }
             assert!(lanes[count..].iter().all(|&x| x == 0.0));
         }
+    }
+
+    /// The union of two bounds is positive wherever either is: a cluster of lights is never
+    /// ruled out where one of its lights can shine.
+    #[test]
+    fn a_union_covers_both_lights() {
+        use crate::sampling::{rng_for, UniformSource};
+        let mut rng = rng_for(29, 0, 0);
+        let random_bounds = |rng: &mut crate::sampling::Pcg32| {
+            let c = (rng.next_2d().extend(rng.next_f32()) - 0.5) * 4.0;
+            let axis = (rng.next_2d().extend(rng.next_f32()) - 0.5).normalize_or(Vec3::Z);
+            let r = if rng.next_f32() < 0.3 {
+                0.0
+            } else {
+                rng.next_f32()
+            };
+            match (rng.next_f32() * 3.0) as u32 {
+                0 => LightBounds::omnidirectional(c, r, 1.0),
+                1 => LightBounds::cone(c, r, 1.0, axis, 1.0, 0.0),
+                _ => LightBounds::cone(c, 0.0, 1.0, axis, rng.next_f32(), rng.next_f32()),
+            }
+        };
+        let mut covered = 0;
+        for _ in 0..400 {
+            let (a, b) = (random_bounds(&mut rng), random_bounds(&mut rng));
+            let u = a.union(&b);
+            for _ in 0..50 {
+                let p = (rng.next_2d().extend(rng.next_f32()) - 0.5) * 10.0;
+                let n = (rng.next_2d().extend(rng.next_f32()) - 0.5).normalize_or(Vec3::Y);
+                if a.importance(p, n) > 0.0 || b.importance(p, n) > 0.0 {
+                    covered += 1;
+                    assert!(u.importance(p, n) > 0.0, "{a:?} ∪ {b:?} = {u:?} at {p}");
+                }
+            }
+        }
+        assert!(covered > 5_000, "{covered}");
+        // Two opposite flat emitters: together they shine everywhere.
+        let up = LightBounds::cone(Vec3::ZERO, 1.0, 1.0, Vec3::Y, 1.0, 0.0);
+        let down = LightBounds::cone(Vec3::ZERO, 1.0, 1.0, -Vec3::Y, 1.0, 0.0);
+        let both = up.union(&down);
+        assert!(both.importance(Vec3::new(0.0, -5.0, 0.0), Vec3::ZERO) > 0.0);
+        assert!(both.importance(Vec3::new(0.0, 5.0, 0.0), Vec3::ZERO) > 0.0);
     }
 }
