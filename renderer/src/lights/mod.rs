@@ -3,7 +3,9 @@
 //! - `sample_li`: a direction towards the light from a reference point, for next-event estimation,
 //! - `pdf_li`: the solid-angle density of that strategy, for MIS with BSDF sampling,
 //! - `sample_emission`: a ray leaving the light with its flux weight, for photon tracing,
-//! - `power`: the emitted power, used to select lights proportionally to it.
+//! - `power`: the emitted power, used to select lights proportionally to it,
+//! - `bounds`: what bounds its emission ([`bounds`]), for choosing lights by what they can
+//!   deliver to a point ([`selection`]).
 //!
 //! Densities and weights returned here do NOT include the light-selection probability; the
 //! scene ([`crate::scene::Scene`]) folds that in.
