@@ -21,7 +21,7 @@ use glam::Vec3;
 
 /// Most lights of one kind (finite or infinite) the selection weighs one by one (every light
 /// sample and every MIS density evaluates each one's importance). More finite lights, up to
-/// this number squared, are clustered ([`Clusters`]); beyond that, and for more infinite
+/// this number squared, are clustered (`Clusters`); beyond that, and for more infinite
 /// lights, that kind is selected by power.
 pub const MAX_SPATIAL_LIGHTS: usize = 64;
 
