@@ -398,15 +398,10 @@ impl Scene {
 
         let accel = Bvh4Accel::build(&shapes)?;
         let emitter_accel = Bvh4Accel::build_subset(&shapes, |i| shape_info[i].light.is_some())?;
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for s in &shapes {
-            for p in 0..s.primitive_count() as u32 {
-                let (a, b) = s.primitive_bounds(p);
-                lo = lo.min(a.into());
-                hi = hi.max(b.into());
-            }
-        }
+        let (mut lo, mut hi) = shapes.iter().map(Shape::bounds).fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), (a, b)| (lo.min(a), hi.max(b)),
+        );
         if shapes.is_empty() {
             lo = Vec3::ZERO;
             hi = Vec3::ZERO;

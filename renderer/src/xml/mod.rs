@@ -833,21 +833,9 @@ impl<'a> Builder<'a> {
     /// The texture declared by `el` (a `<texture>` or a `<ref>` to one); built once per id.
     pub fn texture_value(&mut self, el: &'a Element) -> Result<Texture, SceneError> {
         let target = self.deref(el)?;
-        if target.tag == "spectrum" && target.attr("type").is_some() {
-            // A typed spectrum declared at the top level: Mitsuba's spectra are textures.
-            if let Some(t) = target.attr("id").and_then(|id| self.texture_ids.get(id)) {
-                return Ok(t.clone());
-            }
-            let Some(props::Value::Rgb(c)) = props::typed_spectrum(self, target)? else {
-                return Err(el.error(format!("{} has no value to use", target.describe())));
-            };
-            let t = Texture::Constant(c);
-            if let Some(id) = target.attr("id") {
-                self.texture_ids.insert(id.to_owned(), t.clone());
-            }
-            return Ok(t);
-        }
-        if target.tag != "texture" {
+        // A typed spectrum declared at the top level: Mitsuba's spectra are textures.
+        let spectrum = target.tag == "spectrum" && target.attr("type").is_some();
+        if !spectrum && target.tag != "texture" {
             return Err(el.error(format!(
                 "expected a <texture>, but this refers to {}",
                 target.describe()
@@ -857,10 +845,17 @@ impl<'a> Builder<'a> {
         if let Some(t) = target.attr("id").and_then(|id| self.texture_ids.get(id)) {
             return Ok(t.clone());
         }
-        let guard = self.enter(target)?;
-        let built = textures::build_texture(self, target);
-        self.leave(guard);
-        let t = built?;
+        let t = if spectrum {
+            let Some(props::Value::Rgb(c)) = props::typed_spectrum(self, target)? else {
+                return Err(el.error(format!("{} has no value to use", target.describe())));
+            };
+            Texture::Constant(c)
+        } else {
+            let guard = self.enter(target)?;
+            let built = textures::build_texture(self, target);
+            self.leave(guard);
+            built?
+        };
         if per_shape {
             return Ok(t);
         }
