@@ -26,7 +26,9 @@ sample, as Mitsuba 3.9 weighs delta lights wrongly for more: mitsuba3 issue #186
 samples). `--hide-emitters` sets the integrator's `hide_emitters` and leaves `mask` out of the
 scenes: with it, Mitsuba 3.9.1's `path` drops the light a mask reflects whenever the camera path
 then passes through the mask (its `valid_ray` starts false, the quirk described at `material`).
-Without --hide-emitters a seed's scenes stay the ones earlier runs saw.
+Without --hide-emitters a seed's scenes stay the ones earlier runs saw. `--mesh-lights` draws
+area lights only and turns every rectangle and sphere light into an emitting mesh (a cube, an
+icosphere or a torus).
 
 `--extended` draws the scenes from scripts/fuzz_extended.py instead: bitmap textures on every
 parameter that takes one, normal and bump maps, anisotropic and Beckmann microfacets, named and
@@ -352,6 +354,79 @@ def restyled(text, folder):
     return text[:at] + "\n    " + "\n    ".join(top) + text[at:]
 
 
+def torus_mesh(rings, sides, small):
+    """A torus about +y (ring radius 1, tube radius `small`): positions, outward normals, uvs
+    and counter-clockwise (outward) quads."""
+    pos, nrm, uv, quads = [], [], [], []
+    for i in range(rings):
+        a = 2 * np.pi * i / rings
+        for j in range(sides):
+            b = 2 * np.pi * j / sides
+            rr = 1 + small * np.cos(b)
+            pos.append((rr * np.cos(a), small * np.sin(b), rr * np.sin(a)))
+            nrm.append((np.cos(b) * np.cos(a), np.sin(b), np.cos(b) * np.sin(a)))
+            uv.append((i / rings, j / sides))
+    at = lambda i, j: (i % rings) * sides + (j % sides)  # noqa: E731
+    for i in range(rings):
+        for j in range(sides):
+            quads.append((at(i, j), at(i, j + 1), at(i + 1, j + 1), at(i + 1, j)))
+    return pos, nrm, uv, quads
+
+
+def mesh_lights(text, folder, seed, index):
+    """The scene with each rectangular and spherical area light (the generators'
+    `area_rectangle` and area spheres) turned into an emitting mesh in the same place: a `cube`, an icosphere or a
+    torus written as OBJ next to the scene (vertex normals or not, tilted), sometimes with
+    `flip_normals` — for NEE's choice of a mesh light's triangle by importance."""
+    from make_scene_assets import icosphere, write_obj
+
+    r = random.Random(seed * 1_000_037 + index + 29)
+    count = [0]
+
+    def mesh(m):
+        transform, emitter = m.group(1), m.group(2)
+        kind = r.choice(["cube", "icosphere", "torus"])
+        flip = '<boolean name="flip_normals" value="true"/>' if r.random() < 0.15 else ""
+        tilt = (f'<rotate x="1" angle="{r.uniform(-60, 60):.1f}"/>'
+                f'<rotate z="1" angle="{r.uniform(-60, 60):.1f}"/>')
+        # The tilt goes first: the rectangle's own transform still places and sizes it.
+        transform = transform.replace('<transform name="to_world">', f'<transform name="to_world">{tilt}', 1)
+        if kind == "cube":  # half the rectangle's size: a cube spans [-1, 1]³
+            transform = re.sub(r'<scale value="([0-9.]+)"/>', lambda v: f'<scale value="{0.5 * float(v.group(1)):.3f}"/>',
+                               transform, count=1)
+            return f'<shape type="cube">{flip}{transform}<emitter type="area">{emitter}</emitter></shape>'
+        count[0] += 1
+        name = f"light{count[0]}.obj"
+        normals = r.random() < 0.5
+        if kind == "icosphere":
+            pos, tris = icosphere(r.randint(1, 3))
+            uv = [(0.5 + np.arctan2(p[0], p[2]) / (2 * np.pi), np.arccos(max(-1, min(1, p[1]))) / np.pi) for p in pos]
+            write_obj(folder / name, [tuple(0.5 * c for c in p) for p in pos], pos if normals else None, uv, tris,
+                      "fuzz emitting icosphere")
+        else:
+            pos, nrm, uv, quads = torus_mesh(r.randint(8, 32), r.randint(4, 12), r.uniform(0.1, 0.4))
+            write_obj(folder / name, [tuple(0.6 * c for c in p) for p in pos], nrm if normals else None, uv, quads,
+                      "fuzz emitting torus")
+        return (f'<shape type="obj"><string name="filename" value="{name}"/>{flip}{transform}'
+                f'<emitter type="area">{emitter}</emitter></shape>')
+
+    # (?:(?!</x>).)* stays inside one element: a non-light rectangle must not match up to the
+    # next shape's emitter.
+    text = re.sub(r'<shape type="rectangle">(<transform name="to_world">(?:(?!</transform>).)*</transform>)'
+                  r'<emitter type="area">((?:(?!</emitter>).)*)</emitter></shape>', mesh, text, flags=re.S)
+
+    def sphere(m):
+        x, y, z, radius, emitter = m.groups()
+        # Twice the radius: the meshes above are half a unit across.
+        place = (f'<transform name="to_world"><scale value="{2 * float(radius):.3f}"/>'
+                 f'<translate x="{x}" y="{y}" z="{z}"/></transform>')
+        return mesh(re.match(r"(.*)\x00(.*)", f"{place}\x00{emitter}", re.S))
+
+    return re.sub(r'<shape type="sphere"><point name="center" x="([-0-9.]+)" y="([-0-9.]+)" z="([-0-9.]+)"/>'
+                  r'<float name="radius" value="([0-9.]+)"/><emitter type="area">((?:(?!</emitter>).)*)</emitter></shape>',
+                  sphere, text, flags=re.S)
+
+
 def legacy_names(text):
     """The scene as a Mitsuba 0.6 file: version 0.6.0 and every parameter name in camelCase
     (`int_ior` -> `intIor`), which Mitsuba 3 turns back (`camel_to_underscore_case`);
@@ -375,6 +450,9 @@ def main():
                     help="write each scene in Mitsuba's other spellings: the sampler and rfilter at "
                          "the top level named by <ref>, colours as <spectrum type=\"srgb\">, the "
                          "scene's files in a subfolder found through <path>")
+    ap.add_argument("--mesh-lights", action="store_true",
+                    help="turn each rectangular area light into an emitting mesh (cube, icosphere or "
+                         "torus OBJ, tilted, normals or not): NEE's triangle choice by importance")
     ap.add_argument("--legacy", action="store_true",
                     help="write each scene as a Mitsuba 0.6 file (version 0.6.0, camelCase parameter "
                          "names), which both renderers must upgrade alike")
@@ -383,12 +461,16 @@ def main():
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
     for index, d, xml in scene_dirs(args):
+        # With --mesh-lights area lights only (rectangles and spheres, which become meshes).
+        lights = "area" if args.mesh_lights else "all"
         if args.extended:
             from fuzz_extended import extended_scene_xml
-            text = extended_scene_xml(args.seed, index, d, masks=not args.hide_emitters)
+            text = extended_scene_xml(args.seed, index, d, masks=not args.hide_emitters, lights=lights)
         else:
-            text = scene_xml(args.seed, index, masks=not args.hide_emitters)
+            text = scene_xml(args.seed, index, masks=not args.hide_emitters, lights=lights)
         text, params = integrator_variant(text, args.seed, index, args.direct, args.hide_emitters)
+        if args.mesh_lights:
+            text = mesh_lights(text, d, args.seed, index)
         if args.legacy:
             text = legacy_names(text)
         if args.restyle:

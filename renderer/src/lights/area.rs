@@ -1,13 +1,17 @@
 //! Area light (Mitsuba's `area`): radiance leaving the front side of a shape, a colour or a
-//! texture over the shape's uvs (points are sampled uniformly by area either way, as Mitsuba).
+//! texture over the shape's uvs. Next-event estimation samples a point uniformly by area on the
+//! shape (as Mitsuba), on a mesh of three or more triangles within a triangle chosen by what it
+//! can deliver to the shading point ([`TriangleSelection`]), and a sphere seen from outside by
+//! the cone of directions it subtends.
 
 use super::bounds::{bounding_sphere, LightBounds};
 use super::channel_mean;
+use super::triangle_selection::TriangleSelection;
 use super::{EmissionSample, LightSample};
 use crate::frame::Frame;
 use crate::math::{coordinate_system, spawn_ray};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_uniform_cone, uniform_cone_pdf};
-use crate::shapes::{Shape, Sphere};
+use crate::shapes::{AreaSample, Shape, Sphere};
 use crate::spectrum::Rgb;
 use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
@@ -20,9 +24,24 @@ pub struct AreaLight {
     pub shape: u32,
     /// Emitted radiance (`radiance`), looked up at the surface's uv.
     pub radiance: Texture,
+    /// How next-event estimation chooses the triangle of a mesh (`None`: by area).
+    pub triangles: Option<Box<TriangleSelection>>,
 }
 
 impl AreaLight {
+    /// Emission `radiance` on `shape`, the scene's shape number `index`.
+    pub fn new(index: u32, shape: &Shape, radiance: Texture) -> Self {
+        let triangles = match shape {
+            Shape::Mesh(mesh) => TriangleSelection::new(mesh).map(Box::new),
+            _ => None,
+        };
+        AreaLight {
+            shape: index,
+            radiance,
+            triangles,
+        }
+    }
+
     /// Radiance leaving the surface with normal `n` at texture point `tp` in direction `w`
     /// (front side only).
     #[inline]
@@ -34,9 +53,18 @@ impl AreaLight {
         }
     }
 
-    /// Direct illumination at `p`: for a sphere seen from outside, a direction uniform in the
-    /// cone it subtends (as Mitsuba); otherwise a point sampled uniformly by area on `shape`.
-    pub fn sample_li(&self, shape: &Shape, p: Vec3, u_prim: f32, u: Vec2) -> Option<LightSample> {
+    /// Direct illumination at `p` on a surface with unit geometric normal `n` (`Vec3::ZERO`:
+    /// none): for a sphere seen from outside, a direction uniform in the cone it subtends (as
+    /// Mitsuba); otherwise a point sampled uniformly by area on `shape`, or on the triangle
+    /// chosen for (`p`, `n`) by [`Self::triangles`].
+    pub fn sample_li(
+        &self,
+        shape: &Shape,
+        p: Vec3,
+        n: Vec3,
+        u_prim: f32,
+        u: Vec2,
+    ) -> Option<LightSample> {
         if let Shape::Sphere(sphere) = shape {
             if let Some(cone) = SphereCone::new(sphere, p) {
                 if sphere.flip_normals {
@@ -64,7 +92,16 @@ impl AreaLight {
                 });
             }
         }
-        let s = shape.sample_area(u_prim, u);
+        let s = match (shape, &self.triangles) {
+            (Shape::Mesh(mesh), Some(triangles)) => {
+                let (tri, pmf) = triangles.sample(p, n, u_prim)?;
+                AreaSample {
+                    pdf: pmf / triangles.triangle_area(tri),
+                    ..mesh.sample_triangle(tri, u)
+                }
+            }
+            _ => shape.sample_area(u_prim, u),
+        };
         let d = s.p - p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 {
@@ -92,10 +129,19 @@ impl AreaLight {
         })
     }
 
-    /// Solid-angle density of [`Self::sample_li`] from `p_ref` for the direction that reaches
-    /// the light at `p_light`, where the light's normal is `n_light`.
+    /// Solid-angle density of [`Self::sample_li`] from `p_ref` with geometric normal `n_ref`
+    /// for the direction that reaches the light at `p_light` in triangle `prim` (meshes),
+    /// where the light's normal is `n_light`.
     #[inline]
-    pub fn pdf_li(&self, shape: &Shape, p_ref: Vec3, p_light: Vec3, n_light: Vec3) -> f32 {
+    pub fn pdf_li(
+        &self,
+        shape: &Shape,
+        p_ref: Vec3,
+        n_ref: Vec3,
+        p_light: Vec3,
+        n_light: Vec3,
+        prim: u32,
+    ) -> f32 {
         if let Shape::Sphere(sphere) = shape {
             if let Some(cone) = SphereCone::new(sphere, p_ref) {
                 return if sphere.flip_normals {
@@ -111,7 +157,17 @@ impl AreaLight {
         if cos_l <= 0.0 {
             return 0.0;
         }
-        dist2 / (cos_l * shape.area())
+        match &self.triangles {
+            Some(triangles) => {
+                let area = triangles.triangle_area(prim);
+                if area > 0.0 {
+                    dist2 / cos_l * (triangles.pmf(p_ref, n_ref, prim) / area)
+                } else {
+                    0.0
+                }
+            }
+            None => dist2 / (cos_l * shape.area()),
+        }
     }
 
     /// A photon from a uniform point, cosine-distributed over the front hemisphere: flux

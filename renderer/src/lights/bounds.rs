@@ -444,9 +444,11 @@ mod tests {
             Shape::Disk(Disk::new(tilt, false)),
             Shape::Cylinder(Cylinder::new(tilt, false).unwrap()),
         ];
+        // Every shape's points by area (no triangle tree: one light object for all shapes).
         let area = AreaLight {
             shape: 0,
             radiance: Texture::Constant(Rgb::ONE),
+            triangles: None,
         };
         let spot = SpotLight::new(tilt, Rgb::ONE, 25.0, 10.0, None);
         let projector = ProjectorLight::new(tilt, Texture::Constant(Rgb::ONE), 1.0, 40.0);
@@ -467,7 +469,7 @@ mod tests {
             };
             for (k, shape) in shapes.iter().enumerate() {
                 let shines = area
-                    .sample_li(shape, p, u_sel, u)
+                    .sample_li(shape, p, Vec3::ZERO, u_sel, u)
                     .is_some_and(|ls| ls.weight.max_element() > 0.0);
                 check(k, area.bounds(shape), shines);
             }

@@ -21,6 +21,7 @@ pub mod point;
 pub mod projector;
 pub mod selection;
 pub mod spot;
+pub mod triangle_selection;
 
 pub use area::AreaLight;
 pub use constant::ConstantLight;

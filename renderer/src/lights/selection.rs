@@ -162,10 +162,10 @@ struct Split {
 }
 
 /// The largest importance counted (the sum of [`MAX_SPATIAL_LIGHTS`] of them stays finite).
-const IMPORTANCE_CAP: f32 = 1e30;
+pub(super) const IMPORTANCE_CAP: f32 = 1e30;
 
 /// The largest f32 below 1: a rescaled random number must stay in [0, 1).
-const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
+pub(super) const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
 
 impl LightSelection {
     /// Builds the selection from each light's power (channel mean) and emission bounds.

@@ -157,6 +157,28 @@ impl Mesh {
         faces.chain(vertices.filter_map(|n| n.try_normalize()))
     }
 
+    /// The normals shading can have on triangle `tri`: its face normal and, where shading
+    /// interpolates them, its vertex normals.
+    pub fn triangle_normals(&self, tri: u32) -> impl Iterator<Item = Vec3> + Clone + '_ {
+        let [a, b, c] = self.data.indices[tri as usize];
+        let vertices = self
+            .vertex_normals()
+            .map(|n| [n[a as usize], n[b as usize], n[c as usize]]);
+        std::iter::once(self.face_normals[tri as usize]).chain(
+            vertices
+                .into_iter()
+                .flatten()
+                .filter_map(|n| n.try_normalize()),
+        )
+    }
+
+    /// Area of triangle `tri`.
+    #[inline]
+    pub fn triangle_area(&self, tri: u32) -> f32 {
+        let [a, b, c] = self.triangle(tri);
+        0.5 * (b - a).cross(c - a).length()
+    }
+
     /// Vertex positions of triangle `tri`.
     #[inline]
     pub fn triangle(&self, tri: u32) -> [Vec3; 3] {
@@ -234,12 +256,21 @@ impl Mesh {
     /// A point uniformly distributed over the mesh's area.
     pub fn sample_area(&self, u_prim: f32, u: Vec2) -> AreaSample {
         let (tri, _, _) = self.area_distribution.sample(u_prim);
-        let [i0, i1, i2] = self.data.indices[tri];
-        let [p0, p1, p2] = self.triangle(tri as u32);
+        AreaSample {
+            pdf: 1.0 / self.area,
+            ..self.sample_triangle(tri as u32, u)
+        }
+    }
+
+    /// A point uniformly distributed over triangle `tri` (`pdf`: one over its area).
+    #[inline]
+    pub fn sample_triangle(&self, tri: u32, u: Vec2) -> AreaSample {
+        let [i0, i1, i2] = self.data.indices[tri as usize];
+        let [p0, p1, p2] = self.triangle(tri);
         let b = square_to_uniform_triangle(u);
         let b0 = 1.0 - b.x - b.y;
         let p = p0 * b0 + p1 * b.x + p2 * b.y;
-        let ng = self.face_normals[tri];
+        let ng = self.face_normals[tri as usize];
         // Mitsuba reports the interpolated vertex normal when the mesh has normals.
         let n = match self.vertex_normals() {
             Some(n) => {
@@ -255,9 +286,9 @@ impl Mesh {
             p,
             n,
             uv,
-            prim: tri as u32,
+            prim: tri,
             bary: b,
-            pdf: 1.0 / self.area,
+            pdf: 1.0 / self.triangle_area(tri),
         }
     }
 }
