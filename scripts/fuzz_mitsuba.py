@@ -376,8 +376,8 @@ def torus_mesh(rings, sides, small):
 def mesh_lights(text, folder, seed, index):
     """The scene with each rectangular and spherical area light (the generators'
     `area_rectangle` and area spheres) turned into an emitting mesh in the same place: a `cube`, an icosphere or a
-    torus written as OBJ next to the scene (vertex normals or not, tilted), sometimes with
-    `flip_normals` — for NEE's choice of a mesh light's triangle by importance."""
+    torus written as OBJ next to the scene (vertex normals or not, tilted) — for NEE's choice
+    of a mesh light's triangle by importance."""
     from make_scene_assets import icosphere, write_obj
 
     r = random.Random(seed * 1_000_037 + index + 29)
@@ -385,8 +385,18 @@ def mesh_lights(text, folder, seed, index):
 
     def mesh(m):
         transform, emitter = m.group(1), m.group(2)
+        if "<texture" in emitter:
+            # Mitsuba samples a textured radiance through the texture's uv distribution and
+            # finds the point of a uv on the shape; on a mesh whose uvs cover it more than once
+            # (a cube's six faces, a torus's or sphere's seam) its NEE misses or double-counts
+            # parts (a textured `cube` emitter: 0 by NEE, 1.43e-3 by BSDF sampling, ours 1.40e-3
+            # and 1.41e-3). Such lights stay rectangles.
+            return m.group(0)
         kind = r.choice(["cube", "icosphere", "torus"])
-        flip = '<boolean name="flip_normals" value="true"/>' if r.random() < 0.15 else ""
+        # No `flip_normals`: a closed mesh emitting inwards lights the scene only through
+        # rays that slip past its edges within the shadow-ray epsilon (both renderers, a few
+        # 1e-4 of brightness that differ by 2x: noise for this comparison, not a finding).
+        flip = ""
         tilt = (f'<rotate x="1" angle="{r.uniform(-60, 60):.1f}"/>'
                 f'<rotate z="1" angle="{r.uniform(-60, 60):.1f}"/>')
         # The tilt goes first: the rectangle's own transform still places and sizes it.
@@ -404,7 +414,9 @@ def mesh_lights(text, folder, seed, index):
             write_obj(folder / name, [tuple(0.5 * c for c in p) for p in pos], pos if normals else None, uv, tris,
                       "fuzz emitting icosphere")
         else:
-            pos, nrm, uv, quads = torus_mesh(r.randint(8, 32), r.randint(4, 12), r.uniform(0.1, 0.4))
+            # Tubes thicker than the shadow-ray epsilon at the scene's distances (≈ 5e-3): a
+            # thinner one leaks light through its silhouette in both renderers' NEE alike.
+            pos, nrm, uv, quads = torus_mesh(r.randint(8, 32), r.randint(4, 12), r.uniform(0.25, 0.45))
             write_obj(folder / name, [tuple(0.6 * c for c in p) for p in pos], nrm if normals else None, uv, quads,
                       "fuzz emitting torus")
         return (f'<shape type="obj"><string name="filename" value="{name}"/>{flip}{transform}'
