@@ -393,9 +393,8 @@ def mesh_lights(text, folder, seed, index):
             # and 1.41e-3). Such lights stay rectangles.
             return m.group(0)
         kind = r.choice(["cube", "icosphere", "torus"])
-        # No `flip_normals`: a closed mesh emitting inwards lights the scene only through
-        # rays that slip past its edges within the shadow-ray epsilon (both renderers, a few
-        # 1e-4 of brightness that differ by 2x: noise for this comparison, not a finding).
+        # No `flip_normals`: a closed mesh emitting inwards lights the scene only through leaks
+        # (both renderers, a few 1e-4 of brightness that differ by 2x; docs/validation.md).
         flip = ""
         tilt = (f'<rotate x="1" angle="{r.uniform(-60, 60):.1f}"/>'
                 f'<rotate z="1" angle="{r.uniform(-60, 60):.1f}"/>')
@@ -414,8 +413,8 @@ def mesh_lights(text, folder, seed, index):
             write_obj(folder / name, [tuple(0.5 * c for c in p) for p in pos], pos if normals else None, uv, tris,
                       "fuzz emitting icosphere")
         else:
-            # Tubes thicker than the shadow-ray epsilon at the scene's distances (≈ 5e-3): a
-            # thinner one leaks light through its silhouette in both renderers' NEE alike.
+            # Thick tubes: on thin ones light sampling and BSDF sampling disagree by a few %
+            # in both renderers (docs/validation.md).
             pos, nrm, uv, quads = torus_mesh(r.randint(8, 32), r.randint(4, 12), r.uniform(0.25, 0.45))
             write_obj(folder / name, [tuple(0.6 * c for c in p) for p in pos], nrm if normals else None, uv, quads,
                       "fuzz emitting torus")
