@@ -986,7 +986,7 @@ mod tests {
     }
 
     /// A closed emitting mesh (a torus of 384 triangles) chooses its triangles by what they
-    /// deliver to the point ([`crate::lights::triangle_selection`]): each sample's density is
+    /// deliver to the point ([`crate::lights::emitter_tree`]): each sample's density is
     /// the density `pdf_li_surface` gives its hit; the irradiance NEE estimates equals the one
     /// estimated by area sampling (the selection's expectation is unchanged) at several points
     /// and normals, with less variance.
@@ -994,7 +994,7 @@ mod tests {
     fn mesh_light_triangle_choice_keeps_nee_unbiased() {
         let torus = ShapeDesc {
             name: "torus".into(),
-            geometry: Geometry::Mesh(crate::lights::triangle_selection::torus(24, 8, 1.0, 0.3)),
+            geometry: Geometry::Mesh(crate::lights::emitter_tree::torus(24, 8, 1.0, 0.3)),
             bsdf: 0,
             emission: Some(Texture::Constant(Rgb::new(1.0, 2.0, 3.0))),
         };

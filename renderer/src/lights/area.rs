@@ -1,14 +1,14 @@
 //! Area light (Mitsuba's `area`): radiance leaving the front side of a shape, a colour or a
 //! texture over the shape's uvs. Next-event estimation samples a point uniformly by area on the
 //! shape, on a mesh of three or more triangles within a triangle chosen by what it can deliver
-//! to the shading point ([`TriangleSelection`]), and a sphere seen from outside by the cone of
+//! to the shading point ([`EmitterTree`]), and a sphere seen from outside by the cone of
 //! directions it subtends. (Mitsuba samples a textured radiance by the texture's distribution
 //! over uv, which presumes uvs that cover the shape once: on a textured `cube` emitter Mitsuba
 //! 3.9.1's NEE finds no light at all. By area is unbiased on any shape.)
 
 use super::bounds::{bounding_sphere, LightBounds};
 use super::channel_mean;
-use super::triangle_selection::TriangleSelection;
+use super::emitter_tree::EmitterTree;
 use super::{EmissionSample, LightSample};
 use crate::frame::Frame;
 use crate::math::{coordinate_system, spawn_ray};
@@ -27,14 +27,14 @@ pub struct AreaLight {
     /// Emitted radiance (`radiance`), looked up at the surface's uv.
     pub radiance: Texture,
     /// How next-event estimation chooses the triangle of a mesh (`None`: by area).
-    pub triangles: Option<Box<TriangleSelection>>,
+    pub triangles: Option<Box<EmitterTree>>,
 }
 
 impl AreaLight {
     /// Emission `radiance` on `shape`, the scene's shape number `index`.
     pub fn new(index: u32, shape: &Shape, radiance: Texture) -> Self {
         let triangles = match shape {
-            Shape::Mesh(mesh) => TriangleSelection::new(mesh).map(Box::new),
+            Shape::Mesh(mesh) => EmitterTree::triangles(mesh).map(Box::new),
             _ => None,
         };
         AreaLight {
@@ -96,9 +96,9 @@ impl AreaLight {
         }
         let s = match (shape, &self.triangles) {
             (Shape::Mesh(mesh), Some(triangles)) => {
-                let (tri, pmf) = triangles.sample(p, n, u_prim)?;
+                let (tri, pmf, _) = triangles.sample(p, n, u_prim)?;
                 AreaSample {
-                    pdf: pmf / triangles.triangle_area(tri),
+                    pdf: pmf / triangles.weight(tri),
                     ..mesh.sample_triangle(tri, u)
                 }
             }
@@ -161,7 +161,7 @@ impl AreaLight {
         }
         match &self.triangles {
             Some(triangles) => {
-                let area = triangles.triangle_area(prim);
+                let area = triangles.weight(prim);
                 if area > 0.0 {
                     dist2 / cos_l * (triangles.pmf(p_ref, n_ref, prim) / area)
                 } else {

@@ -14,6 +14,7 @@ pub mod area;
 pub mod bounds;
 pub mod constant;
 pub mod directional;
+pub mod emitter_tree;
 pub mod envmap;
 #[cfg(test)]
 mod envmap_reference;
@@ -21,7 +22,6 @@ pub mod point;
 pub mod projector;
 pub mod selection;
 pub mod spot;
-pub mod triangle_selection;
 
 pub use area::AreaLight;
 pub use constant::ConstantLight;

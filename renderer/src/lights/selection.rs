@@ -5,10 +5,10 @@
 //! infinite lights' share when a directional light is among them (a sun's irradiance follows
 //! the surface's orientation, a sky's does not). Within each kind the importance is mixed with
 //! the power proportions, so every light with power keeps a probability of at least
-//! [`POWER_SHARE`] times its power share (its square for clustered lights: more than
-//! [`MAX_SPATIAL_LIGHTS`] finite ones are chosen by cluster, then within it). Any selection that gives every contributing light a
-//! non-zero probability has the same expected image; this one puts the samples where the light
-//! comes from.
+//! [`POWER_SHARE`] times its power share — up to [`MAX_SPATIAL_LIGHTS`] finite lights weighed
+//! one by one; more are chosen through a tree of their bounds ([`EmitterTree`], the mixture at
+//! every level). Any selection that gives every contributing light a non-zero probability has
+//! the same expected image; this one puts the samples where the light comes from.
 //!
 //! Why: by power alone, a light that radiates mostly into nothing (a far, bright sun-like
 //! sphere; a point light next to a projector; a sky, whose power is its flux through the whole
@@ -16,13 +16,14 @@
 //! drawn rarely, with large weights (speckles).
 
 use super::bounds::{EmitterBounds, LightBounds, LightBounds4};
+use super::emitter_tree::{EmitterTree, TreeEmitter, MAX_EMITTERS};
 use crate::sampling::Distribution1D;
 use glam::Vec3;
 
 /// Most lights of one kind (finite or infinite) the selection weighs one by one (every light
 /// sample and every MIS density evaluates each one's importance). More finite lights, up to
-/// this number squared, are clustered (`Clusters`); beyond that, and for more infinite
-/// lights, that kind is selected by power.
+/// [`MAX_EMITTERS`], are chosen through a tree ([`EmitterTree`]); beyond that, and for more
+/// infinite lights, that kind is selected by power.
 pub const MAX_SPATIAL_LIGHTS: usize = 64;
 
 /// The share of a kind's probability that stays proportional to power at every point (a
@@ -66,85 +67,8 @@ enum Weighing {
     Finite(Vec<LightBounds4>),
     /// Infinite lights, one by one (a sun and a sky or two).
     Infinite(Vec<EmitterBounds>),
-    /// More finite lights than a group weighs one by one: clusters of nearby lights.
-    Clustered(Box<Clusters>),
-}
-
-/// Up to [`MAX_SPATIAL_LIGHTS`] clusters of nearby finite lights, each of up to as many: a
-/// cluster is chosen by the bounds of all its lights together, then a light within it, each
-/// choice by importance mixed with power as a single group's.
-#[derive(Debug, Clone)]
-struct Clusters {
-    /// The clusters as members of one group (their bounds: the union of their lights').
-    top: Group,
-    /// Each cluster as a group whose members are positions in the clustered group.
-    parts: Vec<Group>,
-    /// For each member of the clustered group: its cluster and its index there.
-    place: Vec<(u32, u32)>,
-}
-
-impl Clusters {
-    /// Clusters the members (`bounds` and selection weights `weights`, in the group's order)
-    /// by halving them along the longest axis of their centres, six times.
-    fn new(bounds: &[LightBounds], weights: &[f32]) -> Self {
-        let mut members: Vec<(u32, Vec3)> = (0..bounds.len() as u32)
-            .map(|k| (k, bounds[k as usize].center()))
-            .collect();
-        let mut leaves = Vec::new();
-        halve(
-            &mut members,
-            MAX_SPATIAL_LIGHTS.trailing_zeros(),
-            &mut leaves,
-        );
-        let mut place = vec![(0, 0); bounds.len()];
-        let mut parts = Vec::with_capacity(leaves.len());
-        let mut union = Vec::with_capacity(leaves.len());
-        let mut cluster_weights = Vec::with_capacity(leaves.len());
-        for (c, leaf) in leaves.iter().enumerate() {
-            for (j, &k) in leaf.iter().enumerate() {
-                place[k as usize] = (c as u32, j as u32);
-            }
-            let own: Vec<LightBounds> = leaf.iter().map(|&k| bounds[k as usize]).collect();
-            let w: Vec<f32> = leaf.iter().map(|&k| weights[k as usize]).collect();
-            union.push(own.iter().skip(1).fold(own[0], |u, b| u.union(b)));
-            cluster_weights.push(w.iter().map(|&x| x as f64).sum::<f64>() as f32);
-            parts.push(Group::finite(leaf.clone(), &own, &w));
-        }
-        let top = Group::finite((0..leaves.len() as u32).collect(), &union, &cluster_weights);
-        Clusters { top, parts, place }
-    }
-
-    #[inline]
-    fn sample(&self, p: Vec3, n: Vec3, u: f32) -> (usize, f32, f32) {
-        let (c, pc, u) = self.top.sample(p, n, u);
-        let part = &self.parts[c];
-        let (j, pj, u) = part.sample(p, n, u);
-        (part.lights[j] as usize, pc * pj, u)
-    }
-
-    #[inline]
-    fn pmf(&self, p: Vec3, n: Vec3, k: usize) -> f32 {
-        let (c, j) = self.place[k];
-        self.top.pmf(p, n, c as usize) * self.parts[c as usize].pmf(p, n, j as usize)
-    }
-}
-
-/// Splits `members` (index, centre) in two halves along the longest axis of their centres,
-/// `depth` times (stopping at single members), into `leaves` in order.
-fn halve(members: &mut [(u32, Vec3)], depth: u32, leaves: &mut Vec<Vec<u32>>) {
-    if depth == 0 || members.len() <= 1 {
-        leaves.push(members.iter().map(|m| m.0).collect());
-        return;
-    }
-    let (lo, hi) = members.iter().fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), m| (lo.min(m.1), hi.max(m.1)),
-    );
-    let axis = (hi - lo).max_position();
-    members.sort_by(|a, b| a.1[axis].total_cmp(&b.1[axis]).then(a.0.cmp(&b.0)));
-    let (left, right) = members.split_at_mut(members.len() / 2);
-    halve(left, depth - 1, leaves);
-    halve(right, depth - 1, leaves);
+    /// More finite lights than a group weighs one by one: a tree of their bounds.
+    Tree(Box<EmitterTree>),
 }
 
 /// A fixed share for each kind of light, and within each kind a choice that may depend on the
@@ -181,7 +105,7 @@ impl LightSelection {
         let (finite, infinite) = (members(false), members(true));
         // Finite lights differ in position and direction; infinite ones only matter to each
         // other when a directional light is among them (environments relate by power).
-        let weigh_finite = (2..=MAX_SPATIAL_LIGHTS * MAX_SPATIAL_LIGHTS).contains(&finite.len());
+        let weigh_finite = (2..=MAX_EMITTERS).contains(&finite.len());
         let weigh_infinite = (2..=MAX_SPATIAL_LIGHTS).contains(&infinite.len())
             && infinite
                 .iter()
@@ -205,7 +129,19 @@ impl LightSelection {
             let weighing = if finite.len() != members.len() {
                 Weighing::Infinite(members)
             } else if finite.len() > MAX_SPATIAL_LIGHTS {
-                Weighing::Clustered(Box::new(Clusters::new(&finite, &weights)))
+                let emitters: Vec<TreeEmitter> = finite
+                    .iter()
+                    .zip(&weights)
+                    .map(|(&bounds, &weight)| TreeEmitter {
+                        bounds,
+                        weight,
+                        key: bounds.center(),
+                    })
+                    .collect();
+                match EmitterTree::new(&emitters) {
+                    Some(tree) => Weighing::Tree(Box::new(tree)),
+                    None => unreachable!("{} lights are within a tree's range", finite.len()),
+                }
             } else {
                 Weighing::Finite(finite.chunks(4).map(LightBounds4::new).collect())
             };
@@ -288,19 +224,6 @@ impl LightSelection {
 }
 
 impl Group {
-    /// A group of finite lights weighed one by one (up to [`MAX_SPATIAL_LIGHTS`]): `lights`
-    /// are the members' indices, `bounds` and `weights` (selection by power) theirs.
-    fn finite(lights: Vec<u32>, bounds: &[LightBounds], weights: &[f32]) -> Self {
-        debug_assert!(bounds.len() <= MAX_SPATIAL_LIGHTS);
-        Group {
-            by_power: Distribution1D::new(weights),
-            bounds: Some(Weighing::Finite(
-                bounds.chunks(4).map(LightBounds4::new).collect(),
-            )),
-            lights,
-        }
-    }
-
     /// Each member's selection weight at (`p`, `n`) into `w`: its importance's share scaled to
     /// 1 − [`POWER_SHARE`], plus its power share scaled to [`POWER_SHARE`]; returns their sum.
     #[inline]
@@ -323,9 +246,9 @@ impl Group {
                     *w = b.importance(p, n);
                 }
             }
-            // Not reached (a clustered group samples through its parts); nothing weighs, so
-            // the group would fall back to power.
-            Weighing::Clustered(_) => w.fill(0.0),
+            // Not reached (a tree samples itself); nothing weighs, so the group would fall
+            // back to power.
+            Weighing::Tree(_) => w.fill(0.0),
         }
         let mut importance_sum = 0.0f32;
         for w in &mut w[..k] {
@@ -356,7 +279,12 @@ impl Group {
     fn sample(&self, p: Vec3, n: Vec3, u: f32) -> (usize, f32, f32) {
         let weighing = match &self.bounds {
             None => return self.by_power.sample(u),
-            Some(Weighing::Clustered(c)) => return c.sample(p, n, u),
+            Some(Weighing::Tree(tree)) => {
+                return match tree.sample(p, n, u) {
+                    Some((k, pmf, u_rest)) => (k as usize, pmf, u_rest),
+                    None => (0, 0.0, 0.0),
+                };
+            }
             Some(w) => w,
         };
         let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
@@ -388,7 +316,7 @@ impl Group {
     fn pmf(&self, p: Vec3, n: Vec3, k: usize) -> f32 {
         let weighing = match &self.bounds {
             None => return self.by_power.pmf(k),
-            Some(Weighing::Clustered(c)) => return c.pmf(p, n, k),
+            Some(Weighing::Tree(tree)) => return tree.pmf(p, n, k as u32),
             Some(w) => w,
         };
         let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
@@ -573,7 +501,7 @@ mod tests {
         let sky = EmitterBounds::Environment { irradiance: 3.0 };
         let one = LightSelection::new(&[3.0, 100.0], &[lights(false).1[0], sky]);
         assert!(!one.is_spatial());
-        let many = vec![1.0; MAX_SPATIAL_LIGHTS * MAX_SPATIAL_LIGHTS + 1];
+        let many = vec![1.0; MAX_EMITTERS + 1];
         let point = LightBounds::omnidirectional(Vec3::ZERO, 0.0, 1.0);
         let bounds = vec![EmitterBounds::Finite(point); many.len()];
         let sel = LightSelection::new(&many, &bounds);
@@ -640,11 +568,12 @@ mod tests {
         assert_eq!(sel.pmf(Vec3::NAN, Vec3::ZERO, 0), 0.5);
     }
 
-    /// More finite lights than one group weighs: clustered, with the same guarantees — the
-    /// probabilities sum to one, sampling returns them bit for bit and follows them, and every
-    /// light keeps a share of its power's (the defensive share at both levels).
+    /// More finite lights than one group weighs: chosen through a tree, with the same
+    /// guarantees — the probabilities sum to one, sampling returns them bit for bit and follows
+    /// them, and every light keeps a share of its power's (the defensive share at every level
+    /// of the tree).
     #[test]
-    fn many_lights_are_clustered_and_keep_every_guarantee() {
+    fn many_lights_go_through_a_tree_and_keep_every_guarantee() {
         let count = 300;
         let mut rng = rng_for(31, 0, 0);
         let mut powers = Vec::new();
@@ -661,12 +590,18 @@ mod tests {
         }
         let sel = LightSelection::new(&powers, &bounds);
         assert!(sel.is_spatial());
+        let Some(Weighing::Tree(tree)) = &sel.split.as_ref().unwrap().finite.bounds else {
+            panic!("{count} lights go through a tree");
+        };
+        // ⌈log₄ 300⌉ levels, give or take the halving's rounding.
+        assert!((0..count as u32).all(|i| (4..=6).contains(&tree.depth(i))));
         for (p, n) in points().into_iter().take(40) {
             let pmf: Vec<f32> = (0..count as u32).map(|i| sel.pmf(p, n, i)).collect();
             let sum: f64 = pmf.iter().map(|&x| x as f64).sum();
             assert!((sum - 1.0).abs() < 1e-4, "{sum} at {p}");
             for (i, &x) in pmf.iter().enumerate() {
-                let floor = POWER_SHARE * POWER_SHARE * sel.by_power().pmf(i);
+                let depth = tree.depth(i as u32) as i32;
+                let floor = POWER_SHARE.powi(depth) * sel.by_power().pmf(i);
                 assert!(x >= floor * 0.999, "light {i} at {p}: {x} < {floor}");
             }
             let mut seen = vec![0u32; count];

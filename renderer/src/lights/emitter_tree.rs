@@ -1,13 +1,16 @@
-//! Which triangle of a mesh light next-event estimation samples from a point: a tree over the
-//! mesh's triangles, four children to a node, each child with the emission bounds of its
-//! triangles ([`LightBounds`]), descended from the root by what each child can deliver to the
-//! point (pbrt-v4's light BVH, inside one light). At every level the importance is mixed with
-//! the children's areas ([`POWER_SHARE`] by area, as Mitsuba picks a triangle at every point),
-//! so no triangle's probability can fall to zero where it might light the point.
+//! Choosing one of many emitters — the lights of a scene, the triangles of a mesh light — by
+//! what each can deliver to a point, in logarithmic time: a tree over the emitters, four
+//! children to a node, each child with the union of its emitters' emission bounds
+//! ([`LightBounds`]), descended from the root by the children's importance at the point
+//! (pbrt-v4's light BVH). At every level the importance is mixed with the children's weights
+//! ([`POWER_SHARE`] by weight: power for lights, area for triangles), so no emitter's
+//! probability falls to zero where it might light the point.
 //!
-//! Why: by area alone, a closed emitting mesh spends half its samples on triangles facing away
-//! from the point, and a large one (a long tube, a panel curving round a room) most of them on
-//! triangles far from it; the few that land where the light comes from carry large weights.
+//! Why: by power or area alone, a closed emitting mesh spends half its samples on triangles
+//! facing away from the point, a large one (a long tube, a panel round a room) most of them on
+//! triangles far from it, and a scene with hundreds of lights most of them on lights elsewhere;
+//! the few samples that land where the light comes from carry large weights. Weighing every
+//! emitter at every sample would cost as much as there are emitters.
 
 use super::bounds::{bounding_sphere, LightBounds, LightBounds4};
 use super::selection::{BELOW_ONE, IMPORTANCE_CAP, POWER_SHARE};
@@ -18,14 +21,14 @@ use glam::{Vec3, Vec4};
 /// two lie in one plane and light every point in the same proportion, by area.
 pub const MIN_TRIANGLES: usize = 3;
 
-/// Most triangles a mesh light builds its tree for (≈ 80 bytes per triangle); larger emitting
-/// meshes choose by area.
-pub const MAX_TRIANGLES: usize = 1 << 20;
+/// Most emitters a tree is built for (≈ 80 bytes each); beyond, a mesh light's triangles are
+/// chosen by area and a scene's lights by power.
+pub const MAX_EMITTERS: usize = 1 << 20;
 
-/// Marks a child that is a triangle (its index in the low bits), not a node.
-const TRIANGLE: u32 = 1 << 31;
+/// Marks a child that is an emitter (its index in the low bits), not a node.
+const EMITTER: u32 = 1 << 31;
 
-/// Children that are neither (unused lanes: no area, no importance).
+/// Children that are neither (unused lanes: no weight, no importance).
 const NONE: u32 = u32::MAX;
 
 /// A node: up to four children with their bounds.
@@ -33,67 +36,94 @@ const NONE: u32 = u32::MAX;
 struct Node {
     /// The children's emission bounds.
     bounds: LightBounds4,
-    /// The children's areas.
-    area: Vec4,
-    /// The children: a node index, a triangle (`TRIANGLE` | index) or `NONE`.
+    /// The children's weights (the sums of their emitters').
+    weight: Vec4,
+    /// The children: a node index, an emitter (`EMITTER` | index) or `NONE`.
     child: [u32; 4],
 }
 
-/// The triangles of one mesh light, for choosing one by what it can deliver to a point.
-#[derive(Debug, Clone)]
-pub struct TriangleSelection {
-    /// The tree's nodes, the root first.
-    nodes: Vec<Node>,
-    /// Each triangle's way down from the root: the child taken at each level, two bits a level,
-    /// the root's in the lowest bits.
-    trail: Vec<u64>,
-    /// Each triangle's area.
-    area: Vec<f32>,
+/// An emitter as the tree is built: its bounds, its weight (≥ 0) and where it sits (the point
+/// the tree splits emitters by).
+#[derive(Debug, Clone, Copy)]
+pub struct TreeEmitter {
+    /// Emission bounds.
+    pub bounds: LightBounds,
+    /// Weight of the defensive share (power, area).
+    pub weight: f32,
+    /// Position that sorts it into the tree (a centroid, a centre).
+    pub key: Vec3,
 }
 
-impl TriangleSelection {
-    /// The tree over `mesh`'s triangles, or `None` when the mesh has fewer than
-    /// [`MIN_TRIANGLES`] or more than [`MAX_TRIANGLES`] triangles, or no area.
-    pub fn new(mesh: &Mesh) -> Option<Self> {
-        let count = mesh.triangle_count();
-        if !(MIN_TRIANGLES..=MAX_TRIANGLES).contains(&count)
-            || mesh.area().is_nan()
-            || mesh.area() <= 0.0
-        {
+/// Emitters, for choosing one by what it can deliver to a point.
+#[derive(Debug, Clone)]
+pub struct EmitterTree {
+    /// The tree's nodes, the root first.
+    nodes: Vec<Node>,
+    /// Each emitter's way down from the root: the child taken at each level, two bits a level,
+    /// the root's in the lowest bits.
+    trail: Vec<u64>,
+    /// Each emitter's weight.
+    weight: Vec<f32>,
+}
+
+impl EmitterTree {
+    /// The tree over `emitters` (at least two, at most [`MAX_EMITTERS`]), or `None` for fewer
+    /// or more.
+    pub fn new(emitters: &[TreeEmitter]) -> Option<Self> {
+        if !(2..=MAX_EMITTERS).contains(&emitters.len()) {
             return None;
         }
-        let area: Vec<f32> = (0..count as u32).map(|t| mesh.triangle_area(t)).collect();
-        let leaves: Vec<LightBounds> = (0..count as u32)
-            .map(|t| {
-                let [a, b, c] = mesh.triangle(t);
-                let (center, radius) = bounding_sphere(a.min(b).min(c), a.max(b).max(c));
-                // The radiance is the same scale for every triangle: the area is the intensity.
-                let intensity = area[t as usize];
-                let (axis, cos_o) = normal_cone(mesh.triangle_normals(t));
-                if cos_o <= -1.0 {
-                    LightBounds::omnidirectional(center, radius, intensity)
-                } else {
-                    LightBounds::cone(center, radius, intensity, axis, cos_o, 0.0)
-                }
-            })
+        let weight: Vec<f32> = emitters
+            .iter()
+            .map(|e| if e.weight > 0.0 { e.weight } else { 0.0 })
             .collect();
-        let mut members: Vec<Member> = (0..count as u32)
-            .map(|t| {
-                let [a, b, c] = mesh.triangle(t);
-                (t, (a + b + c) / 3.0)
-            })
+        let mut members: Vec<Member> = (0..emitters.len() as u32)
+            .map(|k| (k, emitters[k as usize].key))
             .collect();
-        let mut tree = TriangleSelection {
-            nodes: Vec::with_capacity(count / 2),
-            trail: vec![0; count],
-            area,
+        let leaves: Vec<LightBounds> = emitters.iter().map(|e| e.bounds).collect();
+        let mut tree = EmitterTree {
+            nodes: Vec::with_capacity(emitters.len() / 2),
+            trail: vec![0; emitters.len()],
+            weight,
         };
         tree.build(&mut members, &leaves, 0, 0);
         Some(tree)
     }
 
-    /// Builds the subtree over `members` (triangle, centroid), reached from the root by
-    /// `trail` (`level` levels down); returns the child entry for it, its bounds and its area.
+    /// The tree over the triangles of a mesh light, weighed by area, or `None` when the mesh
+    /// has fewer than [`MIN_TRIANGLES`] or more than [`MAX_EMITTERS`] triangles, or no area.
+    pub fn triangles(mesh: &Mesh) -> Option<Self> {
+        let count = mesh.triangle_count();
+        if !(MIN_TRIANGLES..=MAX_EMITTERS).contains(&count)
+            || mesh.area().is_nan()
+            || mesh.area() <= 0.0
+        {
+            return None;
+        }
+        let emitters: Vec<TreeEmitter> = (0..count as u32)
+            .map(|t| {
+                let [a, b, c] = mesh.triangle(t);
+                let (center, radius) = bounding_sphere(a.min(b).min(c), a.max(b).max(c));
+                let area = mesh.triangle_area(t);
+                // The radiance is the same scale for every triangle: the area is the intensity.
+                let (axis, cos_o) = normal_cone(mesh.triangle_normals(t));
+                let bounds = if cos_o <= -1.0 {
+                    LightBounds::omnidirectional(center, radius, area)
+                } else {
+                    LightBounds::cone(center, radius, area, axis, cos_o, 0.0)
+                };
+                TreeEmitter {
+                    bounds,
+                    weight: area,
+                    key: (a + b + c) / 3.0,
+                }
+            })
+            .collect();
+        Self::new(&emitters)
+    }
+
+    /// Builds the subtree over `members` (emitter, key), reached from the root by `trail`
+    /// (`level` levels down); returns the child entry for it, its bounds and its weight.
     fn build(
         &mut self,
         members: &mut [Member],
@@ -101,57 +131,71 @@ impl TriangleSelection {
         level: u32,
         trail: u64,
     ) -> (u32, LightBounds, f32) {
-        if let [(t, _)] = members {
-            self.trail[*t as usize] = trail;
-            return (*t | TRIANGLE, leaves[*t as usize], self.area[*t as usize]);
+        if let [(e, _)] = members {
+            self.trail[*e as usize] = trail;
+            return (*e | EMITTER, leaves[*e as usize], self.weight[*e as usize]);
         }
         let index = self.nodes.len();
         self.nodes.push(Node {
             bounds: LightBounds4::new(&[]),
-            area: Vec4::ZERO,
+            weight: Vec4::ZERO,
             child: [NONE; 4],
         });
         let (left, right) = halve(members);
         let (a, b) = halve(left);
         let (c, d) = halve(right);
         let mut bounds = Vec::with_capacity(4);
-        let mut area = [0.0f32; 4];
+        let mut weight = [0.0f32; 4];
         let mut child = [NONE; 4];
         for group in [a, b, c, d] {
             if group.is_empty() {
                 continue;
             }
             let lane = bounds.len();
-            let (entry, group_bounds, group_area) = self.build(
+            let (entry, group_bounds, group_weight) = self.build(
                 group,
                 leaves,
                 level + 1,
                 trail | (lane as u64) << (2 * level),
             );
             child[lane] = entry;
-            area[lane] = group_area;
+            weight[lane] = group_weight;
             bounds.push(group_bounds);
         }
         let union = bounds.iter().skip(1).fold(bounds[0], |u, b| u.union(b));
-        let total = area.iter().map(|&a| a as f64).sum::<f64>() as f32;
+        let total = weight.iter().map(|&w| w as f64).sum::<f64>() as f32;
         self.nodes[index] = Node {
             bounds: LightBounds4::new(&bounds),
-            area: Vec4::from_array(area),
+            weight: Vec4::from_array(weight),
             child,
         };
         (index as u32, union, total)
     }
 
-    /// Area of triangle `tri`.
+    /// Weight of emitter `e` (a triangle's area).
     #[inline]
-    pub fn triangle_area(&self, tri: u32) -> f32 {
-        self.area[tri as usize]
+    pub fn weight(&self, e: u32) -> f32 {
+        self.weight[e as usize]
+    }
+
+    /// Number of levels from the root down to emitter `e`.
+    pub fn depth(&self, e: u32) -> u32 {
+        let (mut trail, mut node, mut depth) = (self.trail[e as usize], 0usize, 1);
+        loop {
+            let child = self.nodes[node].child[(trail & 3) as usize];
+            if child & EMITTER != 0 {
+                return depth;
+            }
+            trail >>= 2;
+            node = child as usize;
+            depth += 1;
+        }
     }
 
     /// The probabilities of a node's four children at `p` with unit normal `n` (`Vec3::ZERO`:
     /// none): each one's share of the importance scaled to 1 − [`POWER_SHARE`] plus its share
-    /// of the area scaled to [`POWER_SHARE`] (by area alone where no child can reach the point
-    /// by its bounds).
+    /// of the weight scaled to [`POWER_SHARE`] (by weight alone where no child can reach the
+    /// point by its bounds, or one's importance overflows).
     #[inline]
     fn shares(node: &Node, p: Vec3, n: Vec3) -> Vec4 {
         let importance = node.bounds.importance(p, n);
@@ -162,20 +206,25 @@ impl TriangleSelection {
             Vec4::ZERO,
         );
         let importance_sum = importance.element_sum();
-        let area_sum = node.area.element_sum();
-        let by_area = if area_sum > 0.0 { 1.0 / area_sum } else { 0.0 };
+        let weight_sum = node.weight.element_sum();
+        let by_weight = if weight_sum > 0.0 {
+            1.0 / weight_sum
+        } else {
+            0.0
+        };
         if importance_sum > 0.0 && importance_sum.is_finite() {
             importance * ((1.0 - POWER_SHARE) / importance_sum)
-                + node.area * (POWER_SHARE * by_area)
+                + node.weight * (POWER_SHARE * by_weight)
         } else {
-            node.area * by_area
+            node.weight * by_weight
         }
     }
 
-    /// Picks a triangle for a point `p` with unit normal `n` (`Vec3::ZERO`: none) with `u` in
-    /// [0, 1); returns (triangle, probability), or `None` when no triangle can be chosen.
+    /// Picks an emitter for a point `p` with unit normal `n` (`Vec3::ZERO`: none) with `u` in
+    /// [0, 1); returns (emitter, probability, `u` rescaled to [0, 1) within the choice), or
+    /// `None` when no emitter can be chosen (no weight and no importance anywhere).
     #[inline]
-    pub fn sample(&self, p: Vec3, n: Vec3, mut u: f32) -> Option<(u32, f32)> {
+    pub fn sample(&self, p: Vec3, n: Vec3, mut u: f32) -> Option<(u32, f32, f32)> {
         let mut node = &self.nodes[0];
         let mut pmf = 1.0f32;
         loop {
@@ -198,17 +247,17 @@ impl TriangleSelection {
             u = ((u - below) / q).clamp(0.0, BELOW_ONE);
             pmf *= q;
             let child = node.child[k];
-            if child & TRIANGLE != 0 {
-                return Some((child & !TRIANGLE, pmf));
+            if child & EMITTER != 0 {
+                return Some((child & !EMITTER, pmf, u));
             }
             node = &self.nodes[child as usize];
         }
     }
 
-    /// The probability that [`Self::sample`] picks triangle `tri` at `p` with normal `n`.
+    /// The probability that [`Self::sample`] picks emitter `e` at `p` with normal `n`.
     #[inline]
-    pub fn pmf(&self, p: Vec3, n: Vec3, tri: u32) -> f32 {
-        let mut trail = self.trail[tri as usize];
+    pub fn pmf(&self, p: Vec3, n: Vec3, e: u32) -> f32 {
+        let mut trail = self.trail[e as usize];
         let mut node = &self.nodes[0];
         let mut pmf = 1.0f32;
         loop {
@@ -216,8 +265,8 @@ impl TriangleSelection {
             trail >>= 2;
             pmf *= Self::shares(node, p, n)[k];
             let child = node.child[k];
-            if child & TRIANGLE != 0 {
-                debug_assert_eq!(child & !TRIANGLE, tri);
+            if child & EMITTER != 0 {
+                debug_assert_eq!(child & !EMITTER, e);
                 return pmf;
             }
             node = &self.nodes[child as usize];
@@ -225,11 +274,11 @@ impl TriangleSelection {
     }
 }
 
-/// A triangle with its centroid, as the tree is built.
+/// An emitter with its key, as the tree is built.
 type Member = (u32, Vec3);
 
-/// Splits `members` into two halves along the longest axis of their centroids (ties by
-/// triangle index, so the tree is the same on every run); a single member stays whole.
+/// Splits `members` into two halves along the longest axis of their keys (ties by index, so
+/// the tree is the same on every run); a single member stays whole.
 fn halve(members: &mut [Member]) -> (&mut [Member], &mut [Member]) {
     if members.len() <= 1 {
         return members.split_at_mut(members.len());
@@ -293,7 +342,7 @@ mod tests {
     #[test]
     fn sampling_follows_the_probabilities_and_favours_what_lights_the_point() {
         let mesh = Mesh::from_data(torus(24, 8, 1.0, 0.3));
-        let tree = TriangleSelection::new(&mesh).unwrap();
+        let tree = EmitterTree::triangles(&mesh).unwrap();
         let count = mesh.triangle_count();
         let mut rng = rng_for(5, 0, 0);
         for trial in 0..6 {
@@ -311,7 +360,7 @@ mod tests {
             let draws = 200_000;
             let mut hist = vec![0u64; count];
             for _ in 0..draws {
-                let (t, q) = tree.sample(p, n, rng.next_f32()).unwrap();
+                let (t, q, _) = tree.sample(p, n, rng.next_f32()).unwrap();
                 assert_eq!(q.to_bits(), tree.pmf(p, n, t).to_bits());
                 hist[t as usize] += 1;
             }
@@ -364,12 +413,12 @@ mod tests {
             indices: vec![[0, 1, 2], [0, 2, 3]],
             ..Default::default()
         });
-        assert!(TriangleSelection::new(&quad).is_none());
+        assert!(EmitterTree::triangles(&quad).is_none());
         let flat = Mesh::from_data(TriangleMesh {
             positions: vec![Vec3::ZERO, Vec3::X, Vec3::X * 2.0],
             indices: vec![[0, 1, 2]; 4],
             ..Default::default()
         });
-        assert!(TriangleSelection::new(&flat).is_none());
+        assert!(EmitterTree::triangles(&flat).is_none());
     }
 }
