@@ -552,7 +552,8 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
                 p.photons_emitted as f64 / p.elapsed / 1e6
             ));
         },
-    )?;
+    )
+    .with_context(|| format!("rendering {}", cli.scene.display()))?;
     bar.finish_and_clear();
     if summary.resumed_from > 0 {
         eprintln!("resumed at pass {}", summary.resumed_from);

@@ -346,7 +346,8 @@ fn finite_bundle(
     if let Some((layer, channel, x, y)) = bundle.find_non_finite() {
         bail!(
             "pass {passes}: {layer}.{channel} is not finite at pixel ({x}, {y}): a value \
-             overflowed float32 (emitted radiance or scene size too large?); no bundle written"
+             overflowed float32 (an emitted radiance or a reflectance far too large, or a \
+             scene too large?); no bundle written"
         );
     }
     Ok(bundle)
