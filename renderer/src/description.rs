@@ -70,6 +70,9 @@ pub struct ShapeDesc {
     /// Radiance of a nested `area` emitter, a colour or a texture over the shape's uvs (emits
     /// from the front side only, as Mitsuba).
     pub emission: Option<crate::texture::Texture>,
+    /// The nested emitter is a `directionalarea`: its radiance leaves only along the surface
+    /// normal (a collimated beam), which only photons can carry.
+    pub collimated: bool,
 }
 
 /// A light source that is not attached to a shape.
@@ -316,6 +319,7 @@ pub(crate) fn test_sphere_scene(
             },
             bsdf: 0,
             emission: None,
+            collimated: false,
         }],
         emitters: vec![emitter],
         warnings: vec![],
@@ -336,5 +340,6 @@ pub(crate) fn emitting_unit_enclosure(bsdf: usize) -> ShapeDesc {
         },
         bsdf,
         emission: Some(crate::texture::Texture::Constant(crate::spectrum::Rgb::ONE)),
+        collimated: false,
     }
 }

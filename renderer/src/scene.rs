@@ -274,7 +274,8 @@ impl Scene {
                     ),
                 },
                 Some(l) if l.mean().max_element() > 0.0 && shape.area() > 0.0 => {
-                    lights.push(Light::Area(AreaLight::new(i as u32, &shape, l.clone())));
+                    let light = AreaLight::new(i as u32, &shape, l.clone(), s.collimated);
+                    lights.push(Light::Area(light));
                     Some(lights.len() as u32 - 1)
                 }
                 _ => None,
@@ -423,12 +424,18 @@ impl Scene {
             .map(|l| channel_mean(light_power(l, &shapes, &sphere)))
             .collect();
         let bounds: Vec<EmitterBounds> = lights.iter().map(|l| light_bounds(l, &shapes)).collect();
+        // A collimated light sends nothing NEE could sample: no share of the light samples.
+        let nee_powers: Vec<f32> = lights
+            .iter()
+            .zip(&powers)
+            .map(|(l, &p)| if l.is_collimated() { 0.0 } else { p })
+            .collect();
         Ok(Scene {
             camera,
             shapes,
             shape_info,
             bsdfs: desc.bsdfs.clone(),
-            light_selection: LightSelection::new(&powers, &bounds),
+            light_selection: LightSelection::new(&nee_powers, &bounds),
             photon_selection: Box::new(Distribution1D::new(&powers)),
             lights,
             environment_lights,
@@ -802,6 +809,7 @@ mod tests {
             }),
             bsdf: 0,
             emission: Some(Texture::Constant(Rgb::new(1.0, 2.0, 3.0))),
+            collimated: false,
         }
     }
 
@@ -816,6 +824,7 @@ mod tests {
             },
             bsdf: 0,
             emission: Some(Texture::Constant(Rgb::ONE)),
+            collimated: false,
         }
     }
 
@@ -836,6 +845,7 @@ mod tests {
     fn ball(center: Vec3, radius: f32) -> ShapeDesc {
         ShapeDesc {
             emission: None,
+            collimated: false,
             name: "occluder".into(),
             ..ball_light(center, radius)
         }
@@ -997,6 +1007,7 @@ mod tests {
             geometry: Geometry::Mesh(crate::lights::emitter_tree::torus(24, 8, 1.0, 0.3)),
             bsdf: 0,
             emission: Some(Texture::Constant(Rgb::new(1.0, 2.0, 3.0))),
+            collimated: false,
         };
         let d = desc(vec![torus], vec![]);
         let scene = Scene::build(&d).unwrap();

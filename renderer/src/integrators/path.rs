@@ -332,6 +332,7 @@ mod tests {
             },
             bsdf,
             emission: emission.map(Texture::Constant),
+            collimated: false,
         };
         let desc = |hide: bool| SceneDescription {
             camera: test_camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 40.0, 8),
@@ -549,6 +550,7 @@ mod tests {
                     geometry: Geometry::Mesh(screen.clone()),
                     bsdf: 0,
                     emission: None,
+                    collimated: false,
                 }],
                 emitters: vec![EmitterDesc::Constant { radiance: Rgb::ONE }],
                 warnings: vec![],

@@ -28,19 +28,26 @@ pub struct AreaLight {
     pub radiance: Texture,
     /// How next-event estimation chooses the triangle of a mesh (`None`: by area).
     pub triangles: Option<Box<EmitterTree>>,
+    /// Mitsuba's `directionalarea`: the radiance leaves only along the surface normal (a
+    /// collimated beam). No ray from a point can meet that direction exactly, so `eval`,
+    /// `sample_li` and `pdf_li` find nothing (as Mitsuba's do: its path tracer renders such a
+    /// light black) and only photons carry it.
+    pub collimated: bool,
 }
 
 impl AreaLight {
-    /// Emission `radiance` on `shape`, the scene's shape number `index`.
-    pub fn new(index: u32, shape: &Shape, radiance: Texture) -> Self {
+    /// Emission `radiance` on `shape`, the scene's shape number `index`, `collimated` for a
+    /// `directionalarea`.
+    pub fn new(index: u32, shape: &Shape, radiance: Texture, collimated: bool) -> Self {
         let triangles = match shape {
-            Shape::Mesh(mesh) => EmitterTree::triangles(mesh).map(Box::new),
+            Shape::Mesh(mesh) if !collimated => EmitterTree::triangles(mesh).map(Box::new),
             _ => None,
         };
         AreaLight {
             shape: index,
             radiance,
             triangles,
+            collimated,
         }
     }
 
@@ -48,7 +55,7 @@ impl AreaLight {
     /// (front side only).
     #[inline]
     pub fn eval(&self, n: Vec3, w: Vec3, tp: TexPoint) -> Rgb {
-        if n.dot(w) > 0.0 {
+        if n.dot(w) > 0.0 && !self.collimated {
             self.radiance.eval(tp)
         } else {
             Rgb::ZERO
@@ -67,6 +74,9 @@ impl AreaLight {
         u_prim: f32,
         u: Vec2,
     ) -> Option<LightSample> {
+        if self.collimated {
+            return None;
+        }
         if let Shape::Sphere(sphere) = shape {
             if let Some(cone) = SphereCone::new(sphere, p) {
                 if sphere.flip_normals {
@@ -144,6 +154,9 @@ impl AreaLight {
         n_light: Vec3,
         prim: u32,
     ) -> f32 {
+        if self.collimated {
+            return 0.0;
+        }
         if let Shape::Sphere(sphere) = shape {
             if let Some(cone) = SphereCone::new(sphere, p_ref) {
                 return if sphere.flip_normals {
@@ -173,7 +186,9 @@ impl AreaLight {
     }
 
     /// A photon from a uniform point, cosine-distributed over the front hemisphere: flux
-    /// L(uv)·π / pdf (L·π·A for a uniform radiance).
+    /// L(uv)·π / pdf (L·π·A for a uniform radiance); a collimated light's leaves along the
+    /// normal with flux L(uv) / pdf (L·A: Mitsuba's `directionalarea` weighs its particles by
+    /// the area, its "radiance" being a power per unit area).
     pub fn sample_emission(
         &self,
         shape: &Shape,
@@ -182,6 +197,13 @@ impl AreaLight {
         u_dir: Vec2,
     ) -> EmissionSample {
         let s = shape.sample_area(u_prim, u_pos);
+        if self.collimated {
+            return EmissionSample {
+                ray: spawn_ray(s.p, s.n, s.n),
+                flux: self.radiance.eval(s.tex()) / s.pdf,
+                light: 0,
+            };
+        }
         let local = square_to_cosine_hemisphere(u_dir);
         let (t, b) = coordinate_system(s.n);
         let d = (t * local.x + b * local.y + s.n * local.z).normalize();
@@ -196,11 +218,16 @@ impl AreaLight {
     /// each normal's emission falling off to zero at 90°. The intensity along the strongest
     /// direction is L·A for a flat emitter and L·A/4 for a sphere; in between by the spread of
     /// the normals.
+    /// A collimated light's intensity is zero: NEE never samples it.
     pub fn bounds(&self, shape: &Shape) -> LightBounds {
         let (lo, hi) = shape.bounds();
         let (center, radius) = bounding_sphere(lo, hi);
         let (axis, cos_o) = shape.normal_cone();
-        let intensity = channel_mean(self.radiance.mean()) * shape.area() * cos_o.max(0.25);
+        let intensity = if self.collimated {
+            0.0
+        } else {
+            channel_mean(self.radiance.mean()) * shape.area() * cos_o.max(0.25)
+        };
         if cos_o <= -1.0 {
             LightBounds::omnidirectional(center, radius, intensity)
         } else {
@@ -208,10 +235,11 @@ impl AreaLight {
         }
     }
 
-    /// Power L·π·A, with a texture's mean over its texels for L (light selection only needs a
-    /// proportion; called once, when the scene is built).
+    /// Power L·π·A (L·A when collimated), with a texture's mean over its texels for L (light
+    /// selection only needs a proportion; called once, when the scene is built).
     pub fn power(&self, shape: &Shape) -> Rgb {
-        self.radiance.mean() * (PI * shape.area())
+        let solid = if self.collimated { 1.0 } else { PI };
+        self.radiance.mean() * (solid * shape.area())
     }
 }
 

@@ -449,6 +449,7 @@ mod tests {
             shape: 0,
             radiance: Texture::Constant(Rgb::ONE),
             triangles: None,
+            collimated: false,
         };
         let spot = SpotLight::new(tilt, Rgb::ONE, 25.0, 10.0, None);
         let projector = ProjectorLight::new(tilt, Texture::Constant(Rgb::ONE), 1.0, 40.0);

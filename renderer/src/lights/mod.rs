@@ -120,6 +120,13 @@ impl Light {
         )
     }
 
+    /// Whether the light is a collimated area light (`directionalarea`): it emits along its
+    /// surface normals only, so next-event estimation and rays hitting it find nothing and only
+    /// photons carry its light.
+    pub fn is_collimated(&self) -> bool {
+        matches!(self, Light::Area(a) if a.collimated)
+    }
+
     /// Whether the light is a delta light (cannot be hit by rays).
     pub fn is_delta(&self) -> bool {
         matches!(

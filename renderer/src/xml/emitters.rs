@@ -1,5 +1,5 @@
-//! `<emitter>` plugins: `area` (inside a shape), `point`, `spot`, `projector`, `directional`,
-//! `constant`, `envmap`.
+//! `<emitter>` plugins: `area` and `directionalarea` (inside a shape), `point`, `spot`,
+//! `projector`, `directional`, `constant`, `envmap`.
 //! Emission spectra are converted without D65 weighting, as Mitsuba's RGB variants do.
 
 use super::props::Props;
@@ -16,8 +16,11 @@ const EMISSION: SpectrumKind = SpectrumKind::Emission;
 pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<(), SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
-    if kind == "area" {
-        return Err(el.error("an area emitter must be nested inside a <shape>"));
+    if kind == "area" || kind == "directionalarea" {
+        let article = if kind == "area" { "an" } else { "a" };
+        return Err(el.error(format!(
+            "{article} {kind} emitter must be nested inside a <shape>"
+        )));
     }
     if ![
         "point",
@@ -30,7 +33,7 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
     .contains(&kind)
     {
         let err = el.error(format!(
-            "unknown plugin \"{kind}\" (supported emitters: area, point, spot, projector, directional, constant, envmap)"
+            "unknown plugin \"{kind}\" (supported emitters: area, directionalarea, point, spot, projector, directional, constant, envmap)"
         ));
         return b.diag.unknown(err);
     }
@@ -180,15 +183,17 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
     Ok(())
 }
 
-/// The radiance of an `area` emitter nested in a shape.
+/// The radiance of an `area` or `directionalarea` emitter nested in a shape, and whether it
+/// is the latter (collimated: the radiance leaves only along the surface normal, Mitsuba's
+/// "similar to an area light, but emitting only in the normal direction").
 pub(super) fn area_radiance<'a>(
     b: &mut Builder<'a>,
     el: &'a Element,
-) -> Result<Option<Texture>, SceneError> {
+) -> Result<Option<(Texture, bool)>, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
-    if kind != "area" {
-        let err = el.error(format!("unknown plugin \"{kind}\" inside a shape (only \"area\" emitters can be attached to shapes)"));
+    if kind != "area" && kind != "directionalarea" {
+        let err = el.error(format!("unknown plugin \"{kind}\" inside a shape (only \"area\" and \"directionalarea\" emitters can be attached to shapes)"));
         b.diag.unknown(err)?;
         return Ok(None);
     }
@@ -209,7 +214,7 @@ pub(super) fn area_radiance<'a>(
         "lights are sampled proportionally to their power",
     );
     p.finish(b)?;
-    Ok(Some(radiance))
+    Ok(Some((radiance, kind == "directionalarea")))
 }
 
 /// An emission colour parameter (default 1, as Mitsuba), constant and non-negative.

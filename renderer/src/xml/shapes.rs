@@ -191,7 +191,11 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
     });
     let built = shape_bsdf_and_emission(b, &mut p);
     b.mesh_scope = outer;
-    let (bsdf, emission) = built?;
+    let (bsdf, emitter) = built?;
+    let (emission, collimated) = match emitter {
+        Some((radiance, collimated)) => (Some(radiance), collimated),
+        None => (None, false),
+    };
     p.finish(b)?;
     let bsdf = match bsdf {
         Some(i) => i,
@@ -210,15 +214,19 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
         geometry,
         bsdf,
         emission,
+        collimated,
     });
     Ok(())
 }
 
-/// A shape's nested or referenced BSDF (its index) and area emitter (its radiance).
+/// A shape's area emitter: its radiance, and whether it is a collimated `directionalarea`.
+type AreaEmission = (Texture, bool);
+
+/// A shape's nested or referenced BSDF (its index) and area emitter.
 fn shape_bsdf_and_emission<'a>(
     b: &mut Builder<'a>,
     p: &mut Props<'a>,
-) -> Result<(Option<usize>, Option<Texture>), SceneError> {
+) -> Result<(Option<usize>, Option<AreaEmission>), SceneError> {
     let mut bsdf = None;
     let mut emission = None;
     // Named or not (`<bsdf name="bsdf">` is common in exported scenes).

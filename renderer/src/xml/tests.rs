@@ -1865,6 +1865,34 @@ fn area_emitters_take_a_texture_as_radiance() {
     );
 }
 
+/// `directionalarea` (Mitsuba's collimated area light) nests in a shape like `area` and is
+/// marked collimated; outside a shape it is an error naming it.
+#[test]
+fn directional_area_emitters_are_collimated_area_lights() {
+    let dir = temp_dir("directionalarea");
+    let body = format!(
+        r#"{SENSOR}
+<shape type="rectangle"><emitter type="directionalarea"><rgb name="radiance" value="2, 3, 4"/></emitter></shape>
+<shape type="sphere"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert!(scene.shapes[0].collimated && !scene.shapes[1].collimated);
+    assert!(
+        matches!(scene.shapes[0].emission, Some(Texture::Constant(c)) if c == Vec3::new(2.0, 3.0, 4.0))
+    );
+    let body = format!(
+        "{SENSOR}\n<emitter type=\"directionalarea\"><rgb name=\"radiance\" value=\"1\"/></emitter>"
+    );
+    assert_body_error_at(
+        &dir,
+        "loose.xml",
+        &body,
+        "<emitter",
+        "a directionalarea emitter must be nested inside a <shape>",
+    );
+}
+
 #[test]
 fn alpha_may_be_a_texture_except_for_roughplastic() {
     let dir = temp_dir("textured-alpha");

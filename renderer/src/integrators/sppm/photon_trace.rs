@@ -1,6 +1,7 @@
 //! The photon pass (SPEC §3.4 step 2): photons leave the lights by power, scatter with Russian
 //! roulette, and are deposited at every diffuse/rough hit after at least one bounce (light
-//! arriving directly from a light is next-event estimation's job).
+//! arriving directly from a light is next-event estimation's job) — from the first hit for a
+//! collimated light (`directionalarea`), whose direct light NEE cannot sample.
 //!
 //! Photons are only stored where a visible point can exist (surfaces whose lobe class is
 //! [`Lobe::Diffuse`]); deposits on glossy surfaces could never be gathered.
@@ -40,6 +41,9 @@ pub fn trace_photon(
     let Some(emission) = scene.sample_emission(u_sel, u_pos, u_dir) else {
         return;
     };
+    // A collimated light's (`directionalarea`) direct light is no NEE's: its photons are
+    // deposited from their first hit.
+    let first_deposit = u32::from(!scene.lights[emission.light as usize].is_collimated());
     let mut ray = emission.ray;
     let mut flux = emission.flux;
     for bounce in 0..max_depth {
@@ -48,7 +52,7 @@ pub fn trace_photon(
         };
         let bsdf = scene.bsdf(&si);
         let wo = si.to_local(si.wo);
-        if bounce > 0 && bsdf.lobe_for(wo) == Lobe::Diffuse {
+        if bounce >= first_deposit && bsdf.lobe_for(wo) == Lobe::Diffuse {
             out.push(Photon {
                 position: si.p,
                 wi: si.wo,
