@@ -13,7 +13,7 @@ use super::{EmissionSample, LightSample};
 use crate::frame::Frame;
 use crate::math::{coordinate_system, spawn_ray};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_uniform_cone, uniform_cone_pdf};
-use crate::shapes::{AreaSample, Shape, Sphere};
+use crate::shapes::{Shape, Sphere};
 use crate::spectrum::Rgb;
 use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
@@ -107,10 +107,7 @@ impl AreaLight {
         let s = match (shape, &self.triangles) {
             (Shape::Mesh(mesh), Some(triangles)) => {
                 let (tri, pmf, _) = triangles.sample(p, n, u_prim)?;
-                AreaSample {
-                    pdf: pmf / triangles.weight(tri),
-                    ..mesh.sample_triangle(tri, u)
-                }
+                mesh.sample_triangle(tri, u, pmf / triangles.weight(tri))
             }
             _ => shape.sample_area(u_prim, u),
         };

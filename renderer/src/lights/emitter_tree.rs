@@ -13,7 +13,7 @@
 //! emitter at every sample would cost as much as there are emitters.
 
 use super::bounds::{bounding_sphere, LightBounds, LightBounds4};
-use super::selection::{BELOW_ONE, IMPORTANCE_CAP, POWER_SHARE};
+use super::selection::{pick, BELOW_ONE, IMPORTANCE_CAP, POWER_SHARE};
 use crate::shapes::{normal_cone, Mesh};
 use glam::{Vec3, Vec4};
 
@@ -80,13 +80,12 @@ impl EmitterTree {
         let mut members: Vec<Member> = (0..emitters.len() as u32)
             .map(|k| (k, emitters[k as usize].key))
             .collect();
-        let leaves: Vec<LightBounds> = emitters.iter().map(|e| e.bounds).collect();
         let mut tree = EmitterTree {
             nodes: Vec::with_capacity(emitters.len() / 2),
             trail: vec![0; emitters.len()],
             weight,
         };
-        tree.build(&mut members, &leaves, 0, 0);
+        tree.build(&mut members, emitters, 0, 0);
         Some(tree)
     }
 
@@ -122,18 +121,23 @@ impl EmitterTree {
         Self::new(&emitters)
     }
 
-    /// Builds the subtree over `members` (emitter, key), reached from the root by `trail`
-    /// (`level` levels down); returns the child entry for it, its bounds and its weight.
+    /// Builds the subtree over `members` (index into `emitters`, key), reached from the root
+    /// by `trail` (`level` levels down); returns the child entry for it, its bounds and its
+    /// weight.
     fn build(
         &mut self,
         members: &mut [Member],
-        leaves: &[LightBounds],
+        emitters: &[TreeEmitter],
         level: u32,
         trail: u64,
     ) -> (u32, LightBounds, f32) {
         if let [(e, _)] = members {
             self.trail[*e as usize] = trail;
-            return (*e | EMITTER, leaves[*e as usize], self.weight[*e as usize]);
+            return (
+                *e | EMITTER,
+                emitters[*e as usize].bounds,
+                self.weight[*e as usize],
+            );
         }
         let index = self.nodes.len();
         self.nodes.push(Node {
@@ -154,7 +158,7 @@ impl EmitterTree {
             let lane = bounds.len();
             let (entry, group_bounds, group_weight) = self.build(
                 group,
-                leaves,
+                emitters,
                 level + 1,
                 trail | (lane as u64) << (2 * level),
             );
@@ -178,8 +182,10 @@ impl EmitterTree {
         self.weight[e as usize]
     }
 
-    /// Number of levels from the root down to emitter `e`.
-    pub fn depth(&self, e: u32) -> u32 {
+    /// Number of levels from the root down to emitter `e` (the power of [`POWER_SHARE`] that
+    /// bounds its defensive share).
+    #[cfg(test)]
+    pub(crate) fn depth(&self, e: u32) -> u32 {
         let (mut trail, mut node, mut depth) = (self.trail[e as usize], 0usize, 1);
         loop {
             let child = self.nodes[node].child[(trail & 3) as usize];
@@ -229,20 +235,7 @@ impl EmitterTree {
         let mut pmf = 1.0f32;
         loop {
             let shares = Self::shares(node, p, n).to_array();
-            // The first child whose cumulative share passes `u`; rounding can leave `u` past
-            // the last one, which then takes it.
-            let mut below = 0.0f32;
-            let mut chosen = None;
-            for (k, &q) in shares.iter().enumerate() {
-                if q > 0.0 {
-                    chosen = Some((k, below));
-                    if u < below + q {
-                        break;
-                    }
-                    below += q;
-                }
-            }
-            let (k, below) = chosen?;
+            let (k, below) = pick(&shares, u)?;
             let q = shares[k];
             u = ((u - below) / q).clamp(0.0, BELOW_ONE);
             pmf *= q;

@@ -116,8 +116,9 @@ impl LightSelection {
                 split: None,
             };
         }
-        let group = |lights: Vec<u32>, weigh: bool| {
-            let weights: Vec<f32> = lights.iter().map(|&i| by_power.pmf(i as usize)).collect();
+        // A group's bounds are packed only when it is weighed per point (an unweighed group of
+        // more lights than a tree takes selects by power).
+        let weighing = |lights: &[u32], weights: &[f32]| {
             let members: Vec<EmitterBounds> = lights.iter().map(|&i| bounds[i as usize]).collect();
             let finite: Vec<LightBounds> = members
                 .iter()
@@ -126,12 +127,12 @@ impl LightSelection {
                     _ => None,
                 })
                 .collect();
-            let weighing = if finite.len() != members.len() {
+            if finite.len() != members.len() {
                 Weighing::Infinite(members)
             } else if finite.len() > MAX_SPATIAL_LIGHTS {
                 let emitters: Vec<TreeEmitter> = finite
                     .iter()
-                    .zip(&weights)
+                    .zip(weights)
                     .map(|(&bounds, &weight)| TreeEmitter {
                         bounds,
                         weight,
@@ -144,10 +145,13 @@ impl LightSelection {
                 }
             } else {
                 Weighing::Finite(finite.chunks(4).map(LightBounds4::new).collect())
-            };
+            }
+        };
+        let group = |lights: Vec<u32>, weigh: bool| {
+            let weights: Vec<f32> = lights.iter().map(|&i| by_power.pmf(i as usize)).collect();
             Group {
                 by_power: Distribution1D::new(&weights),
-                bounds: weigh.then_some(weighing),
+                bounds: weigh.then(|| weighing(&lights, &weights)),
                 lights,
             }
         };
@@ -290,20 +294,7 @@ impl Group {
         let mut w = [0.0f32; MAX_SPATIAL_LIGHTS];
         let total = self.weights(weighing, p, n, &mut w);
         let target = u * total;
-        // The first member whose cumulative weight passes the target; rounding can leave the
-        // target past the last one, which then takes it.
-        let mut below = 0.0f32;
-        let mut chosen = None;
-        for (j, &wj) in w[..self.lights.len()].iter().enumerate() {
-            if wj > 0.0 {
-                chosen = Some((j, below));
-                if target < below + wj {
-                    break;
-                }
-                below += wj;
-            }
-        }
-        let Some((j, below)) = chosen else {
+        let Some((j, below)) = pick(&w[..self.lights.len()], target) else {
             return (0, 0.0, 0.0);
         };
         let wj = w[j];
@@ -323,6 +314,25 @@ impl Group {
         let total = self.weights(weighing, p, n, &mut w);
         w[k] / total
     }
+}
+
+/// The first of `weights` whose cumulative sum passes `target`, with the sum of the weights
+/// before it; rounding can leave `target` past the last positive weight, which then takes it.
+/// `None` when no weight is positive.
+#[inline]
+pub(super) fn pick(weights: &[f32], target: f32) -> Option<(usize, f32)> {
+    let mut below = 0.0f32;
+    let mut chosen = None;
+    for (j, &wj) in weights.iter().enumerate() {
+        if wj > 0.0 {
+            chosen = Some((j, below));
+            if target < below + wj {
+                break;
+            }
+            below += wj;
+        }
+    }
+    chosen
 }
 
 /// Selection weights of the lights for next-event estimation: proportional to power, as photons
@@ -507,6 +517,21 @@ mod tests {
         let sel = LightSelection::new(&many, &bounds);
         assert!(!sel.is_spatial());
         assert_eq!(sel.pmf(Vec3::X, Vec3::Y, 3), sel.by_power().pmf(3));
+        // With a sun and a sky the infinite lights are weighed, the too many finite ones still
+        // by power (no tree is built for them).
+        let (mut many, mut bounds) = (many, bounds);
+        many.extend([3000.0, 12000.0]);
+        bounds.extend([
+            EmitterBounds::Directional {
+                toward: Vec3::Y,
+                irradiance: 3.0,
+            },
+            sky,
+        ]);
+        let sel = LightSelection::new(&many, &bounds);
+        assert!(sel.is_spatial());
+        let (pmf, want) = (sel.pmf(Vec3::X, Vec3::Y, 3), sel.by_power().pmf(3));
+        assert!((pmf - want).abs() <= 1e-4 * want, "{pmf} vs {want}");
     }
 
     #[test]

@@ -256,15 +256,13 @@ impl Mesh {
     /// A point uniformly distributed over the mesh's area.
     pub fn sample_area(&self, u_prim: f32, u: Vec2) -> AreaSample {
         let (tri, _, _) = self.area_distribution.sample(u_prim);
-        AreaSample {
-            pdf: 1.0 / self.area,
-            ..self.sample_triangle(tri as u32, u)
-        }
+        self.sample_triangle(tri as u32, u, 1.0 / self.area)
     }
 
-    /// A point uniformly distributed over triangle `tri` (`pdf`: one over its area).
+    /// A point uniformly distributed over triangle `tri`, reported with area density `pdf`
+    /// (how the triangle was chosen decides it: one over the mesh's area when by area).
     #[inline]
-    pub fn sample_triangle(&self, tri: u32, u: Vec2) -> AreaSample {
+    pub fn sample_triangle(&self, tri: u32, u: Vec2, pdf: f32) -> AreaSample {
         let [i0, i1, i2] = self.data.indices[tri as usize];
         let [p0, p1, p2] = self.triangle(tri);
         let b = square_to_uniform_triangle(u);
@@ -288,7 +286,7 @@ impl Mesh {
             uv,
             prim: tri,
             bary: b,
-            pdf: 1.0 / self.triangle_area(tri),
+            pdf,
         }
     }
 }
