@@ -4,7 +4,8 @@
 For every validation scene (scenes/validation/*/scene.xml) and every external scene
 (../shared/scenes/external/*/scene.xml) this script
 
-1. renders a Mitsuba 3 reference with its `path` integrator (llvm_ad_rgb, box filter, 128x128,
+1. renders a Mitsuba 3 reference with its `path` integrator (`volpath` for scenes whose file
+   names it: participating media; llvm_ad_rgb, box filter, 128x128,
    the scene's max_depth; default 4096 spp in chunks of 512 with distinct seeds) and caches it
    under out/validation/<scene>/ (keyed by a hash of the scene files and the settings);
 2. renders the same XML with our `render --integrator path` at the same spp and resolution;
@@ -166,6 +167,8 @@ def mitsuba_reference(scene, spp, out_dir, force):
     if scene.integrator == "direct":
         settings.update(integrator="direct", emitter_samples=scene.emitter_samples,
                         bsdf_samples=scene.bsdf_samples)
+    if scene.integrator == "volpath":
+        settings["integrator"] = "volpath"
     key = scene.files_hash(settings)
     exr, npy, info_path = out_dir / "mitsuba.exr", out_dir / "mitsuba_chunks.npy", out_dir / "mitsuba.json"
     if not force and info_path.exists() and exr.exists() and npy.exists():
@@ -181,7 +184,8 @@ def mitsuba_reference(scene, spp, out_dir, force):
         integrator = mi.load_dict({"type": "direct", "emitter_samples": scene.emitter_samples,
                                    "bsdf_samples": scene.bsdf_samples, "hide_emitters": scene.hide_emitters})
     else:
-        integrator = mi.load_dict({"type": "path", "max_depth": scene.max_depth, "rr_depth": scene.rr_depth,
+        kind = "volpath" if scene.integrator == "volpath" else "path"
+        integrator = mi.load_dict({"type": kind, "max_depth": scene.max_depth, "rr_depth": scene.rr_depth,
                                    "hide_emitters": scene.hide_emitters})
     t0 = time.time()
     acc, downs = None, []
@@ -214,8 +218,9 @@ def render_help(binary):
 
 def ours_command(scene, binary, help_text, spp, seed, out_exr, out_png, threads):
     """The `render` command line for one scene (path tracer, 128x128, the scene's max_depth;
-    `direct` scenes with the direct integrator at the file's sample counts)."""
-    integrator = "direct" if scene.integrator == "direct" else "path"
+    `direct` scenes with the direct integrator at the file's sample counts, `volpath` scenes
+    (participating media) with the volumetric path tracer)."""
+    integrator = scene.integrator if scene.integrator in ("direct", "volpath") else "path"
     cmd = [str(binary), str(scene.xml), "--integrator", integrator, "--spp", str(spp), "--seed", str(seed),
            "--out", str(out_exr), "--png", str(out_png)]
     if threads:

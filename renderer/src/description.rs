@@ -73,6 +73,8 @@ pub struct ShapeDesc {
     /// The nested emitter is a `directionalarea`: its radiance leaves only along the surface
     /// normal (a collimated beam), which only photons can carry.
     pub collimated: bool,
+    /// The participating media inside and outside the shape (`interior`, `exterior`).
+    pub media: crate::media::MediumInterface,
 }
 
 /// A light source that is not attached to a shape.
@@ -267,6 +269,10 @@ pub struct SceneDescription {
     pub emitters: Vec<EmitterDesc>,
     /// Non-fatal messages from the importer (e.g. an ignored parameter).
     pub warnings: Vec<String>,
+    /// Participating media; shapes and the camera refer to them by index.
+    pub media: Vec<crate::media::Medium>,
+    /// The medium the camera sits in (the sensor's nested medium), if any.
+    pub camera_medium: Option<u32>,
 }
 
 /// A square pinhole camera at `origin` looking at `target` (y up) with horizontal field of view
@@ -320,9 +326,12 @@ pub(crate) fn test_sphere_scene(
             bsdf: 0,
             emission: None,
             collimated: false,
+            media: Default::default(),
         }],
         emitters: vec![emitter],
         warnings: vec![],
+        media: vec![],
+        camera_medium: None,
     }
 }
 
@@ -341,5 +350,6 @@ pub(crate) fn emitting_unit_enclosure(bsdf: usize) -> ShapeDesc {
         bsdf,
         emission: Some(crate::texture::Texture::Constant(crate::spectrum::Rgb::ONE)),
         collimated: false,
+        media: Default::default(),
     }
 }

@@ -13,6 +13,7 @@ pub mod image_io;
 pub mod integrators;
 pub mod lights;
 pub mod math;
+pub mod media;
 pub mod memory;
 pub mod sampling;
 pub mod scene;

@@ -15,6 +15,7 @@ use crate::lights::{
     LightSample, PointLight, ProjectorLight, SceneSphere, SpotLight,
 };
 use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
+use crate::media::{Medium, MediumInterface};
 use crate::sampling::Distribution1D;
 use crate::shapes::Shape;
 use crate::spectrum::Rgb;
@@ -116,6 +117,8 @@ pub struct ShapeInfo {
     pub material: u32,
     /// Index into [`Scene::lights`] of the shape's area light.
     pub light: Option<u32>,
+    /// The participating media on either side of the shape's surface.
+    pub media: MediumInterface,
 }
 
 /// Most emitting surfaces [`Scene::intersect_behind_emitters`] passes through on one ray; a
@@ -157,6 +160,10 @@ pub struct Scene {
     pub integrator: Option<IntegratorDesc>,
     /// Samples per pixel from the file.
     pub sample_count: Option<u32>,
+    /// Participating media; shapes and the camera refer to them by index.
+    pub media: Vec<Medium>,
+    /// The medium the camera sits in.
+    pub camera_medium: Option<u32>,
 }
 
 fn finite_rgb(c: Rgb) -> bool {
@@ -280,10 +287,19 @@ impl Scene {
                 }
                 _ => None,
             };
+            for m in [s.media.interior, s.media.exterior].into_iter().flatten() {
+                if m as usize >= desc.media.len() {
+                    bail!(
+                        "shape '{}' refers to medium #{m}, which does not exist",
+                        s.name
+                    );
+                }
+            }
             shape_info.push(ShapeInfo {
                 name: s.name.clone(),
                 material: s.bsdf as u32,
                 light,
+                media: s.media,
             });
             shapes.push(shape);
         }
@@ -430,6 +446,31 @@ impl Scene {
             .zip(&powers)
             .map(|(l, &p)| if l.is_collimated() { 0.0 } else { p })
             .collect();
+        for m in &desc.media {
+            if !(finite_rgb(m.sigma_t) && finite_rgb(m.albedo) && m.albedo.max_element() <= 1.0) {
+                bail!(
+                    "medium '{}' needs a finite, non-negative sigma_t and an albedo in [0, 1] \
+                     (got sigma_t {:?}, albedo {:?})",
+                    m.name,
+                    m.sigma_t,
+                    m.albedo
+                );
+            }
+            if let crate::media::PhaseFunction::HenyeyGreenstein { g } = m.phase {
+                if !(g > -1.0 && g < 1.0) {
+                    bail!(
+                        "medium '{}': the phase function's g = {g} is outside (-1, 1)",
+                        m.name
+                    );
+                }
+            }
+        }
+        if desc
+            .camera_medium
+            .is_some_and(|m| m as usize >= desc.media.len())
+        {
+            bail!("the camera refers to a medium that does not exist");
+        }
         Ok(Scene {
             camera,
             shapes,
@@ -447,7 +488,31 @@ impl Scene {
             sphere,
             integrator: desc.integrator.clone(),
             sample_count: desc.sample_count,
+            media: desc.media.clone(),
+            camera_medium: desc.camera_medium,
         })
+    }
+
+    /// Whether the scene has participating media (only `volpath` renders them).
+    pub fn has_media(&self) -> bool {
+        !self.media.is_empty()
+    }
+
+    /// The error for integrator `name`, which cannot render participating media, when the
+    /// scene has some.
+    pub fn refuse_media(&self, name: &str) -> Result<()> {
+        match self.media.first() {
+            Some(m) => bail!(
+                "the scene has participating media (medium '{}'{}); the {name} integrator \
+                 does not render them: use --integrator volpath",
+                m.name,
+                match self.media.len() {
+                    1 => String::new(),
+                    n => format!(" and {} more", n - 1),
+                }
+            ),
+            None => Ok(()),
+        }
     }
 
     /// Bounding box (min, max) of the geometry.
@@ -788,6 +853,8 @@ mod tests {
             shapes,
             emitters,
             warnings: vec![],
+            media: vec![],
+            camera_medium: None,
         }
     }
 
@@ -810,6 +877,7 @@ mod tests {
             bsdf: 0,
             emission: Some(Texture::Constant(Rgb::new(1.0, 2.0, 3.0))),
             collimated: false,
+            media: Default::default(),
         }
     }
 
@@ -825,6 +893,7 @@ mod tests {
             bsdf: 0,
             emission: Some(Texture::Constant(Rgb::ONE)),
             collimated: false,
+            media: Default::default(),
         }
     }
 
@@ -846,6 +915,7 @@ mod tests {
         ShapeDesc {
             emission: None,
             collimated: false,
+            media: Default::default(),
             name: "occluder".into(),
             ..ball_light(center, radius)
         }
@@ -1008,6 +1078,7 @@ mod tests {
             bsdf: 0,
             emission: Some(Texture::Constant(Rgb::new(1.0, 2.0, 3.0))),
             collimated: false,
+            media: Default::default(),
         };
         let d = desc(vec![torus], vec![]);
         let scene = Scene::build(&d).unwrap();

@@ -12,6 +12,7 @@ use renderer::film::{with_threads, Film};
 use renderer::image_io::{write_png_srgb, write_rgb_exr};
 use renderer::integrators::direct::DirectIntegrator;
 use renderer::integrators::path::PathTracer;
+use renderer::integrators::volpath::VolPathTracer;
 use renderer::integrators::RayIntegrator;
 use renderer::scene::Scene;
 use renderer::state_file::StateFile;
@@ -24,6 +25,8 @@ use std::time::Instant;
 enum IntegratorKind {
     /// Unidirectional path tracer with NEE + MIS (Mitsuba's `path`).
     Path,
+    /// The path tracer through participating media (Mitsuba's `volpath`).
+    Volpath,
     /// Direct illumination only: light and BSDF samples at the first surface, combined by MIS
     /// (Mitsuba's `direct`).
     Direct,
@@ -39,8 +42,9 @@ enum IntegratorKind {
 struct Cli {
     /// The scene file (Mitsuba 3 XML).
     scene: PathBuf,
-    /// Light-transport algorithm. Default: the scene file's integrator when it is `direct`,
-    /// else `path`.
+    /// Light-transport algorithm. Default: the scene file's integrator when it is `direct` or
+    /// `volpath` (also for `volpathmis`), else `path`. Only `volpath` renders participating
+    /// media.
     #[arg(long, value_enum)]
     integrator: Option<IntegratorKind>,
     /// Output: an RGB EXR for `path` and `direct` (its name ends in `.exr` or has no
@@ -141,7 +145,7 @@ impl IntegratorKind {
         let sppm = SPPM_ONLY.map(|id| (id, "the SPPM integrators (sppm, sppm-ml)"));
         let direct = DIRECT_ONLY.map(|id| (id, "the direct integrator"));
         match self {
-            IntegratorKind::Path => [&sppm[..], &direct[..]].concat(),
+            IntegratorKind::Path | IntegratorKind::Volpath => [&sppm[..], &direct[..]].concat(),
             IntegratorKind::Direct => {
                 let path = [
                     ("max_depth", "path and SPPM"),
@@ -158,7 +162,10 @@ impl IntegratorKind {
 
     /// Whether it writes one image (`path`, `direct`) rather than SPPM bundles.
     fn writes_image(self) -> bool {
-        matches!(self, IntegratorKind::Path | IntegratorKind::Direct)
+        matches!(
+            self,
+            IntegratorKind::Path | IntegratorKind::Volpath | IntegratorKind::Direct
+        )
     }
 
     /// Its `--integrator` value.
@@ -198,7 +205,8 @@ fn ignored_option_given(matches: &ArgMatches, kind: IntegratorKind) -> Option<St
         })
 }
 
-/// The integrator to run: `--integrator`, else the scene file's `direct`, else `path`. When it
+/// The integrator to run: `--integrator`, else the scene file's `direct` or `volpath`
+/// (`volpathmis`: the same image), else `path`. When it
 /// comes from the file, an option given for another integrator is refused here, as
 /// [`parse_cli`] refuses it for an `--integrator` given on the command line.
 fn chosen_integrator(cli: &Cli, matches: &ArgMatches, scene: &Scene) -> Result<IntegratorKind> {
@@ -207,6 +215,7 @@ fn chosen_integrator(cli: &Cli, matches: &ArgMatches, scene: &Scene) -> Result<I
     }
     let kind = match scene.integrator.as_ref().map(|i| i.kind.as_str()) {
         Some("direct") => IntegratorKind::Direct,
+        Some("volpath" | "volpathmis") => IntegratorKind::Volpath,
         _ => IntegratorKind::Path,
     };
     if let Some(conflict) = ignored_option_given(matches, kind) {
@@ -241,7 +250,9 @@ fn run() -> Result<()> {
     );
     let integrator = chosen_integrator(&cli, &matches, &scene)?;
     with_threads(cli.threads, || match integrator {
-        IntegratorKind::Path | IntegratorKind::Direct => run_image(&cli, &scene, integrator),
+        IntegratorKind::Path | IntegratorKind::Volpath | IntegratorKind::Direct => {
+            run_image(&cli, &scene, integrator)
+        }
         IntegratorKind::Sppm => run_sppm(&cli, &scene, false),
         IntegratorKind::SppmMl => run_sppm(&cli, &scene, true),
     })?
@@ -390,8 +401,13 @@ fn direct_settings(cli: &Cli, scene: &Scene) -> Result<DirectIntegrator> {
         .context("--emitter-samples and --bsdf-samples")
 }
 
-/// The `path` and `direct` integrators: one image of `spp` samples per pixel.
+/// The `path`, `volpath` and `direct` integrators: one image of `spp` samples per pixel.
 fn run_image(cli: &Cli, scene: &Scene, kind: IntegratorKind) -> Result<()> {
+    if kind != IntegratorKind::Volpath {
+        scene
+            .refuse_media(&kind.name())
+            .with_context(|| cli.scene.display().to_string())?;
+    }
     let spp = cli.spp.or(scene.sample_count).unwrap_or(16);
     if spp == 0 {
         bail!("--spp must be at least 1");
@@ -423,6 +439,13 @@ fn run_image(cli: &Cli, scene: &Scene, kind: IntegratorKind) -> Result<()> {
     let t = Instant::now();
     let film = match direct {
         Some(d) => render_image(cli, scene, &d, spp, &bar)?,
+        None if kind == IntegratorKind::Volpath => {
+            let tracer = VolPathTracer {
+                max_depth,
+                rr_depth,
+            };
+            render_image(cli, scene, &tracer, spp, &bar)?
+        }
         None => {
             let tracer = PathTracer {
                 max_depth,

@@ -597,6 +597,41 @@ impl Bsdf {
         }
     }
 
+    /// The fraction of light that passes straight through the surface, for outgoing direction
+    /// `wo` (local frame) — Mitsuba's `eval_null_transmission`, what a volumetric path
+    /// tracer's shadow ray carries through the surface: a mask's 1 − opacity (plus its nested
+    /// model's share), a thin dielectric's transmission, zero for every other model.
+    pub fn null_transmission(&self, wo: Vec3, sp: &ShadingPoint) -> Rgb {
+        let tp = sp.tex;
+        match self {
+            Bsdf::ThinDielectric(b) => {
+                b.specular_transmittance.eval(tp) * (1.0 - b.slab_reflectance(wo.z))
+            }
+            Bsdf::Mask(b) => {
+                let opacity = b.opacity_at(tp);
+                Rgb::ONE - opacity * (Rgb::ONE - b.nested.null_transmission(wo, sp))
+            }
+            Bsdf::Blend(b) => {
+                let w = b.weight_at(tp);
+                b.nested[0].null_transmission(wo, sp) * (1.0 - w)
+                    + b.nested[1].null_transmission(wo, sp) * w
+            }
+            // The perturbed frame changes no straight-through share (Mitsuba's normal and bump
+            // maps report none; passing it on keeps shadow rays consistent with the paths
+            // that sample the nested model's pass-through).
+            Bsdf::NormalMap(b) => b.nested.null_transmission(wo, sp),
+            Bsdf::BumpMap(b) => b.nested.null_transmission(wo, sp),
+            Bsdf::TwoSided { front, back } => {
+                if wo.z >= 0.0 {
+                    front.null_transmission(wo, sp)
+                } else {
+                    back.null_transmission(flip(wo), sp)
+                }
+            }
+            _ => Rgb::ZERO,
+        }
+    }
+
     /// Albedo for the G-buffer: the diffuse reflectance of diffuse and plastic models; for
     /// conductors the specular tint times the normal-incidence Fresnel reflectance (the
     /// metal's colour); for dielectrics the transmittance tint; `principled`: its base colour

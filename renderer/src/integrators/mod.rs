@@ -4,5 +4,6 @@ pub mod direct;
 pub mod path;
 pub mod ray_integrator;
 pub mod sppm;
+pub mod volpath;
 
 pub use ray_integrator::RayIntegrator;

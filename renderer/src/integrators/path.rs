@@ -211,6 +211,8 @@ mod tests {
             shapes: vec![crate::description::emitting_unit_enclosure(0)],
             emitters: vec![],
             warnings: vec![],
+            media: vec![],
+            camera_medium: None,
         };
         Scene::build(&desc).unwrap()
     }
@@ -333,6 +335,7 @@ mod tests {
             bsdf,
             emission: emission.map(Texture::Constant),
             collimated: false,
+            media: Default::default(),
         };
         let desc = |hide: bool| SceneDescription {
             camera: test_camera(Vec3::new(0.0, 0.0, -4.0), Vec3::ZERO, 40.0, 8),
@@ -347,6 +350,8 @@ mod tests {
             ],
             emitters: vec![EmitterDesc::Constant { radiance: Rgb::ONE }],
             warnings: vec![],
+            media: vec![],
+            camera_medium: None,
         };
         let hidden_scene = Scene::build(&desc(true)).unwrap();
         // The closest hit is the emitter; behind it lies the ball, 3.5 − 0.5 from the camera.
@@ -551,9 +556,12 @@ mod tests {
                     bsdf: 0,
                     emission: None,
                     collimated: false,
+                    media: Default::default(),
                 }],
                 emitters: vec![EmitterDesc::Constant { radiance: Rgb::ONE }],
                 warnings: vec![],
+                media: vec![],
+                camera_medium: None,
             };
             let scene = Scene::build(&desc).unwrap();
             let film = PathTracer::default().render(&scene, 4096, 9, None);

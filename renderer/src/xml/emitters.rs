@@ -178,6 +178,18 @@ pub(super) fn build_emitter<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<
         &["sampling_weight"],
         "lights are sampled proportionally to their power",
     );
+    // The medium an emitter sits in (Mitsuba: any name) is built, so its errors are reported,
+    // but not needed: `volpath`'s shadow rays track the media from the shading point.
+    for obj in p.objects(&["medium", "ref"]) {
+        let target = b.deref(obj)?;
+        if target.tag != "medium" {
+            return Err(obj.error(format!(
+                "unexpected {} inside an emitter",
+                target.describe()
+            )));
+        }
+        b.medium_index(obj)?;
+    }
     p.finish(b)?;
     b.emitters.push(emitter);
     Ok(())

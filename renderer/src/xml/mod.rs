@@ -17,6 +17,7 @@ mod bsdfs;
 mod emitters;
 pub mod error;
 pub mod ior;
+mod media;
 mod mesh_attributes;
 mod obj;
 mod props;
@@ -572,6 +573,8 @@ pub(crate) struct Builder<'a> {
     bsdf_ids: HashMap<String, usize>,
     /// Already built textures with an id.
     texture_ids: HashMap<String, Texture>,
+    /// Already built media with an id → index into `media`.
+    medium_ids: HashMap<String, u32>,
     /// Ids being built (reference cycle detection).
     building: Vec<String>,
     /// Decoded images by (path, raw).
@@ -586,6 +589,10 @@ pub(crate) struct Builder<'a> {
     pub emitters: Vec<EmitterDesc>,
     /// The sensor, once seen.
     pub camera: Option<CameraDesc>,
+    /// Participating media.
+    pub media: Vec<crate::media::Medium>,
+    /// The medium of the (first) sensor.
+    pub camera_medium: Option<u32>,
     /// The sampler's sample count.
     pub sample_count: Option<u32>,
     /// The integrator.
@@ -668,6 +675,7 @@ impl<'a> Builder<'a> {
             referenced,
             bsdf_ids: HashMap::new(),
             texture_ids: HashMap::new(),
+            medium_ids: HashMap::new(),
             building: Vec::new(),
             bitmaps: HashMap::new(),
             bsdfs: Vec::new(),
@@ -675,6 +683,8 @@ impl<'a> Builder<'a> {
             shapes: Vec::new(),
             emitters: Vec::new(),
             camera: None,
+            media: Vec::new(),
+            camera_medium: None,
             sample_count: None,
             integrator: None,
             instance: None,
@@ -830,6 +840,30 @@ impl<'a> Builder<'a> {
         i
     }
 
+    /// The index in `media` of the medium declared by `el` (a `<medium>` or a `<ref>` to one);
+    /// a medium with an id is built once.
+    pub fn medium_index(&mut self, el: &'a Element) -> Result<u32, SceneError> {
+        let target = self.deref(el)?;
+        if target.tag != "medium" {
+            return Err(el.error(format!(
+                "expected a <medium>, but this refers to {}",
+                target.describe()
+            )));
+        }
+        if let Some(&i) = target.attr("id").and_then(|id| self.medium_ids.get(id)) {
+            return Ok(i);
+        }
+        let guard = self.enter(target)?;
+        let built = media::build_medium(self, target);
+        self.leave(guard);
+        self.media.push(built?);
+        let index = self.media.len() as u32 - 1;
+        if let Some(id) = target.attr("id") {
+            self.medium_ids.insert(id.to_owned(), index);
+        }
+        Ok(index)
+    }
+
     /// The texture declared by `el` (a `<texture>` or a `<ref>` to one); built once per id.
     pub fn texture_value(&mut self, el: &'a Element) -> Result<Texture, SceneError> {
         let target = self.deref(el)?;
@@ -880,6 +914,10 @@ impl<'a> Builder<'a> {
                 }
                 "shape" => shapes::build_shape(self, el)?,
                 "emitter" => emitters::build_emitter(self, el)?,
+                // Declared for the shapes and sensors that refer to it.
+                "medium" => {
+                    self.medium_index(el)?;
+                }
                 "sensor" => {
                     let camera = sensors::build_sensor(self, el)?;
                     if self.camera.is_some() {
@@ -901,6 +939,9 @@ impl<'a> Builder<'a> {
                         "shape" => shapes::build_shape(self, target)?,
                         "emitter" => emitters::build_emitter(self, target)?,
                         "bsdf" | "texture" | "spectrum" => {}
+                        "medium" => {
+                            self.medium_index(target)?;
+                        }
                         _ => {
                             let err = el.error(format!(
                                 "a top-level <ref> to {} is not supported (only shapes, emitters, BSDFs and textures)",
@@ -936,6 +977,8 @@ impl<'a> Builder<'a> {
             shapes: self.shapes,
             emitters: self.emitters,
             warnings: self.diag.warnings,
+            media: self.media,
+            camera_medium: self.camera_medium,
         })
     }
 }

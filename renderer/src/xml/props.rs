@@ -75,8 +75,10 @@ pub(crate) struct Props<'a> {
 }
 
 /// Tags that declare a nested plugin (or a reference to one).
-const OBJECT_TAGS: [&str; 10] = [
+const OBJECT_TAGS: [&str; 12] = [
     "bsdf",
+    "medium",
+    "phase",
     "texture",
     "emitter",
     "shape",

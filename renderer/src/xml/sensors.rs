@@ -72,18 +72,30 @@ pub(super) fn build_sensor<'a>(
         crop: None,
     };
     // Declared here, or elsewhere with an id and named by a `<ref>`.
-    for obj in p.objects(&["film", "sampler", "ref"]) {
+    let mut medium = None;
+    for obj in p.objects(&["film", "sampler", "ref", "medium"]) {
         let target = b.deref(obj)?;
         match target.tag.as_str() {
             "film" => film = build_film(b, target)?,
             "sampler" => b.sample_count = Some(build_sampler(b, target)?),
+            // The medium the camera sits in (Mitsuba: any name).
+            "medium" => {
+                if medium.is_some() {
+                    return Err(obj.error("a sensor can have only one medium"));
+                }
+                medium = Some(b.medium_index(obj)?);
+            }
             _ => {
                 return Err(obj.error(format!(
-                    "a sensor refers to a <film> or a <sampler>, not {}",
+                    "a sensor refers to a <film>, a <sampler> or a <medium>, not {}",
                     target.describe()
                 )))
             }
         }
+    }
+    // Only the first sensor is used (see `build_scene`).
+    if b.camera.is_none() {
+        b.camera_medium = medium;
     }
 
     let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);

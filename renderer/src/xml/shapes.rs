@@ -17,6 +17,7 @@ use super::mesh_attributes::{
 use super::props::Props;
 use super::{Builder, Element, MeshScope, SceneError};
 use crate::description::{Geometry, ShapeDesc, TriangleMesh};
+use crate::media::MediumInterface;
 use crate::texture::Texture;
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use std::path::Path;
@@ -191,7 +192,7 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
     });
     let built = shape_bsdf_and_emission(b, &mut p);
     b.mesh_scope = outer;
-    let (bsdf, emitter) = built?;
+    let (bsdf, emitter, media) = built?;
     let (emission, collimated) = match emitter {
         Some((radiance, collimated)) => (Some(radiance), collimated),
         None => (None, false),
@@ -215,6 +216,7 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
         bsdf,
         emission,
         collimated,
+        media,
     });
     Ok(())
 }
@@ -222,17 +224,28 @@ pub(super) fn build_shape<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<()
 /// A shape's area emitter: its radiance, and whether it is a collimated `directionalarea`.
 type AreaEmission = (Texture, bool);
 
-/// A shape's nested or referenced BSDF (its index) and area emitter.
+/// What a shape holds besides its geometry: the index of its BSDF, its area emitter and the
+/// media on either side.
+type ShapeContents = (Option<usize>, Option<AreaEmission>, MediumInterface);
+
+/// A shape's nested or referenced BSDF (its index), area emitter and interior/exterior media.
 fn shape_bsdf_and_emission<'a>(
     b: &mut Builder<'a>,
     p: &mut Props<'a>,
-) -> Result<(Option<usize>, Option<AreaEmission>), SceneError> {
+) -> Result<ShapeContents, SceneError> {
     let mut bsdf = None;
     let mut emission = None;
+    let mut media = MediumInterface::default();
     // Named or not (`<bsdf name="bsdf">` is common in exported scenes).
-    for obj in p.objects(&["bsdf", "emitter", "ref"]) {
+    for obj in p.objects(&["bsdf", "emitter", "ref", "medium"]) {
         let target = b.deref(obj)?;
         match target.tag.as_str() {
+            // Named on the `<ref>` or on the nested `<medium>` itself.
+            "medium" => {
+                let role = super::media::shape_medium_role(obj)?;
+                let index = b.medium_index(obj)?;
+                super::media::set_side(&mut media, role, index, obj)?;
+            }
             "bsdf" => {
                 if bsdf.is_some() {
                     return Err(obj.error("a shape can have only one BSDF"));
@@ -254,7 +267,7 @@ fn shape_bsdf_and_emission<'a>(
             }
         }
     }
-    Ok((bsdf, emission))
+    Ok((bsdf, emission, media))
 }
 
 /// A `shapegroup` at the top level: nothing is built (its shapes appear through instances),

@@ -476,6 +476,7 @@ pub fn render_sppm_resumable(
     mut on_checkpoint: impl FnMut(Bundle) -> Result<()> + Send,
     mut progress: impl FnMut(&PassProgress) + Send,
 ) -> Result<RenderSummary> {
+    scene.refuse_media(settings.mode.name())?;
     if settings.photons_per_pass == 0 {
         bail!("photons per pass must be positive");
     }

@@ -30,6 +30,7 @@ fn quad(name: &str, c: Vec3, u: Vec3, v: Vec3, bsdf: usize, emission: Option<Rgb
         bsdf,
         emission: emission.map(Texture::Constant),
         collimated: false,
+        media: Default::default(),
     }
 }
 
@@ -47,6 +48,8 @@ fn scene(
         shapes,
         emitters,
         warnings: vec![],
+        media: vec![],
+        camera_medium: None,
     })
     .unwrap()
 }
@@ -669,6 +672,7 @@ fn assert_disk_in_lit_enclosure_matches_the_path_tracer_after(material: Bsdf, pa
                 bsdf: 1,
                 emission: None,
                 collimated: false,
+                media: Default::default(),
             },
         ],
         vec![],
