@@ -30,6 +30,11 @@ Without --hide-emitters a seed's scenes stay the ones earlier runs saw. `--mesh-
 area lights only and turns every rectangle and sphere light into an emitting mesh (a cube, an
 icosphere or a torus).
 
+`--media` renders with both renderers' `volpath` and fills some spheres and cubes with random
+homogeneous media (extinction per channel, albedo, isotropic or Henyey-Greenstein phase, light
+sampling on or off) behind null, smooth, rough or thin glass boundaries, and in some scenes puts
+the camera and everything else in a thin haze (the filled objects name it as their exterior).
+
 `--extended` draws the scenes from scripts/fuzz_extended.py instead: bitmap textures on every
 parameter that takes one, normal and bump maps, anisotropic and Beckmann microfacets, named and
 explicit IORs, `<spectrum>` values, OBJ/PLY meshes, instances, `matrix` transforms, an envmap,
@@ -44,6 +49,7 @@ import random
 import shutil
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -438,6 +444,73 @@ def mesh_lights(text, folder, seed, index):
                   sphere, text, flags=re.S)
 
 
+def random_medium(r, attrs, thin=False):
+    """A random `homogeneous` medium element with attributes `attrs` (id or name); `thin`: a
+    haze (a few percent extinction per unit)."""
+    m = ET.Element("medium", {"type": "homogeneous", **attrs})
+    # Mitsuba reads an rgb sigma_t as a reflectance (at most 1): `scale` sets the density.
+    if r.random() < 0.6:
+        ET.SubElement(m, "rgb", name="sigma_t", value=", ".join(f"{r.uniform(0.2, 1.0):.3f}" for _ in range(3)))
+    else:
+        ET.SubElement(m, "float", name="sigma_t", value=f"{r.uniform(0.2, 1.0):.3f}")
+    scale = r.uniform(0.03, 0.25) if thin else r.uniform(0.5, 6.0)
+    ET.SubElement(m, "float", name="scale", value=f"{scale:.3f}")
+    if r.random() < 0.6:
+        ET.SubElement(m, "rgb", name="albedo", value=", ".join(f"{r.uniform(0.3, 1.0):.3f}" for _ in range(3)))
+    else:
+        ET.SubElement(m, "float", name="albedo", value=f"{r.uniform(0.3, 1.0):.3f}")
+    if r.random() < 0.6:
+        phase = ET.SubElement(m, "phase", type="hg")
+        ET.SubElement(phase, "float", name="g", value=f"{r.uniform(-0.7, 0.85):.3f}")
+    elif r.random() < 0.5:
+        ET.SubElement(m, "phase", type="isotropic")
+    if r.random() < 0.2:
+        ET.SubElement(m, "boolean", name="sample_emitters", value="false")
+    return m
+
+
+def with_media(text, seed, index):
+    """--media: the scene rendered by `volpath`, some of its spheres and cubes filled with a
+    random medium behind a null, glass, rough glass or thin glass boundary, and in some scenes a
+    haze around everything (the sensor's medium and the filled objects' exterior)."""
+    r = random.Random(seed * 4_999_999 + index)
+    root = ET.fromstring(text)
+    integrator = root.find("integrator")
+    integrator.set("type", "volpath")
+    hide = integrator.find("boolean[@name='hide_emitters']")
+    params = {"type": "volpath", "max_depth": int(integrator.find("integer[@name='max_depth']").get("value")),
+              "hide_emitters": hide is not None and hide.get("value") == "true"}
+    # No haze around an environment light: in both renderers only light sampling reaches an
+    # infinite light through an open medium (at twice the scene's radius), but Mitsuba weighs
+    # those samples by MIS against BSDF samples that cannot get there and loses that share of
+    # the sky's light: a known difference (docs/validation.md). A sun (a delta light) renders
+    # the same in both.
+    environment = any(root.find(f"emitter[@type='{t}']") is not None for t in ("constant", "envmap"))
+    haze = r.random() < 0.4 and not environment
+    if haze:
+        root.insert(list(root).index(root.find("sensor")), random_medium(r, {"id": "haze"}, thin=True))
+        ET.SubElement(root.find("sensor"), "ref", id="haze")
+    filled = 0
+    for shape in root.findall("shape"):
+        if shape.get("type") not in ("sphere", "cube") or shape.find("emitter") is not None:
+            continue
+        if filled and r.random() < 0.3:
+            continue
+        filled += 1
+        for old in shape.findall("bsdf") + shape.findall("ref"):
+            shape.remove(old)
+        kind = r.choice(["null", "dielectric", "thindielectric", "roughdielectric"])
+        bsdf = ET.SubElement(shape, "bsdf", type=kind)
+        if kind != "null":
+            ET.SubElement(bsdf, "float", name="int_ior", value=f"{r.uniform(1.2, 1.6):.3f}")
+        if kind == "roughdielectric":
+            ET.SubElement(bsdf, "float", name="alpha", value=f"{r.uniform(0.05, 0.4):.3f}")
+        shape.append(random_medium(r, {"name": "interior"}))
+        if haze:
+            ET.SubElement(shape, "ref", name="exterior", id="haze")
+    return ET.tostring(root, encoding="unicode"), params
+
+
 def legacy_names(text):
     """The scene as a Mitsuba 0.6 file: version 0.6.0 and every parameter name in camelCase
     (`int_ior` -> `intIor`), which Mitsuba 3 turns back (`camel_to_underscore_case`);
@@ -464,10 +537,15 @@ def main():
     ap.add_argument("--mesh-lights", action="store_true",
                     help="turn each rectangular area light into an emitting mesh (cube, icosphere or "
                          "torus OBJ, tilted, normals or not): NEE's triangle choice by importance")
+    ap.add_argument("--media", action="store_true",
+                    help="render with `volpath`, some objects filled with random homogeneous media, "
+                         "sometimes everything in a haze")
     ap.add_argument("--legacy", action="store_true",
                     help="write each scene as a Mitsuba 0.6 file (version 0.6.0, camelCase parameter "
                          "names), which both renderers must upgrade alike")
     args = ap.parse_args()
+    if args.media and (args.direct or args.legacy):
+        sys.exit("--media renders with volpath: not with --direct or --legacy")
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
@@ -482,6 +560,8 @@ def main():
         text, params = integrator_variant(text, args.seed, index, args.direct, args.hide_emitters)
         if args.mesh_lights:
             text = mesh_lights(text, d, args.seed, index)
+        if args.media:
+            text, params = with_media(text, args.seed, index)
         if args.legacy:
             text = legacy_names(text)
         if args.restyle:
@@ -495,7 +575,8 @@ def main():
         # own variance (their sampling strategies differ).
         try:
             ours_chunks = render_path_chunks(args.bin, xml, args.spp, d, "ours",
-                                             integrator="direct" if args.direct else "path")
+                                             integrator="direct" if args.direct else
+                                             "volpath" if args.media else "path")
         except RuntimeError as e:
             flagged.append(index)
             rows.append({"index": index, "error": str(e)})

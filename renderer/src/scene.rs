@@ -498,6 +498,18 @@ impl Scene {
         !self.media.is_empty()
     }
 
+    /// How far from `p` infinite lights (directional, constant, environment map) sit for a
+    /// medium that no surface bounds: Mitsuba's 2·max(R, |p − c|) for the bounding sphere
+    /// (c, R) of the shapes' bounding box. Without it, a sun or sky behind a haze that fills
+    /// the scene would be extinguished by infinitely much medium; with it a sun through fog
+    /// renders as in Mitsuba's `volpath`.
+    pub fn infinite_light_distance(&self, p: Vec3) -> f32 {
+        let (lo, hi) = self.bounds;
+        let center = 0.5 * (lo + hi);
+        let radius = (0.5 * (hi - lo).length()) * (1.0 + 1e-4);
+        2.0 * radius.max((p - center).length())
+    }
+
     /// The error for integrator `name`, which cannot render participating media, when the
     /// scene has some.
     pub fn refuse_media(&self, name: &str) -> Result<()> {

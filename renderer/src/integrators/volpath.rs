@@ -11,6 +11,12 @@
 //!   dielectric's transmission: Mitsuba's "null" interactions) do not count as bounces and keep
 //!   the previous vertex for MIS; shadow rays go through them, multiplied by their
 //!   [`crate::bsdf::Bsdf::null_transmission`] and by each medium's transmittance on the way.
+//! * A medium that no surface bounds extends to infinity for sampled rays (they scatter in it
+//!   sooner or later), while light sampling reaches infinite lights through
+//!   [`Scene::infinite_light_distance`] of it (Mitsuba's convention), so a sun or a sky shines
+//!   through a haze that fills the scene. Such a light sample is the only way to that light,
+//!   so it counts in full (Mitsuba weighs it by MIS against a BSDF sample that cannot get
+//!   there, and loses that share of a sky's light; a sun, a delta light, renders the same).
 //! * `max_depth` counts surface and medium scattering vertices as Mitsuba does (1: emitters
 //!   seen directly), Russian roulette from `rr_depth` as in `path`; `hide_emitters` hides what
 //!   is seen before the first scattering vertex.
@@ -99,7 +105,16 @@ impl VolPathTracer {
     }
 }
 
-/// The fraction of light sample `ls`'s radiance that reaches point `p` (geometric normal `ng`,
+/// What reaches a point from a light sample through media and null surfaces.
+struct ShadowTransmittance {
+    /// The fraction of the light sample's radiance that arrives.
+    tr: Rgb,
+    /// The shadow ray ended in a medium that no surface bounds (towards an infinite light):
+    /// no sampled ray can reach the light that way.
+    open: bool,
+}
+
+/// What fraction of light sample `ls`'s radiance reaches point `p` (geometric normal `ng`,
 /// `Vec3::ZERO` in a medium) when the shadow ray starts in `medium`: the transmittance of every
 /// medium along the way times the straight-through share of every surface it crosses (zero at
 /// the first surface that lets nothing through).
@@ -109,26 +124,40 @@ fn shadow_transmittance(
     ng: Vec3,
     ls: &LightSample,
     mut medium: Option<u32>,
-) -> Rgb {
+) -> ShadowTransmittance {
+    let blocked = ShadowTransmittance {
+        tr: Rgb::ZERO,
+        open: false,
+    };
     let mut ray = if ls.infinite {
         Ray::new(offset_point(p, ng, ls.wi), ls.wi)
     } else {
         crate::math::spawn_ray_to(p, ng, ls.p)
     };
     let mut tr = Rgb::ONE;
+    // How much further an open medium extends towards an infinite light.
+    let mut reach = if ls.infinite {
+        scene.infinite_light_distance(p)
+    } else {
+        f32::INFINITY
+    };
     for _ in 0..MAX_NULL_CROSSINGS {
         let hit = scene.intersect(&ray);
         if let Some(m) = medium {
-            let d = hit.as_ref().map_or(ray.tmax, |si| si.t);
+            let d = hit.as_ref().map_or(ray.tmax, |si| si.t).min(reach);
             tr *= scene.media[m as usize].transmittance(d);
         }
         let Some(si) = hit else {
-            return tr;
+            return ShadowTransmittance {
+                tr,
+                open: medium.is_some() && ls.infinite,
+            };
         };
+        reach -= si.t;
         let wo = si.to_local(si.wo);
         tr *= scene.bsdf(&si).null_transmission(wo, &si.shading_point());
         if tr.max_element() <= 0.0 {
-            return Rgb::ZERO;
+            return blocked;
         }
         let interface = scene.shape_info[si.shape as usize].media;
         if interface.is_transition() {
@@ -140,7 +169,7 @@ fn shadow_transmittance(
             si.spawn_ray_to(ls.p)
         };
     }
-    Rgb::ZERO
+    blocked
 }
 
 impl RayIntegrator for VolPathTracer {
@@ -203,10 +232,11 @@ impl RayIntegrator for VolPathTracer {
                             if let Some(ls) = scene.sample_li(p, Vec3::ZERO, u_light, u_light2) {
                                 let f = med.phase.eval(ray.d, ls.wi);
                                 if f > 0.0 {
-                                    let tr =
+                                    let st =
                                         shadow_transmittance(scene, p, Vec3::ZERO, &ls, medium);
+                                    let tr = st.tr;
                                     if tr.max_element() > 0.0 {
-                                        let w = if ls.delta {
+                                        let w = if ls.delta || st.open {
                                             1.0
                                         } else {
                                             power_heuristic(ls.pdf, f)
@@ -233,7 +263,9 @@ impl RayIntegrator for VolPathTracer {
                         continue;
                     }
                 }
-                if throughput.max_element() <= 0.0 {
+                // Past every surface in an open medium (a channel without extinction): the
+                // infinite lights are light sampling's alone there.
+                if hit.is_none() || throughput.max_element() <= 0.0 {
                     break;
                 }
             }
@@ -281,9 +313,10 @@ impl RayIntegrator for VolPathTracer {
                         } else {
                             medium
                         };
-                        let tr = shadow_transmittance(scene, si.p, si.ng, &ls, start);
+                        let st = shadow_transmittance(scene, si.p, si.ng, &ls, start);
+                        let tr = st.tr;
                         if tr.max_element() > 0.0 {
-                            let w = if ls.delta {
+                            let w = if ls.delta || st.open {
                                 1.0
                             } else {
                                 power_heuristic(ls.pdf, bsdf.pdf(wo, wi, &sp))
@@ -525,6 +558,88 @@ mod tests {
             "{two:?} {four:?} {unbounded:?}"
         );
         assert!((unbounded.x - 1.0).abs() < 0.05, "{unbounded:?}");
+    }
+
+    /// Infinite lights behind a haze that fills the scene (the camera's medium, no surface
+    /// bounding it) shine through 2·max(R, |p − c|) of it, Mitsuba's convention: a diffuse wall
+    /// (ρ = 0.5, 20 × 20, so R = 10√2) in a purely absorbing haze, seen head-on from 5 units
+    /// away, shows ρ/π·E·exp(−σ·2R)·exp(−σ·5) under a sun of irradiance E along its normal,
+    /// and ρ·L·exp(−σ·2R)·exp(−σ·5) under a sky of radiance L — which only light sampling can
+    /// reach (sampled rays always end in the open haze), so its samples count in full.
+    #[test]
+    fn infinite_lights_shine_through_an_open_medium() {
+        use crate::description::{Geometry, ShapeDesc, TriangleMesh};
+        let sigma = 0.02f32;
+        let wall = ShapeDesc {
+            name: "wall".into(),
+            geometry: Geometry::Mesh(TriangleMesh {
+                positions: vec![
+                    glam::Vec3::new(-10.0, -10.0, 0.0),
+                    glam::Vec3::new(10.0, -10.0, 0.0),
+                    glam::Vec3::new(10.0, 10.0, 0.0),
+                    glam::Vec3::new(-10.0, 10.0, 0.0),
+                ],
+                normals: None,
+                uvs: None,
+                indices: vec![[0, 2, 1], [0, 3, 2]],
+                flipped: false,
+            }),
+            bsdf: 0,
+            emission: None,
+            collimated: false,
+            media: MediumInterface::default(),
+        };
+        let scene_with = |emitter: EmitterDesc| {
+            let mut camera = crate::description::test_camera(
+                glam::Vec3::new(0.0, 0.0, -5.0),
+                glam::Vec3::ZERO,
+                40.0,
+                2,
+            );
+            camera.projection = Projection::Orthographic;
+            let desc = SceneDescription {
+                camera,
+                sample_count: None,
+                integrator: None,
+                bsdfs: vec![Bsdf::Diffuse(crate::bsdf::Diffuse {
+                    reflectance: Texture::Constant(Rgb::splat(0.5)),
+                })],
+                shapes: vec![wall.clone()],
+                emitters: vec![emitter],
+                warnings: vec![],
+                media: vec![medium(
+                    Rgb::splat(sigma),
+                    Rgb::ZERO,
+                    PhaseFunction::Isotropic,
+                )],
+                camera_medium: Some(0),
+            };
+            Scene::build(&desc).unwrap()
+        };
+        let radius = 10.0 * 2f32.sqrt() * (1.0 + 1e-4);
+        let attenuation = (-sigma * (2.0 * radius + 5.0)).exp();
+        let sun = scene_with(EmitterDesc::Directional {
+            direction: glam::Vec3::Z,
+            irradiance: Rgb::splat(2.0),
+        });
+        assert_eq!(sun.infinite_light_distance(glam::Vec3::ZERO), 2.0 * radius);
+        let film = VolPathTracer::default().render(&sun, 16384, 1, None);
+        let expected = 0.5 / std::f32::consts::PI * 2.0 * attenuation;
+        let mean = film.mean();
+        assert!(
+            (mean - Rgb::splat(expected)).abs().max_element() < 0.02 * expected,
+            "sun: {mean:?} vs {expected}"
+        );
+        let sky = scene_with(EmitterDesc::Constant {
+            radiance: Rgb::splat(1.5),
+        });
+        let film = VolPathTracer::default().render(&sky, 16384, 2, None);
+        let expected = 0.5 * 1.5 * attenuation;
+        let mean = film.mean();
+        assert!(
+            (mean - Rgb::splat(expected)).abs().max_element() < 0.02 * expected,
+            "sky: {mean:?} vs {expected}"
+        );
     }
 
     #[test]

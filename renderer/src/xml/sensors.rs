@@ -492,9 +492,9 @@ pub(super) fn build_integrator<'a>(
         ));
         b.diag.unknown(err)?;
     }
-    // `volpath` and `volpathmis` without media (which the importer refuses) are `path`, and so
-    // are the differentiable `prb` and `prb_basic` when rendering forward; `sppm` is the
-    // integrator chosen on the command line anyway.
+    // `volpath` and `volpathmis` are the volumetric path tracer (`render` chooses it for them;
+    // the two differ only in how they sample), the differentiable `prb` and `prb_basic` are
+    // `path` when rendering forward; `sppm` is the integrator chosen on the command line anyway.
     let mut p = Props::parse(b, el)?;
     let depth_el = p.element_of("max_depth");
     let max_depth = match p.int("max_depth")? {

@@ -970,8 +970,8 @@ fn spectra_emitters_and_cameras() {
         Some((8, 5))
     );
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
-    // `volpath`, `volpathmis`, `prb`, `prb_basic` render as `path` (no media, forward);
-    // `direct` is its own integrator: no warnings.
+    // `volpath` and `volpathmis` (the volumetric path tracer), `prb` and `prb_basic` (`path`
+    // when rendering forward), `direct`: all known, no warnings.
     for kind in ["volpath", "volpathmis", "prb", "prb_basic", "direct"] {
         let other = body.replace(
             r#"<integrator type="path">"#,
@@ -3184,4 +3184,113 @@ fn dollar_escapes_and_longest_parameter_names() {
     let mut names: Vec<_> = used.into_iter().collect();
     names.sort();
     assert_eq!(names, ["a", "spp", "spp_max"]);
+}
+
+/// Media: a declared medium referred to as a shape's interior, a nested one as another
+/// shape's exterior, the sensor's medium by `<ref>`, Mitsuba's defaults and `scale`.
+#[test]
+fn media_are_read_with_their_interfaces() {
+    use crate::media::{MediumInterface, PhaseFunction};
+    let dir = temp_dir("media");
+    let body = r#"<medium type="homogeneous" id="fog">
+    <rgb name="sigma_t" value="0.5, 0.25, 1"/>
+    <float name="scale" value="4"/>
+    <rgb name="albedo" value="0.9, 0.8, 0.7"/>
+    <phase type="hg"><float name="g" value="-0.25"/></phase>
+</medium>
+<sensor type="perspective"><float name="fov" value="40"/><ref id="fog"/>
+<film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="8"/></film></sensor>
+<shape type="sphere"><bsdf type="null"/><ref name="interior" id="fog"/></shape>
+<shape type="cube">
+    <bsdf type="dielectric"/>
+    <medium type="homogeneous" name="exterior"><boolean name="sample_emitters" value="false"/></medium>
+</shape>
+<shape type="rectangle"/>"#;
+    let scene = load(&write_scene(&dir, "scene.xml", body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    assert_eq!(scene.media.len(), 2);
+    let fog = &scene.media[0];
+    assert_eq!(fog.name, "fog");
+    assert_eq!(fog.sigma_t, Vec3::new(2.0, 1.0, 4.0));
+    assert_eq!(fog.albedo, Vec3::new(0.9, 0.8, 0.7));
+    assert_eq!(fog.phase, PhaseFunction::HenyeyGreenstein { g: -0.25 });
+    assert!(fog.sample_emitters);
+    // Mitsuba's defaults: sigma_t 1, albedo 0.75, isotropic.
+    let nested = &scene.media[1];
+    assert_eq!(
+        (nested.sigma_t, nested.albedo, nested.phase),
+        (Vec3::ONE, Vec3::splat(0.75), PhaseFunction::Isotropic)
+    );
+    assert!(!nested.sample_emitters);
+    assert_eq!(scene.camera_medium, Some(0));
+    let interfaces: Vec<MediumInterface> = scene.shapes.iter().map(|s| s.media).collect();
+    assert_eq!(
+        interfaces,
+        [
+            MediumInterface {
+                interior: Some(0),
+                exterior: None
+            },
+            MediumInterface {
+                interior: None,
+                exterior: Some(1)
+            },
+            MediumInterface::default(),
+        ]
+    );
+    // Built once although referred to twice; the scene builds.
+    crate::scene::Scene::build(&scene).unwrap();
+}
+
+/// Every media error names the file, line and element.
+#[test]
+fn error_media_cases_name_file_and_line() {
+    let dir = temp_dir("media-errors");
+    let cases: [(&str, &str, &str); 8] = [
+        (
+            r#"<medium type="heterogeneous" id="m"/>"#,
+            "heterogeneous",
+            "unsupported medium \"heterogeneous\"",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><phase type="rayleigh"/></medium>"#,
+            "rayleigh",
+            "unsupported phase function \"rayleigh\"",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><phase type="hg"><float name="g" value="1"/></phase></medium>"#,
+            "name=\"g\"",
+            "\"g\" must lie in (-1, 1)",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><float name="albedo" value="1.5"/></medium>"#,
+            "albedo",
+            "\"albedo\" must lie in [0, 1]",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><float name="sigma_t" value="-1"/></medium>"#,
+            "sigma_t",
+            "\"sigma_t\" must be finite and >= 0",
+        ),
+        (
+            r#"<shape type="sphere"><medium type="homogeneous"/></shape>"#,
+            "<medium",
+            "must be named \"interior\" or \"exterior\"",
+        ),
+        (
+            r#"<shape type="sphere"><medium type="homogeneous" name="interior"/>
+<medium type="homogeneous" name="interior"/></shape>"#,
+            "<medium type=\"homogeneous\" name=\"interior\"/></shape>",
+            "parameter \"interior\" given twice",
+        ),
+        (
+            r#"<bsdf type="diffuse" id="d"/><emitter type="point"><ref id="d"/></emitter>"#,
+            "<emitter",
+            "inside an emitter",
+        ),
+    ];
+    for (i, (body, marker, needle)) in cases.iter().enumerate() {
+        let body = format!("{SENSOR}\n{body}");
+        assert_body_error_at(&dir, &format!("case{i}.xml"), &body, marker, needle);
+    }
 }
