@@ -2664,7 +2664,7 @@ fn films_samplers_and_filters_declared_outside_the_sensor() {
         "wrong.xml",
         body,
         "<sensor",
-        "refers to a <film> or a <sampler>",
+        "refers to a <film>, a <sampler> or a <medium>",
     );
     let body = r#"<bsdf type="diffuse" id="m"/>
 <sensor type="perspective"><film type="hdrfilm"><ref id="m"/></film></sensor>"#;
