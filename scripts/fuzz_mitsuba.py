@@ -32,7 +32,8 @@ icosphere or a torus).
 
 `--media` renders with both renderers' `volpath` and fills some spheres and cubes with random
 homogeneous media (extinction per channel, albedo, isotropic or Henyey-Greenstein phase, light
-sampling on or off) behind null, smooth, rough or thin glass boundaries, and in some scenes puts
+sampling on or off) or heterogeneous ones (random `.vol` grids of extinction and albedo, written
+next to the scene) behind null, smooth, rough or thin glass boundaries, and in some scenes puts
 the camera and everything else in a thin haze (the filled objects name it as their exterior).
 
 `--extended` draws the scenes from scripts/fuzz_extended.py instead: bitmap textures on every
@@ -469,11 +470,66 @@ def random_medium(r, attrs, thin=False):
     return m
 
 
-def with_media(text, seed, index):
+def write_vol(path, data):
+    """Writes `data` (z, y, x, channels) as a Mitsuba .vol grid over the unit cube."""
+    z, y, x, c = data.shape
+    header = b"VOL" + bytes([3]) + np.array([1, x, y, z, c], dtype="<i4").tobytes()
+    box = np.array([0, 0, 0, 1, 1, 1], dtype="<f4").tobytes()
+    path.write_bytes(header + box + np.ascontiguousarray(data, dtype="<f4").tobytes())
+
+
+def object_box(shape):
+    """Centre and half-size of a generated sphere or cube (from its XML)."""
+    if shape.get("type") == "sphere":
+        c = shape.find("point[@name='center']")
+        centre = np.array([float(c.get(k)) for k in "xyz"])
+        return centre, float(shape.find("float[@name='radius']").get("value"))
+    transform = shape.find("transform[@name='to_world']")
+    t = transform.find("translate")
+    centre = np.array([float(t.get(k, 0)) for k in "xyz"])
+    return centre, float(transform.find("scale").get("value")) * 1.5
+
+
+def grid_medium(r, shape, folder, k):
+    """A random `heterogeneous` medium for `shape`: a `gridvolume` sigma_t (2-6 cells per axis,
+    1 or 3 channels, random filter and wrap mode) over a box around the object, written to
+    `folder`/grid<k>.vol, and a constant or grid albedo."""
+    m = ET.Element("medium", {"type": "heterogeneous", "name": "interior"})
+    centre, half = object_box(shape)
+    half *= r.uniform(0.7, 1.3)
+    lo = centre - half
+    to_world = (f'<transform name="to_world"><scale value="{2 * half:.4f}"/>'
+                f'<translate x="{lo[0]:.4f}" y="{lo[1]:.4f}" z="{lo[2]:.4f}"/></transform>')
+
+    def volume(name, channels, lo_value, hi_value):
+        res = [r.randint(2, 6) for _ in range(3)]
+        data = np.array([r.uniform(lo_value, hi_value) for _ in range(int(np.prod(res)) * channels)])
+        write_vol(folder / f"grid{k}_{name}.vol", data.reshape(res[2], res[1], res[0], channels))
+        v = ET.fromstring(f'<volume type="gridvolume" name="{name}">'
+                          f'<string name="filename" value="grid{k}_{name}.vol"/>{to_world}</volume>')
+        ET.SubElement(v, "string", name="filter_type", value=r.choice(["trilinear", "nearest"]))
+        ET.SubElement(v, "string", name="wrap_mode", value=r.choice(["clamp", "repeat", "mirror"]))
+        return v
+
+    m.append(volume("sigma_t", r.choice([1, 3]), 0.0, 1.0))
+    ET.SubElement(m, "float", name="scale", value=f"{r.uniform(0.5, 6.0):.3f}")
+    if r.random() < 0.5:
+        m.append(volume("albedo", r.choice([1, 3]), 0.3, 1.0))
+    else:
+        ET.SubElement(m, "float", name="albedo", value=f"{r.uniform(0.3, 1.0):.3f}")
+    if r.random() < 0.5:
+        phase = ET.SubElement(m, "phase", type="hg")
+        ET.SubElement(phase, "float", name="g", value=f"{r.uniform(-0.7, 0.85):.3f}")
+    return m
+
+
+def with_media(text, seed, index, folder):
     """--media: the scene rendered by `volpath`, some of its spheres and cubes filled with a
-    random medium behind a null, glass, rough glass or thin glass boundary, and in some scenes a
-    haze around everything (the sensor's medium and the filled objects' exterior)."""
+    random medium (homogeneous, or heterogeneous from random grids written to `folder`) behind
+    a null, glass, rough glass or thin glass boundary, and in some scenes a haze around
+    everything (the sensor's medium and the filled objects' exterior)."""
     r = random.Random(seed * 4_999_999 + index)
+    grids = random.Random(seed * 7_777_777 + index)
     root = ET.fromstring(text)
     integrator = root.find("integrator")
     integrator.set("type", "volpath")
@@ -505,7 +561,10 @@ def with_media(text, seed, index):
             ET.SubElement(bsdf, "float", name="int_ior", value=f"{r.uniform(1.2, 1.6):.3f}")
         if kind == "roughdielectric":
             ET.SubElement(bsdf, "float", name="alpha", value=f"{r.uniform(0.05, 0.4):.3f}")
-        shape.append(random_medium(r, {"name": "interior"}))
+        if grids.random() < 0.5:
+            shape.append(grid_medium(grids, shape, folder, filled))
+        else:
+            shape.append(random_medium(r, {"name": "interior"}))
         if haze:
             ET.SubElement(shape, "ref", name="exterior", id="haze")
     return ET.tostring(root, encoding="unicode"), params
@@ -561,7 +620,7 @@ def main():
         if args.mesh_lights:
             text = mesh_lights(text, d, args.seed, index)
         if args.media:
-            text, params = with_media(text, args.seed, index)
+            text, params = with_media(text, args.seed, index, d)
         if args.legacy:
             text = legacy_names(text)
         if args.restyle:

@@ -447,22 +447,8 @@ impl Scene {
             .map(|(l, &p)| if l.is_collimated() { 0.0 } else { p })
             .collect();
         for m in &desc.media {
-            if !(finite_rgb(m.sigma_t) && finite_rgb(m.albedo) && m.albedo.max_element() <= 1.0) {
-                bail!(
-                    "medium '{}' needs a finite, non-negative sigma_t and an albedo in [0, 1] \
-                     (got sigma_t {:?}, albedo {:?})",
-                    m.name,
-                    m.sigma_t,
-                    m.albedo
-                );
-            }
-            if let crate::media::PhaseFunction::HenyeyGreenstein { g } = m.phase {
-                if !(g > -1.0 && g < 1.0) {
-                    bail!(
-                        "medium '{}': the phase function's g = {g} is outside (-1, 1)",
-                        m.name
-                    );
-                }
+            if let Err(e) = m.validate() {
+                bail!("medium '{}': {e}", m.name);
             }
         }
         if desc

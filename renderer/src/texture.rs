@@ -128,7 +128,7 @@ pub enum BitmapWrap {
 impl BitmapWrap {
     /// The texel index in `0..n` that index `i` reads.
     #[inline]
-    fn apply(self, i: i64, n: i64) -> i64 {
+    pub(crate) fn apply(self, i: i64, n: i64) -> i64 {
         match self {
             BitmapWrap::Repeat => i.rem_euclid(n),
             BitmapWrap::Mirror => {

@@ -124,6 +124,7 @@ fn shadow_transmittance(
     ng: Vec3,
     ls: &LightSample,
     mut medium: Option<u32>,
+    rng: &mut Pcg32,
 ) -> ShadowTransmittance {
     let blocked = ShadowTransmittance {
         tr: Rgb::ZERO,
@@ -145,7 +146,7 @@ fn shadow_transmittance(
         let hit = scene.intersect(&ray);
         if let Some(m) = medium {
             let d = hit.as_ref().map_or(ray.tmax, |si| si.t).min(reach);
-            tr *= scene.media[m as usize].transmittance(d);
+            tr *= scene.media[m as usize].transmittance(&ray, d, rng);
         }
         let Some(si) = hit else {
             return ShadowTransmittance {
@@ -207,8 +208,15 @@ impl RayIntegrator for VolPathTracer {
             };
             if let Some(m) = medium {
                 let med = &scene.media[m as usize];
-                let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t);
-                match med.sample_free_flight(t_max, hero, rng.next_f32()) {
+                // Behind hidden emitters the hit's `t` counts from the last one skipped.
+                let t_max = hit.as_ref().map_or(f32::INFINITY, |si| {
+                    if hidden {
+                        (si.p - ray.o).length()
+                    } else {
+                        si.t
+                    }
+                });
+                match med.sample_free_flight(&ray, t_max, hero, rng) {
                     FreeFlight::Pass { weight, ratio: r } => {
                         throughput *= weight;
                         ratio *= r;
@@ -232,8 +240,14 @@ impl RayIntegrator for VolPathTracer {
                             if let Some(ls) = scene.sample_li(p, Vec3::ZERO, u_light, u_light2) {
                                 let f = med.phase.eval(ray.d, ls.wi);
                                 if f > 0.0 {
-                                    let st =
-                                        shadow_transmittance(scene, p, Vec3::ZERO, &ls, medium);
+                                    let st = shadow_transmittance(
+                                        scene,
+                                        p,
+                                        Vec3::ZERO,
+                                        &ls,
+                                        medium,
+                                        rng,
+                                    );
                                     let tr = st.tr;
                                     if tr.max_element() > 0.0 {
                                         let w = if ls.delta || st.open {
@@ -313,7 +327,7 @@ impl RayIntegrator for VolPathTracer {
                         } else {
                             medium
                         };
-                        let st = shadow_transmittance(scene, si.p, si.ng, &ls, start);
+                        let st = shadow_transmittance(scene, si.p, si.ng, &ls, start, rng);
                         let tr = st.tr;
                         if tr.max_element() > 0.0 {
                             let w = if ls.delta || st.open {
@@ -395,13 +409,7 @@ mod tests {
     }
 
     fn medium(sigma_t: Rgb, albedo: Rgb, phase: PhaseFunction) -> Medium {
-        Medium {
-            sigma_t,
-            albedo,
-            phase,
-            sample_emitters: true,
-            name: "test".into(),
-        }
+        Medium::homogeneous(sigma_t, albedo, phase, "test")
     }
 
     /// The unit sphere of `test_sphere_scene` with boundary `bsdf`, filled with `inside`, in a
@@ -469,6 +477,55 @@ mod tests {
             let film = VolPathTracer::default().render(&scene, 4096, 3, None);
             assert_every_pixel_is_one(&film, what);
         }
+    }
+
+    /// The furnace with a heterogeneous medium: a lossless grid (2×2×2 cells of extinctions
+    /// between 0 and 4 that differ per channel, trilinear) over [−1, 1]³ inside the null unit
+    /// sphere: delta tracking's null collisions and ratio tracking's shadow rays add up to 1.
+    #[test]
+    fn white_furnace_with_a_heterogeneous_medium() {
+        use crate::media::grid::{GridFilter, VolFile, VolumeGrid};
+        use crate::media::{Density, Heterogeneous, VolumeTexture};
+        let data: Vec<f32> = (0..8)
+            .flat_map(|i| {
+                let v = i as f32 * 0.5;
+                [v, 4.0 - v, (v * 1.7) % 4.0]
+            })
+            .collect();
+        let grid = VolumeGrid::new(
+            VolFile {
+                res: glam::UVec3::splat(2),
+                channels: 3,
+                bbox: (glam::Vec3::ZERO, glam::Vec3::ONE),
+                data,
+            },
+            glam::Mat4::from_translation(glam::Vec3::splat(-1.0))
+                * glam::Mat4::from_scale(glam::Vec3::splat(2.0)),
+            false,
+            GridFilter::Trilinear,
+            crate::texture::BitmapWrap::Clamp,
+            "furnace".into(),
+        )
+        .unwrap();
+        assert_eq!(grid.bounds, (glam::Vec3::splat(-1.0), glam::Vec3::ONE));
+        let sigma_t = VolumeTexture::Grid(std::sync::Arc::new(grid));
+        let inside = Medium {
+            density: Density::Heterogeneous(Box::new(Heterogeneous {
+                majorant: sigma_t.max(),
+                bounds: Some((glam::Vec3::splat(-1.0), glam::Vec3::ONE)),
+                sigma_t,
+                albedo: VolumeTexture::Constant(Rgb::ONE),
+                scale: 1.0,
+            })),
+            ..medium(
+                Rgb::ONE,
+                Rgb::ONE,
+                PhaseFunction::HenyeyGreenstein { g: 0.4 },
+            )
+        };
+        let scene = Scene::build(&filled_sphere(null(), inside)).unwrap();
+        let film = VolPathTracer::default().render(&scene, 4096, 8, None);
+        assert_every_pixel_is_one(&film, "heterogeneous");
     }
 
     /// The furnace seen from inside the medium: the camera sits in the sphere (the scene's

@@ -1,20 +1,32 @@
-//! `<medium>` (`homogeneous`) with its `<phase>` (`isotropic`, `hg`), in Mitsuba 3's parameter
-//! names and defaults, and the media a shape or the sensor refers to.
+//! `<medium>` (`homogeneous`, `heterogeneous`) with its `<phase>` (`isotropic`, `hg`) and
+//! `<volume>`s (`gridvolume`, `constvolume`), in Mitsuba 3's parameter names and defaults, and
+//! the media a shape or the sensor refers to.
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
-use crate::media::{Medium, MediumInterface, PhaseFunction};
+use crate::media::grid::{read_vol, GridFilter, VolumeGrid};
+use crate::media::{Density, Heterogeneous, Medium, MediumInterface, PhaseFunction, VolumeTexture};
 use crate::spectrum::{Rgb, SpectrumKind};
+use crate::texture::BitmapWrap;
+use std::sync::Arc;
 
 /// The medium plugins this importer knows.
-const MEDIUM_PLUGINS: [&str; 1] = ["homogeneous"];
+const MEDIUM_PLUGINS: [&str; 2] = ["homogeneous", "heterogeneous"];
+
+/// A world-space box (min, max).
+pub(super) type Bounds = (glam::Vec3, glam::Vec3);
+
+/// The volume plugins this importer knows.
+const VOLUME_PLUGINS: [&str; 2] = ["gridvolume", "constvolume"];
 
 /// The phase-function plugins this importer knows.
 const PHASE_PLUGINS: [&str; 2] = ["isotropic", "hg"];
 
 /// Builds the medium declared by a `<medium>` element:
-/// * `sigma_t` (float or spectrum, default 1): extinction per unit of distance;
-/// * `albedo` (float or spectrum, default 0.75): single-scattering albedo (constant only);
+/// * `sigma_t` (float or spectrum, default 1; `heterogeneous`: also a `<volume>`): extinction
+///   per unit of distance;
+/// * `albedo` (float or spectrum, default 0.75; `heterogeneous`: also a `<volume>`):
+///   single-scattering albedo;
 /// * `scale` (float, default 1): multiplies `sigma_t`;
 /// * `sample_emitters` (boolean, default true): light sampling at scattering points;
 /// * `has_spectral_extinction` (boolean): accepted; how distances are sampled does not change
@@ -31,13 +43,26 @@ pub(super) fn build_medium<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<M
     }
     let mut p = Props::parse(b, el)?;
     let sigma_el = p.element_of("sigma_t");
-    let sigma_t = p
-        .constant_color(b, "sigma_t", SpectrumKind::Unbounded)?
-        .unwrap_or(Rgb::ONE);
     let albedo_el = p.element_of("albedo");
-    let albedo = p
-        .constant_color(b, "albedo", SpectrumKind::Reflectance)?
-        .unwrap_or(Rgb::splat(0.75));
+    let heterogeneous = kind == "heterogeneous";
+    // A plain value is Mitsuba's `constvolume` over the unit cube.
+    let volume = |b: &mut Builder<'a>, p: &mut Props<'a>, name, kind, default| match p.object(name)
+    {
+        Some(o) if heterogeneous => b.volume_value(o, kind),
+        Some(o) => Err(o.error(format!(
+            "a homogeneous medium's \"{name}\" is a constant: use a heterogeneous medium for a \
+             <volume>"
+        ))),
+        None => Ok((
+            VolumeTexture::Constant(
+                p.constant_color(b, name, kind)?
+                    .unwrap_or(Rgb::splat(default)),
+            ),
+            (glam::Vec3::ZERO, glam::Vec3::ONE),
+        )),
+    };
+    let (sigma_t, sigma_t_box) = volume(b, &mut p, "sigma_t", SpectrumKind::Unbounded, 1.0)?;
+    let (albedo, _) = volume(b, &mut p, "albedo", SpectrumKind::Reflectance, 0.75)?;
     let scale_el = p.element_of("scale");
     let scale = p.float_or("scale", 1.0)? as f32;
     let sample_emitters = p.bool_or("sample_emitters", true)?;
@@ -60,26 +85,139 @@ pub(super) fn build_medium<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<M
     if !(scale.is_finite() && scale >= 0.0) {
         return Err(scale_el.error(format!("\"scale\" must be finite and >= 0, got {scale}")));
     }
-    let sigma_t = sigma_t * scale;
-    if !(sigma_t.is_finite() && sigma_t.min_element() >= 0.0) {
+    if !(sigma_t.min() >= 0.0 && (sigma_t.max() * scale).is_finite()) {
         return Err(sigma_el.error(format!(
-            "\"sigma_t\" must be finite and >= 0, got {sigma_t:?}"
+            "\"sigma_t\" must be finite and >= 0, got values from {} to {}",
+            sigma_t.min(),
+            sigma_t.max()
         )));
     }
-    if albedo.max_element() > 1.0 || albedo.min_element() < 0.0 {
-        return Err(albedo_el.error(format!("\"albedo\" must lie in [0, 1], got {albedo:?}")));
+    if let VolumeTexture::Constant(a) = albedo {
+        if a.max_element() > 1.0 || a.min_element() < 0.0 {
+            return Err(albedo_el.error(format!("\"albedo\" must lie in [0, 1], got {a:?}")));
+        }
     }
+    let density = match (heterogeneous, sigma_t, albedo) {
+        (false, VolumeTexture::Constant(sigma_t), VolumeTexture::Constant(albedo)) => {
+            Density::Homogeneous {
+                sigma_t: sigma_t * scale,
+                albedo,
+            }
+        }
+        // As in Mitsuba, the medium is empty outside its `sigma_t` volume's box — also for a
+        // constant one (the unit cube, or a `constvolume`'s `to_world` of it).
+        (_, sigma_t, albedo) => Density::Heterogeneous(Box::new(Heterogeneous {
+            majorant: sigma_t.max() * scale,
+            bounds: Some(sigma_t_box),
+            sigma_t,
+            albedo,
+            scale,
+        })),
+    };
     let name = el
         .attr("id")
         .map(str::to_owned)
         .unwrap_or_else(|| format!("{kind}#{}", b.media.len()));
     Ok(Medium {
-        sigma_t,
-        albedo,
+        density,
         phase: phase.unwrap_or(PhaseFunction::Isotropic),
         sample_emitters,
         name,
     })
+}
+
+/// Builds a `<volume>`:
+/// * `gridvolume`: `filename` (a `.vol` grid, 1 or 3 channels, values as stored — `raw` is
+///   accepted, an RGB renderer converts nothing), `filter_type` (`trilinear`, `nearest`),
+///   `wrap_mode` (`clamp`, `repeat`, `mirror`), `to_world`, `use_grid_bbox`; `accel` and
+///   `max_value` are accepted (the majorant is the data's maximum);
+/// * `constvolume`: `value` (float or spectrum, default 1), `to_world`.
+///
+/// Returns the volume and the world-space box it covers (a heterogeneous medium is empty outside
+/// its `sigma_t` volume's box, as in Mitsuba).
+pub(super) fn build_volume<'a>(
+    b: &mut Builder<'a>,
+    el: &'a Element,
+    kind: SpectrumKind,
+) -> Result<(VolumeTexture, Bounds), SceneError> {
+    el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
+    let plugin = el.attr("type").unwrap_or_default();
+    let mut p = Props::parse(b, el)?;
+    let volume = match plugin {
+        "constvolume" => {
+            let value = p.constant_color(b, "value", kind)?.unwrap_or(Rgb::ONE);
+            let to_world = p.transform("to_world")?.unwrap_or(glam::Mat4::IDENTITY);
+            let mut lo = glam::Vec3::splat(f32::INFINITY);
+            let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
+            for i in 0..8 {
+                let c = glam::Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, (i >> 2) as f32);
+                let w = to_world.transform_point3(c);
+                lo = lo.min(w);
+                hi = hi.max(w);
+            }
+            (VolumeTexture::Constant(value), (lo, hi))
+        }
+        "gridvolume" => {
+            let file_el = p.element_of("filename");
+            let Some(filename) = p.string("filename")? else {
+                return Err(el.error("missing parameter \"filename\""));
+            };
+            let filter_el = p.element_of("filter_type");
+            let filter = match p.string("filter_type")?.unwrap_or("trilinear") {
+                "trilinear" => GridFilter::Trilinear,
+                "nearest" => GridFilter::Nearest,
+                other => {
+                    return Err(filter_el.error(format!(
+                        "unknown filter_type \"{other}\" (use \"trilinear\" or \"nearest\")"
+                    )))
+                }
+            };
+            let wrap_el = p.element_of("wrap_mode");
+            let wrap = match p.string("wrap_mode")?.unwrap_or("clamp") {
+                "clamp" => BitmapWrap::Clamp,
+                "repeat" => BitmapWrap::Repeat,
+                "mirror" => BitmapWrap::Mirror,
+                other => {
+                    return Err(wrap_el.error(format!(
+                        "unknown wrap_mode \"{other}\" (use \"clamp\", \"repeat\" or \"mirror\")"
+                    )))
+                }
+            };
+            let to_world_el = p.element_of("to_world");
+            let to_world = p.transform("to_world")?.unwrap_or(glam::Mat4::IDENTITY);
+            let use_grid_bbox = p.bool_or("use_grid_bbox", false)?;
+            p.bool_or("raw", false)?;
+            p.bool_or("accel", true)?;
+            p.ignore(
+                b,
+                &["max_value"],
+                "the majorant is the maximum of the grid's values",
+            );
+            let path = file_el.resolve_path(filename, &b.diag.search_paths);
+            let file = read_vol(&path).map_err(|m| {
+                file_el.error(format!("cannot load volume \"{}\": {m}", path.display()))
+            })?;
+            let grid = VolumeGrid::new(
+                file,
+                to_world,
+                use_grid_bbox,
+                filter,
+                wrap,
+                path.display().to_string(),
+            )
+            .map_err(|m| to_world_el.error(format!("volume \"{}\": {m}", path.display())))?;
+            let bounds = grid.bounds;
+            (VolumeTexture::Grid(Arc::new(grid)), bounds)
+        }
+        _ => {
+            return Err(el.error(format!(
+                "unsupported volume \"{plugin}\" (supported volumes: {})",
+                VOLUME_PLUGINS.join(", ")
+            )))
+        }
+    };
+    p.finish(b)?;
+    Ok(volume)
 }
 
 /// Builds a `<phase>`: `isotropic`, or `hg` with `g` (default 0.8) in (−1, 1).

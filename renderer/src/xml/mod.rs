@@ -575,6 +575,8 @@ pub(crate) struct Builder<'a> {
     texture_ids: HashMap<String, Texture>,
     /// Already built media with an id → index into `media`.
     medium_ids: HashMap<String, u32>,
+    /// Already built volumes (grids) with an id, and the boxes they cover.
+    volume_ids: HashMap<String, (crate::media::VolumeTexture, media::Bounds)>,
     /// Ids being built (reference cycle detection).
     building: Vec<String>,
     /// Decoded images by (path, raw).
@@ -676,6 +678,7 @@ impl<'a> Builder<'a> {
             bsdf_ids: HashMap::new(),
             texture_ids: HashMap::new(),
             medium_ids: HashMap::new(),
+            volume_ids: HashMap::new(),
             building: Vec::new(),
             bitmaps: HashMap::new(),
             bsdfs: Vec::new(),
@@ -864,6 +867,30 @@ impl<'a> Builder<'a> {
         Ok(index)
     }
 
+    /// The volume declared by `el` (a `<volume>` or a `<ref>` to one), read as `kind`; a
+    /// volume with an id is built (its file read) once.
+    pub fn volume_value(
+        &mut self,
+        el: &'a Element,
+        kind: crate::spectrum::SpectrumKind,
+    ) -> Result<(crate::media::VolumeTexture, media::Bounds), SceneError> {
+        let target = self.deref(el)?;
+        if target.tag != "volume" {
+            return Err(el.error(format!(
+                "expected a <volume>, but this refers to {}",
+                target.describe()
+            )));
+        }
+        if let Some(v) = target.attr("id").and_then(|id| self.volume_ids.get(id)) {
+            return Ok(v.clone());
+        }
+        let built = media::build_volume(self, target, kind)?;
+        if let Some(id) = target.attr("id") {
+            self.volume_ids.insert(id.to_owned(), built.clone());
+        }
+        Ok(built)
+    }
+
     /// The texture declared by `el` (a `<texture>` or a `<ref>` to one); built once per id.
     pub fn texture_value(&mut self, el: &'a Element) -> Result<Texture, SceneError> {
         let target = self.deref(el)?;
@@ -918,6 +945,10 @@ impl<'a> Builder<'a> {
                 "medium" => {
                     self.medium_index(el)?;
                 }
+                // Declared for the media that refer to it (its file is read and checked now).
+                "volume" => {
+                    self.volume_value(el, crate::spectrum::SpectrumKind::Unbounded)?;
+                }
                 "sensor" => {
                     let camera = sensors::build_sensor(self, el)?;
                     if self.camera.is_some() {
@@ -941,6 +972,9 @@ impl<'a> Builder<'a> {
                         "bsdf" | "texture" | "spectrum" => {}
                         "medium" => {
                             self.medium_index(target)?;
+                        }
+                        "volume" => {
+                            self.volume_value(target, crate::spectrum::SpectrumKind::Unbounded)?;
                         }
                         _ => {
                             let err = el.error(format!(

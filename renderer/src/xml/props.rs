@@ -75,10 +75,11 @@ pub(crate) struct Props<'a> {
 }
 
 /// Tags that declare a nested plugin (or a reference to one).
-const OBJECT_TAGS: [&str; 12] = [
+const OBJECT_TAGS: [&str; 13] = [
     "bsdf",
     "medium",
     "phase",
+    "volume",
     "texture",
     "emitter",
     "shape",
@@ -576,6 +577,19 @@ impl<'a> Props<'a> {
             Some(_) => Err(el.error(format!(
                 "parameter \"{name}\" must be a constant colour, not a texture"
             ))),
+        }
+    }
+
+    /// The nested plugin (or `<ref>`) given as parameter `name`, taken; `None` (and nothing
+    /// taken) when the parameter is absent or a plain value.
+    pub fn object(&mut self, name: &str) -> Option<&'a Element> {
+        let p = self.items.iter_mut().find(|p| p.name == name)?;
+        match p.value {
+            Value::Object(o) => {
+                p.used = true;
+                Some(o)
+            }
+            _ => None,
         }
     }
 

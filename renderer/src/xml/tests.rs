@@ -3190,7 +3190,7 @@ fn dollar_escapes_and_longest_parameter_names() {
 /// shape's exterior, the sensor's medium by `<ref>`, Mitsuba's defaults and `scale`.
 #[test]
 fn media_are_read_with_their_interfaces() {
-    use crate::media::{MediumInterface, PhaseFunction};
+    use crate::media::{Density, MediumInterface, PhaseFunction};
     let dir = temp_dir("media");
     let body = r#"<medium type="homogeneous" id="fog">
     <rgb name="sigma_t" value="0.5, 0.25, 1"/>
@@ -3211,15 +3211,26 @@ fn media_are_read_with_their_interfaces() {
     assert_eq!(scene.media.len(), 2);
     let fog = &scene.media[0];
     assert_eq!(fog.name, "fog");
-    assert_eq!(fog.sigma_t, Vec3::new(2.0, 1.0, 4.0));
-    assert_eq!(fog.albedo, Vec3::new(0.9, 0.8, 0.7));
+    assert_eq!(
+        fog.density,
+        Density::Homogeneous {
+            sigma_t: Vec3::new(2.0, 1.0, 4.0),
+            albedo: Vec3::new(0.9, 0.8, 0.7)
+        }
+    );
     assert_eq!(fog.phase, PhaseFunction::HenyeyGreenstein { g: -0.25 });
     assert!(fog.sample_emitters);
     // Mitsuba's defaults: sigma_t 1, albedo 0.75, isotropic.
     let nested = &scene.media[1];
     assert_eq!(
-        (nested.sigma_t, nested.albedo, nested.phase),
-        (Vec3::ONE, Vec3::splat(0.75), PhaseFunction::Isotropic)
+        (&nested.density, nested.phase),
+        (
+            &Density::Homogeneous {
+                sigma_t: Vec3::ONE,
+                albedo: Vec3::splat(0.75)
+            },
+            PhaseFunction::Isotropic
+        )
     );
     assert!(!nested.sample_emitters);
     assert_eq!(scene.camera_medium, Some(0));
@@ -3248,9 +3259,9 @@ fn error_media_cases_name_file_and_line() {
     let dir = temp_dir("media-errors");
     let cases: [(&str, &str, &str); 8] = [
         (
-            r#"<medium type="heterogeneous" id="m"/>"#,
-            "heterogeneous",
-            "unsupported medium \"heterogeneous\"",
+            r#"<medium type="smoke" id="m"/>"#,
+            "smoke",
+            "unsupported medium \"smoke\"",
         ),
         (
             r#"<medium type="homogeneous" id="m"><phase type="rayleigh"/></medium>"#,
@@ -3293,4 +3304,80 @@ fn error_media_cases_name_file_and_line() {
         let body = format!("{SENSOR}\n{body}");
         assert_body_error_at(&dir, &format!("case{i}.xml"), &body, marker, needle);
     }
+}
+
+/// A heterogeneous medium: a `gridvolume` `sigma_t` read from a `.vol` file next to the scene,
+/// placed by `to_world` (its box is where the medium is), a `constvolume` albedo, `scale` in
+/// the majorant; a declared volume named by `<ref>`; and the grid's errors with file and line.
+#[test]
+fn heterogeneous_media_read_their_grids() {
+    use crate::media::grid::{encode_vol, VolFile};
+    use crate::media::{Density, VolumeTexture};
+    let dir = temp_dir("heterogeneous");
+    let vol = VolFile {
+        res: glam::UVec3::new(2, 1, 1),
+        channels: 1,
+        bbox: (Vec3::ZERO, Vec3::ONE),
+        data: vec![0.5, 2.0],
+    };
+    std::fs::write(dir.join("d.vol"), encode_vol(&vol)).unwrap();
+    let body = format!(
+        r#"{SENSOR}
+<volume type="gridvolume" id="density"><string name="filename" value="d.vol"/>
+    <transform name="to_world"><scale x="2"/><translate x="1"/></transform></volume>
+<medium type="heterogeneous" id="smoke">
+    <ref name="sigma_t" id="density"/>
+    <volume type="constvolume" name="albedo"><rgb name="value" value="0.5, 0.6, 0.7"/></volume>
+    <float name="scale" value="3"/>
+</medium>
+<shape type="cube"><bsdf type="null"/><ref name="interior" id="smoke"/></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let Density::Heterogeneous(h) = &scene.media[0].density else {
+        panic!("{:?}", scene.media[0].density)
+    };
+    assert_eq!(h.majorant, 6.0);
+    assert_eq!(
+        h.bounds,
+        Some((Vec3::new(1.0, 0.0, 0.0), Vec3::new(3.0, 1.0, 1.0)))
+    );
+    assert_eq!(h.albedo, VolumeTexture::Constant(Vec3::new(0.5, 0.6, 0.7)));
+    // Trilinear between the cell centres x = 1.5 (0.5) and 2.5 (2.0).
+    assert_eq!(h.sigma_t.eval(Vec3::new(2.0, 0.5, 0.5)), Vec3::splat(1.25));
+    crate::scene::Scene::build(&scene).unwrap();
+
+    let bad = |name: &str, bytes: &[u8], needle: &str| {
+        std::fs::write(dir.join(name), bytes).unwrap();
+        let body = format!(
+            "{SENSOR}\n<medium type=\"heterogeneous\" id=\"m\">\n<volume type=\"gridvolume\" name=\"sigma_t\"><string name=\"filename\" value=\"{name}\"/></volume>\n</medium>"
+        );
+        assert_body_error_at(&dir, &format!("{name}.xml"), &body, "filename", needle);
+    };
+    bad("truncated.vol", &encode_vol(&vol)[..50], "truncated");
+    bad("text.vol", b"hello", "not a .vol grid");
+    let body = format!(
+        "{SENSOR}\n<medium type=\"heterogeneous\" id=\"m\">\n<volume type=\"gridvolume\" name=\"sigma_t\"><string name=\"filename\" value=\"missing.vol\"/></volume>\n</medium>"
+    );
+    assert_body_error_at(
+        &dir,
+        "missing.xml",
+        &body,
+        "missing.vol",
+        "cannot load volume",
+    );
+    let body = format!(
+        "{SENSOR}\n<medium type=\"homogeneous\" id=\"m\">\n<volume type=\"constvolume\" name=\"sigma_t\"/>\n</medium>"
+    );
+    assert_body_error_at(
+        &dir,
+        "homogeneous.xml",
+        &body,
+        "constvolume",
+        "use a heterogeneous medium",
+    );
+    let body = format!(
+        "{SENSOR}\n<medium type=\"heterogeneous\" id=\"m\">\n<volume type=\"gridvolume\" name=\"sigma_t\"><string name=\"filename\" value=\"d.vol\"/>\n<string name=\"filter_type\" value=\"cubic\"/></volume>\n</medium>"
+    );
+    assert_body_error_at(&dir, "filter.xml", &body, "cubic", "unknown filter_type");
 }
