@@ -31,9 +31,9 @@ area lights only and turns every rectangle and sphere light into an emitting mes
 icosphere or a torus).
 
 `--media` renders with both renderers' `volpath` and fills some spheres and cubes with random
-homogeneous media (extinction per channel, albedo, isotropic or Henyey-Greenstein phase, light
-sampling on or off) or heterogeneous ones (random `.vol` grids of extinction and albedo, written
-next to the scene) behind null, smooth, rough or thin glass boundaries, and in some scenes puts
+homogeneous media (extinction per channel, albedo, isotropic, Henyey-Greenstein or Rayleigh
+phase, light sampling on or off) or heterogeneous ones (random `.vol` grids of extinction and
+albedo, written next to the scene) behind null, smooth, rough or thin glass boundaries, and in some scenes puts
 the camera and everything else in a thin haze (the filled objects name it as their exterior).
 
 `--extended` draws the scenes from scripts/fuzz_extended.py instead: bitmap textures on every
@@ -529,7 +529,9 @@ def with_media(text, seed, index, folder):
     a null, glass, rough glass or thin glass boundary, and in some scenes a haze around
     everything (the sensor's medium and the filled objects' exterior)."""
     r = random.Random(seed * 4_999_999 + index)
+    # Later additions draw from streams of their own, so that a seed's earlier scenes stay.
     grids = random.Random(seed * 7_777_777 + index)
+    phases = random.Random(seed * 3_333_331 + index)
     root = ET.fromstring(text)
     integrator = root.find("integrator")
     integrator.set("type", "volpath")
@@ -562,9 +564,15 @@ def with_media(text, seed, index, folder):
         if kind == "roughdielectric":
             ET.SubElement(bsdf, "float", name="alpha", value=f"{r.uniform(0.05, 0.4):.3f}")
         if grids.random() < 0.5:
-            shape.append(grid_medium(grids, shape, folder, filled))
+            medium = grid_medium(grids, shape, folder, filled)
         else:
-            shape.append(random_medium(r, {"name": "interior"}))
+            medium = random_medium(r, {"name": "interior"})
+        # Half of the media without a Henyey-Greenstein phase get Rayleigh's.
+        if medium.find("phase[@type='hg']") is None and phases.random() < 0.5:
+            for old in medium.findall("phase"):
+                medium.remove(old)
+            ET.SubElement(medium, "phase", type="rayleigh")
+        shape.append(medium)
         if haze:
             ET.SubElement(shape, "ref", name="exterior", id="haze")
     return ET.tostring(root, encoding="unicode"), params

@@ -1,5 +1,5 @@
-//! Phase functions of participating media, as Mitsuba 3's `isotropic` and `hg` plugins: the
-//! angular distribution of light scattered at a point in a medium.
+//! Phase functions of participating media, as Mitsuba 3's `isotropic`, `hg` and `rayleigh`
+//! plugins: the angular distribution of light scattered at a point in a medium.
 //!
 //! Directions follow the light's travel: `d_in` is the direction the path arrived along (from
 //! the previous vertex towards the scattering point) and `d_out` the direction it leaves in, so
@@ -21,6 +21,9 @@ pub enum PhaseFunction {
         /// `g`: the mean cosine of the scattering angle (0 isotropic, > 0 forward).
         g: f32,
     },
+    /// `rayleigh`: scattering by particles much smaller than the wavelength,
+    /// 3/(16π)·(1 + cos²θ) (unpolarised).
+    Rayleigh,
 }
 
 /// A direction drawn from a phase function, with its density (the weight is always 1: each
@@ -41,6 +44,7 @@ impl PhaseFunction {
         match *self {
             PhaseFunction::Isotropic => 1.0 / (4.0 * PI),
             PhaseFunction::HenyeyGreenstein { g } => hg(g, d_in.dot(d_out)),
+            PhaseFunction::Rayleigh => rayleigh(d_in.dot(d_out)),
         }
     }
 
@@ -60,17 +64,38 @@ impl PhaseFunction {
                     let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u.x);
                     ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
                 };
-                let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-                let phi = 2.0 * PI * u.y;
-                let local = Vec3::new(sin_theta * phi.cos(), sin_theta * phi.sin(), cos_theta);
-                let d_out = Frame::from_normal(d_in).to_world(local).normalize();
                 PhaseSample {
-                    d_out,
+                    d_out: around(d_in, cos_theta, u.y),
                     pdf: hg(g, cos_theta),
+                }
+            }
+            PhaseFunction::Rayleigh => {
+                // The CDF (c³ + 3c + 4)/8 = u inverted by Cardano's formula.
+                let z = 2.0 * (2.0 * u.x - 1.0);
+                let root = (z * z + 1.0).sqrt();
+                let cos_theta = ((z + root).cbrt() + (z - root).cbrt()).clamp(-1.0, 1.0);
+                PhaseSample {
+                    d_out: around(d_in, cos_theta, u.y),
+                    pdf: rayleigh(cos_theta),
                 }
             }
         }
     }
+}
+
+/// The unit direction at angle acos(`cos_theta`) from `axis`, at azimuth 2π·`u_phi`.
+#[inline]
+fn around(axis: Vec3, cos_theta: f32, u_phi: f32) -> Vec3 {
+    let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+    let phi = 2.0 * PI * u_phi;
+    let local = Vec3::new(sin_theta * phi.cos(), sin_theta * phi.sin(), cos_theta);
+    Frame::from_normal(axis).to_world(local).normalize()
+}
+
+/// The Rayleigh density for the cosine between the travel directions.
+#[inline]
+fn rayleigh(cos_theta: f32) -> f32 {
+    3.0 / (16.0 * PI) * (1.0 + cos_theta * cos_theta)
 }
 
 /// The Henyey–Greenstein density for the cosine between the travel directions.
@@ -85,12 +110,13 @@ mod tests {
     use super::*;
     use crate::sampling::{Pcg32, UniformSource};
 
-    const PHASES: [PhaseFunction; 5] = [
+    const PHASES: [PhaseFunction; 6] = [
         PhaseFunction::Isotropic,
         PhaseFunction::HenyeyGreenstein { g: 0.0 },
         PhaseFunction::HenyeyGreenstein { g: 0.7 },
         PhaseFunction::HenyeyGreenstein { g: -0.4 },
         PhaseFunction::HenyeyGreenstein { g: 0.95 },
+        PhaseFunction::Rayleigh,
     ];
 
     /// Each phase function integrates to one over the sphere (a fine midpoint rule in cos θ,
@@ -121,7 +147,7 @@ mod tests {
         let frame = Frame::from_normal(d_in);
         for phase in PHASES {
             let g = match phase {
-                PhaseFunction::Isotropic => 0.0,
+                PhaseFunction::Isotropic | PhaseFunction::Rayleigh => 0.0,
                 PhaseFunction::HenyeyGreenstein { g } => g,
             };
             let mut rng = Pcg32::new(7, 11);
@@ -147,10 +173,12 @@ mod tests {
             }
             mean_cos /= n as f64;
             assert!((mean_cos - g as f64).abs() < 0.01, "{phase:?}: {mean_cos}");
-            // Expected counts: the cos θ marginal integrated exactly per bin (HG's CDF).
+            // Expected counts: the cos θ marginal integrated exactly per bin.
             let cdf = |c: f64| -> f64 {
                 let g = g as f64;
-                if g.abs() < 1e-3 {
+                if phase == PhaseFunction::Rayleigh {
+                    (c * c * c + 3.0 * c + 4.0) / 8.0
+                } else if g.abs() < 1e-3 {
                     (c + 1.0) / 2.0
                 } else {
                     (1.0 - g * g) / (2.0 * g)

@@ -20,7 +20,7 @@ pub(super) type Bounds = (glam::Vec3, glam::Vec3);
 const VOLUME_PLUGINS: [&str; 2] = ["gridvolume", "constvolume"];
 
 /// The phase-function plugins this importer knows.
-const PHASE_PLUGINS: [&str; 2] = ["isotropic", "hg"];
+const PHASE_PLUGINS: [&str; 3] = ["isotropic", "hg", "rayleigh"];
 
 /// Builds the medium declared by a `<medium>` element:
 /// * `sigma_t` (float or spectrum, default 1; `heterogeneous`: also a `<volume>`): extinction
@@ -220,13 +220,14 @@ pub(super) fn build_volume<'a>(
     Ok(volume)
 }
 
-/// Builds a `<phase>`: `isotropic`, or `hg` with `g` (default 0.8) in (−1, 1).
+/// Builds a `<phase>`: `isotropic`, `rayleigh`, or `hg` with `g` (default 0.8) in (−1, 1).
 fn build_phase<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<PhaseFunction, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
     let mut p = Props::parse(b, el)?;
     let phase = match kind {
         "isotropic" => PhaseFunction::Isotropic,
+        "rayleigh" => PhaseFunction::Rayleigh,
         "hg" => {
             let g_el = p.element_of("g");
             let g = p.float_or("g", 0.8)?;

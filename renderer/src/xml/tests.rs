@@ -3264,9 +3264,9 @@ fn error_media_cases_name_file_and_line() {
             "unsupported medium \"smoke\"",
         ),
         (
-            r#"<medium type="homogeneous" id="m"><phase type="rayleigh"/></medium>"#,
-            "rayleigh",
-            "unsupported phase function \"rayleigh\"",
+            r#"<medium type="homogeneous" id="m"><phase type="sggx"/></medium>"#,
+            "sggx",
+            "unsupported phase function \"sggx\"",
         ),
         (
             r#"<medium type="homogeneous" id="m"><phase type="hg"><float name="g" value="1"/></phase></medium>"#,
