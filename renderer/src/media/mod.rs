@@ -181,6 +181,16 @@ fn clip_to_box(ray: &Ray, bounds: Option<(Vec3, Vec3)>, t_max: f32) -> Option<(f
 }
 
 impl Heterogeneous {
+    /// The stretch of `ray` before `t_max` that the medium can interact with: inside its box,
+    /// and nothing when its majorant is zero.
+    #[inline]
+    fn tracked_range(&self, ray: &Ray, t_max: f32) -> Option<(f32, f32)> {
+        if self.majorant <= 0.0 {
+            return None;
+        }
+        clip_to_box(ray, self.bounds, t_max)
+    }
+
     /// σt at `p` (scale applied), at most the majorant (trilinear rounding).
     #[inline]
     fn sigma_t_at(&self, p: Vec3) -> Rgb {
@@ -196,16 +206,12 @@ impl Heterogeneous {
         hero: usize,
         rng: &mut impl UniformSource,
     ) -> FreeFlight {
-        let passed = FreeFlight::Pass {
-            weight: Rgb::ONE,
-            ratio: Rgb::ONE,
+        let Some((t0, t1)) = self.tracked_range(ray, t_max) else {
+            return FreeFlight::Pass {
+                weight: Rgb::ONE,
+                ratio: Rgb::ONE,
+            };
         };
-        let Some((t0, t1)) = clip_to_box(ray, self.bounds, t_max) else {
-            return passed;
-        };
-        if self.majorant <= 0.0 {
-            return passed;
-        }
         let (mut weight, mut ratio) = (Rgb::ONE, Rgb::ONE);
         let mut t = t0;
         loop {
@@ -233,12 +239,9 @@ impl Heterogeneous {
 
     /// Ratio tracking: the product of 1 − σt/σ̄ over tentative collisions before `t_end`.
     fn ratio_tracking(&self, ray: &Ray, t_end: f32, rng: &mut impl UniformSource) -> Rgb {
-        let Some((t0, t1)) = clip_to_box(ray, self.bounds, t_end) else {
+        let Some((t0, t1)) = self.tracked_range(ray, t_end) else {
             return Rgb::ONE;
         };
-        if self.majorant <= 0.0 {
-            return Rgb::ONE;
-        }
         if t1.is_infinite() {
             // An unbounded constant extinction: nothing passes (unless a channel is empty).
             return transmittance(self.sigma_t.eval(ray.o) * self.scale, f32::INFINITY);
