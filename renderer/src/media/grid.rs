@@ -41,6 +41,11 @@ pub struct VolFile {
 /// count (1 or 3; Mitsuba's 6-channel grids hold spectral data this renderer does not use),
 /// the bounding box, then the values, all little-endian. Errors say what is wrong.
 pub fn read_vol(path: &Path) -> Result<VolFile, String> {
+    let size = std::fs::metadata(path)
+        .map_err(|e| format!("cannot read: {e}"))?
+        .len();
+    // The file's bytes and the decoded values are held at once.
+    crate::memory::check_fits("the volume grid", 2 * size).map_err(|e| e.to_string())?;
     let bytes = std::fs::read(path).map_err(|e| format!("cannot read: {e}"))?;
     parse_vol(&bytes)
 }
