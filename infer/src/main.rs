@@ -544,7 +544,8 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
                 p.photons_emitted as f64 / p.elapsed / 1e6
             ));
         },
-    )?;
+    )
+    .with_context(|| format!("rendering {}", scene_path.display()))?;
     bar.finish_and_clear();
     let bundle = result.context("the renderer wrote no bundle")?;
     eprintln!(

@@ -502,7 +502,7 @@ impl Scene {
         match self.media.first() {
             Some(m) => bail!(
                 "the scene has participating media (medium '{}'{}); the {name} integrator \
-                 does not render them: use --integrator volpath",
+                 does not render them (`render --integrator volpath` does)",
                 m.name,
                 match self.media.len() {
                     1 => String::new(),
