@@ -3,10 +3,11 @@
 //! interior/exterior media a shape separates, and the free-flight sampling and transmittance
 //! the volumetric path tracer (`integrators/volpath.rs`) uses.
 //!
-//! A heterogeneous medium is tracked against its majorant σ̄ (the largest extinction in the
-//! grid): tentative collisions at exponential distances of rate σ̄, each a real one with the
-//! hero channel's probability σt/σ̄ (delta tracking) or a null one; shadow rays multiply
-//! 1 − σt/σ̄ per tentative collision (ratio tracking). Outside its grid's box it holds nothing.
+//! A heterogeneous medium is tracked against majorants σ̄ — the largest extinction in each of
+//! up to 16³ blocks of its grid's box (`grid::MajorantGrid`), walked block by block — with
+//! tentative collisions at exponential distances of rate σ̄, each a real one with the hero
+//! channel's probability σt/σ̄ (delta tracking) or a null one; shadow rays multiply 1 − σt/σ̄
+//! per tentative collision (ratio tracking). Outside its grid's box it holds nothing.
 //!
 //! Extinction may differ per RGB channel. Distances are drawn from one channel's exponential —
 //! the path's *hero* channel, chosen uniformly once per path — and every event also reports
@@ -63,9 +64,11 @@ pub struct Heterogeneous {
     pub scale: f32,
     /// The largest extinction anywhere (scale × the grid's maximum over every channel).
     pub majorant: f32,
-    /// The world-space box of the `sigma_t` grid, outside of which the medium is empty
-    /// (`None` for a constant `sigma_t`: everywhere).
+    /// The world-space box of the `sigma_t` volume, outside of which the medium is empty
+    /// (`None`: everywhere).
     pub bounds: Option<(Vec3, Vec3)>,
+    /// Local majorants over the box, for a grid `sigma_t`.
+    pub majorants: Option<grid::MajorantGrid>,
 }
 
 /// What a free-flight sample found along a ray segment that ends at distance `t_max`. The
@@ -181,20 +184,53 @@ fn clip_to_box(ray: &Ray, bounds: Option<(Vec3, Vec3)>, t_max: f32) -> Option<(f
 }
 
 impl Heterogeneous {
-    /// The stretch of `ray` before `t_max` that the medium can interact with: inside its box,
-    /// and nothing when its majorant is zero.
-    #[inline]
-    fn tracked_range(&self, ray: &Ray, t_max: f32) -> Option<(f32, f32)> {
-        if self.majorant <= 0.0 {
-            return None;
+    /// A heterogeneous medium of extinction `sigma_t` × `scale` inside `bounds` (the
+    /// `sigma_t` volume's box; `None`: everywhere) and albedo `albedo`, with its majorants.
+    pub fn new(
+        sigma_t: VolumeTexture,
+        albedo: VolumeTexture,
+        scale: f32,
+        bounds: Option<(Vec3, Vec3)>,
+    ) -> Heterogeneous {
+        let majorants = match (&sigma_t, bounds) {
+            (VolumeTexture::Grid(g), Some(b)) => Some(grid::MajorantGrid::new(g, b, scale)),
+            _ => None,
+        };
+        Heterogeneous {
+            majorant: sigma_t.max() * scale,
+            sigma_t,
+            albedo,
+            scale,
+            bounds,
+            majorants,
         }
-        clip_to_box(ray, self.bounds, t_max)
     }
 
-    /// σt at `p` (scale applied), at most the majorant (trilinear rounding).
+    /// Calls `f(t_start, t_end, majorant)` for the stretches of `ray` before `t_max` that the
+    /// medium can interact with (inside its box, in order, skipping those whose majorant is
+    /// zero) until `f` returns false.
     #[inline]
-    fn sigma_t_at(&self, p: Vec3) -> Rgb {
-        (self.sigma_t.eval(p) * self.scale).min(Rgb::splat(self.majorant))
+    fn stretches(&self, ray: &Ray, t_max: f32, mut f: impl FnMut(f32, f32, f32) -> bool) {
+        if self.majorant <= 0.0 {
+            return;
+        }
+        let Some((t0, t1)) = clip_to_box(ray, self.bounds, t_max) else {
+            return;
+        };
+        match &self.majorants {
+            Some(m) => m.segments(ray.o, ray.d, t0, t1, |a, b, bound| {
+                bound <= 0.0 || f(a, b, bound)
+            }),
+            None => {
+                f(t0, t1, self.majorant);
+            }
+        }
+    }
+
+    /// σt at `p` (scale applied), at most `bound` (trilinear rounding).
+    #[inline]
+    fn sigma_t_at(&self, p: Vec3, bound: f32) -> Rgb {
+        (self.sigma_t.eval(p) * self.scale).min(Rgb::splat(bound))
     }
 
     /// Delta tracking with the hero channel's collision probabilities; each event also reports
@@ -206,59 +242,61 @@ impl Heterogeneous {
         hero: usize,
         rng: &mut impl UniformSource,
     ) -> FreeFlight {
-        let Some((t0, t1)) = self.tracked_range(ray, t_max) else {
-            return FreeFlight::Pass {
-                weight: Rgb::ONE,
-                ratio: Rgb::ONE,
-            };
-        };
         let (mut weight, mut ratio) = (Rgb::ONE, Rgb::ONE);
-        let mut t = t0;
-        loop {
-            t -= (1.0 - rng.next_f32()).ln() / self.majorant;
-            if t >= t1 {
-                return FreeFlight::Pass { weight, ratio };
+        let mut scatter = None;
+        self.stretches(ray, t_max, |t0, t1, bound| {
+            let mut t = t0;
+            loop {
+                // Exponential steps restart at each block's edge (memorylessness).
+                t -= (1.0 - rng.next_f32()).ln() / bound;
+                if t >= t1 {
+                    return true;
+                }
+                let p = ray.o + ray.d * t;
+                let sigma_t = self.sigma_t_at(p, bound);
+                if rng.next_f32() * bound < sigma_t[hero] {
+                    let albedo = self.albedo.eval(p).clamp(Rgb::ZERO, Rgb::ONE);
+                    scatter = Some(FreeFlight::Scatter {
+                        t,
+                        weight: weight * sigma_t * albedo / sigma_t[hero],
+                        ratio: ratio * sigma_t / sigma_t[hero],
+                    });
+                    return false;
+                }
+                // A null collision: the hero's probability of it, σn/σ̄, is positive here.
+                let sigma_n = Rgb::splat(bound) - sigma_t;
+                let r = sigma_n / sigma_n[hero];
+                weight *= r;
+                ratio *= r;
             }
-            let p = ray.o + ray.d * t;
-            let sigma_t = self.sigma_t_at(p);
-            if rng.next_f32() * self.majorant < sigma_t[hero] {
-                let albedo = self.albedo.eval(p).clamp(Rgb::ZERO, Rgb::ONE);
-                return FreeFlight::Scatter {
-                    t,
-                    weight: weight * sigma_t * albedo / sigma_t[hero],
-                    ratio: ratio * sigma_t / sigma_t[hero],
-                };
-            }
-            // A null collision: the hero's probability of it, σn/σ̄, is positive here.
-            let sigma_n = Rgb::splat(self.majorant) - sigma_t;
-            let r = sigma_n / sigma_n[hero];
-            weight *= r;
-            ratio *= r;
-        }
+        });
+        scatter.unwrap_or(FreeFlight::Pass { weight, ratio })
     }
 
     /// Ratio tracking: the product of 1 − σt/σ̄ over tentative collisions before `t_end`.
     fn ratio_tracking(&self, ray: &Ray, t_end: f32, rng: &mut impl UniformSource) -> Rgb {
-        let Some((t0, t1)) = self.tracked_range(ray, t_end) else {
-            return Rgb::ONE;
-        };
-        if t1.is_infinite() {
-            // An unbounded constant extinction: nothing passes (unless a channel is empty).
-            return transmittance(self.sigma_t.eval(ray.o) * self.scale, f32::INFINITY);
-        }
         let mut tr = Rgb::ONE;
-        let mut t = t0;
-        loop {
-            t -= (1.0 - rng.next_f32()).ln() / self.majorant;
-            if t >= t1 {
-                return tr;
+        self.stretches(ray, t_end, |t0, t1, bound| {
+            if t1.is_infinite() {
+                // An unbounded constant extinction: nothing passes (unless a channel is empty).
+                tr = transmittance(self.sigma_t.eval(ray.o) * self.scale, f32::INFINITY);
+                return false;
             }
-            let sigma_t = self.sigma_t_at(ray.o + ray.d * t);
-            tr *= Rgb::ONE - sigma_t / self.majorant;
-            if tr.max_element() <= 0.0 {
-                return Rgb::ZERO;
+            let mut t = t0;
+            loop {
+                t -= (1.0 - rng.next_f32()).ln() / bound;
+                if t >= t1 {
+                    return true;
+                }
+                let sigma_t = self.sigma_t_at(ray.o + ray.d * t, bound);
+                tr *= Rgb::ONE - sigma_t / bound;
+                if tr.max_element() <= 0.0 {
+                    tr = Rgb::ZERO;
+                    return false;
+                }
             }
-        }
+        });
+        tr
     }
 }
 
@@ -452,13 +490,12 @@ mod tests {
         .unwrap();
         let sigma_t = VolumeTexture::Grid(std::sync::Arc::new(grid));
         Medium {
-            density: Density::Heterogeneous(Box::new(Heterogeneous {
-                majorant: sigma_t.max(),
-                bounds: Some((Vec3::ZERO, Vec3::new(2.0, 1.0, 1.0))),
+            density: Density::Heterogeneous(Box::new(Heterogeneous::new(
                 sigma_t,
-                albedo: VolumeTexture::Constant(albedo),
-                scale: 1.0,
-            })),
+                VolumeTexture::Constant(albedo),
+                1.0,
+                Some((Vec3::ZERO, Vec3::new(2.0, 1.0, 1.0))),
+            ))),
             phase: PhaseFunction::Isotropic,
             sample_emitters: true,
             name: "two-cell".into(),

@@ -106,13 +106,12 @@ pub(super) fn build_medium<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<M
         }
         // As in Mitsuba, the medium is empty outside its `sigma_t` volume's box — also for a
         // constant one (the unit cube, or a `constvolume`'s `to_world` of it).
-        (_, sigma_t, albedo) => Density::Heterogeneous(Box::new(Heterogeneous {
-            majorant: sigma_t.max() * scale,
-            bounds: Some(sigma_t_box),
+        (_, sigma_t, albedo) => Density::Heterogeneous(Box::new(Heterogeneous::new(
             sigma_t,
             albedo,
             scale,
-        })),
+            Some(sigma_t_box),
+        ))),
     };
     let name = el
         .attr("id")
