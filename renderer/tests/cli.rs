@@ -703,3 +703,57 @@ fn a_state_file_is_refused_once_a_mesh_the_scene_reads_changed() {
         &["run.state", "scene_fingerprint", "a file it reads"],
     );
 }
+
+/// A scene with participating media renders with `volpath` — chosen by its file's
+/// `<integrator type="volpath">` — and every other integrator refuses it, naming the medium and
+/// the file, with exit status 1.
+#[test]
+fn media_render_with_volpath_and_other_integrators_refuse_them() {
+    let dir = temp_dir("media");
+    let scene = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenes/validation/media/scene.xml"
+    );
+    let exr = dir.join("media.exr");
+    let out = run(
+        env!("CARGO_BIN_EXE_render"),
+        &[
+            scene,
+            "--spp",
+            "2",
+            "-D",
+            "res=8",
+            "--out",
+            exr.to_str().unwrap(),
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("volpath: 8x8"), "{}", stderr(&out));
+    let (w, _, pixels) = renderer::image_io::read_rgb_image(&exr).unwrap();
+    assert_eq!(w, 8);
+    assert!(pixels.iter().all(|v| v.is_finite()));
+    for integrator in ["path", "direct", "sppm-ml"] {
+        let out_path = dir.join(integrator);
+        let mut args = vec![
+            scene,
+            "--integrator",
+            integrator,
+            "-D",
+            "res=8",
+            "--out",
+            out_path.to_str().unwrap(),
+        ];
+        if integrator == "sppm-ml" {
+            args.extend(["--passes", "1"]);
+        }
+        let out = run(env!("CARGO_BIN_EXE_render"), &args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{integrator}: {err}");
+        assert!(
+            err.contains("participating media (medium 'fog'")
+                && err.contains("scenes/validation/media/scene.xml")
+                && err.contains(&format!("the {integrator} integrator")),
+            "{integrator}: {err}"
+        );
+    }
+}
