@@ -556,14 +556,19 @@ impl Scene {
     /// The closest surface hit by a camera ray that sees through area emitters, as Mitsuba 3's
     /// `hide_emitters` does: a hit on an emitting shape continues the ray in the same direction
     /// from that surface, so the camera shows what lies behind the light (the light's own
-    /// surface, lit or not, is not seen). `None` when the ray escapes.
+    /// surface, lit or not, is not seen). `None` when the ray escapes. The hit's `t` is its
+    /// distance from `ray`'s origin, also behind skipped emitters.
     pub fn intersect_behind_emitters(&self, ray: &Ray) -> Option<SurfaceInteraction> {
+        let origin = ray.o;
         let mut ray = *ray;
         // Each step starts past the previous surface (`spawn_ray`'s offset), so the loop ends;
         // the bound only guards against a stack of coincident emitters the offset cannot clear.
-        for _ in 0..MAX_EMITTER_SKIPS {
-            let si = self.intersect(&ray)?;
+        for skipped in 0..MAX_EMITTER_SKIPS {
+            let mut si = self.intersect(&ray)?;
             if si.light.is_none() {
+                if skipped > 0 {
+                    si.t = (si.p - origin).length();
+                }
                 return Some(si);
             }
             ray = Ray {

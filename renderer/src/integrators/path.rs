@@ -3,7 +3,7 @@
 //! by NEE only, Russian roulette from `rr_depth` on with probability min(max(β)·η², 0.95), and
 //! `max_depth` counted as Mitsuba does (1: emitters seen directly; 2: direct lighting; …).
 
-use super::RayIntegrator;
+use super::{russian_roulette, RayIntegrator};
 use crate::bsdf::TransportMode;
 use crate::math::Ray;
 use crate::sampling::{power_heuristic, Pcg32, UniformSource};
@@ -144,16 +144,9 @@ impl RayIntegrator for PathTracer {
             prev_delta = bs.delta;
             depth += 1;
 
-            let throughput_max = throughput.max_element();
-            if depth >= self.rr_depth {
-                let q = (throughput_max * eta * eta).min(0.95);
-                if rng.next_f32() >= q {
-                    break;
-                }
-                throughput /= q;
-            }
-            if throughput_max <= 0.0 || throughput_max.is_nan() {
-                break;
+            match russian_roulette(depth, self.rr_depth, throughput.max_element(), eta, rng) {
+                Some(q) => throughput /= q,
+                None => break,
             }
         }
         result

@@ -26,7 +26,7 @@
 //! the balance heuristic over the three channels (`media/mod.rs`), and transmittance on shadow
 //! rays is evaluated in closed form, which a homogeneous medium allows).
 
-use super::RayIntegrator;
+use super::{russian_roulette, RayIntegrator};
 use crate::bsdf::TransportMode;
 use crate::lights::LightSample;
 use crate::math::{offset_point, Ray};
@@ -93,15 +93,14 @@ impl VolPathTracer {
         eta: f32,
         rng: &mut Pcg32,
     ) -> bool {
-        let throughput_max = spectral_mis(*throughput, ratio).max_element();
-        if depth >= self.rr_depth {
-            let q = (throughput_max * eta * eta).min(0.95);
-            if rng.next_f32() >= q {
-                return false;
+        let weight_max = spectral_mis(*throughput, ratio).max_element();
+        match russian_roulette(depth, self.rr_depth, weight_max, eta, rng) {
+            Some(q) => {
+                *throughput /= q;
+                true
             }
-            *throughput /= q;
+            None => false,
         }
-        throughput_max > 0.0 && !throughput_max.is_nan()
     }
 }
 
@@ -208,14 +207,7 @@ impl RayIntegrator for VolPathTracer {
             };
             if let Some(m) = medium {
                 let med = &scene.media[m as usize];
-                // Behind hidden emitters the hit's `t` counts from the last one skipped.
-                let t_max = hit.as_ref().map_or(f32::INFINITY, |si| {
-                    if hidden {
-                        (si.p - ray.o).length()
-                    } else {
-                        si.t
-                    }
-                });
+                let t_max = hit.as_ref().map_or(f32::INFINITY, |si| si.t);
                 match med.sample_free_flight(&ray, t_max, hero, rng) {
                     FreeFlight::Pass { weight, ratio: r } => {
                         throughput *= weight;

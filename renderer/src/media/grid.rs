@@ -154,15 +154,7 @@ impl VolumeGrid {
             return Err("to_world is singular".into());
         }
         let to_local = box_to_unit * to_world.inverse();
-        let from_local = to_local.inverse();
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for i in 0..8 {
-            let c = Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32);
-            let w = from_local.transform_point3(c);
-            lo = lo.min(w);
-            hi = hi.max(w);
-        }
+        let (lo, hi) = unit_cube_bounds(to_local.inverse());
         let max = file.data.iter().fold(0.0f32, |m, &v| m.max(v));
         Ok(VolumeGrid {
             file,
@@ -220,6 +212,19 @@ impl VolumeGrid {
             }
         }
     }
+}
+
+/// The world-space bounding box of the unit cube mapped by `to_world` (Mitsuba's volume box).
+pub fn unit_cube_bounds(to_world: Mat4) -> (Vec3, Vec3) {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for i in 0..8 {
+        let c = Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32);
+        let w = to_world.transform_point3(c);
+        lo = lo.min(w);
+        hi = hi.max(w);
+    }
+    (lo, hi)
 }
 
 /// Blocks per axis of a [`MajorantGrid`] (at most: never more than the grid has cells).

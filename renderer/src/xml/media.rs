@@ -4,10 +4,9 @@
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
-use crate::media::grid::{read_vol, GridFilter, VolumeGrid};
+use crate::media::grid::{read_vol, unit_cube_bounds, GridFilter, VolumeGrid};
 use crate::media::{Density, Heterogeneous, Medium, MediumInterface, PhaseFunction, VolumeTexture};
 use crate::spectrum::{Rgb, SpectrumKind};
-use crate::texture::BitmapWrap;
 use std::sync::Arc;
 
 /// The medium plugins this importer knows.
@@ -146,15 +145,7 @@ pub(super) fn build_volume<'a>(
         "constvolume" => {
             let value = p.constant_color(b, "value", kind)?.unwrap_or(Rgb::ONE);
             let to_world = p.transform("to_world")?.unwrap_or(glam::Mat4::IDENTITY);
-            let mut lo = glam::Vec3::splat(f32::INFINITY);
-            let mut hi = glam::Vec3::splat(f32::NEG_INFINITY);
-            for i in 0..8 {
-                let c = glam::Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, (i >> 2) as f32);
-                let w = to_world.transform_point3(c);
-                lo = lo.min(w);
-                hi = hi.max(w);
-            }
-            (VolumeTexture::Constant(value), (lo, hi))
+            (VolumeTexture::Constant(value), unit_cube_bounds(to_world))
         }
         "gridvolume" => {
             let file_el = p.element_of("filename");
@@ -171,17 +162,7 @@ pub(super) fn build_volume<'a>(
                     )))
                 }
             };
-            let wrap_el = p.element_of("wrap_mode");
-            let wrap = match p.string("wrap_mode")?.unwrap_or("clamp") {
-                "clamp" => BitmapWrap::Clamp,
-                "repeat" => BitmapWrap::Repeat,
-                "mirror" => BitmapWrap::Mirror,
-                other => {
-                    return Err(wrap_el.error(format!(
-                        "unknown wrap_mode \"{other}\" (use \"clamp\", \"repeat\" or \"mirror\")"
-                    )))
-                }
-            };
+            let wrap = super::textures::wrap_mode(&mut p, "clamp")?;
             let to_world_el = p.element_of("to_world");
             let to_world = p.transform("to_world")?.unwrap_or(glam::Mat4::IDENTITY);
             let use_grid_bbox = p.bool_or("use_grid_bbox", false)?;

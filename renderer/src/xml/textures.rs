@@ -48,17 +48,7 @@ pub(super) fn build_texture<'a>(
                     )))
                 }
             };
-            let wrap_el = p.element_of("wrap_mode");
-            let wrap = match p.string("wrap_mode")?.unwrap_or("repeat") {
-                "repeat" => BitmapWrap::Repeat,
-                "mirror" => BitmapWrap::Mirror,
-                "clamp" => BitmapWrap::Clamp,
-                other => {
-                    return Err(wrap_el.error(format!(
-                        "unknown wrap_mode \"{other}\" (use \"repeat\", \"mirror\" or \"clamp\")"
-                    )))
-                }
-            };
+            let wrap = wrap_mode(&mut p, "repeat")?;
             let to_uv = to_uv(&mut p)?;
             // Mitsuba's storage precision and GPU texture units: the texels are kept in single
             // precision here, and filtered in software.
@@ -158,4 +148,18 @@ pub(crate) fn uv_affine(m: Mat4) -> Mat3 {
         glam::Vec3::new(m.y_axis.x, m.y_axis.y, 0.0),
         glam::Vec3::new(m.w_axis.x, m.w_axis.y, 1.0),
     )
+}
+
+/// The `wrap_mode` parameter of a bitmap or a grid volume (`repeat`, `mirror`, `clamp`),
+/// `default` when absent.
+pub(super) fn wrap_mode(p: &mut Props, default: &str) -> Result<BitmapWrap, SceneError> {
+    let wrap_el = p.element_of("wrap_mode");
+    match p.string("wrap_mode")?.unwrap_or(default) {
+        "repeat" => Ok(BitmapWrap::Repeat),
+        "mirror" => Ok(BitmapWrap::Mirror),
+        "clamp" => Ok(BitmapWrap::Clamp),
+        other => Err(wrap_el.error(format!(
+            "unknown wrap_mode \"{other}\" (use \"repeat\", \"mirror\" or \"clamp\")"
+        ))),
+    }
 }
