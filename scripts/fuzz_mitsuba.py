@@ -523,15 +523,39 @@ def grid_medium(r, shape, folder, k):
     return m
 
 
-def with_media(text, seed, index, folder):
+def random_phase(r, depth=0):
+    """A random phase function element: `hg`, `rayleigh`, `isotropic`, `tabphase` (4-12 values,
+    some zero) or, above depth 1 only as leaves, `blendphase` (a float or constvolume weight)."""
+    kind = r.choice(["hg", "rayleigh", "isotropic", "tabphase", "tabphase"] + (["blendphase"] * 2 if depth < 2 else []))
+    phase = ET.Element("phase", type=kind)
+    if kind == "hg":
+        ET.SubElement(phase, "float", name="g", value=f"{r.uniform(-0.8, 0.9):.3f}")
+    elif kind == "tabphase":
+        values = [0.0 if r.random() < 0.15 else r.uniform(0.0, 3.0) for _ in range(r.randint(4, 12))]
+        values[r.randrange(len(values))] = r.uniform(0.5, 3.0)
+        ET.SubElement(phase, "string", name="values", value=", ".join(f"{v:.3f}" for v in values))
+    elif kind == "blendphase":
+        if r.random() < 0.7:
+            ET.SubElement(phase, "float", name="weight", value=f"{r.uniform(0.0, 1.0):.3f}")
+        else:
+            v = ET.SubElement(phase, "volume", type="constvolume", name="weight")
+            ET.SubElement(v, "rgb", name="value", value=", ".join(f"{r.uniform(0.0, 1.0):.3f}" for _ in range(3)))
+        phase.append(random_phase(r, depth + 1))
+        phase.append(random_phase(r, depth + 1))
+    return phase
+
+
+def with_media(text, seed, index, folder, more_phases=False):
     """--media: the scene rendered by `volpath`, some of its spheres and cubes filled with a
     random medium (homogeneous, or heterogeneous from random grids written to `folder`) behind
     a null, glass, rough glass or thin glass boundary, and in some scenes a haze around
-    everything (the sensor's medium and the filled objects' exterior)."""
+    everything (the sensor's medium and the filled objects' exterior). `more_phases`
+    (--phases): every medium's phase function drawn by `random_phase` instead."""
     r = random.Random(seed * 4_999_999 + index)
     # Later additions draw from streams of their own, so that a seed's earlier scenes stay.
     grids = random.Random(seed * 7_777_777 + index)
     phases = random.Random(seed * 3_333_331 + index)
+    tables = random.Random(seed * 5_555_557 + index)
     root = ET.fromstring(text)
     integrator = root.find("integrator")
     integrator.set("type", "volpath")
@@ -546,7 +570,12 @@ def with_media(text, seed, index, folder):
     environment = any(root.find(f"emitter[@type='{t}']") is not None for t in ("constant", "envmap"))
     haze = r.random() < 0.4 and not environment
     if haze:
-        root.insert(list(root).index(root.find("sensor")), random_medium(r, {"id": "haze"}, thin=True))
+        haze_medium = random_medium(r, {"id": "haze"}, thin=True)
+        if more_phases:
+            for old in haze_medium.findall("phase"):
+                haze_medium.remove(old)
+            haze_medium.append(random_phase(tables))
+        root.insert(list(root).index(root.find("sensor")), haze_medium)
         ET.SubElement(root.find("sensor"), "ref", id="haze")
     filled = 0
     for shape in root.findall("shape"):
@@ -572,6 +601,10 @@ def with_media(text, seed, index, folder):
             for old in medium.findall("phase"):
                 medium.remove(old)
             ET.SubElement(medium, "phase", type="rayleigh")
+        if more_phases:
+            for old in medium.findall("phase"):
+                medium.remove(old)
+            medium.append(random_phase(tables))
         shape.append(medium)
         if haze:
             ET.SubElement(shape, "ref", name="exterior", id="haze")
@@ -607,6 +640,8 @@ def main():
     ap.add_argument("--media", action="store_true",
                     help="render with `volpath`, some objects filled with random homogeneous media, "
                          "sometimes everything in a haze")
+    ap.add_argument("--phases", action="store_true",
+                    help="with --media: random phase functions, tabulated and blended ones included")
     ap.add_argument("--legacy", action="store_true",
                     help="write each scene as a Mitsuba 0.6 file (version 0.6.0, camelCase parameter "
                          "names), which both renderers must upgrade alike")
@@ -628,7 +663,7 @@ def main():
         if args.mesh_lights:
             text = mesh_lights(text, d, args.seed, index)
         if args.media:
-            text, params = with_media(text, args.seed, index, d)
+            text, params = with_media(text, args.seed, index, d, args.phases)
         if args.legacy:
             text = legacy_names(text)
         if args.restyle:

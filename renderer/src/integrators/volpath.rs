@@ -230,7 +230,7 @@ impl RayIntegrator for VolPathTracer {
                         let u_light2 = rng.next_2d();
                         if med.sample_emitters {
                             if let Some(ls) = scene.sample_li(p, Vec3::ZERO, u_light, u_light2) {
-                                let f = med.phase.eval(ray.d, ls.wi);
+                                let f = med.phase.eval(p, ray.d, ls.wi);
                                 if f > 0.0 {
                                     let st = shadow_transmittance(
                                         scene,
@@ -255,7 +255,7 @@ impl RayIntegrator for VolPathTracer {
                                 }
                             }
                         }
-                        let ps = med.phase.sample(ray.d, rng.next_2d());
+                        let ps = med.phase.sample(p, ray.d, rng.next_2d());
                         prev = PreviousVertex {
                             p,
                             n: Vec3::ZERO,
@@ -387,7 +387,8 @@ mod tests {
     use crate::bsdf::{Bsdf, Dielectric, Mask};
     use crate::description::{test_sphere_scene, EmitterDesc, Projection, SceneDescription};
     use crate::film::{with_threads, Film};
-    use crate::media::{Medium, MediumInterface, PhaseFunction};
+    use crate::media::phase::{BlendPhase, TabulatedPhase};
+    use crate::media::{Medium, MediumInterface, PhaseFunction, VolumeTexture};
     use crate::texture::Texture;
 
     /// Mitsuba's `null` BSDF, as the importer builds it.
@@ -439,20 +440,37 @@ mod tests {
     fn white_furnace_with_scattering_media() {
         let sigma = Rgb::new(0.5, 1.0, 2.0);
         let hg = PhaseFunction::HenyeyGreenstein { g: 0.7 };
+        // Back-scattering, with an interval of no mass.
+        let table = PhaseFunction::Tabulated(std::sync::Arc::new(
+            TabulatedPhase::new(vec![4.0, 1.0, 0.0, 0.0, 0.5]).unwrap(),
+        ));
         let cases = [
             (
                 "isotropic",
                 null(),
                 medium(sigma, Rgb::ONE, PhaseFunction::Isotropic),
             ),
-            ("hg 0.7", null(), medium(sigma, Rgb::ONE, hg)),
+            ("hg 0.7", null(), medium(sigma, Rgb::ONE, hg.clone())),
             (
                 "no light sampling",
                 null(),
                 Medium {
                     sample_emitters: false,
-                    ..medium(sigma, Rgb::ONE, hg)
+                    ..medium(sigma, Rgb::ONE, hg.clone())
                 },
+            ),
+            ("tabphase", null(), medium(sigma, Rgb::ONE, table.clone())),
+            (
+                "blendphase",
+                null(),
+                medium(
+                    sigma,
+                    Rgb::ONE,
+                    PhaseFunction::Blend(std::sync::Arc::new(BlendPhase {
+                        weight: VolumeTexture::Constant(Rgb::splat(0.4)),
+                        nested: [table, hg],
+                    })),
+                ),
             ),
             (
                 "glass boundary",

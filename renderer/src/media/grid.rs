@@ -399,6 +399,17 @@ impl VolumeTexture {
         }
     }
 
+    /// The value at world point `p` read as one number, as Mitsuba's `eval_1`: a constant's
+    /// mean over its channels, a grid's one channel or the luminance of its three.
+    #[inline]
+    pub fn eval_1(&self, p: Vec3) -> f32 {
+        match self {
+            VolumeTexture::Constant(c) => (c.x + c.y + c.z) / 3.0,
+            VolumeTexture::Grid(g) if g.file.channels == 1 => g.eval(p).x,
+            VolumeTexture::Grid(g) => crate::spectrum::luminance(g.eval(p)),
+        }
+    }
+
     /// The largest value anywhere, over every channel.
     pub fn max(&self) -> f32 {
         match self {

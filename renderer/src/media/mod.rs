@@ -108,11 +108,7 @@ impl Medium {
 
     /// Checks the values a scene file cannot be trusted with.
     pub fn validate(&self) -> Result<(), String> {
-        if let PhaseFunction::HenyeyGreenstein { g } = self.phase {
-            if !(g > -1.0 && g < 1.0) {
-                return Err(format!("the phase function's g = {g} is outside (-1, 1)"));
-            }
-        }
+        self.phase.validate()?;
         match &self.density {
             Density::Homogeneous { sigma_t, albedo } => {
                 let ok = |c: &Rgb| c.is_finite() && c.min_element() >= 0.0;

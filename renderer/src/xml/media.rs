@@ -1,10 +1,12 @@
-//! `<medium>` (`homogeneous`, `heterogeneous`) with its `<phase>` (`isotropic`, `hg`) and
+//! `<medium>` (`homogeneous`, `heterogeneous`) with its `<phase>` (`isotropic`, `hg`,
+//! `rayleigh`, `tabphase`, `blendphase`) and
 //! `<volume>`s (`gridvolume`, `constvolume`), in Mitsuba 3's parameter names and defaults, and
 //! the media a shape or the sensor refers to.
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
 use crate::media::grid::{read_vol, unit_cube_bounds, GridFilter, VolumeGrid};
+use crate::media::phase::{BlendPhase, TabulatedPhase};
 use crate::media::{Density, Heterogeneous, Medium, MediumInterface, PhaseFunction, VolumeTexture};
 use crate::spectrum::{Rgb, SpectrumKind};
 use std::sync::Arc;
@@ -19,7 +21,7 @@ pub(super) type Bounds = (glam::Vec3, glam::Vec3);
 const VOLUME_PLUGINS: [&str; 2] = ["gridvolume", "constvolume"];
 
 /// The phase-function plugins this importer knows.
-const PHASE_PLUGINS: [&str; 3] = ["isotropic", "hg", "rayleigh"];
+const PHASE_PLUGINS: [&str; 5] = ["isotropic", "hg", "rayleigh", "tabphase", "blendphase"];
 
 /// Builds the medium declared by a `<medium>` element:
 /// * `sigma_t` (float or spectrum, default 1; `heterogeneous`: also a `<volume>`): extinction
@@ -68,17 +70,10 @@ pub(super) fn build_medium<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<M
     p.bool_or("has_spectral_extinction", true)?;
     let mut phase = None;
     for obj in p.objects(&["phase", "ref"]) {
-        let target = b.deref(obj)?;
-        if target.tag != "phase" {
-            return Err(obj.error(format!(
-                "a medium holds a <phase>, not {}",
-                target.describe()
-            )));
-        }
         if phase.is_some() {
             return Err(obj.error("a medium can have only one phase function"));
         }
-        phase = Some(build_phase(b, target)?);
+        phase = Some(phase_value(b, obj, "a medium")?);
     }
     p.finish(b)?;
     if !(scale.is_finite() && scale >= 0.0) {
@@ -200,8 +195,35 @@ pub(super) fn build_volume<'a>(
     Ok(volume)
 }
 
-/// Builds a `<phase>`: `isotropic`, `rayleigh`, or `hg` with `g` (default 0.8) in (−1, 1).
-fn build_phase<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<PhaseFunction, SceneError> {
+/// The phase function declared by `obj` (a nested `<phase>` or a `<ref>` to one) inside
+/// `owner` (for the message when it is something else).
+fn phase_value<'a>(
+    b: &mut Builder<'a>,
+    obj: &'a Element,
+    owner: &str,
+) -> Result<PhaseFunction, SceneError> {
+    let target = b.deref(obj)?;
+    if target.tag != "phase" {
+        return Err(obj.error(format!(
+            "{owner} holds a <phase>, not {}",
+            target.describe()
+        )));
+    }
+    build_phase(b, target)
+}
+
+/// Builds a `<phase>`:
+/// * `isotropic`, `rayleigh`;
+/// * `hg`: `g` (default 0.8) in (−1, 1);
+/// * `tabphase`: `values`, a string of at least two comma- or space-separated non-negative
+///   numbers, not all zero, at cosines of the scattering angle regularly spaced from −1 to 1
+///   (1: forward scattering), normalised;
+/// * `blendphase`: `weight` (float or `<volume>`, default 0.5, clamped to [0, 1]) and exactly
+///   two nested phase functions, in file order: weight 0 is the first, 1 the second.
+pub(super) fn build_phase<'a>(
+    b: &mut Builder<'a>,
+    el: &'a Element,
+) -> Result<PhaseFunction, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
     let mut p = Props::parse(b, el)?;
@@ -215,6 +237,46 @@ fn build_phase<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<PhaseFunction
                 return Err(g_el.error(format!("\"g\" must lie in (-1, 1), got {g}")));
             }
             PhaseFunction::HenyeyGreenstein { g: g as f32 }
+        }
+        "tabphase" => {
+            let values_el = p.element_of("values");
+            let Some(text) = p.string("values")? else {
+                return Err(el.error("missing parameter \"values\""));
+            };
+            let values = text
+                .split([',', ' ', '\t', '\n', '\r'])
+                .filter(|t| !t.is_empty())
+                .map(|t| {
+                    t.parse::<f32>().map_err(|_| {
+                        values_el.error(format!("\"values\": \"{t}\" is not a number"))
+                    })
+                })
+                .collect::<Result<Vec<f32>, SceneError>>()?;
+            let table = TabulatedPhase::new(values)
+                .map_err(|m| values_el.error(format!("\"values\": {m}")))?;
+            PhaseFunction::Tabulated(std::sync::Arc::new(table))
+        }
+        "blendphase" => {
+            let weight_el = p.element_of("weight");
+            let weight = match p.object("weight") {
+                Some(o) => b.volume_value(o, SpectrumKind::Unbounded)?.0,
+                None => VolumeTexture::Constant(Rgb::splat(p.float_or("weight", 0.5)? as f32)),
+            };
+            if weight.min().is_nan() || weight.max().is_nan() {
+                return Err(weight_el.error("\"weight\" is not a number"));
+            }
+            let nested = p
+                .objects(&["phase", "ref"])
+                .into_iter()
+                .map(|o| phase_value(b, o, "a blendphase"))
+                .collect::<Result<Vec<_>, _>>()?;
+            let nested: [PhaseFunction; 2] = nested.try_into().map_err(|v: Vec<_>| {
+                el.error(format!(
+                    "a blendphase needs exactly two nested phase functions, got {}",
+                    v.len()
+                ))
+            })?;
+            PhaseFunction::Blend(std::sync::Arc::new(BlendPhase { weight, nested }))
         }
         _ => {
             return Err(el.error(format!(

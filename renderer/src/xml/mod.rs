@@ -949,6 +949,10 @@ impl<'a> Builder<'a> {
                 "volume" => {
                     self.volume_value(el, crate::spectrum::SpectrumKind::Unbounded)?;
                 }
+                // Declared for the media that refer to it (built each time; checked now).
+                "phase" => {
+                    media::build_phase(self, el)?;
+                }
                 "sensor" => {
                     let camera = sensors::build_sensor(self, el)?;
                     if self.camera.is_some() {
@@ -969,7 +973,7 @@ impl<'a> Builder<'a> {
                     match target.tag.as_str() {
                         "shape" => shapes::build_shape(self, target)?,
                         "emitter" => emitters::build_emitter(self, target)?,
-                        "bsdf" | "texture" | "spectrum" => {}
+                        "bsdf" | "texture" | "spectrum" | "phase" => {}
                         "medium" => {
                             self.medium_index(target)?;
                         }

@@ -3223,13 +3223,13 @@ fn media_are_read_with_their_interfaces() {
     // Mitsuba's defaults: sigma_t 1, albedo 0.75, isotropic.
     let nested = &scene.media[1];
     assert_eq!(
-        (&nested.density, nested.phase),
+        (&nested.density, &nested.phase),
         (
             &Density::Homogeneous {
                 sigma_t: Vec3::ONE,
                 albedo: Vec3::splat(0.75)
             },
-            PhaseFunction::Isotropic
+            &PhaseFunction::Isotropic
         )
     );
     assert!(!nested.sample_emitters);
@@ -3298,6 +3298,106 @@ fn error_media_cases_name_file_and_line() {
             r#"<bsdf type="diffuse" id="d"/><emitter type="point"><ref id="d"/></emitter>"#,
             "<emitter",
             "inside an emitter",
+        ),
+    ];
+    for (i, (body, marker, needle)) in cases.iter().enumerate() {
+        let body = format!("{SENSOR}\n{body}");
+        assert_body_error_at(&dir, &format!("case{i}.xml"), &body, marker, needle);
+    }
+}
+
+/// `tabphase` (values separated by commas and spaces) and `blendphase` (a float or volume
+/// weight, two nested phase functions — declared, referred to or nested in a blend — in file
+/// order), and their errors with file and line.
+#[test]
+fn tabulated_and_blended_phases_are_read() {
+    use crate::media::PhaseFunction;
+    let dir = temp_dir("phases");
+    let body = format!(
+        r#"{SENSOR}
+<phase type="tabphase" id="table"><string name="values" value="1, 3 2,0"/></phase>
+<medium type="homogeneous" id="a"><ref id="table"/></medium>
+<medium type="homogeneous" id="b">
+  <phase type="blendphase">
+    <float name="weight" value="0.25"/>
+    <phase type="hg" name="phase_0"><float name="g" value="0.5"/></phase>
+    <ref id="table"/>
+  </phase>
+</medium>
+<medium type="homogeneous" id="c">
+  <phase type="blendphase">
+    <volume type="constvolume" name="weight"><rgb name="value" value="0.2, 0.4, 0.9"/></volume>
+    <phase type="blendphase"><phase type="isotropic"/><phase type="rayleigh"/></phase>
+    <phase type="isotropic"/>
+  </phase>
+</medium>
+<shape type="sphere"><bsdf type="null"/><ref name="interior" id="a"/></shape>
+<shape type="sphere"><bsdf type="null"/><ref name="interior" id="b"/></shape>
+<shape type="sphere"><bsdf type="null"/><ref name="interior" id="c"/></shape>"#
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let (p, d_in) = (Vec3::ZERO, Vec3::Z);
+    let PhaseFunction::Tabulated(_) = &scene.media[0].phase else {
+        panic!("{:?}", scene.media[0].phase)
+    };
+    // Values 1, 3, 2, 0 at cos θ = −1, −1/3, 1/3, 1: the trapezoids sum to 4/3 + 5/3 + 2/3 =
+    // 11/3, so forward scattering (cos θ = 1) has density 0 and cos θ = 1/3 has 6/(11·2π).
+    let table = &scene.media[0].phase;
+    let at = |phase: &PhaseFunction, c: f32| {
+        phase.eval(p, d_in, Vec3::new((1.0 - c * c).sqrt(), 0.0, c))
+    };
+    assert_eq!(at(table, 1.0), 0.0);
+    let two_pi = 2.0 * std::f32::consts::PI;
+    assert!((at(table, 1.0 / 3.0) - 6.0 / (11.0 * two_pi)).abs() < 1e-6);
+    let hg = PhaseFunction::HenyeyGreenstein { g: 0.5 };
+    for c in [-0.9, 0.0, 0.7] {
+        let mixed = 0.75 * at(&hg, c) + 0.25 * at(table, c);
+        assert!((at(&scene.media[1].phase, c) - mixed).abs() < 1e-6);
+        // A constvolume weight is the mean of its channels (0.5): an even mix of the inner
+        // blend (itself an even mix) and isotropic.
+        let inner = 0.5 / (4.0 * std::f32::consts::PI) + 0.5 * at(&PhaseFunction::Rayleigh, c);
+        let expected = 0.5 * inner + 0.5 / (4.0 * std::f32::consts::PI);
+        assert!((at(&scene.media[2].phase, c) - expected).abs() < 1e-6);
+    }
+    crate::scene::Scene::build(&scene).unwrap();
+
+    let cases: [(&str, &str, &str); 7] = [
+        (
+            r#"<medium type="homogeneous" id="m"><phase type="tabphase"/></medium>"#,
+            "tabphase",
+            "missing parameter \"values\"",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><phase type="tabphase"><string name="values" value="1, x"/></phase></medium>"#,
+            "name=\"values\"",
+            "\"x\" is not a number",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><phase type="tabphase"><string name="values" value="1, -2"/></phase></medium>"#,
+            "name=\"values\"",
+            "value 2 is -2",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><phase type="tabphase"><string name="values" value="0 0 0"/></phase></medium>"#,
+            "name=\"values\"",
+            "every value is zero",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><phase type="tabphase"><string name="values" value="1"/></phase></medium>"#,
+            "name=\"values\"",
+            "at least two values",
+        ),
+        (
+            r#"<medium type="homogeneous" id="m"><phase type="blendphase"><phase type="isotropic"/></phase></medium>"#,
+            "blendphase",
+            "exactly two nested phase functions, got 1",
+        ),
+        (
+            r#"<bsdf type="diffuse" id="d"/><medium type="homogeneous" id="m"><phase type="blendphase"><phase type="isotropic"/>
+<ref id="d"/></phase></medium>"#,
+            "<ref id=\"d\"/>",
+            "a blendphase holds a <phase>",
         ),
     ];
     for (i, (body, marker, needle)) in cases.iter().enumerate() {
