@@ -66,6 +66,11 @@ def rgb(r, lo=0.1, hi=0.9):
     return ", ".join(f"{r.uniform(lo, hi):.3f}" for _ in range(3))
 
 
+# Plugins added to `material`'s choice by options (the default list stays, so that a seed's
+# scenes stay the same).
+EXTRA_MATERIALS = []
+
+
 def material(r, allow_delta=True, allow_mask=True):
     """A random BSDF element (one of every supported plugin).
 
@@ -80,6 +85,7 @@ def material(r, allow_delta=True, allow_mask=True):
         kinds.append("mask")
     if allow_delta:
         kinds += ["conductor", "plastic", "dielectric", "thindielectric"]
+    kinds += EXTRA_MATERIALS
     k = r.choice(kinds)
     metal = r.choice(["Au", "Cu", "Al", "Ag", "Cr"])
     if k == "diffuse":
@@ -121,6 +127,14 @@ def material(r, allow_delta=True, allow_mask=True):
             if r.random() < 0.6:
                 params.append(f'<float name="{name}" value="{r.uniform(lo, hi):.3f}"/>')
         return f'<bsdf type="principled">{"".join(params)}</bsdf>'
+    if k == "principledthin":
+        params = [f'<rgb name="base_color" value="{rgb(r)}"/>']
+        for name, lo, hi in [("roughness", 0.15, 0.9), ("spec_trans", 0, 1), ("eta", 1.1, 1.9),
+                             ("spec_tint", 0, 1), ("sheen", 0, 1), ("sheen_tint", 0, 1),
+                             ("flatness", 0, 1), ("diff_trans", 0, 2), ("anisotropic", 0, 0.8)]:
+            if r.random() < 0.6:
+                params.append(f'<float name="{name}" value="{r.uniform(lo, hi):.3f}"/>')
+        return f'<bsdf type="principledthin">{"".join(params)}</bsdf>'
     if k == "blend":
         # Two non-delta, non-transmitting models. Mitsuba 3.9.1's blendbsdf loses energy with
         # delta models, and gains some when one model transmits: where the other model's sample
@@ -128,9 +142,9 @@ def material(r, allow_delta=True, allow_mask=True):
         # roughconductor + roughdielectric blend seen from inside has albedo 1.95 in Mitsuba,
         # the blend of its models' albedos is 1.26; docs/validation.md).
         a, b = material(r, False, False), material(r, False, False)
-        if any(t in a + b for t in ("blendbsdf", "roughdielectric")):
+        if any(t in a + b for t in ("blendbsdf", "roughdielectric", "principledthin")):
             a = f'<bsdf type="diffuse"><rgb name="reflectance" value="{rgb(r)}"/></bsdf>'
-        if "roughdielectric" in b:
+        if "roughdielectric" in b or "principledthin" in b:
             b = f'<bsdf type="roughplastic"><string name="distribution" value="ggx"/><float name="alpha" value="{r.uniform(0.05, 0.4):.3f}"/></bsdf>'
         return f'<bsdf type="blendbsdf"><float name="weight" value="{r.uniform(0.2, 0.8):.3f}"/>{a}{b}</bsdf>'
     # mask
@@ -642,10 +656,15 @@ def main():
                          "sometimes everything in a haze")
     ap.add_argument("--phases", action="store_true",
                     help="with --media: random phase functions, tabulated and blended ones included")
+    ap.add_argument("--thin", action="store_true",
+                    help="the thin principled BSDF (principledthin) among the random materials, "
+                         "three times as likely as any other")
     ap.add_argument("--legacy", action="store_true",
                     help="write each scene as a Mitsuba 0.6 file (version 0.6.0, camelCase parameter "
                          "names), which both renderers must upgrade alike")
     args = ap.parse_args()
+    if args.thin:
+        EXTRA_MATERIALS.extend(["principledthin"] * 3)
     if args.media and (args.direct or args.legacy):
         sys.exit("--media renders with volpath: not with --direct or --legacy")
     out = Path(args.out) / str(args.seed)

@@ -94,6 +94,22 @@ CASES = [
       "spec_tint": 0.5, "clearcoat": 0.8, "clearcoat_gloss": 0.5, "spec_trans": 0.5,
       "roughness": 0.4},
      "principled(eta 1/1.3, metallic 0.4, spec_tint 0.5, clearcoat 0.8/0.5, spec_trans 0.5)", True),
+    ("principledthin default", {"type": "principledthin"},
+     "principled_thin(PrincipledThinParams::default())", True),
+    ("principledthin spec_trans diff_trans eta 1.33",
+     {"type": "principledthin", "base_color": rgb([0.8, 0.6, 0.3]), "spec_trans": 0.6, "roughness": 0.3,
+      "eta": 1.33, "diff_trans": 0.5},
+     "principled_thin(spec_trans 0.6, roughness 0.3, eta 1.33, diff_trans 0.5)", True),
+    ("principledthin everything, custom rates",
+     {"type": "principledthin", "base_color": rgb([0.3, 0.7, 0.9]), "anisotropic": 0.5, "spec_trans": 0.4,
+      "spec_tint": 0.3, "sheen": 0.7, "sheen_tint": 0.4, "flatness": 0.5, "diff_trans": 1.3, "eta": 1.6,
+      "roughness": 0.45, "diffuse_reflectance_sampling_rate": 0.7,
+      "specular_reflectance_sampling_rate": 1.5, "specular_transmittance_sampling_rate": 0.5,
+      "diffuse_transmittance_sampling_rate": 2.0},
+     "principled_thin(all parameters, rates 0.7/1.5/0.5/2)", True),
+    ("principledthin spec_trans 1 roughness 0.2",
+     {"type": "principledthin", "base_color": rgb([0.9, 0.9, 0.6]), "spec_trans": 1.0, "roughness": 0.2},
+     "principled_thin(spec_trans 1, roughness 0.2)", True),
 ]
 
 # Surface uv of each case's evaluations (cases not listed: (0, 0)).

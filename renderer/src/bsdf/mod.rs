@@ -30,6 +30,7 @@ mod normalmap;
 mod perturbed;
 mod plastic;
 mod principled;
+mod principledthin;
 mod roughconductor;
 mod roughdielectric;
 mod roughplastic;
@@ -50,6 +51,7 @@ pub use mask::Mask;
 pub use normalmap::NormalMap;
 pub use perturbed::TiltedModel;
 pub use principled::{Principled, PrincipledIor, PrincipledParams};
+pub use principledthin::{PrincipledThin, PrincipledThinParams};
 
 /// Roughness below which a rough conductor/dielectric counts as [`Lobe::Glossy`] (the larger of
 /// `alpha_u`, `alpha_v` is compared): SPPM continues eye paths through such surfaces instead of
@@ -302,6 +304,9 @@ pub enum Bsdf {
     RoughPlastic(RoughPlastic),
     /// `principled`: Disney-style layered model (diffuse, metal, rough glass, sheen, clearcoat).
     Principled(Principled),
+    /// `principledthin`: the thin-sheet principled model (diffuse, sheen, glossy reflection and
+    /// transmission without refraction, diffuse transmission).
+    PrincipledThin(PrincipledThin),
     /// `normalmap`: a nested model in a shading frame perturbed by a texture.
     NormalMap(NormalMap),
     /// `bumpmap`: a nested model in a shading frame tilted by a height field's gradient.
@@ -341,6 +346,7 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.sample(wo, tp, u_lobe, u),
             Bsdf::RoughPlastic(b) => b.sample(wo, tp, u_lobe, u),
             Bsdf::Principled(b) => b.sample(wo, tp, u_lobe, u, mode),
+            Bsdf::PrincipledThin(b) => b.sample(wo, tp, u_lobe, u),
             Bsdf::NormalMap(b) => b.sample(wo, sp, u_lobe, u, mode),
             Bsdf::BumpMap(b) => b.sample(wo, sp, u_lobe, u, mode),
             Bsdf::Blend(b) => b.sample(wo, sp, u_lobe, u, mode),
@@ -374,6 +380,8 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.eval(wo, wi, tp),
             Bsdf::RoughPlastic(b) => b.eval(wo, wi, tp),
             Bsdf::Principled(b) => b.eval(wo, wi, tp, mode),
+            // Nothing refracts: both modes evaluate alike, as in Mitsuba.
+            Bsdf::PrincipledThin(b) => b.eval(wo, wi, tp),
             Bsdf::NormalMap(b) => b.eval(wo, wi, sp, mode),
             Bsdf::BumpMap(b) => b.eval(wo, wi, sp, mode),
             Bsdf::Blend(b) => b.eval(wo, wi, sp, mode),
@@ -405,6 +413,7 @@ impl Bsdf {
             Bsdf::Plastic(b) => b.pdf(wo, wi),
             Bsdf::RoughPlastic(b) => b.pdf(wo, wi),
             Bsdf::Principled(b) => b.pdf(wo, wi, tp),
+            Bsdf::PrincipledThin(b) => b.pdf(wo, wi, tp),
             Bsdf::NormalMap(b) => b.pdf(wo, wi, sp),
             Bsdf::BumpMap(b) => b.pdf(wo, wi, sp),
             Bsdf::Blend(b) => b.pdf(wo, wi, sp),
@@ -430,6 +439,7 @@ impl Bsdf {
             Bsdf::RoughConductor(b) => rough_lobe(&b.roughness),
             Bsdf::RoughDielectric(b) => rough_lobe(&b.roughness),
             Bsdf::Principled(b) => b.lobe(),
+            Bsdf::PrincipledThin(b) => b.lobe(),
             Bsdf::NormalMap(b) => b.nested.lobe(),
             Bsdf::BumpMap(b) => b.nested.lobe(),
             // The most diffuse of the two: a visible point is stored where either model has a
@@ -505,6 +515,7 @@ impl Bsdf {
             }
             Bsdf::RoughPlastic(b) => b.eval_split(wo, wi, tp),
             Bsdf::Principled(b) => b.eval_split(wo, wi, tp),
+            Bsdf::PrincipledThin(b) => b.eval_split(wo, wi, tp),
             Bsdf::NormalMap(b) => b.eval_split(wo, wi, sp),
             Bsdf::BumpMap(b) => b.eval_split(wo, wi, sp),
             Bsdf::Blend(b) => b.eval_split(wo, wi, sp),
@@ -532,6 +543,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) if is_sharp(&b.roughness, &b.alpha_texture, tp) => Some(1.0),
             Bsdf::RoughPlastic(b) => b.sharp_share(wo),
             Bsdf::Principled(b) => b.sharp_share(wo, tp),
+            Bsdf::PrincipledThin(b) => b.sharp_share(wo, tp),
             Bsdf::NormalMap(b) => b.sharp_share(wo, sp),
             Bsdf::BumpMap(b) => b.sharp_share(wo, sp),
             Bsdf::Blend(b) => b.sharp_share(wo, sp),
@@ -652,6 +664,7 @@ impl Bsdf {
             Bsdf::ThinDielectric(b) => b.specular_transmittance.eval(tp),
             Bsdf::RoughDielectric(b) => b.specular_transmittance.eval(tp),
             Bsdf::Principled(b) => b.albedo(tp),
+            Bsdf::PrincipledThin(b) => b.albedo(tp),
             Bsdf::NormalMap(b) => b.nested.albedo(sp),
             Bsdf::BumpMap(b) => b.nested.albedo(sp),
             Bsdf::Mask(b) => b.nested.albedo(sp),

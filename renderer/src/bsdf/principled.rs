@@ -182,21 +182,21 @@ struct Strategies {
 }
 
 /// 5th power Schlick weight (1 − cos)⁵ with the cosine clamped to [0, 1].
-fn schlick_weight(cos: f32) -> f32 {
+pub(super) fn schlick_weight(cos: f32) -> f32 {
     let m = (1.0 - cos).clamp(0.0, 1.0);
     let m2 = m * m;
     m2 * m2 * m
 }
 
 /// a + (b − a)·t, in the same operation order as Dr.Jit's `lerp`.
-fn lerp(a: f32, b: f32, t: f32) -> f32 {
+pub(super) fn lerp(a: f32, b: f32, t: f32) -> f32 {
     a - a * t + b * t
 }
 
 /// Schlick's Fresnel with reflectance `r0` at normal incidence for the cosine `cos_i` against
 /// the microfacet normal, through an interface of relative IOR `eta`: from the denser side the
 /// transmitted cosine drives the weight (0 beyond the critical angle: total reflection).
-fn schlick(r0: Rgb, cos_i: f32, eta: f32) -> Rgb {
+pub(super) fn schlick(r0: Rgb, cos_i: f32, eta: f32) -> Rgb {
     let (eta_it, eta_ti) = if cos_i >= 0.0 {
         (eta, 1.0 / eta)
     } else {
@@ -212,7 +212,7 @@ fn schlick(r0: Rgb, cos_i: f32, eta: f32) -> Rgb {
 }
 
 /// Normal-incidence reflectance ((η − 1)/(η + 1))².
-fn r0_of_eta(eta: f32) -> f32 {
+pub(super) fn r0_of_eta(eta: f32) -> f32 {
     let r = (eta - 1.0) / (eta + 1.0);
     r * r
 }
@@ -280,17 +280,17 @@ pub fn eta_from_specular(specular: f32) -> f32 {
 }
 
 /// Reads a lobe parameter at `tp`, 0 when the lobe is off.
-fn scalar_at(t: &Option<Texture>, tp: TexPoint) -> f32 {
+pub(super) fn scalar_at(t: &Option<Texture>, tp: TexPoint) -> f32 {
     t.as_ref().map_or(0.0, |t| t.eval_1(tp))
 }
 
 /// A lobe parameter's mean (for the SPPM class), 0 when the lobe is off.
-fn scalar_mean(t: &Option<Texture>) -> f32 {
+pub(super) fn scalar_mean(t: &Option<Texture>) -> f32 {
     t.as_ref().map_or(0.0, Texture::mean_1)
 }
 
 /// Main-lobe roughness (α_u, α_v) from `roughness` and `anisotropic`, as Disney's notes map them.
-fn alphas(roughness: f32, anisotropic: f32, has_anisotropic: bool) -> (f32, f32) {
+pub(super) fn alphas(roughness: f32, anisotropic: f32, has_anisotropic: bool) -> (f32, f32) {
     let r2 = roughness * roughness;
     if !has_anisotropic {
         let a = r2.max(0.001);
@@ -723,7 +723,7 @@ impl Principled {
 }
 
 /// The base colour normalised by its luminance (its hue), white for black.
-fn tint_colour(base: Rgb) -> Rgb {
+pub(super) fn tint_colour(base: Rgb) -> Rgb {
     let lum = luminance(base);
     if lum > 0.0 {
         base / lum

@@ -4,14 +4,14 @@ use super::props::Props;
 use super::{ior, Builder, Element, SceneError};
 use crate::bsdf::{
     Blend, Bsdf, BumpMap, Conductor, ConductorIor, Dielectric, Diffuse, Mask, MicrofacetKind,
-    NormalMap, Plastic, Principled, PrincipledIor, PrincipledParams, RoughConductor,
-    RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
+    NormalMap, Plastic, Principled, PrincipledIor, PrincipledParams, PrincipledThin,
+    PrincipledThinParams, RoughConductor, RoughDielectric, RoughPlastic, Roughness, ThinDielectric,
 };
 use crate::spectrum::{Rgb, SpectrumKind};
 use crate::texture::Texture;
 
 /// The BSDF plugins this importer knows.
-const BSDF_PLUGINS: [&str; 15] = [
+const BSDF_PLUGINS: [&str; 16] = [
     "diffuse",
     "conductor",
     "roughconductor",
@@ -21,6 +21,7 @@ const BSDF_PLUGINS: [&str; 15] = [
     "plastic",
     "roughplastic",
     "principled",
+    "principledthin",
     "twosided",
     "normalmap",
     "bumpmap",
@@ -131,6 +132,7 @@ pub(super) fn build_bsdf<'a>(b: &mut Builder<'a>, el: &'a Element) -> Result<Bsd
             p.bool_or("nonlinear", false)?,
         )),
         "principled" => Bsdf::Principled(principled(b, &mut p)?),
+        "principledthin" => Bsdf::PrincipledThin(principled_thin(b, &mut p)?),
         "twosided" => {
             let nested = p.objects(&["bsdf", "ref"]);
             let allow_transmission = p.bool_or("allow_transmission", false)?;
@@ -266,6 +268,8 @@ fn has_transmission(bsdf: &Bsdf) -> bool {
         | Bsdf::Mask(_) => true,
         // Mitsuba flags transmission whenever `spec_trans` is given.
         Bsdf::Principled(p) => p.transmits(),
+        // Mitsuba lists its diffuse transmission lobe whatever `diff_trans` is.
+        Bsdf::PrincipledThin(_) => true,
         Bsdf::TwoSided { front, back } => has_transmission(front) || has_transmission(back),
         Bsdf::NormalMap(b) => has_transmission(&b.nested),
         Bsdf::BumpMap(b) => has_transmission(&b.nested),
@@ -459,18 +463,9 @@ fn principled<'a>(b: &mut Builder<'a>, p: &mut Props<'a>) -> Result<Principled, 
             PrincipledIor::Specular(specular as f32)
         }
     };
-    let rate = |p: &mut Props<'a>, name: &str| -> Result<f32, SceneError> {
-        let el = p.element_of(name);
-        let v = p.float_or(name, 1.0)?;
-        if v >= 0.0 && v.is_finite() {
-            Ok(v as f32)
-        } else {
-            Err(el.error(format!("\"{name}\" must be non-negative, got {v}")))
-        }
-    };
-    let diffuse_reflectance_sampling_rate = rate(p, "diffuse_reflectance_sampling_rate")?;
-    let main_specular_sampling_rate = rate(p, "main_specular_sampling_rate")?;
-    let clearcoat_sampling_rate = rate(p, "clearcoat_sampling_rate")?;
+    let diffuse_reflectance_sampling_rate = sampling_rate(p, "diffuse_reflectance_sampling_rate")?;
+    let main_specular_sampling_rate = sampling_rate(p, "main_specular_sampling_rate")?;
+    let clearcoat_sampling_rate = sampling_rate(p, "clearcoat_sampling_rate")?;
     Ok(Principled::new(PrincipledParams {
         base_color,
         roughness,
@@ -501,15 +496,25 @@ fn principled_scalar<'a>(
     p: &mut Props<'a>,
     name: &str,
 ) -> Result<Option<Texture>, SceneError> {
+    principled_scalar_up_to(b, p, name, 1.0)
+}
+
+/// [`principled_scalar`] for a parameter whose values lie in [0, `max`].
+fn principled_scalar_up_to<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+    name: &str,
+    max: f32,
+) -> Result<Option<Texture>, SceneError> {
     let el = p.element_of(name);
     let Some(t) = p.texture(b, name, SpectrumKind::Unbounded)? else {
         return Ok(None);
     };
     check_read(el, name, &t, Read::OneChannel)?;
     let (lo, hi) = t.scalar_range();
-    if !(lo >= 0.0 && hi <= 1.0) {
+    if !(lo >= 0.0 && hi <= max) {
         return Err(el.error(format!(
-            "\"{name}\" must lie in [0, 1], got values in [{lo}, {hi}]"
+            "\"{name}\" must lie in [0, {max}], got values in [{lo}, {hi}]"
         )));
     }
     Ok(Some(t))
@@ -522,11 +527,81 @@ fn principled_lobe<'a>(
     p: &mut Props<'a>,
     name: &str,
 ) -> Result<Option<Texture>, SceneError> {
+    principled_lobe_up_to(b, p, name, 1.0)
+}
+
+/// [`principled_lobe`] for a parameter whose values lie in [0, `max`].
+fn principled_lobe_up_to<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+    name: &str,
+    max: f32,
+) -> Result<Option<Texture>, SceneError> {
     let is_float = p.has(name) && p.element_of(name).tag == "float";
-    Ok(match principled_scalar(b, p, name)? {
+    Ok(match principled_scalar_up_to(b, p, name, max)? {
         Some(Texture::Constant(c)) if is_float && c == Rgb::ZERO => None,
         t => t,
     })
+}
+
+/// A principled model's sampling rate `name` (default 1, non-negative).
+fn sampling_rate(p: &mut Props<'_>, name: &str) -> Result<f32, SceneError> {
+    let el = p.element_of(name);
+    let v = p.float_or(name, 1.0)?;
+    if v >= 0.0 && v.is_finite() {
+        Ok(v as f32)
+    } else {
+        Err(el.error(format!("\"{name}\" must be non-negative, got {v}")))
+    }
+}
+
+/// Reads a `principledthin` (parameters and their ranges: `bsdf/principledthin.rs`).
+fn principled_thin<'a>(
+    b: &mut Builder<'a>,
+    p: &mut Props<'a>,
+) -> Result<PrincipledThin, SceneError> {
+    let base_el = p.element_of("base_color");
+    let base_color = p.texture_or(b, "base_color", SpectrumKind::Reflectance, 0.5)?;
+    if !base_color.is_finite_non_negative() {
+        return Err(base_el.error("\"base_color\" has negative or non-finite values"));
+    }
+    let roughness = principled_scalar(b, p, "roughness")?.unwrap_or(grey(0.5));
+    let eta_el = p.element_of("eta");
+    let eta = match p.texture(b, "eta", SpectrumKind::Unbounded)? {
+        Some(t) => {
+            check_read(eta_el, "eta", &t, Read::OneChannel)?;
+            let (lo, hi) = t.scalar_range();
+            if !(lo > 0.0 && hi.is_finite()) {
+                return Err(eta_el.error(format!(
+                    "\"eta\" must be positive and finite, got values in [{lo}, {hi}]"
+                )));
+            }
+            t
+        }
+        None => grey(1.5),
+    };
+    Ok(PrincipledThin::new(PrincipledThinParams {
+        base_color,
+        roughness,
+        anisotropic: principled_lobe(b, p, "anisotropic")?,
+        spec_trans: principled_lobe(b, p, "spec_trans")?,
+        eta,
+        spec_tint: principled_lobe(b, p, "spec_tint")?,
+        sheen: principled_lobe(b, p, "sheen")?,
+        sheen_tint: principled_lobe(b, p, "sheen_tint")?,
+        flatness: principled_lobe(b, p, "flatness")?,
+        diff_trans: principled_lobe_up_to(b, p, "diff_trans", 2.0)?,
+        diffuse_reflectance_sampling_rate: sampling_rate(p, "diffuse_reflectance_sampling_rate")?,
+        specular_reflectance_sampling_rate: sampling_rate(p, "specular_reflectance_sampling_rate")?,
+        specular_transmittance_sampling_rate: sampling_rate(
+            p,
+            "specular_transmittance_sampling_rate",
+        )?,
+        diffuse_transmittance_sampling_rate: sampling_rate(
+            p,
+            "diffuse_transmittance_sampling_rate",
+        )?,
+    }))
 }
 
 /// How a BSDF reads a texture parameter (Mitsuba's `eval_1`, `eval_3` or `mean`), which decides

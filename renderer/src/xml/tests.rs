@@ -2245,6 +2245,121 @@ fn principled_bad_values_are_errors_at_their_line() {
     }
 }
 
+/// `principledthin`: Mitsuba's defaults (η 1.5, no specular lobe without `spec_trans`),
+/// every parameter read, `diff_trans` up to 2, `eta` as a texture, a lobe switched off by the
+/// float 0; `twosided` refuses it without `allow_transmission` (Mitsuba lists its diffuse
+/// transmission always); and its bad values with file and line.
+#[test]
+fn principledthin_parameters_follow_mitsuba() {
+    use crate::bsdf::PrincipledThin;
+    let dir = temp_dir("principledthin");
+    let body = format!(
+        "{SENSOR}
+<bsdf type=\"principledthin\"/>
+<bsdf type=\"principledthin\">
+  <rgb name=\"base_color\" value=\"0.9, 0.6, 0.3\"/>
+  <float name=\"roughness\" value=\"0.2\"/>
+  <float name=\"anisotropic\" value=\"0.5\"/>
+  <float name=\"spec_trans\" value=\"0.4\"/>
+  <texture type=\"checkerboard\" name=\"eta\"><float name=\"color0\" value=\"1.2\"/><float name=\"color1\" value=\"1.6\"/></texture>
+  <float name=\"spec_tint\" value=\"0.4\"/>
+  <float name=\"sheen\" value=\"0.3\"/>
+  <float name=\"sheen_tint\" value=\"0.2\"/>
+  <float name=\"flatness\" value=\"0.1\"/>
+  <float name=\"diff_trans\" value=\"1.5\"/>
+  <float name=\"diffuse_reflectance_sampling_rate\" value=\"0.5\"/>
+  <float name=\"specular_reflectance_sampling_rate\" value=\"2\"/>
+  <float name=\"specular_transmittance_sampling_rate\" value=\"0.25\"/>
+  <float name=\"diffuse_transmittance_sampling_rate\" value=\"0\"/>
+</bsdf>
+<bsdf type=\"principledthin\"><float name=\"diff_trans\" value=\"0\"/></bsdf>
+<bsdf type=\"twosided\"><boolean name=\"allow_transmission\" value=\"true\"/><bsdf type=\"principledthin\"/></bsdf>"
+    );
+    let scene = load(&write_scene(&dir, "scene.xml", &body)).unwrap();
+    let get = |i: usize| -> &PrincipledThin {
+        let Bsdf::PrincipledThin(p) = &scene.bsdfs[i] else {
+            panic!("{:?}", scene.bsdfs[i])
+        };
+        p
+    };
+    let d = get(0).params();
+    assert_eq!(d.base_color.mean(), Vec3::splat(0.5));
+    assert_eq!(d.roughness.mean_1(), 0.5);
+    assert_eq!(d.eta.mean_1(), 1.5);
+    for lobe in [
+        &d.anisotropic,
+        &d.spec_trans,
+        &d.spec_tint,
+        &d.sheen,
+        &d.sheen_tint,
+        &d.flatness,
+        &d.diff_trans,
+    ] {
+        assert!(lobe.is_none());
+    }
+    assert!(!get(0).transmits());
+    let f = get(1).params();
+    let value = |t: &Option<Texture>| t.as_ref().map(|t| t.mean_1());
+    assert_eq!(f.base_color.mean(), Vec3::new(0.9, 0.6, 0.3));
+    assert_eq!(f.roughness.mean_1(), 0.2);
+    assert_eq!(value(&f.anisotropic), Some(0.5));
+    assert_eq!(value(&f.spec_trans), Some(0.4));
+    assert!((f.eta.mean_1() - 1.4).abs() < 1e-6);
+    assert_eq!(value(&f.spec_tint), Some(0.4));
+    assert_eq!(value(&f.sheen), Some(0.3));
+    assert_eq!(value(&f.sheen_tint), Some(0.2));
+    assert_eq!(value(&f.flatness), Some(0.1));
+    assert_eq!(value(&f.diff_trans), Some(1.5));
+    assert_eq!(
+        (
+            f.diffuse_reflectance_sampling_rate,
+            f.specular_reflectance_sampling_rate,
+            f.specular_transmittance_sampling_rate,
+            f.diffuse_transmittance_sampling_rate
+        ),
+        (0.5, 2.0, 0.25, 0.0)
+    );
+    assert!(get(1).transmits());
+    assert!(get(2).params().diff_trans.is_none());
+
+    let cases = [
+        (
+            "<bsdf type=\"principledthin\">\n<float name=\"diff_trans\" value=\"2.5\"/></bsdf>",
+            "diff_trans",
+            "\"diff_trans\" must lie in [0, 2]",
+        ),
+        (
+            "<bsdf type=\"principledthin\">\n<float name=\"roughness\" value=\"1.1\"/></bsdf>",
+            "roughness",
+            "\"roughness\" must lie in [0, 1]",
+        ),
+        (
+            "<bsdf type=\"principledthin\">\n<float name=\"eta\" value=\"-1\"/></bsdf>",
+            "eta",
+            "\"eta\" must be positive and finite",
+        ),
+        (
+            "<bsdf type=\"principledthin\">\n<float name=\"specular_transmittance_sampling_rate\" value=\"-2\"/></bsdf>",
+            "specular_transmittance_sampling_rate",
+            "must be non-negative",
+        ),
+        (
+            "<bsdf type=\"principledthin\">\n<float name=\"metallic\" value=\"0.5\"/></bsdf>",
+            "metallic",
+            "unknown parameter \"metallic\" of <bsdf type=\"principledthin\">",
+        ),
+        (
+            "<bsdf type=\"twosided\">\n<bsdf type=\"principledthin\"/></bsdf>",
+            "<bsdf type=\"principledthin\"/>",
+            "allow_transmission",
+        ),
+    ];
+    for (k, (bsdf, marker, needle)) in cases.iter().enumerate() {
+        let body = format!("{SENSOR}\n{bsdf}");
+        assert_body_error_at(&dir, &format!("e{k}.xml"), &body, marker, needle);
+    }
+}
+
 /// A unit quad in z = 0 as one PLY polygon (fan-triangulated into (0, 1, 2) and (0, 2, 3)),
 /// with float vertex colours, a 1-channel float vertex attribute, uchar vertex properties
 /// (kept unnormalised, as Mitsuba 3.9.1 does), a ushort face colour (normalised and

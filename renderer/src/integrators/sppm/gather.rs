@@ -26,6 +26,7 @@ fn transmits(bsdf: &Bsdf) -> bool {
     match bsdf {
         Bsdf::RoughDielectric(_) => true,
         Bsdf::Principled(b) => b.transmits(),
+        Bsdf::PrincipledThin(b) => b.transmits(),
         Bsdf::Diffuse(_)
         | Bsdf::Conductor(_)
         | Bsdf::RoughConductor(_)
