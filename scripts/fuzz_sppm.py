@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from fuzz_mitsuba import (  # noqa: E402
-    CHUNKS, finish, fuzz_arguments, integrator_variant, render_path_chunks, run_render, scene_dirs,
+    CHUNKS, EXTRA_MATERIALS, finish, fuzz_arguments, integrator_variant, render_path_chunks, run_render, scene_dirs,
     scene_xml)
 from validate_pt import mitsuba  # noqa: E402
 
@@ -61,7 +61,11 @@ def main():
     ap.add_argument("--hide-emitters", action="store_true", help="set the scenes' hide_emitters")
     ap.add_argument("--extended", action="store_true",
                     help="the scenes of fuzz_mitsuba.py --extended (scripts/fuzz_extended.py)")
+    ap.add_argument("--thin", action="store_true",
+                    help="the thin principled BSDF among the materials (as fuzz_mitsuba.py --thin)")
     args = ap.parse_args()
+    if args.thin:
+        EXTRA_MATERIALS.extend(["principledthin"] * 3)
     out = Path(args.out) / str(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     flagged, rows = [], []
