@@ -178,6 +178,22 @@ impl Camera {
         self.ray_at(pixel.as_vec2() + u_film, u_lens)
     }
 
+    /// The rays one pixel to the right and one pixel down of the ray through film `position`
+    /// with lens sample `u_lens`, as Mitsuba's `sample_ray_differential` makes them: the same
+    /// origin and the neighbouring pixel's direction for perspective and thin-lens cameras (the
+    /// same lens point), the neighbouring origin and the same direction for orthographic ones.
+    pub fn ray_differentials(&self, position: Vec2, u_lens: Vec2) -> [Ray; 2] {
+        let ray = self.ray_at(position, u_lens);
+        [Vec2::X, Vec2::Y].map(|offset| {
+            let next = self.ray_at(position + offset, u_lens);
+            if self.projection == Projection::Orthographic {
+                Ray { d: ray.d, ..next }
+            } else {
+                Ray { o: ray.o, ..next }
+            }
+        })
+    }
+
     /// The primary ray through film position `position` (pixels from the rendered image's
     /// top-left corner — the crop window's, if the film has one; it may lie outside the image),
     /// using `u_lens` as [`Camera::generate_ray`].

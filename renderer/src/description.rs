@@ -225,6 +225,101 @@ pub struct IntegratorDesc {
     /// `bsdf_samples` of `direct`: BSDF samples per camera ray (default `shading_samples`,
     /// else 1).
     pub bsdf_samples: u32,
+    /// `aovs` of `aov`: the arbitrary output variables asked for, in order.
+    pub aovs: Vec<AovSpec>,
+    /// The integrators nested in an `aov`, each with the name its layer gets (its `name`, or
+    /// Mitsuba's `_arg_<k>` for the k-th unnamed one).
+    pub nested: Vec<(String, IntegratorDesc)>,
+}
+
+/// One arbitrary output variable of Mitsuba's `aov` integrator: `<name>:<kind>` in `aovs`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AovSpec {
+    /// The layer name (the channels are `<name>.<suffix>`).
+    pub name: String,
+    /// What the layer holds.
+    pub kind: AovKind,
+}
+
+/// What an AOV holds, at the surface the camera ray meets first (zero where it meets none).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AovKind {
+    /// `albedo`: the BSDF's diffuse reflectance (Mitsuba's `eval_diffuse_reflectance`).
+    Albedo,
+    /// `depth`: the distance along the camera ray.
+    Depth,
+    /// `position`: the world-space position.
+    Position,
+    /// `uv`: the texture coordinates.
+    Uv,
+    /// `geo_normal`: the geometric normal.
+    GeometricNormal,
+    /// `sh_normal`: the shading normal (perturbed by a normal or bump map).
+    ShadingNormal,
+    /// `dp_du`: ∂p/∂u.
+    DpDu,
+    /// `dp_dv`: ∂p/∂v.
+    DpDv,
+    /// `duv_dx`: ∂uv/∂x, from the ray differential one pixel to the right.
+    DuvDx,
+    /// `duv_dy`: ∂uv/∂y, from the ray differential one pixel down.
+    DuvDy,
+    /// `prim_index`: the primitive's index in its shape (a triangle of a mesh; 0 otherwise).
+    PrimIndex,
+    /// `shape_index`: 1 + the shape's index in the scene (0 where nothing is hit).
+    ShapeIndex,
+}
+
+impl AovKind {
+    /// The kind named `name` in an `aovs` string (Mitsuba's spelling).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "albedo" => AovKind::Albedo,
+            "depth" => AovKind::Depth,
+            "position" => AovKind::Position,
+            "uv" => AovKind::Uv,
+            "geo_normal" => AovKind::GeometricNormal,
+            "sh_normal" => AovKind::ShadingNormal,
+            "dp_du" => AovKind::DpDu,
+            "dp_dv" => AovKind::DpDv,
+            "duv_dx" => AovKind::DuvDx,
+            "duv_dy" => AovKind::DuvDy,
+            "prim_index" => AovKind::PrimIndex,
+            "shape_index" => AovKind::ShapeIndex,
+            _ => return None,
+        })
+    }
+
+    /// Every kind's name, for messages.
+    pub const NAMES: [&'static str; 12] = [
+        "albedo",
+        "depth",
+        "position",
+        "uv",
+        "geo_normal",
+        "sh_normal",
+        "dp_du",
+        "dp_dv",
+        "duv_dx",
+        "duv_dy",
+        "prim_index",
+        "shape_index",
+    ];
+
+    /// The channel suffixes of the layer, as Mitsuba names them.
+    pub fn suffixes(self) -> &'static [&'static str] {
+        match self {
+            AovKind::Albedo => &["R", "G", "B"],
+            AovKind::Depth => &["T"],
+            AovKind::Uv | AovKind::DuvDx | AovKind::DuvDy => &["U", "V"],
+            AovKind::Position
+            | AovKind::GeometricNormal
+            | AovKind::ShadingNormal
+            | AovKind::DpDu
+            | AovKind::DpDv => &["X", "Y", "Z"],
+            AovKind::PrimIndex | AovKind::ShapeIndex => &["I"],
+        }
+    }
 }
 
 #[cfg(test)]
@@ -248,6 +343,8 @@ impl Default for IntegratorDesc {
             hide_emitters: false,
             emitter_samples: 1,
             bsdf_samples: 1,
+            aovs: Vec::new(),
+            nested: Vec::new(),
         }
     }
 }

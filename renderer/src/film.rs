@@ -95,6 +95,47 @@ where
     film
 }
 
+/// [`render_pixels`] for `channels` values per pixel: `pixel(x, y, out)` adds the pixel's
+/// values into `out` (zeroed, `channels` long; randomness from (x, y) alone). Returns one plane
+/// per channel, rows top to bottom.
+pub fn render_pixels_channels<F>(
+    width: u32,
+    height: u32,
+    channels: usize,
+    progress: Option<&ProgressBar>,
+    work_per_pixel: u64,
+    pixel: F,
+) -> Vec<Vec<f32>>
+where
+    F: Fn(u32, u32, &mut [f32]) + Sync,
+{
+    let (w, h) = (width as usize, height as usize);
+    let mut interleaved = vec![0.0f32; w * h * channels];
+    if channels > 0 {
+        interleaved
+            .par_chunks_mut(w * channels)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, out) in row.chunks_mut(channels).enumerate() {
+                    pixel(x as u32, y as u32, out);
+                }
+                if let Some(p) = progress {
+                    p.inc(work_per_pixel * width as u64);
+                }
+            });
+    }
+    (0..channels)
+        .map(|c| {
+            interleaved
+                .iter()
+                .skip(c)
+                .step_by(channels)
+                .copied()
+                .collect()
+        })
+        .collect()
+}
+
 /// First line of a row-by-row render's state file.
 const ROWS_MAGIC: &str = "rows-run-state 1";
 

@@ -347,16 +347,7 @@ fn read_exr(path: &Path) -> Result<RgbImage, ImageIoError> {
             pixels[position.y() * *width + position.x()] = Rgb::new(r, g, b);
         },
     )
-    .map_err(|error| match error {
-        exr::error::Error::Io(error) => ImageIoError::Io {
-            path: path.to_owned(),
-            error,
-        },
-        error => ImageIoError::Exr {
-            path: path.to_owned(),
-            error,
-        },
-    })?;
+    .map_err(|error| exr_error(path, error))?;
     let size = image.layer_data.size;
     let (_, pixels) = image.layer_data.channel_data.pixels;
     Ok((size.width() as u32, size.height() as u32, pixels))
@@ -424,6 +415,21 @@ fn write_atomically(
     })
 }
 
+/// The error of reading or writing the EXR `path`: an I/O error as such, anything else as the
+/// EXR's.
+fn exr_error(path: &Path, error: exr::error::Error) -> ImageIoError {
+    match error {
+        exr::error::Error::Io(error) => ImageIoError::Io {
+            path: path.to_owned(),
+            error,
+        },
+        error => ImageIoError::Exr {
+            path: path.to_owned(),
+            error,
+        },
+    }
+}
+
 /// Writes a float32 RGB OpenEXR (channels `R`, `G`, `B`), atomically. The blocks are ZIP
 /// compressed in increasing line order, as bundles are: the file's bytes are a function of the
 /// pixels alone (the `exr` crate's default, tiles in unspecified order, stores them in the
@@ -451,16 +457,47 @@ pub fn write_rgb_exr(
         Image::from_layer(layer)
             .write()
             .to_file(tmp)
-            .map_err(|error| match error {
-                exr::error::Error::Io(error) => ImageIoError::Io {
-                    path: tmp.to_owned(),
-                    error,
-                },
-                error => ImageIoError::Exr {
-                    path: tmp.to_owned(),
-                    error,
-                },
-            })
+            .map_err(|error| exr_error(tmp, error))
+    })
+}
+
+/// Writes a float32 OpenEXR of named channels (`(name, plane)`, each plane `width`·`height`
+/// values, rows top to bottom), atomically, ZIP-compressed in increasing line order like
+/// [`write_rgb_exr`]. The file lists the channels sorted by name, as OpenEXR requires.
+pub fn write_channels_exr(
+    path: &Path,
+    width: u32,
+    height: u32,
+    channels: Vec<(String, Vec<f32>)>,
+) -> Result<(), ImageIoError> {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes,
+        WritableImage,
+    };
+    let pixels = width as usize * height as usize;
+    if let Some((_, plane)) = channels.iter().find(|(_, p)| p.len() != pixels) {
+        return Err(ImageIoError::SizeMismatch {
+            path: path.to_owned(),
+            width,
+            height,
+            len: plane.len(),
+        });
+    }
+    write_atomically(path, |tmp| {
+        let list = channels
+            .into_iter()
+            .map(|(name, plane)| AnyChannel::new(name.as_str(), FlatSamples::F32(plane)))
+            .collect();
+        let layer = Layer::new(
+            (width as usize, height as usize),
+            LayerAttributes::default(),
+            Encoding::SMALL_LOSSLESS,
+            AnyChannels::sort(list),
+        );
+        Image::from_layer(layer)
+            .write()
+            .to_file(tmp)
+            .map_err(|error| exr_error(tmp, error))
     })
 }
 

@@ -757,3 +757,202 @@ fn media_render_with_volpath_and_other_integrators_refuse_them() {
         );
     }
 }
+
+/// The channels of a multi-channel EXR by name.
+fn exr_channels(path: &Path) -> std::collections::HashMap<String, Vec<f32>> {
+    let image = exr::prelude::read_all_flat_layers_from_file(path).expect("readable EXR");
+    let layer = &image.layer_data[0];
+    layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            (
+                c.name.to_string(),
+                c.sample_data.values_as_f32().collect::<Vec<f32>>(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn the_aov_and_depth_integrators_write_mitsubas_channels() {
+    let dir = temp_dir("aov");
+    let floor = write_scene(&dir);
+    // The lit floor with an `aov` integrator: a named path tracer, an unnamed depth integrator
+    // and five variables.
+    let text = std::fs::read_to_string(&floor).unwrap().replace(
+        r#"<integrator type="path"><integer name="max_depth" value="4"/></integrator>"#,
+        r#"<integrator type="aov">
+            <string name="aovs" value="dd.y:depth,pos:position,n:geo_normal,alb:albedo,s:shape_index"/>
+            <integrator type="path" name="image"><integer name="max_depth" value="4"/></integrator>
+            <integrator type="depth"/>
+        </integrator>"#,
+    );
+    let scene = dir.join("aov.xml");
+    std::fs::write(&scene, text).unwrap();
+    let scene = scene.to_str().unwrap();
+    let render = |extra: &[&str], out: &str| {
+        let out = dir.join(out);
+        let mut args = vec![scene, "--spp", "16", "--out", out.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        (run(env!("CARGO_BIN_EXE_render"), &args), out)
+    };
+    let png = dir.join("aov.png");
+    let (result, out) = render(
+        &["--threads", "1", "--png", png.to_str().unwrap()],
+        "aov.exr",
+    );
+    let err = stderr(&result);
+    assert!(result.status.success(), "{err}");
+    assert!(
+        err.contains("aov: 16x16 at 16 spp, 2 nested images and 5 variables (22 channels)"),
+        "{err}"
+    );
+    let c = exr_channels(&out);
+    let mut names: Vec<_> = c.keys().cloned().collect();
+    names.sort();
+    let expected = [
+        "B", "G", "R", "_arg_0.A", "_arg_0.B", "_arg_0.G", "_arg_0.R", "alb.B", "alb.G", "alb.R",
+        "dd.y.T", "image.A", "image.B", "image.G", "image.R", "n.X", "n.Y", "n.Z", "pos.X",
+        "pos.Y", "pos.Z", "s.I",
+    ];
+    assert_eq!(names, expected);
+    assert!(png.exists());
+    // The main image is the first nested one.
+    for ch in ["R", "G", "B"] {
+        assert_eq!(c[ch], c[&format!("image.{ch}")], "{ch}");
+    }
+    // Pixels wholly on the floor (every sample met it, none the light above it, shape 2): its
+    // normal, albedo, height and index.
+    let covered: Vec<usize> = (0..256)
+        .filter(|&i| c["image.A"][i] == 1.0 && c["s.I"][i] == 1.0)
+        .collect();
+    assert!(covered.len() > 100, "{} covered pixels", covered.len());
+    for &i in &covered {
+        assert!(
+            (c["n.Y"][i] - 1.0).abs() < 1e-5 && c["n.X"][i].abs() < 1e-5,
+            "pixel {i}"
+        );
+        assert!((c["alb.R"][i] - 0.5).abs() < 1e-5, "pixel {i}");
+        assert!(c["pos.Y"][i].abs() < 1e-4, "pixel {i}");
+        // The distance from the camera at (0, 3, 3) to the point on the floor, less the near
+        // clip distance the ray starts at (0.01 along the optical axis).
+        let p = [c["pos.X"][i], c["pos.Y"][i], c["pos.Z"][i]];
+        let d = (p[0].powi(2) + (p[1] - 3.0).powi(2) + (p[2] - 3.0).powi(2)).sqrt();
+        assert!(
+            (c["dd.y.T"][i] - d).abs() < 0.03 * d,
+            "pixel {i}: {} vs {d}",
+            c["dd.y.T"][i]
+        );
+    }
+    // The nested depth integrator measures the same distances with its own samples.
+    let mean =
+        |name: &str| covered.iter().map(|&i| c[name][i] as f64).sum::<f64>() / covered.len() as f64;
+    let (integrator, variable) = (mean("_arg_0.R"), mean("dd.y.T"));
+    assert!(
+        (integrator / variable - 1.0).abs() < 0.01,
+        "{integrator} vs {variable}"
+    );
+    // Pixels that see no surface: zero everywhere, alpha zero (no environment light).
+    let empty: Vec<usize> = (0..256).filter(|&i| c["image.A"][i] == 0.0).collect();
+    assert!(!empty.is_empty());
+    for &i in &empty {
+        for name in ["dd.y.T", "alb.R", "s.I", "_arg_0.R", "R"] {
+            assert_eq!(c[name][i], 0.0, "{name} at pixel {i}");
+        }
+    }
+    // Bit-identical on two threads.
+    let (result, two) = render(&["--threads", "2"], "aov2.exr");
+    assert!(result.status.success(), "{}", stderr(&result));
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&two).unwrap());
+    // Killed or not, a run with --state resumes its nested images from `<state>.<name>`.
+    let state = dir.join("run.state");
+    let (result, first) = render(&["--state", state.to_str().unwrap()], "state.exr");
+    assert!(result.status.success(), "{}", stderr(&result));
+    assert!(dir.join("run.state.image").exists() && dir.join("run.state._arg_0").exists());
+    let (result, again) = render(&["--state", state.to_str().unwrap()], "state2.exr");
+    assert!(stderr(&result).contains("resuming"), "{}", stderr(&result));
+    assert_eq!(std::fs::read(first).unwrap(), std::fs::read(again).unwrap());
+
+    // `--integrator depth` on the plain floor scene: the distance as every colour channel.
+    let depth = dir.join("depth.exr");
+    let result = run(
+        env!("CARGO_BIN_EXE_render"),
+        &[
+            floor.to_str().unwrap(),
+            "--integrator",
+            "depth",
+            "--spp",
+            "4",
+            "--out",
+            depth.to_str().unwrap(),
+        ],
+    );
+    assert!(result.status.success(), "{}", stderr(&result));
+    let (_, _, px) = renderer::image_io::read_rgb_image(&depth).unwrap();
+    // The four pixels around the optical axis, which meets the floor at √18 from the camera.
+    let centre = [7 * 16 + 7, 7 * 16 + 8, 8 * 16 + 7, 8 * 16 + 8].map(|i| px[i]);
+    let mean = centre.iter().map(|p| p.x).sum::<f32>() / 4.0;
+    assert!((mean / 18f32.sqrt() - 1.0).abs() < 0.02, "{centre:?}");
+    assert!(
+        centre.iter().all(|p| p.x == p.y && p.y == p.z),
+        "{centre:?}"
+    );
+
+    // Refusals, each naming what is wrong, before anything is written.
+    // (exit status 1: a bad scene or output; 2: a usage error)
+    let refused = |args: &[&str], code: i32, needle: &str| {
+        let result = run(env!("CARGO_BIN_EXE_render"), args);
+        let err = stderr(&result);
+        assert_eq!(result.status.code(), Some(code), "{err}");
+        assert!(err.contains(needle), "{err}");
+    };
+    let nope = dir.join("nope.exr");
+    let nope = nope.to_str().unwrap();
+    refused(
+        &[
+            floor.to_str().unwrap(),
+            "--integrator",
+            "aov",
+            "--out",
+            nope,
+        ],
+        1,
+        "has no aov integrator",
+    );
+    let only_aovs = std::fs::read_to_string(scene).unwrap().replace(
+        r#"<integrator type="path" name="image"><integer name="max_depth" value="4"/></integrator>
+            <integrator type="depth"/>"#,
+        "",
+    );
+    let only = dir.join("only.xml");
+    std::fs::write(&only, only_aovs).unwrap();
+    let png = dir.join("nope.png");
+    refused(
+        &[
+            only.to_str().unwrap(),
+            "--out",
+            nope,
+            "--png",
+            png.to_str().unwrap(),
+        ],
+        1,
+        "nests no integrator",
+    );
+    refused(
+        &[
+            floor.to_str().unwrap(),
+            "--integrator",
+            "depth",
+            "--max-depth",
+            "3",
+            "--out",
+            nope,
+        ],
+        2,
+        "--max-depth is read by path and SPPM only, not by --integrator depth",
+    );
+    assert!(!Path::new(nope).exists() && !png.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,6 +1,6 @@
-//! `render`: renders a Mitsuba 3 XML scene with the path tracer, direct illumination or
-//! (multi-level) SPPM and writes a float32 RGB EXR (SPPM: sample bundles) and optionally a
-//! tone-mapped sRGB PNG.
+//! `render`: renders a Mitsuba 3 XML scene with the path tracer, direct illumination, Mitsuba's
+//! `depth` and `aov` integrators or (multi-level) SPPM and writes a float32 EXR (RGB; an `aov`
+//! integrator's named channels; SPPM: sample bundles) and optionally a tone-mapped sRGB PNG.
 
 use anyhow::{bail, Context, Result};
 use clap::error::ErrorKind;
@@ -8,8 +8,10 @@ use clap::parser::ValueSource;
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, ValueEnum};
 use cli_output::paths::{check_distinct, check_extension, check_not_directory, extension};
 use indicatif::{ProgressBar, ProgressStyle};
+use renderer::description::{AovSpec, IntegratorDesc};
 use renderer::film::{with_threads, Film};
-use renderer::image_io::{write_png_srgb, write_rgb_exr};
+use renderer::image_io::{write_channels_exr, write_png_srgb, write_rgb_exr};
+use renderer::integrators::aov::{environment_seen, render_aovs, DepthIntegrator};
 use renderer::integrators::direct::DirectIntegrator;
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::volpath::VolPathTracer;
@@ -34,6 +36,11 @@ enum IntegratorKind {
     Sppm,
     /// Multi-level SPPM: writes sample bundles with five bandwidths.
     SppmMl,
+    /// The distance to the first surface along each camera ray (Mitsuba's `depth`).
+    Depth,
+    /// The scene file's `aov` integrator: its variables (depth, normals, albedo, …) and the
+    /// images of the integrators it nests, as the channels of one EXR (Mitsuba's `aov`).
+    Aov,
 }
 
 /// Render a Mitsuba 3 XML scene.
@@ -42,9 +49,9 @@ enum IntegratorKind {
 struct Cli {
     /// The scene file (Mitsuba 3 XML).
     scene: PathBuf,
-    /// Light-transport algorithm. Default: the scene file's integrator when it is `direct` or
-    /// `volpath` (also for `volpathmis`), else `path`. Only `volpath` renders participating
-    /// media.
+    /// Light-transport algorithm. Default: the scene file's integrator when it is `direct`,
+    /// `volpath` (also for `volpathmis`), `depth` or `aov`, else `path`. Only `volpath` renders
+    /// participating media.
     #[arg(long, value_enum)]
     integrator: Option<IntegratorKind>,
     /// Output: an RGB EXR for `path` and `direct` (its name ends in `.exr` or has no
@@ -78,8 +85,9 @@ struct Cli {
     rr_depth: Option<u32>,
     /// Keep the run's state in this file and resume from it when it exists: a killed render
     /// started again with the same arguments continues from its last save (the path tracer's
-    /// finished rows, SPPM's last pass) and writes the same outputs as an uninterrupted run. A
-    /// finished SPPM run continues when given more passes.
+    /// finished rows, SPPM's last pass; an `aov` integrator's nested images keep theirs in
+    /// FILE.<name>) and writes the same outputs as an uninterrupted run. A finished SPPM run
+    /// continues when given more passes.
     #[arg(long, value_name = "FILE")]
     state: Option<PathBuf>,
     /// Seconds of rendering between saves of --state (also saved with every SPPM bundle and at
@@ -157,15 +165,21 @@ impl IntegratorKind {
                 let path = [("spp", "path and direct"), ("rr_depth", "the path tracer")];
                 [&path[..], &direct[..]].concat()
             }
+            IntegratorKind::Depth => {
+                let path = [
+                    ("max_depth", "path and SPPM"),
+                    ("rr_depth", "the path tracer"),
+                ];
+                [&sppm[..], &direct[..], &path[..]].concat()
+            }
+            // Depths and sample counts go to the integrators it nests.
+            IntegratorKind::Aov => sppm.to_vec(),
         }
     }
 
-    /// Whether it writes one image (`path`, `direct`) rather than SPPM bundles.
+    /// Whether it writes one image (`path`, `direct`, …) rather than SPPM bundles.
     fn writes_image(self) -> bool {
-        matches!(
-            self,
-            IntegratorKind::Path | IntegratorKind::Volpath | IntegratorKind::Direct
-        )
+        !matches!(self, IntegratorKind::Sppm | IntegratorKind::SppmMl)
     }
 
     /// Its `--integrator` value.
@@ -205,8 +219,8 @@ fn ignored_option_given(matches: &ArgMatches, kind: IntegratorKind) -> Option<St
         })
 }
 
-/// The integrator to run: `--integrator`, else the scene file's `direct` or `volpath`
-/// (`volpathmis`: the same image), else `path`. When it
+/// The integrator to run: `--integrator`, else the scene file's `direct`, `volpath`
+/// (`volpathmis`: the same image), `depth` or `aov`, else `path`. When it
 /// comes from the file, an option given for another integrator is refused here, as
 /// [`parse_cli`] refuses it for an `--integrator` given on the command line.
 fn chosen_integrator(cli: &Cli, matches: &ArgMatches, scene: &Scene) -> Result<IntegratorKind> {
@@ -216,6 +230,8 @@ fn chosen_integrator(cli: &Cli, matches: &ArgMatches, scene: &Scene) -> Result<I
     let kind = match scene.integrator.as_ref().map(|i| i.kind.as_str()) {
         Some("direct") => IntegratorKind::Direct,
         Some("volpath" | "volpathmis") => IntegratorKind::Volpath,
+        Some("depth") => IntegratorKind::Depth,
+        Some("aov") => IntegratorKind::Aov,
         _ => IntegratorKind::Path,
     };
     if let Some(conflict) = ignored_option_given(matches, kind) {
@@ -250,9 +266,11 @@ fn run() -> Result<()> {
     );
     let integrator = chosen_integrator(&cli, &matches, &scene)?;
     with_threads(cli.threads, || match integrator {
-        IntegratorKind::Path | IntegratorKind::Volpath | IntegratorKind::Direct => {
-            run_image(&cli, &scene, integrator)
-        }
+        IntegratorKind::Path
+        | IntegratorKind::Volpath
+        | IntegratorKind::Direct
+        | IntegratorKind::Depth => run_image(&cli, &scene, integrator),
+        IntegratorKind::Aov => run_aov(&cli, &scene),
         IntegratorKind::Sppm => run_sppm(&cli, &scene, false),
         IntegratorKind::SppmMl => run_sppm(&cli, &scene, true),
     })?
@@ -330,7 +348,7 @@ fn check_outputs(cli: &Cli) -> Result<Vec<(&'static str, PathBuf)>> {
             "--out",
             &cli.out,
             "exr",
-            "the path tracer and the direct integrator write an OpenEXR image",
+            "the path, volpath, direct, depth and aov integrators write an OpenEXR image",
         )
         .map_err(anyhow::Error::msg)?;
     }
@@ -350,9 +368,9 @@ fn create_parent_dirs(files: &[(&str, PathBuf)]) -> Result<()> {
     Ok(())
 }
 
-/// Depth settings: command line, else the scene file's integrator, else Mitsuba's defaults.
-fn depths(cli: &Cli, scene: &Scene) -> (i32, u32) {
-    let file = scene.integrator.as_ref();
+/// Depth settings: command line, else `file` (the scene file's integrator, or one nested in its
+/// `aov`), else Mitsuba's defaults.
+fn depths(cli: &Cli, file: Option<&IntegratorDesc>) -> (i32, u32) {
     let max_depth = cli.max_depth.or(file.map(|i| i.max_depth)).unwrap_or(-1);
     let rr_depth = cli.rr_depth.or(file.map(|i| i.rr_depth)).unwrap_or(5);
     (max_depth, rr_depth)
@@ -381,37 +399,104 @@ fn write_outputs(film: &Film, exr: &Path, png: Option<&Path>) -> Result<()> {
 
 /// The run's state file, when `--state` names one.
 fn state_file(cli: &Cli) -> Result<Option<StateFile>> {
-    let Some(path) = &cli.state else {
-        return Ok(None);
-    };
+    cli.state
+        .as_deref()
+        .map(|p| state_file_at(cli, p))
+        .transpose()
+}
+
+/// A state file of this run at `path`.
+fn state_file_at(cli: &Cli, path: &Path) -> Result<StateFile> {
     if path.exists() {
         eprintln!("resuming from the run state {}", path.display());
     }
     let (interval, lenient) = (cli.state_interval, cli.lenient);
-    StateFile::for_scene(path, interval, &cli.scene, &cli.define, lenient).map(Some)
+    StateFile::for_scene(path, interval, &cli.scene, &cli.define, lenient)
 }
 
-/// Sample counts of the direct integrator: command line, else the scene file's `direct`
+/// Sample counts of the direct integrator: command line, else `file`'s when it is a `direct`
 /// integrator, else Mitsuba's defaults (1 and 1).
-fn direct_settings(cli: &Cli, scene: &Scene) -> Result<DirectIntegrator> {
-    let file = scene.integrator.as_ref().filter(|i| i.kind == "direct");
+fn direct_settings(cli: &Cli, file: Option<&IntegratorDesc>) -> Result<DirectIntegrator> {
+    let file = file.filter(|i| i.kind == "direct");
     let emitter = cli.emitter_samples.or(file.map(|i| i.emitter_samples));
     let bsdf = cli.bsdf_samples.or(file.map(|i| i.bsdf_samples));
     DirectIntegrator::new(emitter.unwrap_or(1), bsdf.unwrap_or(1))
         .context("--emitter-samples and --bsdf-samples")
 }
 
-/// The `path`, `volpath` and `direct` integrators: one image of `spp` samples per pixel.
-fn run_image(cli: &Cli, scene: &Scene, kind: IntegratorKind) -> Result<()> {
-    if kind != IntegratorKind::Volpath {
-        scene
-            .refuse_media(&kind.name())
-            .with_context(|| cli.scene.display().to_string())?;
-    }
+/// The samples per pixel: `--spp`, else the file's sampler's `sample_count`, else 16.
+fn samples_per_pixel(cli: &Cli, scene: &Scene) -> Result<u32> {
     let spp = cli.spp.or(scene.sample_count).unwrap_or(16);
     if spp == 0 {
         bail!("--spp must be at least 1");
     }
+    Ok(spp)
+}
+
+/// Refuses a scene with participating media for an integrator that cannot render them (all
+/// but `volpath`; `depth` only measures distances to surfaces).
+fn refuse_media(cli: &Cli, scene: &Scene, kind: IntegratorKind) -> Result<()> {
+    if matches!(kind, IntegratorKind::Volpath | IntegratorKind::Depth) {
+        return Ok(());
+    }
+    scene
+        .refuse_media(&kind.name())
+        .with_context(|| cli.scene.display().to_string())
+}
+
+/// Renders the image of the image integrator `kind` with its settings from the command line,
+/// else `file`, resuming from (and saving to) `state`. Returns the film and its settings in
+/// words.
+fn render_film(
+    cli: &Cli,
+    scene: &Scene,
+    kind: IntegratorKind,
+    file: Option<&IntegratorDesc>,
+    spp: u32,
+    bar: &ProgressBar,
+    state: Option<StateFile>,
+) -> Result<(Film, String)> {
+    let (max_depth, rr_depth) = depths(cli, file);
+    Ok(match kind {
+        IntegratorKind::Direct => {
+            let d = direct_settings(cli, file)?;
+            let settings = format!(
+                "{} emitter and {} BSDF samples",
+                d.emitter_samples, d.bsdf_samples
+            );
+            (
+                render_image(scene, &d, spp, cli.seed, bar, state)?,
+                settings,
+            )
+        }
+        IntegratorKind::Volpath => {
+            let tracer = VolPathTracer {
+                max_depth,
+                rr_depth,
+            };
+            let film = render_image(scene, &tracer, spp, cli.seed, bar, state)?;
+            (film, format!("max_depth {max_depth}"))
+        }
+        IntegratorKind::Depth => {
+            let film = render_image(scene, &DepthIntegrator, spp, cli.seed, bar, state)?;
+            (film, "distance to the first surface".into())
+        }
+        _ => {
+            let tracer = PathTracer {
+                max_depth,
+                rr_depth,
+            };
+            let film = render_image(scene, &tracer, spp, cli.seed, bar, state)?;
+            (film, format!("max_depth {max_depth}"))
+        }
+    })
+}
+
+/// The `path`, `volpath`, `direct` and `depth` integrators: one image of `spp` samples per
+/// pixel.
+fn run_image(cli: &Cli, scene: &Scene, kind: IntegratorKind) -> Result<()> {
+    refuse_media(cli, scene, kind)?;
+    let spp = samples_per_pixel(cli, scene)?;
     let res = scene.camera.resolution();
     // The film, its copy for the EXR writer and the PNG (12 + 12 + 4 bytes per pixel); a state
     // file adds its encoded copy.
@@ -420,40 +505,13 @@ fn run_image(cli: &Cli, scene: &Scene, kind: IntegratorKind) -> Result<()> {
         &format!("a {}x{} image", res.x, res.y),
         res.x as u64 * res.y as u64 * per_pixel,
     )?;
-    let direct = match kind {
-        IntegratorKind::Direct => Some(direct_settings(cli, scene)?),
-        _ => None,
-    };
-    let (max_depth, rr_depth) = depths(cli, scene);
-    let settings = match direct {
-        Some(d) => format!(
-            "{} emitter and {} BSDF samples",
-            d.emitter_samples, d.bsdf_samples
-        ),
-        None => format!("max_depth {max_depth}"),
-    };
     // Rows restored from a state file were not rendered now: no throughput for this session.
     let resumed = cli.state.as_ref().is_some_and(|p| p.exists());
     let total = res.x as u64 * res.y as u64 * spp as u64;
     let bar = progress_bar(total, "samples");
     let t = Instant::now();
-    let film = match direct {
-        Some(d) => render_image(cli, scene, &d, spp, &bar)?,
-        None if kind == IntegratorKind::Volpath => {
-            let tracer = VolPathTracer {
-                max_depth,
-                rr_depth,
-            };
-            render_image(cli, scene, &tracer, spp, &bar)?
-        }
-        None => {
-            let tracer = PathTracer {
-                max_depth,
-                rr_depth,
-            };
-            render_image(cli, scene, &tracer, spp, &bar)?
-        }
-    };
+    let file = scene.integrator.as_ref();
+    let (film, settings) = render_film(cli, scene, kind, file, spp, &bar, state_file(cli)?)?;
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     let rate = if resumed {
@@ -471,17 +529,130 @@ fn run_image(cli: &Cli, scene: &Scene, kind: IntegratorKind) -> Result<()> {
     write_outputs(&film, &cli.out, cli.png.as_deref())
 }
 
-/// Renders the image with `integrator`, resuming from `--state` when it names a file.
+/// The image integrator an `aov` integrator nests as `desc` (the XML accepts only these).
+fn nested_kind(desc: &IntegratorDesc) -> IntegratorKind {
+    match desc.kind.as_str() {
+        "volpath" | "volpathmis" => IntegratorKind::Volpath,
+        "direct" => IntegratorKind::Direct,
+        "depth" => IntegratorKind::Depth,
+        _ => IntegratorKind::Path,
+    }
+}
+
+/// The state file of the image nested as `name`, next to `--state`: `<state>.<name>`.
+fn nested_state_path(state: &Path, name: &str) -> PathBuf {
+    let mut path = state.as_os_str().to_owned();
+    path.push(format!(".{name}"));
+    PathBuf::from(path)
+}
+
+/// The scene file's `aov` integrator: each nested integrator's image (resumable from
+/// `<state>.<name>`), then the variables, written as one multi-channel EXR with Mitsuba's
+/// channel names — `R`, `G`, `B` (the first nested image), `<name>.R`…`<name>.A` per nested
+/// image, `<variable>.<suffix>` per variable — and the first nested image as the PNG.
+fn run_aov(cli: &Cli, scene: &Scene) -> Result<()> {
+    let Some(aov) = scene.integrator.as_ref().filter(|i| i.kind == "aov") else {
+        bail!(
+            "--integrator aov: {} has no aov integrator (its variables and nested integrators \
+             are read from the file)",
+            cli.scene.display()
+        );
+    };
+    if cli.png.is_some() && aov.nested.is_empty() {
+        bail!(
+            "--png: the aov integrator of {} nests no integrator, so it renders no image to \
+             preview",
+            cli.scene.display()
+        );
+    }
+    for (_, desc) in &aov.nested {
+        refuse_media(cli, scene, nested_kind(desc))?;
+    }
+    let spp = samples_per_pixel(cli, scene)?;
+    let res = scene.camera.resolution();
+    let pixels = res.x as u64 * res.y as u64;
+    let channels = 3 + 4 * aov.nested.len() + aovs_channel_count(&aov.aovs);
+    // Per nested image its film and planes (24 bytes + a state file's 12), and every channel
+    // twice (planes and the interleaved render).
+    let per_pixel = 36 * aov.nested.len() as u64 + 8 * channels as u64;
+    renderer::memory::check_fits(
+        &format!("a {}x{} image of {channels} channels", res.x, res.y),
+        pixels * per_pixel,
+    )?;
+    let bar = progress_bar(
+        pixels * spp as u64 * (aov.nested.len() as u64 + 1),
+        "samples",
+    );
+    let t = Instant::now();
+    let mut films = Vec::new();
+    for (name, desc) in &aov.nested {
+        let kind = nested_kind(desc);
+        let state = match &cli.state {
+            Some(p) => Some(state_file_at(cli, &nested_state_path(p, name))?),
+            None => None,
+        };
+        let (film, settings) = render_film(cli, scene, kind, Some(desc), spp, &bar, state)?;
+        bar.println(format!("{name}: {} ({settings})", desc.kind));
+        films.push(film);
+    }
+    let variables = render_aovs(scene, &aov.aovs, spp, cli.seed, Some(&bar));
+    bar.finish_and_clear();
+    let rgb_planes = |film: &Film| -> [Vec<f32>; 3] {
+        std::array::from_fn(|c| film.pixels.iter().map(|p| p[c]).collect())
+    };
+    let mut planes: Vec<(String, Vec<f32>)> = Vec::new();
+    let base = films.first().map_or_else(
+        || std::array::from_fn(|_| vec![0.0; pixels as usize]),
+        rgb_planes,
+    );
+    planes.extend(["R", "G", "B"].into_iter().map(String::from).zip(base));
+    // Mitsuba's alpha: the samples that met a surface, or all of them for the path tracers
+    // under a visible environment light.
+    let env = environment_seen(scene);
+    for ((name, desc), film) in aov.nested.iter().zip(&films) {
+        let [r, g, b] = rgb_planes(film);
+        let alpha = match nested_kind(desc) {
+            IntegratorKind::Path | IntegratorKind::Volpath if env => variables.weights.clone(),
+            _ => variables.hits.clone(),
+        };
+        for (c, plane) in ["R", "G", "B", "A"].into_iter().zip([r, g, b, alpha]) {
+            planes.push((format!("{name}.{c}"), plane));
+        }
+    }
+    planes.extend(variables.channels.into_iter().zip(variables.planes));
+    eprintln!(
+        "aov: {}x{} at {spp} spp, {} nested images and {} variables ({} channels) in {:.2} s",
+        res.x,
+        res.y,
+        films.len(),
+        aov.aovs.len(),
+        planes.len(),
+        t.elapsed().as_secs_f64()
+    );
+    write_channels_exr(&cli.out, res.x, res.y, planes)?;
+    if let (Some(png), Some(film)) = (&cli.png, films.first()) {
+        write_png_srgb(png, film.width, film.height, &film.pixels)?;
+    }
+    Ok(())
+}
+
+/// The channels the variables `aovs` fill.
+fn aovs_channel_count(aovs: &[AovSpec]) -> usize {
+    aovs.iter().map(|a| a.kind.suffixes().len()).sum()
+}
+
+/// Renders the image with `integrator`, resuming from `state` when given.
 fn render_image(
-    cli: &Cli,
     scene: &Scene,
     integrator: &impl RayIntegrator,
     spp: u32,
+    seed: u64,
     bar: &ProgressBar,
+    state: Option<StateFile>,
 ) -> Result<Film> {
-    Ok(match state_file(cli)? {
-        Some(state) => integrator.render_resumable(scene, spp, cli.seed, Some(bar), &state)?,
-        None => integrator.render(scene, spp, cli.seed, Some(bar)),
+    Ok(match state {
+        Some(state) => integrator.render_resumable(scene, spp, seed, Some(bar), &state)?,
+        None => integrator.render(scene, spp, seed, Some(bar)),
     })
 }
 

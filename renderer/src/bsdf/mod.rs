@@ -644,6 +644,44 @@ impl Bsdf {
         }
     }
 
+    /// Mitsuba's `eval_diffuse_reflectance` (the `albedo` AOV) seen from `wo` (shading frame,
+    /// towards the viewer): the diffuse reflectance of `diffuse` and the plastics, the base
+    /// colour of the principled models, the nested model's through masks and normal or bump
+    /// maps, the two models' mix for `blendbsdf`, the side facing the viewer for `twosided`;
+    /// for every other model Mitsuba's default, π·f(wo, n) — zero for the delta models.
+    pub fn diffuse_reflectance(&self, wo: Vec3, sp: &ShadingPoint) -> Rgb {
+        let tp = sp.tex;
+        match self {
+            Bsdf::Diffuse(b) => b.reflectance.eval(tp),
+            Bsdf::Plastic(b) => b.diffuse_reflectance.eval(tp),
+            Bsdf::RoughPlastic(b) => b.diffuse_reflectance.eval(tp),
+            Bsdf::Principled(b) => b.albedo(tp),
+            Bsdf::PrincipledThin(b) => b.albedo(tp),
+            Bsdf::NormalMap(b) => b.nested.diffuse_reflectance(wo, sp),
+            Bsdf::BumpMap(b) => b.nested.diffuse_reflectance(wo, sp),
+            Bsdf::Mask(b) => b.nested.diffuse_reflectance(wo, sp),
+            Bsdf::Blend(b) => {
+                let w = b.weight_at(tp);
+                b.nested[0].diffuse_reflectance(wo, sp) * (1.0 - w)
+                    + b.nested[1].diffuse_reflectance(wo, sp) * w
+            }
+            Bsdf::TwoSided { front, back } => {
+                if wo.z >= 0.0 {
+                    front.diffuse_reflectance(wo, sp)
+                } else {
+                    back.diffuse_reflectance(flip(wo), sp)
+                }
+            }
+            Bsdf::Conductor(_)
+            | Bsdf::RoughConductor(_)
+            | Bsdf::Dielectric(_)
+            | Bsdf::ThinDielectric(_)
+            | Bsdf::RoughDielectric(_) => {
+                self.eval(wo, Vec3::Z, sp, TransportMode::Radiance) * std::f32::consts::PI
+            }
+        }
+    }
+
     /// Albedo for the G-buffer: the diffuse reflectance of diffuse and plastic models; for
     /// conductors the specular tint times the normal-incidence Fresnel reflectance (the
     /// metal's colour); for dielectrics the transmittance tint; `principled`: its base colour

@@ -351,6 +351,26 @@ fn eval_and_pdf_match_mitsuba() {
 }
 
 #[test]
+fn diffuse_reflectance_matches_mitsuba() {
+    // Mitsuba's `eval_diffuse_reflectance` (the `albedo` AOV) from the front and the back:
+    // the reflectance of diffuse and plastic models, the base colour of the principled ones,
+    // the viewer's side of `twosided`, π·f(wo, n) otherwise (zero for delta models).
+    use super::mitsuba_reference::{CASES, CASE_UVS, DIFFUSE_REFLECTANCES};
+    let cases = mitsuba_cases();
+    assert_eq!(DIFFUSE_REFLECTANCES.len(), 2 * CASES.len());
+    let mut failures = Vec::new();
+    for &(ci, wo, expect) in DIFFUSE_REFLECTANCES {
+        let (wo, expect) = (Vec3::from(wo), Rgb::from(expect));
+        let sp = ShadingPoint::flat(Vec2::from(CASE_UVS[ci]));
+        let got = cases[ci].diffuse_reflectance(wo, &sp);
+        if (got - expect).abs().max_element() > 2e-3 * expect.max_element() + 1e-6 {
+            failures.push(format!("{} wo={wo}: {got} vs Mitsuba {expect}", CASES[ci]));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
 fn directional_albedo_matches_mitsuba() {
     use super::mitsuba_reference::{ALBEDOS, CASES, CASE_UVS};
     let cases = mitsuba_cases();

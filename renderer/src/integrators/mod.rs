@@ -1,5 +1,6 @@
 //! Light transport algorithms: each integrator turns a scene into images.
 
+pub mod aov;
 pub mod direct;
 pub mod path;
 pub mod ray_integrator;

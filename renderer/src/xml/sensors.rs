@@ -468,15 +468,18 @@ fn direct_sample_counts(p: &mut Props, el: &Element) -> Result<(u32, u32), Scene
     Ok(counts)
 }
 
-/// `<integrator>`: the plugin name, `max_depth`, `rr_depth`, `hide_emitters` and `direct`'s
-/// sample counts.
+/// `<integrator>`: the plugin name, `max_depth`, `rr_depth`, `hide_emitters`, `direct`'s
+/// sample counts, and an `aov`'s variables and nested integrators.
 pub(super) fn build_integrator<'a>(
     b: &mut Builder<'a>,
     el: &'a Element,
 ) -> Result<IntegratorDesc, SceneError> {
     el.check_attributes(&["type", "id", "name"], &["type"], &mut b.diag)?;
     let kind = el.attr("type").unwrap_or_default();
-    const INTEGRATORS: [&str; 7] = [
+    if kind == "aov" {
+        return build_aov_integrator(b, el);
+    }
+    const INTEGRATORS: [&str; 9] = [
         "path",
         "sppm",
         "volpath",
@@ -484,6 +487,8 @@ pub(super) fn build_integrator<'a>(
         "prb",
         "prb_basic",
         "direct",
+        "depth",
+        "aov",
     ];
     if !INTEGRATORS.contains(&kind) {
         let err = el.error(format!(
@@ -529,5 +534,134 @@ pub(super) fn build_integrator<'a>(
         hide_emitters,
         emitter_samples,
         bsdf_samples,
+        ..IntegratorDesc::default()
+    })
+}
+
+/// The integrators an `aov` integrator can nest: those that estimate radiance along camera
+/// rays (Mitsuba's sampling integrators).
+const SAMPLING_INTEGRATORS: [&str; 7] = [
+    "path",
+    "volpath",
+    "volpathmis",
+    "prb",
+    "prb_basic",
+    "direct",
+    "depth",
+];
+
+/// Mitsuba's `aov`: `aovs` (required: `<name>:<kind>` pairs separated by commas) and the
+/// nested integrators whose images come with the variables (their layers are named by their
+/// `name`, else `_arg_<k>` for the k-th unnamed one, as Mitsuba names them). The depth settings
+/// and `hide_emitters` are the first nested integrator's (what the other tools read from the
+/// file); nested integrators that differ in `hide_emitters` are refused, since the scene has
+/// one such setting.
+fn build_aov_integrator<'a>(
+    b: &mut Builder<'a>,
+    el: &'a Element,
+) -> Result<IntegratorDesc, SceneError> {
+    let mut p = Props::parse(b, el)?;
+    let aovs_el = p.element_of("aovs");
+    let Some(spec) = p.string("aovs")? else {
+        return Err(el.error("missing parameter \"aovs\" (e.g. \"dd:depth,nn:sh_normal\")"));
+    };
+    let mut aovs = Vec::new();
+    for item in spec.split(',').map(str::trim).filter(|t| !t.is_empty()) {
+        let (name, kind) = item.split_once(':').unwrap_or((item, ""));
+        let (name, kind) = (name.trim(), kind.trim());
+        if name.is_empty() || kind.is_empty() || kind.contains(':') {
+            return Err(aovs_el.error(format!("\"aovs\": \"{item}\" is not a <name>:<kind> pair")));
+        }
+        if kind == "boundary_test" {
+            return Err(aovs_el.error(
+                "\"aovs\": the AOV kind \"boundary_test\" (differentiable rendering's \
+                 distance to silhouettes) is not supported",
+            ));
+        }
+        let Some(kind) = crate::description::AovKind::from_name(kind) else {
+            return Err(aovs_el.error(format!(
+                "\"aovs\": unknown AOV kind \"{kind}\" (known: {})",
+                crate::description::AovKind::NAMES.join(", ")
+            )));
+        };
+        aovs.push(crate::description::AovSpec {
+            name: name.to_owned(),
+            kind,
+        });
+    }
+    let mut nested = Vec::new();
+    let mut unnamed = 0;
+    for obj in p.objects(&["integrator", "ref"]) {
+        let target = b.deref(obj)?;
+        if target.tag != "integrator" {
+            return Err(obj.error(format!(
+                "an aov integrator holds <integrator>s, not {}",
+                target.describe()
+            )));
+        }
+        let inner = build_integrator(b, target)?;
+        if !SAMPLING_INTEGRATORS.contains(&inner.kind.as_str()) {
+            return Err(target.error(format!(
+                "an aov integrator nests sampling integrators ({}), not \"{}\"",
+                SAMPLING_INTEGRATORS.join(", "),
+                inner.kind
+            )));
+        }
+        let name = match obj.attr("name") {
+            Some(n) if !n.is_empty() => n.to_owned(),
+            Some(_) => return Err(obj.error("a nested integrator's \"name\" is empty")),
+            None => {
+                unnamed += 1;
+                format!("_arg_{}", unnamed - 1)
+            }
+        };
+        nested.push((name, inner));
+    }
+    p.finish(b)?;
+    if aovs.is_empty() && nested.is_empty() {
+        return Err(el.error("an aov integrator needs AOVs or a nested integrator"));
+    }
+    // Every channel of the image once: `R`, `G`, `B`, each nested image's `<name>.R…A` and
+    // each variable's `<name>.<suffix>`.
+    let mut channels: Vec<String> = ["R", "G", "B"].map(String::from).to_vec();
+    for (name, _) in &nested {
+        channels.extend(["R", "G", "B", "A"].map(|c| format!("{name}.{c}")));
+    }
+    for aov in &aovs {
+        channels.extend(
+            aov.kind
+                .suffixes()
+                .iter()
+                .map(|c| format!("{}.{c}", aov.name)),
+        );
+    }
+    for (i, c) in channels.iter().enumerate() {
+        if channels[..i].contains(c) {
+            return Err(aovs_el.error(format!(
+                "two outputs of the aov integrator write the channel \"{c}\": give them \
+                 different names"
+            )));
+        }
+    }
+    if let Some((name, _)) = nested
+        .iter()
+        .find(|(_, n)| n.hide_emitters != nested[0].1.hide_emitters)
+    {
+        return Err(el.error(format!(
+            "the nested integrators differ in \"hide_emitters\" (\"{name}\" and \"{}\"): \
+             this renderer has one such setting per scene",
+            nested[0].0
+        )));
+    }
+    let first = nested.first().map(|(_, n)| n.clone()).unwrap_or_default();
+    Ok(IntegratorDesc {
+        kind: "aov".into(),
+        max_depth: first.max_depth,
+        rr_depth: first.rr_depth,
+        hide_emitters: first.hide_emitters,
+        emitter_samples: first.emitter_samples,
+        bsdf_samples: first.bsdf_samples,
+        aovs,
+        nested,
     })
 }

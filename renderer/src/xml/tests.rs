@@ -3596,3 +3596,109 @@ fn heterogeneous_media_read_their_grids() {
     );
     assert_body_error_at(&dir, "filter.xml", &body, "cubic", "unknown filter_type");
 }
+
+#[test]
+fn aov_integrator_reads_variables_and_nested_integrators_as_mitsuba_names_them() {
+    use crate::description::{AovKind, AovSpec};
+    let dir = temp_dir("aov");
+    let body = format!(
+        r#"{SENSOR}
+<integrator type="aov">
+  <string name="aovs" value="dd.y:depth, nn:sh_normal,alb:albedo"/>
+  <integrator type="path" name="my_image"><integer name="max_depth" value="7"/></integrator>
+  <integrator type="direct"><integer name="emitter_samples" value="3"/></integrator>
+  <integrator type="depth"/>
+</integrator>"#
+    );
+    let scene = load(&write_scene(&dir, "aov.xml", &body)).unwrap();
+    let aov = scene.integrator.as_ref().unwrap();
+    assert_eq!(aov.kind, "aov");
+    let spec = |name: &str, kind| AovSpec {
+        name: name.into(),
+        kind,
+    };
+    assert_eq!(
+        aov.aovs,
+        [
+            spec("dd.y", AovKind::Depth),
+            spec("nn", AovKind::ShadingNormal),
+            spec("alb", AovKind::Albedo)
+        ]
+    );
+    let names: Vec<_> = aov
+        .nested
+        .iter()
+        .map(|(n, i)| (n.as_str(), i.kind.as_str()))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            ("my_image", "path"),
+            ("_arg_0", "direct"),
+            ("_arg_1", "depth")
+        ]
+    );
+    assert_eq!(aov.nested[1].1.emitter_samples, 3);
+    // The depth settings the other tools read are the first nested integrator's.
+    assert_eq!(aov.max_depth, 7);
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    // `depth` on its own is known too.
+    let depth = format!("{SENSOR}\n<integrator type=\"depth\"/>");
+    let scene = load(&write_scene(&dir, "depth.xml", &depth)).unwrap();
+    assert_eq!(scene.integrator.unwrap().kind, "depth");
+}
+
+#[test]
+fn aov_integrator_errors_name_the_line() {
+    let dir = temp_dir("aov-errors");
+    let case = |file: &str, inner: &str, marker: &str, needle: &str| {
+        let body = format!("{SENSOR}\n<integrator type=\"aov\">\n{inner}\n</integrator>");
+        assert_body_error_at(&dir, file, &body, marker, needle);
+    };
+    case(
+        "kind.xml",
+        r#"<string name="aovs" value="a:depth,b:curvature"/>"#,
+        "curvature",
+        "unknown AOV kind \"curvature\"",
+    );
+    case(
+        "pair.xml",
+        r#"<string name="aovs" value="depth"/>"#,
+        "value=\"depth\"",
+        "not a <name>:<kind> pair",
+    );
+    case(
+        "boundary.xml",
+        r#"<string name="aovs" value="b:boundary_test"/>"#,
+        "boundary_test",
+        "not supported",
+    );
+    case(
+        "clash.xml",
+        r#"<string name="aovs" value="x:depth,x:depth"/>"#,
+        "x:depth",
+        "channel \"x.T\"",
+    );
+    case(
+        "sppm.xml",
+        "<string name=\"aovs\" value=\"d:depth\"/>\n<integrator type=\"sppm\"/>",
+        "type=\"sppm\"",
+        "nests sampling integrators",
+    );
+    case(
+        "nested-aov.xml",
+        "<string name=\"aovs\" value=\"d:depth\"/>\n<integrator type=\"aov\"><string name=\"aovs\" value=\"e:depth\"/></integrator>",
+        "type=\"aov\"><string",
+        "nests sampling integrators",
+    );
+    // Without `aovs` the error is at the integrator.
+    let body =
+        format!("{SENSOR}\n<integrator type=\"aov\">\n<integrator type=\"path\"/>\n</integrator>");
+    assert_body_error_at(
+        &dir,
+        "missing.xml",
+        &body,
+        "type=\"aov\"",
+        "missing parameter \"aovs\"",
+    );
+}
