@@ -176,6 +176,10 @@ fn write_values(
         out[k..k + values.len()].copy_from_slice(values);
         k += values.len();
     };
+    // ∂uv/∂x and ∂uv/∂y, traced once if either is asked for.
+    let mut partials = None;
+    let mut uv_partials_once =
+        || *partials.get_or_insert_with(|| uv_partials(si, &differentials()));
     for aov in aovs {
         match aov.kind {
             AovKind::Albedo => {
@@ -190,8 +194,8 @@ fn write_values(
             AovKind::ShadingNormal => put(&si.frame.n.to_array()),
             AovKind::DpDu => put(&si.dpdu.to_array()),
             AovKind::DpDv => put(&si.dpdv.to_array()),
-            AovKind::DuvDx => put(&uv_partials(si, &differentials())[0].to_array()),
-            AovKind::DuvDy => put(&uv_partials(si, &differentials())[1].to_array()),
+            AovKind::DuvDx => put(&uv_partials_once()[0].to_array()),
+            AovKind::DuvDy => put(&uv_partials_once()[1].to_array()),
             AovKind::PrimIndex => put(&[si.prim as f32]),
             AovKind::ShapeIndex => put(&[(si.shape + 1) as f32]),
         }
