@@ -636,6 +636,13 @@ fn build_aov_integrator<'a>(
         );
     }
     for (i, c) in channels.iter().enumerate() {
+        // OpenEXR's limit; a longer name makes a file other readers refuse.
+        if c.len() > 255 {
+            return Err(el.error(format!(
+                "the channel name \"{c}\" is {} bytes long: OpenEXR allows at most 255",
+                c.len()
+            )));
+        }
         if channels[..i].contains(c) {
             return Err(aovs_el.error(format!(
                 "two outputs of the aov integrator write the channel \"{c}\": give them \

@@ -3691,6 +3691,11 @@ fn aov_integrator_errors_name_the_line() {
         "type=\"aov\"><string",
         "nests sampling integrators",
     );
+    let long = "n".repeat(300);
+    let body = format!(
+        "{SENSOR}\n<integrator type=\"aov\">\n<string name=\"aovs\" value=\"{long}:depth\"/>\n</integrator>"
+    );
+    assert_body_error_at(&dir, "long.xml", &body, "type=\"aov\"", "at most 255");
     // Without `aovs` the error is at the integrator.
     let body =
         format!("{SENSOR}\n<integrator type=\"aov\">\n<integrator type=\"path\"/>\n</integrator>");
