@@ -77,6 +77,16 @@ pub enum ImageIoError {
         /// Number of pixels given.
         len: usize,
     },
+    /// A channel name OpenEXR cannot store (empty, longer than 255 bytes, or with a NUL).
+    #[error("{path}: channel name {name:?} {why}")]
+    ChannelName {
+        /// The file.
+        path: PathBuf,
+        /// The name.
+        name: String,
+        /// What is wrong.
+        why: &'static str,
+    },
 }
 
 /// A decoded image: width, height and row-major linear-RGB pixels (row 0 is the top row).
@@ -471,10 +481,23 @@ pub fn write_channels_exr(
     channels: Vec<(String, Vec<f32>)>,
 ) -> Result<(), ImageIoError> {
     use exr::prelude::{
-        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes,
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, Text,
         WritableImage,
     };
     let pixels = width as usize * height as usize;
+    for (name, _) in &channels {
+        let why = match name.len() {
+            0 => "is empty",
+            256.. => "is longer than OpenEXR's 255 bytes",
+            _ if name.contains('\0') => "holds a NUL character",
+            _ => continue,
+        };
+        return Err(ImageIoError::ChannelName {
+            path: path.to_owned(),
+            name: name.clone(),
+            why,
+        });
+    }
     if let Some((_, plane)) = channels.iter().find(|(_, p)| p.len() != pixels) {
         return Err(ImageIoError::SizeMismatch {
             path: path.to_owned(),
@@ -486,7 +509,14 @@ pub fn write_channels_exr(
     write_atomically(path, |tmp| {
         let list = channels
             .into_iter()
-            .map(|(name, plane)| AnyChannel::new(name.as_str(), FlatSamples::F32(plane)))
+            // UTF-8 bytes as they are, as OpenEXR stores names (exr's `Text::from` panics on
+            // characters beyond Latin-1).
+            .map(|(name, plane)| {
+                AnyChannel::new(
+                    Text::from_slice_unchecked(name.as_bytes()),
+                    FlatSamples::F32(plane),
+                )
+            })
             .collect();
         let layer = Layer::new(
             (width as usize, height as usize),
@@ -564,6 +594,44 @@ mod tests {
         assert_eq!(back, pixels);
         // No temporary file is left behind.
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn named_channels_round_trip_and_bad_names_are_refused() {
+        let dir = temp_dir("channels");
+        let path = dir.join("c.exr");
+        let planes = vec![
+            ("dd.y.T".to_string(), vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]),
+            (
+                "✓ normal.X".to_string(),
+                vec![-1.0, 0.5, 0.0, 7.0, 8.0, 9.0],
+            ),
+        ];
+        write_channels_exr(&path, 3, 2, planes.clone()).unwrap();
+        let image = exr::prelude::read_all_flat_layers_from_file(&path).unwrap();
+        let mut back: Vec<(Vec<u8>, Vec<f32>)> = image.layer_data[0]
+            .channel_data
+            .list
+            .iter()
+            .map(|c| {
+                let values = c.sample_data.values_as_f32().collect();
+                (c.name.bytes().to_vec(), values)
+            })
+            .collect();
+        back.sort_by(|a, b| a.0.cmp(&b.0));
+        let mut expected: Vec<_> = planes
+            .into_iter()
+            .map(|(n, p)| (n.into_bytes(), p))
+            .collect();
+        expected.sort_by(|a, b| a.0.cmp(&b.0));
+        assert_eq!(back, expected);
+        // A name OpenEXR cannot hold, or a plane of the wrong size: an error, no file.
+        for (name, len) in [(String::new(), 6), ("n".repeat(256), 6), ("a".into(), 5)] {
+            let bad = dir.join("bad.exr");
+            let err = write_channels_exr(&bad, 3, 2, vec![(name, vec![0.0; len])]).unwrap_err();
+            assert!(err.to_string().contains("bad.exr"), "{err}");
+            assert!(!bad.exists());
+        }
     }
 
     #[test]
