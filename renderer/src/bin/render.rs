@@ -54,8 +54,8 @@ struct Cli {
     /// participating media.
     #[arg(long, value_enum)]
     integrator: Option<IntegratorKind>,
-    /// Output: an RGB EXR for `path` and `direct` (its name ends in `.exr` or has no
-    /// extension); for the SPPM integrators the prefix of the bundles `<prefix>_p<passes>.exr`
+    /// Output: an RGB EXR for `path`, `volpath`, `direct` and `depth`, a multi-channel EXR for
+    /// `aov` (its name ends in `.exr` or has no extension); for the SPPM integrators the prefix of the bundles `<prefix>_p<passes>.exr`
     /// (a trailing `.exr` is dropped: `b.exr` gives `b_p0064.exr`). Missing folders are created.
     #[arg(long, visible_alias = "output", value_name = "PATH")]
     out: PathBuf,
