@@ -479,21 +479,10 @@ pub(super) fn build_integrator<'a>(
     if kind == "aov" {
         return build_aov_integrator(b, el);
     }
-    const INTEGRATORS: [&str; 9] = [
-        "path",
-        "sppm",
-        "volpath",
-        "volpathmis",
-        "prb",
-        "prb_basic",
-        "direct",
-        "depth",
-        "aov",
-    ];
-    if !INTEGRATORS.contains(&kind) {
+    if !SAMPLING_INTEGRATORS.contains(&kind) && kind != "sppm" {
         let err = el.error(format!(
-            "unknown plugin \"{kind}\" (supported integrators: {})",
-            INTEGRATORS.join(", ")
+            "unknown plugin \"{kind}\" (supported integrators: {}, sppm, aov)",
+            SAMPLING_INTEGRATORS.join(", ")
         ));
         b.diag.unknown(err)?;
     }
