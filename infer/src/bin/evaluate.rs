@@ -14,12 +14,19 @@ use infer::evaluate::config::EvalConfig;
 #[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Evaluation config (TOML), e.g. `configs/eval/small.toml`.
-    #[arg(long)]
-    config: PathBuf,
+    #[arg(long, required_unless_present = "combine")]
+    config: Option<PathBuf>,
+    /// Instead of evaluating, summarise finished evaluations together: the output directories
+    /// of earlier runs (each holding results.json), e.g. a dataset's test split and the
+    /// external scenes. Prints a Markdown table and the aggregates over all their scenes at the
+    /// largest pass count they share.
+    #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["config", "model", "limit", "resume"])]
+    combine: Vec<PathBuf>,
     /// Override the config's model directory.
     #[arg(long)]
     model: Option<PathBuf>,
-    /// Override the config's output directory.
+    /// Override the config's output directory; with `--combine`, the JSON file the combined
+    /// summary is written to.
     #[arg(long)]
     output: Option<PathBuf>,
     /// Evaluate only the first N scenes.
@@ -47,7 +54,10 @@ fn main() -> ExitCode {
 
 /// Returns whether every scene was evaluated.
 fn run(cli: &Cli) -> Result<bool> {
-    let mut config = EvalConfig::load(&cli.config)?;
+    let Some(config_path) = &cli.config else {
+        return combine(cli);
+    };
+    let mut config = EvalConfig::load(config_path)?;
     if let Some(m) = &cli.model {
         config.model = m.clone();
     }
@@ -84,4 +94,16 @@ fn run(cli: &Cli) -> Result<bool> {
         );
     }
     Ok(s.failed == 0)
+}
+
+/// `--combine`: the summary over several finished evaluations. Returns whether none of their
+/// scenes failed.
+fn combine(cli: &Cli) -> Result<bool> {
+    let combined = infer::evaluate::combine::combine(&cli.combine)?;
+    print!("{}", infer::evaluate::combine::markdown(&combined));
+    if let Some(path) = &cli.output {
+        infer::evaluate::combine::write_json(&combined, path)?;
+        println!("wrote {}", path.display());
+    }
+    Ok(combined.summary.failed == 0)
 }

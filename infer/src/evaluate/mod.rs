@@ -3,6 +3,7 @@
 //! writes results.json, convergence plots, comparison images and one self-contained HTML page.
 
 pub mod ablation;
+pub mod combine;
 pub mod compare;
 pub mod config;
 pub mod html;
