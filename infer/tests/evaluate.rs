@@ -275,6 +275,39 @@ fn evaluates_explicit_and_dataset_scenes() {
     assert_eq!(summary["failed"], 0);
     assert_eq!(summary["passes"], 4);
 
+    // `--combine` reads the finished evaluation back: the same scenes and aggregates.
+    let combined_json = dir.join("combined.json");
+    let combined = Command::new(env!("CARGO_BIN_EXE_evaluate"))
+        .arg("--combine")
+        .arg(&out)
+        .arg("--output")
+        .arg(&combined_json)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&combined.stdout);
+    assert!(
+        combined.status.success(),
+        "{}",
+        String::from_utf8_lossy(&combined.stderr)
+    );
+    assert!(
+        stdout.contains("| explicit-box |") && stdout.contains("| 001-box |"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("At 4 passes"), "{stdout}");
+    let back: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&combined_json).unwrap()).unwrap();
+    assert_eq!(back["summary"], results["summary"]);
+    // Evaluating and combining at once is refused by the argument parser.
+    let both = Command::new(env!("CARGO_BIN_EXE_evaluate"))
+        .arg("--config")
+        .arg(&config)
+        .arg("--combine")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(both.status.code(), Some(2));
+
     // `--resume` takes every finished scene from `out/scenes/`, with the same numbers.
     let resume = |config: &Path| {
         Command::new(env!("CARGO_BIN_EXE_evaluate"))
