@@ -177,39 +177,13 @@ pub fn build(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::evaluate::compare::Interpolated;
-    use crate::evaluate::scene::{Checkpoint, SceneEval};
+    use crate::evaluate::scene::fixtures::{self, scene};
+    use crate::evaluate::scene::Checkpoint;
 
     fn checkpoint(passes: u32, ours: f64, variants: Vec<f64>) -> Checkpoint {
         Checkpoint {
-            passes,
-            render_seconds: 1.0,
-            inference_seconds: 0.1,
-            total_seconds: 1.1,
-            ours_relmse: ours,
-            level_relmse: vec![1.0, 0.5, 2.0, 3.0, 4.0],
-            best_level: "z1".into(),
             variant_relmse: variants,
-            standard_equal_time: Interpolated {
-                relmse: 1.0,
-                extrapolated: false,
-            },
-            ratio_equal_time: ours,
-            standard_equal_passes: None,
-            standard_seconds_equal_passes: None,
-            overhead: None,
-        }
-    }
-
-    fn scene(name: &str, checkpoints: Vec<Checkpoint>) -> SceneResult {
-        SceneResult {
-            eval: Some(SceneEval {
-                width: 1,
-                height: 1,
-                checkpoints,
-                standard: Vec::new(),
-            }),
-            ..SceneResult::new(name.into(), PathBuf::from("s.xml"), PathBuf::from("r.exr"))
+            ..fixtures::checkpoint(passes, ours)
         }
     }
 

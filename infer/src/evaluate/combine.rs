@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use super::html::opt_sci;
 use super::{summarise, SceneResult, Summary};
 
 /// The part of an evaluation's `results.json` the combined summary needs.
@@ -121,39 +122,41 @@ fn describe_passes(dirs: &[PathBuf], stored: &[StoredResults]) -> String {
 
 /// The combined table as Markdown (scene rows, then the aggregates), as printed.
 pub fn markdown(c: &Combined) -> String {
-    let num = |v: Option<f64>, f: &dyn Fn(f64) -> String| v.map_or_else(|| "–".into(), f);
+    let ratio = |v: Option<f64>| v.map_or_else(|| "–".into(), |x| format!("{x:.3}"));
+    let overhead =
+        |v: Option<f64>| v.map_or_else(|| "–".into(), |x| format!("{:+.0} %", 100.0 * x));
     let mut out = String::from(
         "| evaluation | scene | photons/pass | ours relMSE | standard relMSE, equal time | ours / standard | overhead |\n\
          |---|---|---|---|---|---|---|\n",
     );
     for r in &c.rows {
-        let ratio = match (&r.error, r.ratio_equal_time) {
+        let outcome = match (&r.error, r.ratio_equal_time) {
             (Some(e), _) => format!("failed: {e}"),
-            (None, v) => num(v, &|x| format!("**{x:.3}**")),
+            (None, Some(_)) => format!("**{}**", ratio(r.ratio_equal_time)),
+            (None, None) => "–".into(),
         };
         out += &format!(
             "| {} | {} | {} | {} | {} | {} | {} |\n",
             r.evaluation.display(),
             r.scene,
             r.photons_per_pass,
-            num(r.ours_relmse, &|x| format!("{x:.3e}")),
-            num(r.standard_relmse_equal_time, &|x| format!("{x:.3e}")),
-            ratio,
-            num(r.overhead, &|x| format!("{:+.0} %", 100.0 * x)),
+            opt_sci(r.ours_relmse),
+            opt_sci(r.standard_relmse_equal_time),
+            outcome,
+            overhead(r.overhead),
         );
     }
     let s = &c.summary;
-    let evaluated = s.scenes - s.failed;
     out += &format!(
         "\nAt {} passes: ours better at equal time on {} of {} scenes ({} failed), median ratio {}, \
          geometric mean {}; median overhead per pass {}.\n",
         s.passes,
         s.ours_better_equal_time,
-        evaluated,
+        s.scenes - s.failed,
         s.failed,
-        num(s.median_ratio_equal_time, &|x| format!("{x:.3}")),
-        num(s.geomean_ratio_equal_time, &|x| format!("{x:.3}")),
-        num(s.median_overhead, &|x| format!("{:+.0} %", 100.0 * x)),
+        ratio(s.median_ratio_equal_time),
+        ratio(s.geomean_ratio_equal_time),
+        overhead(s.median_overhead),
     );
     out
 }
@@ -168,18 +171,13 @@ pub fn write_json(c: &Combined, path: &Path) -> Result<()> {
 mod tests {
     use super::*;
     use crate::evaluate::compare::Interpolated;
-    use crate::evaluate::scene::{Checkpoint, SceneEval};
+    use crate::evaluate::scene::fixtures::{self, scene};
+    use crate::evaluate::scene::Checkpoint;
 
     fn checkpoint(passes: u32, ours: f64, standard: f64, overhead: f64) -> Checkpoint {
         Checkpoint {
-            passes,
-            render_seconds: 1.0,
-            inference_seconds: 0.1,
-            total_seconds: 1.1,
-            ours_relmse: ours,
             level_relmse: vec![2.0 * ours; 5],
             best_level: "z4".into(),
-            variant_relmse: Vec::new(),
             standard_equal_time: Interpolated {
                 relmse: standard,
                 extrapolated: false,
@@ -188,18 +186,8 @@ mod tests {
             standard_equal_passes: Some(standard),
             standard_seconds_equal_passes: Some(1.0),
             overhead: Some(overhead),
+            ..fixtures::checkpoint(passes, ours)
         }
-    }
-
-    fn scene(name: &str, checkpoints: Vec<Checkpoint>) -> SceneResult {
-        let mut r = SceneResult::new(name.into(), "s.xml".into(), "r.exr".into());
-        r.eval = Some(SceneEval {
-            width: 4,
-            height: 4,
-            checkpoints,
-            standard: Vec::new(),
-        });
-        r
     }
 
     /// Writes `dir/results.json` with the fields an evaluation writes that `combine` reads.

@@ -35,7 +35,8 @@ fn sci(v: f64) -> String {
     }
 }
 
-fn opt_sci(v: Option<f64>) -> String {
+/// A relMSE in the report's scientific notation; "–" when absent or not finite.
+pub(crate) fn opt_sci(v: Option<f64>) -> String {
     v.map_or_else(|| "–".into(), sci)
 }
 

@@ -230,3 +230,47 @@ pub fn evaluate_scene(
         },
     ))
 }
+
+/// Hand-made results for the unit tests of the modules that aggregate them.
+#[cfg(test)]
+pub(crate) mod fixtures {
+    use super::{Checkpoint, SceneEval};
+    use crate::evaluate::compare::Interpolated;
+    use crate::evaluate::SceneResult;
+
+    /// A checkpoint where ours has relMSE `ours` and standard SPPM 1 at equal time; no
+    /// equal-pass figures, no overhead, no variants (tests override what they look at).
+    pub(crate) fn checkpoint(passes: u32, ours: f64) -> Checkpoint {
+        Checkpoint {
+            passes,
+            render_seconds: 1.0,
+            inference_seconds: 0.1,
+            total_seconds: 1.1,
+            ours_relmse: ours,
+            level_relmse: vec![1.0, 0.5, 2.0, 3.0, 4.0],
+            best_level: "z1".into(),
+            variant_relmse: Vec::new(),
+            standard_equal_time: Interpolated {
+                relmse: 1.0,
+                extrapolated: false,
+            },
+            ratio_equal_time: ours,
+            standard_equal_passes: None,
+            standard_seconds_equal_passes: None,
+            overhead: None,
+        }
+    }
+
+    /// An evaluated 1×1 scene with these checkpoints.
+    pub(crate) fn scene(name: &str, checkpoints: Vec<Checkpoint>) -> SceneResult {
+        SceneResult {
+            eval: Some(SceneEval {
+                width: 1,
+                height: 1,
+                checkpoints,
+                standard: Vec::new(),
+            }),
+            ..SceneResult::new(name.into(), "s.xml".into(), "r.exr".into())
+        }
+    }
+}
