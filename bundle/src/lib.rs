@@ -1,4 +1,4 @@
-//! The sample-bundle format (SPEC §3.5): the contract between the renderer and the network side.
+//! The sample-bundle format (docs/method.md §4): the contract between the renderer and the network side.
 //!
 //! A bundle is one single-part, multi-layer float32 OpenEXR file holding the five multi-level
 //! SPPM estimates (`y`, `z1`..`z4`), their variances of the mean, the G-buffer (albedo, normal,
@@ -11,13 +11,13 @@
 //! References (long renders) are plain RGB EXRs with channels `R`, `G`, `B`
 //! ([`write_rgb_exr_image`], [`read_rgb_exr_image`]).
 
+pub mod manifest;
+
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use exr::prelude::{
-    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image as ExrImage,
-    LayerAttributes, ReadChannels, ReadLayers, SmallVec, Text, WritableImage,
-};
+use exr::prelude::{AttributeValue, Text};
+use fileio::exr::{ExrError, ExrReadError};
 use serde::{Deserialize, Serialize};
 
 /// Names of the five estimate levels, sharpest first: `y` is the sharpest (independent)
@@ -265,59 +265,37 @@ impl Bundle {
     }
 }
 
-/// Writes `exr` to a temporary file next to `path`, then renames it over `path`, so readers
-/// never see a half-written file.
-fn write_atomic(
+/// Writes (full channel name, plane) pairs and text attributes as one EXR through
+/// [`fileio::exr`], the error naming `path`.
+fn write_exr(
     path: &Path,
-    exr: ExrImage<exr::image::Layer<AnyChannels<FlatSamples>>>,
-) -> Result<(), BundleError> {
-    let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-    let file_name = file_name.unwrap_or_else(|| "bundle.exr".into());
-    let tmp = path.with_file_name(format!(".{file_name}.tmp{}", std::process::id()));
-    if let Err(source) = exr.write().to_file(&tmp) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(match source {
-            exr::error::Error::Io(source) => BundleError::Io {
-                path: path.to_owned(),
-                error: source,
-            },
-            source => BundleError::Exr {
-                path: path.to_owned(),
-                error: source,
-            },
-        });
-    }
-    std::fs::rename(&tmp, path).map_err(|source| {
-        let _ = std::fs::remove_file(&tmp);
-        BundleError::Io {
-            path: path.to_owned(),
-            error: source,
-        }
-    })
-}
-
-/// Builds a single-part EXR image from (full channel name, plane) pairs.
-fn build_exr(
     width: usize,
     height: usize,
     channels: Vec<(String, Vec<f32>)>,
-    attributes: HashMap<Text, AttributeValue>,
-) -> ExrImage<exr::image::Layer<AnyChannels<FlatSamples>>> {
-    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
-        .into_iter()
-        .map(|(name, plane)| AnyChannel::new(name.as_str(), FlatSamples::F32(plane)))
-        .collect();
-    let layer_attributes = LayerAttributes {
-        other: attributes,
-        ..LayerAttributes::default()
-    };
-    let layer = exr::image::Layer::new(
-        (width, height),
-        layer_attributes,
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(list),
-    );
-    ExrImage::from_layer(layer)
+    attributes: &[(&str, &[u8])],
+) -> Result<(), BundleError> {
+    fileio::exr::write_channels(path, width, height, channels, attributes).map_err(|e| {
+        let path = path.to_owned();
+        match e {
+            ExrError::Io(error) => BundleError::Io { path, error },
+            ExrError::Exr(error) => BundleError::Exr { path, error },
+            ExrError::ChannelName { name, why } => BundleError::BadChannel {
+                path,
+                channel: name,
+                reason: format!("the name {why}"),
+            },
+            ExrError::Size { name, len, .. } => BundleError::BadChannel {
+                path,
+                channel: name,
+                reason: format!("{len} values for a {width}x{height} image"),
+            },
+            ExrError::Header(reason) => BundleError::Metadata {
+                path,
+                attribute: "header".into(),
+                reason,
+            },
+        }
+    })
 }
 
 /// Writes a bundle as one multi-layer float32 EXR, atomically (temp file + rename).
@@ -334,23 +312,17 @@ pub fn write_bundle(path: &Path, b: &Bundle) -> Result<(), BundleError> {
         attribute: META_ATTRIBUTE.into(),
         reason: e.to_string(),
     })?;
-    let mut attributes = HashMap::new();
     // OpenEXR string attributes are byte strings; UTF-8 passes through unchanged.
-    attributes.insert(
-        Text::from(META_ATTRIBUTE),
-        AttributeValue::Text(Text::from_slice_unchecked(json.as_bytes())),
-    );
-    attributes.insert(
-        Text::from(FORMAT_ATTRIBUTE),
-        AttributeValue::Text(Text::from(FORMAT_VERSION)),
-    );
-    let exr = build_exr(
+    write_exr(
+        path,
         b.meta.width as usize,
         b.meta.height as usize,
         channels,
-        attributes,
-    );
-    write_atomic(path, exr)
+        &[
+            (META_ATTRIBUTE, json.as_bytes()),
+            (FORMAT_ATTRIBUTE, FORMAT_VERSION.as_bytes()),
+        ],
+    )
 }
 
 /// A decoded EXR: resolution, channel planes by full name, header attributes.
@@ -362,38 +334,25 @@ struct Decoded {
 }
 
 impl Decoded {
-    /// Reads the first layer of an EXR with all channels and attributes.
+    /// Reads the first layer of an EXR with all channels and attributes ([`fileio::exr`]).
     fn read(path: &Path) -> Result<Self, BundleError> {
-        check_header(path)?;
-        let file = std::fs::File::open(path).map_err(|source| BundleError::Io {
-            path: path.to_owned(),
-            error: source,
+        let read = fileio::exr::read_channels(path).map_err(|e| {
+            let path = path.to_owned();
+            match e {
+                ExrReadError::Io(error) => BundleError::Io { path, error },
+                ExrReadError::Exr(error) => BundleError::Exr { path, error },
+                ExrReadError::DataWindow(reason) => BundleError::Metadata {
+                    path,
+                    attribute: "dataWindow".into(),
+                    reason,
+                },
+            }
         })?;
-        let image = exr::prelude::read()
-            .no_deep_data()
-            .largest_resolution_level()
-            .all_channels()
-            .first_valid_layer()
-            .all_attributes()
-            .pedantic()
-            .from_unbuffered(file)
-            .map_err(|source| BundleError::Exr {
-                path: path.to_owned(),
-                error: source,
-            })?;
-        let layer = image.layer_data;
-        let mut planes = HashMap::new();
-        for channel in layer.channel_data.list {
-            let name = String::from_utf8_lossy(channel.name.as_slice()).into_owned();
-            planes.insert(name, channel.sample_data.values_as_f32().collect());
-        }
-        let mut attributes = image.attributes.other;
-        attributes.extend(layer.attributes.other);
         Ok(Self {
-            width: layer.size.0,
-            height: layer.size.1,
-            planes,
-            attributes,
+            width: read.width,
+            height: read.height,
+            planes: read.planes,
+            attributes: read.attributes,
         })
     }
 
@@ -448,157 +407,6 @@ impl Decoded {
             None => Err(bad("missing")),
         }
     }
-}
-
-/// Decoded bytes a file may claim per byte it holds. Above the best ratio of any lossless EXR
-/// compression (deflate, as in ZIP: 1032:1), so no valid file is refused, while a corrupt
-/// header that claims gigabytes for a small file is refused before anything is allocated.
-const MAX_EXPANSION: u64 = 2048;
-
-/// Checks an EXR's headers before its pixels are decoded: each layer's data window must start
-/// at (0, 0) (the readers here index pixels from the window's corner) and its decoded size must
-/// be one the file's length can hold. The EXR library allocates what a header claims, so a
-/// single corrupt number would otherwise end the process on a failed allocation. The first
-/// header's raw window is checked before the library parses it, so that every corrupt window is
-/// an error naming `dataWindow` and its value.
-fn check_header(path: &Path) -> Result<(), BundleError> {
-    let io = |error| BundleError::Io {
-        path: path.to_owned(),
-        error,
-    };
-    let file_len = std::fs::metadata(path).map_err(io)?.len();
-    // The raw window first: the EXR library refuses some corrupt windows itself (coordinates
-    // beyond ±(2³⁰ − 1), a window its chunk count does not match) with messages that do not
-    // name the attribute.
-    let mut prefix = Vec::new();
-    {
-        use std::io::Read;
-        let file = std::fs::File::open(path).map_err(io)?;
-        file.take(RAW_HEADER_BYTES)
-            .read_to_end(&mut prefix)
-            .map_err(io)?;
-    }
-    if let Some((window, channels)) = raw_window_and_channels(&prefix) {
-        let [x0, y0, x1, y1] = window.map(i64::from);
-        check_window(
-            path,
-            file_len,
-            (x0, y0),
-            (x1 - x0 + 1, y1 - y0 + 1),
-            channels as u64,
-        )?;
-    }
-    let meta =
-        exr::meta::MetaData::read_from_file(path, true).map_err(|error| BundleError::Exr {
-            path: path.to_owned(),
-            error,
-        })?;
-    for header in meta.headers.iter() {
-        let position = header.own_attributes.layer_position;
-        check_window(
-            path,
-            file_len,
-            (i64::from(position.0), i64::from(position.1)),
-            (header.layer_size.0 as i64, header.layer_size.1 as i64),
-            header.channels.list.len() as u64,
-        )?;
-    }
-    Ok(())
-}
-
-/// Bytes at the start of a file searched for the first header's raw attributes (a bundle's
-/// header, its JSON metadata included, is a few kilobytes; a longer header is left to the EXR
-/// library). Kept small: every bundle read pays for it, on top of the library's own read.
-const RAW_HEADER_BYTES: u64 = 64 << 10;
-
-/// Refuses a data window (corner `position`, `size` in pixels, `channels` channels) that does
-/// not start at (0, 0), is empty, or holds more float32 samples than a file of `file_len` bytes
-/// can decode to: an error naming the attribute `dataWindow` and the offending value.
-fn check_window(
-    path: &Path,
-    file_len: u64,
-    position: (i64, i64),
-    size: (i64, i64),
-    channels: u64,
-) -> Result<(), BundleError> {
-    let bad = |reason: String| BundleError::Metadata {
-        path: path.to_owned(),
-        attribute: "dataWindow".into(),
-        reason,
-    };
-    if position != (0, 0) {
-        return Err(bad(format!(
-            "starts at ({}, {}); expected (0, 0)",
-            position.0, position.1
-        )));
-    }
-    let (width, height) = size;
-    if width <= 0 || height <= 0 {
-        return Err(bad(format!("{width}x{height} pixels: empty or inverted")));
-    }
-    let bytes = (width as u64)
-        .saturating_mul(height as u64)
-        .saturating_mul(channels)
-        .saturating_mul(4);
-    if bytes
-        > file_len
-            .saturating_mul(MAX_EXPANSION)
-            .saturating_add(1 << 20)
-    {
-        return Err(bad(format!(
-            "{width}x{height} pixels of {channels} channels cannot come from a file of \
-             {file_len} bytes (corrupt header)"
-        )));
-    }
-    Ok(())
-}
-
-/// The number of entries of a raw `chlist` attribute value: each a name, then 16 bytes (type,
-/// linear, reserved, sampling); an empty name ends the list.
-fn raw_channel_count(value: &[u8]) -> Option<usize> {
-    let (mut count, mut k) = (0, 0);
-    while *value.get(k)? != 0 {
-        k += value[k..].iter().position(|&b| b == 0)? + 1 + 16;
-        count += 1;
-    }
-    Some(count)
-}
-
-/// The first header's `dataWindow` (xMin, yMin, xMax, yMax) and number of channels, read from
-/// the raw attributes at the start of an EXR (`bytes`: magic number, version, then attributes
-/// as name, type, size, value); `None` where the header is not laid out so (the EXR library
-/// then reports it).
-fn raw_window_and_channels(bytes: &[u8]) -> Option<([i32; 4], usize)> {
-    let c_string = |at: usize| -> Option<(&[u8], usize)> {
-        let len = bytes.get(at..)?.iter().position(|&b| b == 0)?;
-        Some((&bytes[at..at + len], at + len + 1))
-    };
-    let i32_at = |at: usize| -> Option<i32> {
-        Some(i32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?))
-    };
-    let (mut window, mut channels) = (None, None);
-    let mut at = 8;
-    loop {
-        let (name, next) = c_string(at)?;
-        if name.is_empty() {
-            break;
-        }
-        let (kind, next) = c_string(next)?;
-        let size = usize::try_from(i32_at(next)?).ok()?;
-        let value_at = next + 4;
-        let end = value_at.checked_add(size)?;
-        let value = bytes.get(value_at..end)?;
-        match (name, kind) {
-            (b"dataWindow", b"box2i") if size == 16 => {
-                let n = |k: usize| i32_at(value_at + 4 * k);
-                window = Some([n(0)?, n(1)?, n(2)?, n(3)?]);
-            }
-            (b"channels", b"chlist") => channels = raw_channel_count(value),
-            _ => {}
-        }
-        at = end;
-    }
-    Some((window?, channels.unwrap_or(1)))
 }
 
 /// Checks what a bundle's header says about its origin: the format version this code reads,
@@ -733,10 +541,7 @@ pub fn write_rgb_exr_image(path: &Path, img: &Image) -> Result<(), BundleError> 
         .enumerate()
         .map(|(c, name)| ((*name).to_owned(), img.plane(c)))
         .collect();
-    write_atomic(
-        path,
-        build_exr(img.width, img.height, channels, HashMap::new()),
-    )
+    write_exr(path, img.width, img.height, channels, &[])
 }
 
 /// Reads the `R`, `G`, `B` channels of an EXR (other channels, e.g. `A`, are ignored).
@@ -948,36 +753,6 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    /// The raw header scan reads the data window and channel count the writer wrote, for
-    /// bundles with and without radii (27 and 32 channels) and for plain RGB images.
-    #[test]
-    fn raw_header_scan_finds_the_written_window_and_channels() {
-        let dir = temp_dir("raw-header");
-        for (with_radius, channels) in [(false, 27), (true, 32)] {
-            let path = dir.join(format!("b{with_radius}.exr"));
-            write_bundle(&path, &sample_bundle(7, 5, with_radius)).unwrap();
-            let bytes = std::fs::read(&path).unwrap();
-            assert_eq!(
-                raw_window_and_channels(&bytes),
-                Some(([0, 0, 6, 4], channels)),
-                "{}",
-                path.display()
-            );
-        }
-        let path = dir.join("rgb.exr");
-        write_rgb_exr_image(&path, &Image::new(9, 2, 3)).unwrap();
-        let bytes = std::fs::read(&path).unwrap();
-        assert_eq!(
-            raw_window_and_channels(&bytes),
-            Some(([0, 0, 8, 1], 3)),
-            "{}",
-            path.display()
-        );
-        // Not an EXR header: nothing found, the EXR library reports it.
-        assert_eq!(raw_window_and_channels(b"P6\n16 16\n255\n"), None);
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-
     /// The header must be this format's: another version, an unknown integrator, zero passes
     /// and negative variances, radii or depths are errors naming what is wrong.
     #[test]
@@ -1048,17 +823,12 @@ mod tests {
                 }
             }
         }
-        let mut attributes = HashMap::new();
         let json = serde_json::to_string(&b.meta).unwrap();
-        attributes.insert(
-            Text::from(META_ATTRIBUTE),
-            AttributeValue::Text(Text::from_slice_unchecked(json.as_bytes())),
-        );
-        attributes.insert(
-            Text::from(FORMAT_ATTRIBUTE),
-            AttributeValue::Text(Text::from(FORMAT_VERSION)),
-        );
-        write_atomic(&path, build_exr(4, 3, channels, attributes)).unwrap();
+        let attributes = [
+            (META_ATTRIBUTE, json.as_bytes()),
+            (FORMAT_ATTRIBUTE, FORMAT_VERSION.as_bytes()),
+        ];
+        write_exr(&path, 4, 3, channels, &attributes).unwrap();
         let err = read_bundle(&path).unwrap_err();
         let msg = err.to_string();
         assert!(matches!(err, BundleError::MissingChannel { .. }), "{msg}");

@@ -6,7 +6,7 @@
 //! mean of N runs keeps 1/N of it, and the spread between the runs measures it.
 
 use crate::fsutil::{remove_if_present, write_atomic};
-use crate::jobs::{RunSpec, SampleRenderer, StateSpec};
+use crate::jobs::{run_settings, RunSpec, SampleRenderer, StateSpec};
 use crate::manifest::{to_json, Manifest, SceneEntry};
 use crate::plan::Split;
 use anyhow::{bail, Context, Result};
@@ -44,7 +44,7 @@ pub struct AverageOptions {
 }
 
 /// The noise of one scene's references, relative to the noise-free limit of the same
-/// estimator: the SPEC §4 relMSE summand Σ s²/(ref² + 0.01) / (3·pixels), with s² the unbiased
+/// estimator: the relMSE summand (docs/method.md §5.6) Σ s²/(ref² + 0.01) / (3·pixels), with s² the unbiased
 /// per-sample variance across the runs. Variance only: the estimator's bias is not in it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneNoise {
@@ -216,7 +216,7 @@ pub fn mean_and_noise(images: &[Image]) -> (Image, f64) {
             / (n - 1.0);
         *m = mu as f32;
     }
-    // SPEC §4 relMSE weight of a pixel: 1 / ((mean over RGB of the reference)² + 0.01).
+    // relMSE weight (docs/method.md §5.6) of a pixel: 1 / ((mean over RGB of the reference)² + 0.01).
     let c = first.channels;
     let mut sum = 0.0;
     for (px, v) in mean.data.chunks(c).zip(var.chunks(c)) {
@@ -332,12 +332,14 @@ pub fn average_references(
             let rendered = !path.exists();
             let image = if rendered {
                 let spec = RunSpec {
-                    scene_id: scene.id.clone(),
-                    seed,
-                    photons_per_pass: scene.reference_photons,
+                    sppm: run_settings(
+                        &scene.id,
+                        seed,
+                        scene.reference_photons,
+                        manifest.config.render.max_depth,
+                        options.threads,
+                    ),
                     passes: vec![scene.reference_passes],
-                    max_depth: manifest.config.render.max_depth,
-                    threads: options.threads,
                     // A killed run continues from its state; removed once the image is written.
                     state: Some(StateSpec {
                         path: path.with_extension("state"),

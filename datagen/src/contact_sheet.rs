@@ -38,13 +38,8 @@ pub fn tonemap(img: &Image) -> Vec<[u8; 3]> {
         } else {
             0.0
         };
-        let v = v / (1.0 + 0.25 * v) * 1.25; // gentle shoulder, 1 ↦ 1
-        let s = if v <= 0.003_130_8 {
-            12.92 * v
-        } else {
-            1.055 * v.powf(1.0 / 2.4) - 0.055
-        };
-        (s.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+        // A gentle shoulder, 1 ↦ 1.
+        fileio::srgb::encode8(v / (1.0 + 0.25 * v) * 1.25)
     };
     img.data
         .chunks(img.channels)
@@ -115,14 +110,8 @@ pub fn write_contact_sheet(
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent)?;
     }
-    let mut bytes = Vec::new();
-    sheet
-        .write_to(
-            &mut std::io::Cursor::new(&mut bytes),
-            image::ImageFormat::Png,
-        )
-        .context("encoding PNG")?;
-    crate::fsutil::write_atomic(out, &bytes)
+    let (w, h) = (sheet.width() as usize, sheet.height() as usize);
+    fileio::png::write_rgb8(out, w, h, sheet.as_raw())
         .with_context(|| format!("writing {}", out.display()))?;
     Ok(images.len())
 }

@@ -4,9 +4,9 @@
 //! [`SampleRenderer`] so the bookkeeping is independent of the integrator.
 
 use crate::config::Config;
-use crate::exr_canon::sort_header_attributes;
 use crate::families::generate;
-use crate::fsutil::{remove_if_present, remove_stale_temps, sha256_file, temp_path, write_atomic};
+use crate::fsutil::{remove_if_present, sha256_file, write_atomic};
+use fileio::atomic::remove_stale_temps;
 use crate::manifest::{
     assemble_manifest, config_fingerprint, jobs_of_other_config, outputs_intact, read_record,
     to_json, JobRecord, SampleEntry, SceneEntry, MANIFEST_FORMAT,
@@ -23,18 +23,11 @@ use std::time::{Duration, Instant};
 /// What one render run needs to know.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunSpec {
-    /// Scene id (written into bundle metadata).
-    pub scene_id: String,
-    /// Render seed.
-    pub seed: u64,
-    /// Photons per pass.
-    pub photons_per_pass: u64,
+    /// The renderer's settings of the run (multi-level; its `scene_name` is the scene id written
+    /// into bundle metadata, its `threads` do not change the results).
+    pub sppm: SppmSettings,
     /// Pass counts to deliver (ascending); the reference uses only the last.
     pub passes: Vec<u32>,
-    /// Maximum path depth.
-    pub max_depth: u32,
-    /// Worker threads (0 = all cores); results do not depend on it.
-    pub threads: usize,
     /// Where a long run keeps its resumable state, so a killed job continues mid-run (the
     /// reference jobs give one; a renderer may ignore it).
     pub state: Option<StateSpec>,
@@ -42,6 +35,25 @@ pub struct RunSpec {
     pub defines: Vec<(String, String)>,
     /// The dataset's image size: a scene whose film differs is an error before rendering.
     pub size: (u32, u32),
+}
+
+/// The multi-level SPPM settings of a dataset run.
+pub fn run_settings(
+    scene_id: &str,
+    seed: u64,
+    photons_per_pass: u64,
+    max_depth: u32,
+    threads: usize,
+) -> SppmSettings {
+    SppmSettings {
+        photons_per_pass,
+        seed,
+        mode: SppmMode::MultiLevel,
+        max_depth,
+        threads,
+        scene_name: scene_id.to_owned(),
+        ..SppmSettings::default()
+    }
 }
 
 /// Where and how often a run saves its resumable state.
@@ -533,12 +545,14 @@ fn run_job(
     match *job {
         Job::Reference { .. } => {
             let spec = RunSpec {
-                scene_id: sp.id.clone(),
-                seed,
-                photons_per_pass: r.reference_photons_per_pass,
+                sppm: run_settings(
+                    &sp.id,
+                    seed,
+                    r.reference_photons_per_pass,
+                    r.max_depth,
+                    options.threads,
+                ),
                 passes: vec![r.reference_passes],
-                max_depth: r.max_depth,
-                threads: options.threads,
                 state: Some(state.clone()),
                 defines: defines.clone(),
                 size: (config.width, config.height),
@@ -561,7 +575,7 @@ fn run_job(
             })?;
             record.scene = Some(SceneEntry {
                 id: sp.id.clone(),
-                family: sp.family,
+                family: sp.family.name().to_owned(),
                 split: sp.split,
                 xml: manifest_xml,
                 reference: rel,
@@ -575,12 +589,8 @@ fn run_job(
         }
         Job::Inputs { seed_index, .. } => {
             let spec = RunSpec {
-                scene_id: sp.id.clone(),
-                seed,
-                photons_per_pass: r.photons_per_pass,
+                sppm: run_settings(&sp.id, seed, r.photons_per_pass, r.max_depth, options.threads),
                 passes: r.passes.clone(),
-                max_depth: r.max_depth,
-                threads: options.threads,
                 state: Some(state.clone()),
                 defines,
                 size: (config.width, config.height),
@@ -590,7 +600,7 @@ fn run_job(
                 Ok(SampleEntry {
                     bundle: rel,
                     scene: sp.id.clone(),
-                    family: sp.family,
+                    family: sp.family.name().to_owned(),
                     split: sp.split,
                     seed,
                     seed_index,
@@ -609,14 +619,8 @@ fn run_job(
                 b.meta.seconds = 0.0;
                 let rel = plan.bundle_path(sp.index, seed_index, passes);
                 let path = root.join(&rel);
-                write_output(&path, |tmp| {
-                    write_bundle(tmp, &b)?;
-                    // Byte-reproducible headers (see `exr_canon`).
-                    let mut bytes = std::fs::read(tmp)?;
-                    sort_header_attributes(&mut bytes)?;
-                    std::fs::write(tmp, &bytes)?;
-                    Ok(())
-                })?;
+                // (`write_bundle` writes byte-reproducible headers: `fileio::exr`.)
+                write_output(&path, |tmp| Ok(write_bundle(tmp, &b)?))?;
                 record.samples.push(sample_entry(rel, passes, &path)?);
                 Ok(())
             };
@@ -656,21 +660,14 @@ fn run_job(
     Ok(record)
 }
 
-/// Writes an output through `write` into a unique temp file, then renames it into place.
+/// Writes an output through `write` into a unique temp file, then renames it into place
+/// ([`fileio::atomic`]); its folder is created.
 fn write_output(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("creating {}", parent.display()))?;
     }
-    let tmp = temp_path(path);
-    let result = write(&tmp).and_then(|()| {
-        std::fs::File::open(&tmp)
-            .and_then(|f| f.sync_all())
-            .with_context(|| format!("syncing {}", tmp.display()))?;
-        std::fs::rename(&tmp, path).with_context(|| format!("renaming onto {}", path.display()))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    fileio::atomic::write_with(path, write).map_err(|e| {
+        e.into_error(|e| anyhow::Error::new(e).context(format!("renaming onto {}", path.display())))
+    })
 }

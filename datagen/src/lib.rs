@@ -6,7 +6,6 @@ pub mod average;
 pub mod check;
 pub mod config;
 pub mod contact_sheet;
-pub mod exr_canon;
 pub mod families;
 pub mod fsutil;
 pub mod jobs;

@@ -1,79 +1,17 @@
-//! The dataset manifest (`manifest.json`, read by the training side) and the per-job
-//! completion records (`records/<scene>/<job>.json`) it is assembled from. A record is written
+//! Writing the dataset manifest (`manifest.json`; its types are `bundle::manifest`'s, shared
+//! with the readers) and the per-job completion records (`records/<scene>/<job>.json`) it is assembled from. A record is written
 //! last, after all of its job's outputs, so its presence means the job finished; the manifest
 //! is the sorted union of all records and is identical however the jobs were sharded.
 
 use crate::config::Config;
 use crate::fsutil::{sha256_bytes, sha256_file, write_if_changed};
-use crate::plan::{Job, Plan, Split};
-use crate::scene::Family;
+use crate::plan::{Job, Plan};
+pub use bundle::manifest::{SampleEntry, SceneEntry, MANIFEST_FILE, MANIFEST_FORMAT};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-/// Format identifier of `manifest.json` and of job records.
-pub const MANIFEST_FORMAT: &str = "sppm-ml-dataset/1";
-
-/// File name of the manifest in the dataset root.
-pub const MANIFEST_FILE: &str = "manifest.json";
-
-/// One input bundle of the dataset.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SampleEntry {
-    /// Bundle EXR path relative to the dataset root.
-    pub bundle: String,
-    /// Scene id.
-    pub scene: String,
-    /// Scene family.
-    pub family: Family,
-    /// Split of the scene.
-    pub split: Split,
-    /// Render seed of the input run (< 2³²).
-    pub seed: u64,
-    /// Seed number 0..seeds within the scene.
-    pub seed_index: u32,
-    /// SPPM passes accumulated in this bundle.
-    pub passes: u32,
-    /// Photons per pass.
-    pub photons: u64,
-    /// Reference EXR path relative to the dataset root.
-    pub reference: String,
-    /// Lower-case hex SHA-256 of the bundle file.
-    pub sha256: String,
-}
-
-/// One scene of the dataset with its reference.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SceneEntry {
-    /// Scene id.
-    pub id: String,
-    /// Family.
-    pub family: Family,
-    /// Split.
-    pub split: Split,
-    /// Scene XML path relative to the dataset root.
-    pub xml: String,
-    /// Reference EXR path relative to the dataset root.
-    pub reference: String,
-    /// Lower-case hex SHA-256 of the reference file.
-    pub reference_sha256: String,
-    /// Render seed of the reference run.
-    pub reference_seed: u64,
-    /// Passes of the reference run.
-    pub reference_passes: u32,
-    /// Photons per pass of the reference run.
-    pub reference_photons: u64,
-    /// Fingerprint of the scene as rendered, for scenes the user brings (`external`; generated
-    /// scenes are a function of the config): lower-case hex SHA-256 over its `defines` and the
-    /// contents of the scene file and every file it reads (`renderer::state_file::scene_fingerprint`).
-    /// Datasets of the twelfth session wrote the scene file's hash alone, as `xml_sha256`.
-    #[serde(default, alias = "xml_sha256", skip_serializing_if = "Option::is_none")]
-    pub scene_sha256: Option<String>,
-    /// `<default>` overrides the scene is rendered with (scenes the user brings).
-    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
-    pub defines: std::collections::BTreeMap<String, String>,
-}
+/// The manifest written for a dataset of this config.
+pub type Manifest = bundle::manifest::Manifest<Config>;
 
 /// What a finished job produced (`records/<scene>/<job>.json`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -110,40 +48,6 @@ impl JobRecord {
             out.push((s.reference.as_str(), s.reference_sha256.as_str()));
         }
         out
-    }
-}
-
-/// The whole dataset description (`manifest.json`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Manifest {
-    /// [`MANIFEST_FORMAT`].
-    pub format: String,
-    /// Config preset name.
-    pub name: String,
-    /// Fingerprint of the configuration.
-    pub config_sha256: String,
-    /// Image width of every bundle and reference.
-    pub width: u32,
-    /// Image height of every bundle and reference.
-    pub height: u32,
-    /// Which level of the reference run the reference image is (`y`).
-    pub reference_level: String,
-    /// Scenes in id order.
-    pub scenes: Vec<SceneEntry>,
-    /// Samples ordered by (scene, seed_index, passes).
-    pub samples: Vec<SampleEntry>,
-    /// The configuration itself.
-    pub config: Config,
-}
-
-impl Manifest {
-    /// Reads `DIR/manifest.json`.
-    pub fn load(root: &Path) -> anyhow::Result<Self> {
-        let path = root.join(MANIFEST_FILE);
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
     }
 }
 

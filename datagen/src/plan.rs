@@ -8,39 +8,7 @@ use crate::rng::{hash_seq, hash_str, Rng};
 use crate::scene::Family;
 use serde::{Deserialize, Serialize};
 
-/// Which part of the dataset a scene belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Split {
-    /// Training scenes.
-    Train,
-    /// Validation scenes (model selection).
-    Val,
-    /// Held-out test scenes.
-    Test,
-}
-
-impl Split {
-    /// The name used in configs, manifests and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Split::Train => "train",
-            Split::Val => "val",
-            Split::Test => "test",
-        }
-    }
-}
-
-impl std::str::FromStr for Split {
-    type Err = String;
-
-    fn from_str(text: &str) -> Result<Self, String> {
-        [Split::Train, Split::Val, Split::Test]
-            .into_iter()
-            .find(|s| s.name() == text)
-            .ok_or_else(|| format!("unknown split `{text}` (train, val or test)"))
-    }
-}
+pub use bundle::manifest::Split;
 
 /// One planned scene.
 #[derive(Debug, Clone, PartialEq)]

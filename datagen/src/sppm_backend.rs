@@ -3,9 +3,9 @@
 //! one long multi-level run; inputs are bundles of one continuing run at each pass count.
 
 use crate::jobs::{RunSpec, SampleRenderer};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use bundle::{Bundle, Image};
-use renderer::integrators::sppm::{render_sppm_resumable, SppmMode, SppmSettings, StopCondition};
+use renderer::integrators::sppm::{render_sppm_resumable, StopCondition};
 use renderer::scene::Scene;
 use renderer::state_file::{scene_fingerprint, StateFile};
 use std::path::Path;
@@ -14,19 +14,16 @@ use std::path::Path;
 #[derive(Debug, Clone, Copy, Default)]
 pub struct SppmBackend;
 
-/// Loads and builds a scene with the run's `-D` overrides (strict import: every file must be
-/// fully supported) and checks that it renders at the dataset's size.
+/// Loads and builds a scene with the run's `-D` overrides under the toolkit's scene policy
+/// (`renderer::scene_file`, strict) and the dataset's own rules: the box filter and the
+/// dataset's image size, so that its bundles are alike.
 fn load(xml: &Path, spec: &RunSpec) -> Result<Scene> {
-    let desc = renderer::xml::load_scene(xml, &spec.defines, false)
-        .map_err(|e| anyhow!("{e}"))
-        .with_context(|| format!("loading {}", xml.display()))?;
-    // Strict as the import: a define the scene never reads (a misspelt name) is an error here,
-    // where it would otherwise shape a whole dataset unnoticed.
-    if let Some(unused) = desc.warnings.iter().find(|w| w.starts_with("-D ")) {
-        bail!("{}: {unused}", xml.display());
+    // The toolkit's scene policy (renderer::scene_file), strict: no --lenient for datasets.
+    let loaded = renderer::scene_file::load(xml, &spec.defines, false)?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {}: {w}", xml.display());
     }
-    let scene =
-        Scene::from_description(desc).with_context(|| format!("building {}", xml.display()))?;
+    let scene = loaded.scene;
     // Bundles of one dataset share the box filter (the generated scenes name it): another
     // filter spreads each sample over neighbouring pixels and smooths the inputs unlike the
     // rest of the data.
@@ -63,19 +60,6 @@ fn state_file(xml: &Path, spec: &RunSpec) -> Result<Option<StateFile>> {
     }))
 }
 
-/// SPPM settings of a run.
-fn settings(spec: &RunSpec) -> SppmSettings {
-    SppmSettings {
-        photons_per_pass: spec.photons_per_pass,
-        seed: spec.seed,
-        mode: SppmMode::MultiLevel,
-        max_depth: spec.max_depth,
-        threads: spec.threads,
-        scene_name: spec.scene_id.clone(),
-        ..SppmSettings::default()
-    }
-}
-
 impl SampleRenderer for SppmBackend {
     fn reference(
         &self,
@@ -92,7 +76,7 @@ impl SampleRenderer for SppmBackend {
         let mut reference = None;
         render_sppm_resumable(
             &scene,
-            &settings(spec),
+            &spec.sppm,
             &stop,
             state.as_ref(),
             |b| {
@@ -119,7 +103,7 @@ impl SampleRenderer for SppmBackend {
         let state = state_file(xml, spec)?;
         render_sppm_resumable(
             &scene,
-            &settings(spec),
+            &spec.sppm,
             &stop,
             state.as_ref(),
             on_bundle,

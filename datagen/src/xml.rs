@@ -1,6 +1,6 @@
 //! A minimal Mitsuba 3 XML writer: an element tree plus helpers for the plugin parameters the
 //! generators use (`rgb`, `float`, `matrix`, `lookat`, ...). Only features the project's
-//! importer supports (SPEC §3.1) are produced.
+//! importer supports (docs/method.md §2.1) are produced.
 
 use glam::{Mat4, Vec3};
 use std::fmt::Write;

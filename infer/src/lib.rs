@@ -1,13 +1,11 @@
-//! Post-reconstruction (SPEC §6): trained model directories, tiled inference with a halo that
-//! covers the receptive field, error reports against a reference, and PNG previews.
+//! Post-reconstruction (docs/method.md, "Inference"): a trained model applied to a bundle in
+//! tiles whose halo covers the receptive field ([`tiling`], on the native CPU engine or Burn),
+//! error reports against a reference ([`report`]) and PNG previews ([`preview`]). The `infer`
+//! binary also renders the bundle first when given a scene (`--scene`).
 
-pub mod evaluate;
-pub mod model_dir;
-pub mod native;
 pub mod preview;
 pub mod report;
 pub mod tiling;
 
-pub use model_dir::TrainedModel;
 pub use report::ErrorReport;
 pub use tiling::{reconstruct_tiled, Engine, Inference, Reconstruction};

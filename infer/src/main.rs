@@ -1,4 +1,4 @@
-//! `infer`: post-reconstruction in one command (SPEC §6). Reads a multi-level SPPM bundle, or
+//! `infer`: post-reconstruction in one command (docs/method.md §7). Reads a multi-level SPPM bundle, or
 //! renders one from a Mitsuba XML scene first, and combines its five levels with trained
 //! weights; writes the result as EXR (+ PNG previews) and, given a reference, the relMSE of
 //! every input level and of the output.
@@ -16,10 +16,10 @@ use clap::parser::ValueSource;
 use clap::{CommandFactory, FromArgMatches, Parser};
 use indicatif::{ProgressBar, ProgressStyle};
 use infer::preview::{write_side_by_side, write_weight_map, Panel};
-use infer::{reconstruct_tiled, Engine, ErrorReport, TrainedModel};
+use infer::{reconstruct_tiled, Engine, ErrorReport};
 use model::backend::Backend;
 use model::features::{interleaved, pack, planar_reference};
-use model::training::write_atomic;
+use model::model_dir::TrainedModel;
 
 /// Reconstruct a multi-level SPPM render with a trained combiner network.
 ///
@@ -182,7 +182,7 @@ fn main() -> ExitCode {
     let cli = parse_cli();
     // Every parallel part (the render, the native engine, Burn's CPU backends) runs on rayon:
     // one pool of `--threads` bounds them all.
-    let result = renderer::film::with_threads(cli.threads, || run(&cli)).and_then(|r| r);
+    let result = renderer::threads::with_threads(cli.threads, || run(&cli)).and_then(|r| r);
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -430,7 +430,8 @@ fn run(cli: &Cli) -> Result<()> {
         let report = ErrorReport::new(&packed, &result.image, r);
         print!("{}", report.to_text());
         let json = report_path(&output);
-        write_atomic(&json, &serde_json::to_string_pretty(&report)?).map_err(anyhow::Error::msg)?;
+        fileio::atomic::write_bytes(&json, serde_json::to_string_pretty(&report)?.as_bytes())
+            .with_context(|| format!("writing {}", json.display()))?;
         written.push(json);
     }
     println!("wrote:");
@@ -461,16 +462,11 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
         renderer::integrators::sppm::check_time_limit(t)
             .map_err(|why| anyhow::anyhow!("--time {why}"))?;
     }
-    let desc = renderer::xml::load_scene(scene_path, &cli.define, cli.lenient)
-        .map_err(|e| renderer::xml::load_error(e, scene_path))?;
-    for w in &desc.warnings {
+    let loaded = renderer::scene_file::load_for_sppm(scene_path, &cli.define, cli.lenient)?;
+    for w in &loaded.warnings {
         eprintln!("warning: {w}");
     }
-    if let Some(w) = renderer::integrators::sppm::filter_warning(desc.camera.filter) {
-        eprintln!("warning: {w}");
-    }
-    let scene = renderer::scene::Scene::from_description(desc)
-        .with_context(|| format!("building {}", scene_path.display()))?;
+    let scene = loaded.scene;
     create_parent_dir("--output", output).map_err(anyhow::Error::msg)?;
     let settings = SppmSettings {
         photons_per_pass: cli.photons,

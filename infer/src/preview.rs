@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use renderer::image_io::linear_to_srgb;
+use fileio::srgb::encode8;
 
 /// Gap between panels in pixels (white).
 const GAP: usize = 4;
@@ -13,10 +13,6 @@ const GAP: usize = 4;
 pub struct Panel<'a> {
     /// Planar RGB data.
     pub planes: &'a [f32],
-}
-
-fn encode(v: f32) -> u8 {
-    (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8
 }
 
 /// Writes `panels` (each `width`×`height`, planar linear RGB) left to right into one sRGB PNG,
@@ -37,7 +33,7 @@ pub fn write_side_by_side(
             for x in 0..width {
                 let d = (y * total_w + x_off + x) * 3;
                 for c in 0..3 {
-                    bytes[d + c] = encode(panel.planes[c * pixels + y * width + x]);
+                    bytes[d + c] = encode8(panel.planes[c * pixels + y * width + x]);
                 }
             }
         }
@@ -59,19 +55,6 @@ pub fn write_weight_map(path: &Path, width: usize, height: usize, shares: &[f32]
 }
 
 fn save_png(path: &Path, width: usize, height: usize, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
-    image::save_buffer_with_format(
-        &tmp,
-        bytes,
-        width as u32,
-        height as u32,
-        image::ExtendedColorType::Rgb8,
-        image::ImageFormat::Png,
-    )
-    .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
+    fileio::png::write_rgb8(path, width, height, bytes)
+        .with_context(|| format!("writing {}", path.display()))
 }

@@ -1,4 +1,4 @@
-//! Error report against a reference: relMSE (SPEC §4) of every input level and of the output.
+//! Error report against a reference: relMSE (docs/method.md §5.6) of every input level and of the output.
 
 use model::features::PackedImage;
 use model::metrics::relmse_planar;

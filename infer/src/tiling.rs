@@ -29,10 +29,10 @@ use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor, TensorData};
 use model::combine::{combine_block, level_weight_shares_block};
 use model::features::PackedImage;
-use model::model::{positive_weights, LEVELS};
+use model::network::{positive_weights, LEVELS};
 
-use crate::native::{grow, CombinationInputs, NativeNetwork, Rect};
-use crate::TrainedModel;
+use model::model_dir::TrainedModel;
+use model::native::{grow, CombinationInputs, NativeNetwork, Rect};
 
 /// Which code runs the network and the combination.
 #[derive(
@@ -210,7 +210,7 @@ pub fn reconstruct_tiled(
 
 /// The packed image reduced to the levels `model` combines (borrowed when it reads all five).
 fn model_levels<'a>(model: &TrainedModel, packed: &'a PackedImage) -> Cow<'a, PackedImage> {
-    if model.config.levels == model::model::all_levels() {
+    if model.config.levels == model::network::all_levels() {
         Cow::Borrowed(packed)
     } else {
         Cow::Owned(packed.select_levels(&model.config.levels))
@@ -321,7 +321,7 @@ pub fn reconstruct_banded(
                 ),
                 device,
             );
-            // Clamped at zero like `model::training::reconstruct` (what the loss saw).
+            // Clamped at zero like `model::combine::reconstruct` (what the loss saw).
             let combined = combine_block(levels, weights.clone(), window, margins)
                 .clamp_min(0.0)
                 .into_data()
@@ -430,5 +430,66 @@ mod tests {
             .collect();
         let out = crop_planes(&data, 2, 3, 2, [1, 0, 3, 2]);
         assert_eq!(out, vec![1.0, 2.0, 4.0, 5.0, 11.0, 12.0, 14.0, 15.0]);
+    }
+
+    /// A model directory that combines two levels (Dual) reconstructs from its levels only.
+    #[test]
+    fn dual_model_directory_reconstructs_from_its_levels() {
+        use model::model_dir::{CONFIG_FILE, WEIGHTS_FILE};
+        use model::synthetic::synthetic_sample;
+        use model::weights::save_burnpack;
+        use model::{ModelConfig, Preset};
+        let dir = std::env::temp_dir().join(format!("model-dir-dual-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let device = Device::flex();
+        let config = ModelConfig::preset(Preset::Tiny).with_levels(vec![0, 3]);
+        save_burnpack(&config.init(4, &device), &dir.join(WEIGHTS_FILE)).unwrap();
+        std::fs::write(
+            dir.join(CONFIG_FILE),
+            serde_json::to_string(&config).unwrap(),
+        )
+        .unwrap();
+        let model = TrainedModel::open(&dir, &device).unwrap();
+        assert_eq!(model.config.levels, vec![0, 3]);
+
+        // ỹ copied into z̃3: the dual combination must return ỹ (consistency), tiled or not,
+        // whatever z̃1, z̃2, z̃4 hold; all weight sits on z̃3.
+        let mut packed = synthetic_sample(13, 11, 0.2, 8).packed;
+        let pixels = packed.pixels();
+        let y = packed.level(0).to_vec();
+        packed.levels[9 * pixels..12 * pixels].copy_from_slice(&y);
+        for (tile, engine) in [
+            (0, Engine::Burn),
+            (4, Engine::Burn),
+            (0, Engine::Native),
+            (4, Engine::Native),
+        ] {
+            let rec = reconstruct_tiled(&model, &packed, tile, engine, &device, |_, _| {});
+            for (o, e) in rec.image.iter().zip(&y) {
+                assert!(
+                    (o - e).abs() <= 1e-4 * e.abs().max(1.0),
+                    "tile {tile} {engine:?}: {o} vs {e}"
+                );
+            }
+            assert_eq!(rec.shares.len(), 4 * pixels);
+            for (j, plane) in rec.shares.chunks(pixels).enumerate() {
+                let want = if j == 2 { 1.0 } else { 0.0 };
+                assert!(
+                    plane.iter().all(|s| (s - want).abs() < 1e-5),
+                    "share plane {j}"
+                );
+            }
+        }
+
+        // A model.json whose levels disagree with in_channels is refused, naming the file.
+        let mut bad = config.clone();
+        bad.in_channels = 27;
+        std::fs::write(dir.join(CONFIG_FILE), serde_json::to_string(&bad).unwrap()).unwrap();
+        let err = TrainedModel::open(&dir, &device).err().unwrap().to_string();
+        assert!(
+            err.contains("model.json") && err.contains("in_channels"),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

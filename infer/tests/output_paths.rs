@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 
 use burn::tensor::Device;
-use model::training::save_burnpack;
+use model::weights::save_burnpack;
 use model::{ModelConfig, Preset, Weighting};
 
 fn temp_dir(name: &str) -> PathBuf {

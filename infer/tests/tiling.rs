@@ -6,10 +6,11 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use burn::tensor::Device;
-use infer::{reconstruct_tiled, Engine, TrainedModel};
+use infer::{reconstruct_tiled, Engine};
+use model::model_dir::TrainedModel;
 use model::features::pack;
 use model::synthetic::{synthetic_bundle, with_biases, with_distinct_biases};
-use model::training::save_burnpack;
+use model::weights::save_burnpack;
 use model::{ModelConfig, Network, Preset, Weighting};
 
 fn temp_dir(name: &str) -> PathBuf {

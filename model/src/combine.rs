@@ -12,6 +12,8 @@ use burn::tensor::module::unfold4d;
 use burn::tensor::ops::{PadMode, UnfoldOptions};
 use burn::tensor::{Device, Tensor, TensorData};
 
+use crate::network::{ModelConfig, Network};
+
 /// 1 where window entry k of pixel p lies inside the `height`×`width` image, else 0; shape
 /// `[1, 1, 1, window², height·width]`, entries ordered like `unfold4d` (row-major offsets).
 pub fn inside_mask(height: usize, width: usize, window: usize, device: &Device) -> Tensor<5> {
@@ -161,6 +163,22 @@ pub fn level_weight_shares_block(
     let total = sums.clone().sum_dim(1);
     (sums / total).reshape([batch, pairs, height, width])
 }
+
+/// Forward pass of network + combination: `[B, 3, P, P]` reconstruction of a batch, clamped
+/// at zero.
+///
+/// Eq. 6 is a control-variate form (ỹ_i + z̃_c − z̃_i) and goes negative next to bright spots
+/// that the smooth levels spread out; the loss (docs/method.md §5.5, Eq. 8) sees ŷ clamped ≥ 0, so the
+/// clamped image is what the network was trained to produce — and radiance is never negative.
+pub fn reconstruct(
+    model: &Network,
+    config: &ModelConfig,
+    features: Tensor<4>,
+    levels: Tensor<4>,
+) -> Tensor<4> {
+    combine(levels, model.weights(features), config.window).clamp_min(0.0)
+}
+
 
 #[cfg(test)]
 mod tests {

@@ -12,7 +12,7 @@
 
 use bundle::{Bundle, Image};
 
-use crate::model::{GBUFFER_CHANNELS, INPUT_CHANNELS, LEVELS};
+use crate::network::{GBUFFER_CHANNELS, INPUT_CHANNELS, LEVELS};
 
 /// Number of raw colour planes: five RGB estimates.
 pub const COLOUR_CHANNELS: usize = 3 * LEVELS;
@@ -42,7 +42,7 @@ impl PackedImage {
     }
 
     /// The network input of a model combining `levels` (indices into ỹ, z̃1..z̃4, as checked by
-    /// [`crate::model::validate_levels`]): the feature planes of [`feature_channels`] and the raw
+    /// [`crate::network::validate_levels`]): the feature planes of [`feature_channels`] and the raw
     /// colours of [`colour_channels`], in that order.
     pub fn select_levels(&self, levels: &[usize]) -> PackedImage {
         let pixels = self.pixels();
@@ -241,7 +241,7 @@ pub fn interleaved(planes: &[f32], w: usize, h: usize, channels: usize) -> Image
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{all_levels, input_channels};
+    use crate::network::{all_levels, input_channels};
 
     /// A 2×1 packed image whose plane `c` holds `100·c + pixel`, so a value names its plane.
     fn labelled() -> PackedImage {

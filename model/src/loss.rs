@@ -10,11 +10,11 @@ use crate::metrics::relmse;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Loss {
-    /// Paper Eq. 8 (SPEC §4): relative L1 of log(1 + x); robust to the outliers of noisy
+    /// Paper Eq. 8 (docs/method.md §5.5): relative L1 of log(1 + x); robust to the outliers of noisy
     /// references, the loss every run starts with.
     #[default]
     RelativeLogL1,
-    /// The evaluation metric itself, relMSE (SPEC §4): squares the error, so it weighs the few
+    /// The evaluation metric itself, relMSE (docs/method.md §5.6): squares the error, so it weighs the few
     /// pixels with large errors (caustic and shadow edges) that dominate the evaluated figure
     /// far more than Eq. 8 does. Meant for fine-tuning a network trained with Eq. 8.
     Relmse,

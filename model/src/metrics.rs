@@ -1,4 +1,4 @@
-//! Image error metrics: relative MSE (SPEC §4), on tensors and on host images.
+//! Image error metrics: relative MSE (docs/method.md §5.6), on tensors and on host images.
 
 use burn::tensor::Tensor;
 

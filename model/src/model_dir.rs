@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::training::load_burnpack;
+use crate::weights::load_burnpack;
 use crate::{ModelConfig, Network};
 use burn::tensor::Device;
 

@@ -8,13 +8,14 @@
 
 use bundle::{Bundle, BundleMeta, Image};
 use burn::module::{Module, ModuleMapper, Param};
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use crate::data::Sample;
+use crate::sample::Sample;
 use crate::features::{interleaved, pack, planar_reference};
-use crate::model::Network;
+use crate::combine::reconstruct;
+use crate::network::{ModelConfig, Network};
 
 /// Approximately standard-normal noise (sum of four uniforms, rescaled).
 fn gaussian(rng: &mut Pcg64Mcg) -> f32 {
@@ -161,4 +162,73 @@ pub fn with_distinct_biases(network: Network) -> Network {
     with_biases(network, |n| {
         (0.3 * (2.0 * (0.3 + n as f64 * 0.618_033_988_749_895).fract() - 1.0)) as f32
     })
+}
+
+/// A convolution's bias values.
+pub fn conv_bias(conv: &burn::nn::conv::Conv2d) -> Vec<f32> {
+    let b = conv.bias.as_ref().expect("convolutions have a bias");
+    b.val().into_data().try_to_vec::<f32>().unwrap_or_default()
+}
+
+/// Parameter values of a network, flattened in visiting order (weights, then bias, layer by
+/// layer).
+pub fn parameters(network: &Network) -> Vec<f32> {
+    let mut out = Vec::new();
+    for conv in network.hidden.iter().chain(std::iter::once(&network.output)) {
+        out.extend(
+            conv.weight
+                .val()
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap_or_default(),
+        );
+        out.extend(conv_bias(conv));
+    }
+    out
+}
+
+/// The reconstruction (network + combination, clamped at zero) of the 12×10 synthetic sample
+/// of `seed`, planar RGB.
+pub fn synthetic_reconstruction(
+    network: &Network,
+    config: &ModelConfig,
+    seed: u64,
+    device: &Device,
+) -> Vec<f32> {
+    let s = synthetic_sample(12, 10, 0.3, seed);
+    let f = Tensor::<4>::from_data(
+        TensorData::new(s.packed.features.clone(), [1, 27, 10, 12]),
+        device,
+    );
+    let l = Tensor::<4>::from_data(
+        TensorData::new(s.packed.levels.clone(), [1, 15, 10, 12]),
+        device,
+    );
+    reconstruct(network, config, f, l)
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap_or_default()
+}
+
+/// The raw network output on the features of the 12×10 synthetic sample of seed 4.
+pub fn synthetic_raw_output(network: &Network, device: &Device) -> Vec<f32> {
+    let s = synthetic_sample(12, 10, 0.3, 4);
+    let f = Tensor::<4>::from_data(
+        TensorData::new(s.packed.features.clone(), [1, 27, 10, 12]),
+        device,
+    );
+    network
+        .forward(f)
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap_or_default()
+}
+
+/// The largest difference between `a` and `b` relative to the magnitude (at least 1).
+pub fn max_relative_difference(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len(), "compared slices differ in length");
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
+        .fold(0.0f32, f32::max)
 }

@@ -55,19 +55,13 @@ pub fn write_atomically(
     path: &Path,
     draw: impl FnOnce(&Path) -> Result<(), Box<dyn Error>>,
 ) -> Result<(), String> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".tmp{}-{name}", std::process::id()));
-    let drawn = register_font()
-        .map_err(|e| e.into())
-        .and_then(|()| draw(&tmp));
-    if let Err(e) = drawn {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(format!("drawing {}: {e}", path.display()));
-    }
-    std::fs::rename(&tmp, path).map_err(|e| format!("writing {}: {e}", path.display()))
+    fileio::atomic::write_with(path, |tmp| {
+        register_font().map_err(|e| e.into()).and_then(|()| draw(tmp))
+    })
+    .map_err(|e| match e {
+        fileio::atomic::AtomicError::Write(e) => format!("drawing {}: {e}", path.display()),
+        fileio::atomic::AtomicError::Commit(e) => format!("writing {}: {e}", path.display()),
+    })
 }
 
 #[cfg(test)]

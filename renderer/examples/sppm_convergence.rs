@@ -17,7 +17,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use bundle::{read_rgb_exr_image, write_bundle, write_rgb_exr_image, Image, LEVEL_NAMES};
 use clap::Parser;
-use renderer::film::with_threads;
+use renderer::threads::with_threads;
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
 use renderer::integrators::RayIntegrator;

@@ -31,6 +31,15 @@ pub enum ImageIoError {
         /// The underlying error.
         error: exr::error::Error,
     },
+    /// An OpenEXR file without the R, G and B channels of its first layer, or with a data
+    /// window the reader cannot take.
+    #[error("{path}: OpenEXR: {why}")]
+    ExrLayout {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
     /// The PNG decoder or encoder failed.
     #[error("{path}: PNG: {error}")]
     Png {
@@ -166,25 +175,6 @@ fn format_of(path: &Path) -> Result<Format, ImageIoError> {
     }
 }
 
-/// The sRGB electro-optical transfer function: encoded value in [0, 1] → linear.
-pub fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// The inverse sRGB transfer function: linear → encoded value (inputs clamped to [0, 1]).
-pub fn linear_to_srgb(v: f32) -> f32 {
-    let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
-    if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
-}
-
 /// Reads a PNG, JPEG, TGA or BMP (sRGB → linear), Radiance HDR or EXR (linear) image as
 /// linear RGB. Alpha is ignored; grey-scale images are expanded to three equal channels.
 pub fn read_rgb_image(path: &Path) -> Result<RgbImage, ImageIoError> {
@@ -248,7 +238,7 @@ fn read_hdr(path: &Path) -> Result<RgbImage, ImageIoError> {
 fn rgb_image(decoded: image::DynamicImage, srgb: bool) -> RgbImage {
     let rgb = decoded.to_rgb32f();
     let (width, height) = rgb.dimensions();
-    let decode = |v: f32| if srgb { srgb_to_linear(v) } else { v };
+    let decode = |v: f32| if srgb { fileio::srgb::decode(v) } else { v };
     let pixels = rgb
         .pixels()
         .map(|p| Rgb::new(decode(p.0[0]), decode(p.0[1]), decode(p.0[2])))
@@ -340,27 +330,32 @@ fn read_pfm(path: &Path) -> Result<RgbImage, ImageIoError> {
 }
 
 fn read_exr(path: &Path) -> Result<RgbImage, ImageIoError> {
-    // Open the file ourselves so that "not found" is an I/O error naming the file.
-    std::fs::metadata(path).map_err(|error| ImageIoError::Io {
-        path: path.to_owned(),
-        error,
+    use fileio::exr::ExrReadError;
+    let read = fileio::exr::read_channels(path).map_err(|e| match e {
+        ExrReadError::Io(error) => ImageIoError::Io {
+            path: path.to_owned(),
+            error,
+        },
+        ExrReadError::Exr(error) => exr_error(path, error),
+        e @ ExrReadError::DataWindow(_) => ImageIoError::ExrLayout {
+            path: path.to_owned(),
+            why: e.to_string(),
+        },
     })?;
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |resolution, _| {
-            (
-                resolution.width(),
-                vec![Rgb::ZERO; resolution.width() * resolution.height()],
-            )
-        },
-        |(width, pixels): &mut (usize, Vec<Rgb>), position, (r, g, b, _a): (f32, f32, f32, f32)| {
-            pixels[position.y() * *width + position.x()] = Rgb::new(r, g, b);
-        },
-    )
-    .map_err(|error| exr_error(path, error))?;
-    let size = image.layer_data.size;
-    let (_, pixels) = image.layer_data.channel_data.pixels;
-    Ok((size.width() as u32, size.height() as u32, pixels))
+    let [r, g, b] = fileio::exr::RGB.map(|name| {
+        read.planes
+            .get(name)
+            .filter(|plane| plane.len() == read.width * read.height)
+            .ok_or_else(|| ImageIoError::ExrLayout {
+                path: path.to_owned(),
+                why: format!("no channel `{name}` of {}x{} pixels", read.width, read.height),
+            })
+    });
+    let (r, g, b) = (r?, g?, b?);
+    let pixels = (0..read.width * read.height)
+        .map(|i| Rgb::new(r[i], g[i], b[i]))
+        .collect();
+    Ok((read.width as u32, read.height as u32, pixels))
 }
 
 fn check_size(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result<(), ImageIoError> {
@@ -375,54 +370,24 @@ fn check_size(path: &Path, width: u32, height: u32, pixels: &[Rgb]) -> Result<()
     Ok(())
 }
 
-/// A temporary path next to `path` (same directory, so the rename is atomic).
-fn temp_path_for(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "image".into());
-    // Keep the real extension last: the PNG encoder picks the format from it.
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let unique = format!("{}.{:?}", std::process::id(), std::thread::current().id())
-        .replace(|c: char| !c.is_ascii_alphanumeric(), "");
-    path.with_file_name(format!(".{name}.tmp{unique}.{ext}"))
-}
-
-/// Writes via `write_temp` into a temporary file, then renames it over `path`.
-fn write_atomically(
-    path: &Path,
-    write_temp: impl FnOnce(&Path) -> Result<(), ImageIoError>,
-) -> Result<(), ImageIoError> {
-    let tmp = temp_path_for(path);
-    if let Err(e) = write_temp(&tmp) {
-        let _ = std::fs::remove_file(&tmp);
-        // Name the real target, not the temporary file, in the error.
-        return Err(match e {
-            ImageIoError::Io { error, .. } => ImageIoError::Io {
-                path: path.to_owned(),
-                error,
-            },
-            ImageIoError::Exr { error, .. } => ImageIoError::Exr {
-                path: path.to_owned(),
-                error,
-            },
-            ImageIoError::Png { error, .. } => ImageIoError::Png {
-                path: path.to_owned(),
-                error,
-            },
-            other => other,
-        });
+/// The renderer's error for a failed [`fileio::exr`] write of `path`.
+fn exr_write_error(path: &Path, error: fileio::exr::ExrError) -> ImageIoError {
+    use fileio::exr::ExrError;
+    let path = path.to_owned();
+    match error {
+        ExrError::Io(error) => ImageIoError::Io { path, error },
+        ExrError::Exr(error) => exr_error(&path, error),
+        ExrError::ChannelName { name, why } => ImageIoError::ChannelName { path, name, why },
+        ExrError::Header(why) => ImageIoError::ExrLayout { path, why },
+        ExrError::Size {
+            width, height, len, ..
+        } => ImageIoError::SizeMismatch {
+            path,
+            width: width as u32,
+            height: height as u32,
+            len,
+        },
     }
-    std::fs::rename(&tmp, path).map_err(|error| {
-        let _ = std::fs::remove_file(&tmp);
-        ImageIoError::Io {
-            path: path.to_owned(),
-            error,
-        }
-    })
 }
 
 /// The error of reading or writing the EXR `path`: an I/O error as such, anything else as the
@@ -440,58 +405,36 @@ fn exr_error(path: &Path, error: exr::error::Error) -> ImageIoError {
     }
 }
 
-/// Writes a float32 RGB OpenEXR (channels `R`, `G`, `B`), atomically. The blocks are ZIP
-/// compressed in increasing line order, as bundles are: the file's bytes are a function of the
-/// pixels alone (the `exr` crate's default, tiles in unspecified order, stores them in the
-/// order its compression threads finish).
+/// Writes a float32 RGB OpenEXR (channels `R`, `G`, `B`), atomically, through
+/// [`fileio::exr`] (ZIP-compressed in increasing line order: the file's bytes are a function of
+/// the pixels alone).
 pub fn write_rgb_exr(
     path: &Path,
     width: u32,
     height: u32,
     pixels: &[Rgb],
 ) -> Result<(), ImageIoError> {
-    use exr::prelude::{Encoding, Image, Layer, LayerAttributes, SpecificChannels, WritableImage};
     check_size(path, width, height, pixels)?;
-    write_atomically(path, |tmp| {
-        let w = width as usize;
-        let channels = SpecificChannels::rgb(|exr::math::Vec2(x, y): exr::math::Vec2<usize>| {
-            let p = pixels[y * w + x];
-            (p.x, p.y, p.z)
-        });
-        let layer = Layer::new(
-            (w, height as usize),
-            LayerAttributes::default(),
-            Encoding::SMALL_LOSSLESS,
-            channels,
-        );
-        Image::from_layer(layer)
-            .write()
-            .to_file(tmp)
-            .map_err(|error| exr_error(tmp, error))
-    })
+    let planes = [0, 1, 2].map(|c| pixels.iter().map(|p| p[c]).collect());
+    fileio::exr::write_rgb(path, width as usize, height as usize, planes)
+        .map_err(|e| exr_write_error(path, e))
 }
 
 /// Writes a float32 OpenEXR of named channels (`(name, plane)`, each plane `width`·`height`
-/// values, rows top to bottom), atomically, ZIP-compressed in increasing line order like
-/// [`write_rgb_exr`]. The file lists the channels sorted by name, as OpenEXR requires.
+/// values, rows top to bottom), atomically, like [`write_rgb_exr`]. The file lists the channels
+/// sorted by name, as OpenEXR requires; a name OpenEXR cannot store (empty, longer than 255
+/// bytes, with a NUL) is refused.
 pub fn write_channels_exr(
     path: &Path,
     width: u32,
     height: u32,
     channels: Vec<(String, Vec<f32>)>,
 ) -> Result<(), ImageIoError> {
-    use exr::prelude::{
-        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, Text,
-        WritableImage,
-    };
     let pixels = width as usize * height as usize;
-    for (name, _) in &channels {
-        let why = match name.len() {
-            0 => "is empty",
-            256.. => "is longer than OpenEXR's 255 bytes",
-            _ if name.contains('\0') => "holds a NUL character",
-            _ => continue,
-        };
+    if let Some((name, why)) = channels
+        .iter()
+        .find_map(|(name, _)| fileio::exr::channel_name_problem(name).map(|why| (name, why)))
+    {
         return Err(ImageIoError::ChannelName {
             path: path.to_owned(),
             name: name.clone(),
@@ -506,29 +449,8 @@ pub fn write_channels_exr(
             len: plane.len(),
         });
     }
-    write_atomically(path, |tmp| {
-        let list = channels
-            .into_iter()
-            // UTF-8 bytes as they are, as OpenEXR stores names (exr's `Text::from` panics on
-            // characters beyond Latin-1).
-            .map(|(name, plane)| {
-                AnyChannel::new(
-                    Text::from_slice_unchecked(name.as_bytes()),
-                    FlatSamples::F32(plane),
-                )
-            })
-            .collect();
-        let layer = Layer::new(
-            (width as usize, height as usize),
-            LayerAttributes::default(),
-            Encoding::SMALL_LOSSLESS,
-            AnyChannels::sort(list),
-        );
-        Image::from_layer(layer)
-            .write()
-            .to_file(tmp)
-            .map_err(|error| exr_error(tmp, error))
-    })
+    fileio::exr::write_channels(path, width as usize, height as usize, channels, &[])
+        .map_err(|e| exr_write_error(path, e))
 }
 
 /// Writes an 8-bit sRGB PNG: linear values clamped to [0, 1] and gamma-encoded, atomically.
@@ -539,24 +461,22 @@ pub fn write_png_srgb(
     pixels: &[Rgb],
 ) -> Result<(), ImageIoError> {
     check_size(path, width, height, pixels)?;
-    let encode = |v: f32| (linear_to_srgb(v) * 255.0 + 0.5) as u8;
     let bytes: Vec<u8> = pixels
         .iter()
-        .flat_map(|p| [encode(p.x), encode(p.y), encode(p.z)])
+        .flat_map(|p| [p.x, p.y, p.z].map(fileio::srgb::encode8))
         .collect();
-    write_atomically(path, |tmp| {
-        image::save_buffer_with_format(
-            tmp,
-            &bytes,
-            width,
-            height,
-            image::ExtendedColorType::Rgb8,
-            image::ImageFormat::Png,
-        )
-        .map_err(|error| ImageIoError::Png {
-            path: tmp.to_owned(),
-            error,
-        })
+    fileio::png::write_rgb8(path, width as usize, height as usize, &bytes).map_err(|e| {
+        let path = path.to_owned();
+        match e {
+            fileio::png::PngError::Encode(error) => ImageIoError::Png { path, error },
+            fileio::png::PngError::Io(error) => ImageIoError::Io { path, error },
+            fileio::png::PngError::Size { len, .. } => ImageIoError::SizeMismatch {
+                path,
+                width,
+                height,
+                len: len / 3,
+            },
+        }
     })
 }
 
@@ -682,7 +602,7 @@ mod tests {
         // Raw reading returns the encoded values.
         let (_, _, raw) = read_rgb_image_encoded(&path, true).unwrap();
         assert!((raw[11].x - 1.0).abs() < 1e-6);
-        assert!((raw[11].y - linear_to_srgb(0.5)).abs() < 0.003);
+        assert!((raw[11].y - fileio::srgb::encode(0.5)).abs() < 0.003);
     }
 
     #[test]
@@ -700,7 +620,7 @@ mod tests {
         };
         let rgb8 = image::RgbImage::from_fn(w, h, |x, _| image::Rgb(encoded(x)));
         let expect = |x: u32| {
-            let e = encoded(x).map(|c| srgb_to_linear(c as f32 / 255.0));
+            let e = encoded(x).map(|c| fileio::srgb::decode(c as f32 / 255.0));
             Rgb::new(e[0], e[1], e[2])
         };
         for (name, tolerance) in [
@@ -910,9 +830,9 @@ mod tests {
     fn srgb_curve_round_trips() {
         for i in 0..=100 {
             let v = i as f32 / 100.0;
-            assert!((srgb_to_linear(linear_to_srgb(v)) - v).abs() < 1e-5);
+            assert!((fileio::srgb::decode(fileio::srgb::encode(v)) - v).abs() < 1e-5);
         }
-        assert!((srgb_to_linear(0.5) - 0.214_041).abs() < 1e-5);
+        assert!((fileio::srgb::decode(0.5) - 0.214_041).abs() < 1e-5);
     }
 
     /// Every error names its file, and states its cause once: the cause is in the message and

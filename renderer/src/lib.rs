@@ -19,6 +19,8 @@ pub mod sampling;
 pub mod scene;
 pub mod shapes;
 pub mod spectrum;
+pub mod scene_file;
 pub mod state_file;
 pub mod texture;
+pub mod threads;
 pub mod xml;

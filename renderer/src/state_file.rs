@@ -100,18 +100,18 @@ pub fn save<H: Serialize>(path: &Path, magic: &str, header: &H, body: &[u8]) -> 
         body_crc32: crc32fast::hash(body),
     };
     let tmp = temp_path(path);
-    let write = || -> std::io::Result<()> {
-        let mut w = BufWriter::new(std::fs::File::create(&tmp)?);
+    let result = fileio::atomic::write_via(path, &tmp, |tmp| -> std::io::Result<()> {
+        let mut w = BufWriter::new(std::fs::File::create(tmp)?);
         writeln!(w, "{magic}")?;
         serde_json::to_writer(&mut w, &envelope)?;
         writeln!(w)?;
         w.write_all(body)?;
-        w.into_inner().map_err(|e| e.into_error())?.sync_all()
-    };
-    let result = write().and_then(|()| std::fs::rename(&tmp, path));
+        w.into_inner().map_err(|e| e.into_error())?;
+        Ok(())
+    });
     if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("writing the run state {}", path.display()));
+        return Err(e.into_io())
+            .with_context(|| format!("writing the run state {}", path.display()));
     }
     Ok(())
 }

@@ -1,6 +1,6 @@
 //! The renderer's command-line tools through their real binaries: each `--help` describes that
 //! tool, `render` writes its outputs (path tracer EXR + PNG, SPPM bundles at the listed passes),
-//! `bundle_info` reads a bundle back, and bad input ends with an error naming the file and line
+//! the bundles read back, and bad input ends with an error naming the file and line
 //! and a non-zero exit status instead of a panic.
 
 use std::path::{Path, PathBuf};
@@ -39,10 +39,6 @@ fn every_tool_describes_itself_in_its_help() {
             "path-tracing samples per second",
         ),
         (env!("CARGO_BIN_EXE_bench_sppm"), "`sppm-ml` over `sppm`"),
-        (
-            env!("CARGO_BIN_EXE_bundle_info"),
-            "Inspect a multi-level SPPM sample bundle",
-        ),
     ] {
         let out = run(bin, &["--help"]);
         assert!(out.status.success(), "{bin} --help failed");
@@ -54,7 +50,7 @@ fn every_tool_describes_itself_in_its_help() {
 }
 
 #[test]
-fn render_writes_images_and_bundles_that_bundle_info_reads() {
+fn render_writes_images_and_bundles_that_read_back() {
     let dir = temp_dir("outputs");
     let scene = write_scene(&dir);
     let scene = scene.to_str().unwrap();
@@ -106,54 +102,10 @@ fn render_writes_images_and_bundles_that_bundle_info_reads() {
     for passes in [1, 3] {
         let bundle = dir.join(format!("ml_p{passes:04}.exr"));
         assert!(bundle.exists(), "{} missing", bundle.display());
-        let pngs = dir.join(format!("levels{passes}"));
-        let out = run(
-            env!("CARGO_BIN_EXE_bundle_info"),
-            &[bundle.to_str().unwrap(), "--png", pngs.to_str().unwrap()],
-        );
-        assert!(out.status.success(), "{}", stderr(&out));
-        let text = String::from_utf8_lossy(&out.stdout);
-        assert!(text.contains(&format!("\"passes\": {passes}")), "{text}");
-        for layer in ["y", "z1", "z2", "z3", "z4", "albedo", "normal", "depth"] {
-            let png = dir.join(format!("levels{passes}_{layer}.png"));
-            assert!(png.exists(), "{} missing", png.display());
-        }
-    }
-    // An exposure is for the PNGs: a negative one is a value, and without --png it is refused.
-    let bundle = dir.join("ml_p0003.exr");
-    let darker = dir.join("new/folder/darker");
-    let out = run(
-        env!("CARGO_BIN_EXE_bundle_info"),
-        &[
-            bundle.to_str().unwrap(),
-            "--exposure",
-            "-2",
-            "--png",
-            darker.to_str().unwrap(),
-        ],
-    );
-    assert!(out.status.success(), "{}", stderr(&out));
-    // (into a folder made for it)
-    assert!(dir.join("new/folder/darker_y.png").exists());
-    let out = run(
-        env!("CARGO_BIN_EXE_bundle_info"),
-        &[bundle.to_str().unwrap(), "--exposure", "1"],
-    );
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(stderr(&out).contains("--png"), "{}", stderr(&out));
-    // Standard output that cannot be written (a full disk) is an error, not a panic.
-    if let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") {
-        let out = Command::new(env!("CARGO_BIN_EXE_bundle_info"))
-            .arg(&bundle)
-            .stdout(full)
-            .output()
-            .unwrap();
-        let err = stderr(&out);
-        assert_eq!(out.status.code(), Some(1), "{err}");
-        assert!(
-            err.contains("failed printing to stdout") && !err.contains("panicked"),
-            "{err}"
-        );
+        let b = bundle::read_bundle(&bundle).unwrap();
+        assert_eq!(b.meta.passes, passes);
+        assert_eq!((b.meta.width, b.meta.height), (12, 12));
+        assert_eq!(b.find_non_finite(), None);
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -270,16 +222,6 @@ fn bad_input_names_the_file_and_line_and_fails() {
     ]
     .map(String::from);
     render_fails_naming(&endless, &["time limit", "finite", "got inf"]);
-    let missing = run(
-        env!("CARGO_BIN_EXE_bundle_info"),
-        &[dir.join("none.exr").to_str().unwrap()],
-    );
-    assert_ne!(missing.status.code(), Some(0));
-    assert!(
-        stderr(&missing).contains("none.exr"),
-        "{}",
-        stderr(&missing)
-    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

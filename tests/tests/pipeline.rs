@@ -172,7 +172,7 @@ fn datagen_train_infer() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Relative MSE (SPEC §4) of interleaved RGB images: mean over pixels and channels of
+/// Relative MSE (docs/method.md §5.6) of interleaved RGB images: mean over pixels and channels of
 /// (ŷ − y)² / (mean_c(y)² + 0.01), summed in f64 in pixel order like
 /// `model::metrics::relmse_planar` (a dependency this crate does not have).
 fn relmse(prediction: &[f32], reference: &[f32]) -> f64 {

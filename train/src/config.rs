@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use model::loss::Loss;
-use model::training::{toml_name, TrainSettings};
+use crate::training::{toml_name, TrainSettings};
 use model::{ModelConfig, Preset, Weighting};
 use serde::Deserialize;
 
@@ -179,7 +179,7 @@ impl TrainConfig {
             format!("{:?}", model.levels),
             format!("{:?}", net.levels),
         );
-        out.extend(model::training::settings_differences(settings, &ours));
+        out.extend(crate::training::settings_differences(settings, &ours));
         // Same keys, different network: a preset whose sizes changed since the checkpoint.
         if out.is_empty() && *model != net {
             let layers = |c: &ModelConfig| {

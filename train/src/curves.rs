@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use anyhow::{anyhow, Result};
-use model::training::EpochReport;
+use crate::training::EpochReport;
 use plots::{LogAxis, LogTicks, Series};
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
@@ -183,7 +183,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use model::training::Validation;
+    use crate::training::Validation;
 
     fn report(epoch: usize, loss: f64, output: Option<f64>) -> EpochReport {
         EpochReport {

@@ -1,8 +1,8 @@
 //! `train --config configs/train/<name>.toml [--resume]`: trains the combiner network on a
-//! dataset written by `datagen` (SPEC §5).
+//! dataset written by `datagen` (docs/method.md §6).
 
-mod config;
-mod curves;
+
+
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -12,8 +12,10 @@ use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
-use model::data::PatchDataset;
-use model::training::{load_burnpack, validate, write_atomic, EpochReport, Trainer};
+use train::data::PatchDataset;
+use model::weights::load_burnpack;
+use train::training::{validate, EpochReport, Trainer};
+use train::{config, curves};
 
 use config::TrainConfig;
 
@@ -182,11 +184,16 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
         "best_level_relmse": best_value,
         "ratio_to_best_level": v.output / best_value,
     });
-    write_atomic(
+    write_text(
         &cfg.output.join(format!("eval_{split}.json")),
         &serde_json::to_string_pretty(&json)?,
     )
-    .map_err(anyhow::Error::msg)
+}
+
+/// Writes `text` to `path` atomically.
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    fileio::atomic::write_bytes(path, text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The title of `curves.png`: the run's output directory and its network.
@@ -254,7 +261,7 @@ fn report_bad(split: &str, ds: &PatchDataset, output: &Path) -> Result<()> {
         text.push_str(&format!("{split}\t{}\t{}\n", b.file.display(), b.reason));
     }
     let path = output.join(format!("bad_samples_{split}.txt"));
-    write_atomic(&path, &text).map_err(anyhow::Error::msg)
+    write_text(&path, &text)
 }
 
 /// Files of a training run in its output directory, finished or partial: the checkpoint is
@@ -273,7 +280,7 @@ const RUN_FILES: [&str; 6] = [
 #[derive(serde::Deserialize)]
 struct CheckpointHead {
     model: model::ModelConfig,
-    settings: model::training::TrainSettings,
+    settings: train::training::TrainSettings,
     epochs_done: usize,
 }
 
@@ -431,7 +438,7 @@ fn run(cli: &Cli) -> Result<()> {
     };
     // The run is accepted (data screened, checkpoint or `init` weights loaded): record its
     // config.
-    write_atomic(&cfg.output.join("train.toml"), &config_text).map_err(anyhow::Error::msg)?;
+    write_text(&cfg.output.join("train.toml"), &config_text)?;
     eprintln!(
         "model: {:?}, levels {}, {} parameters",
         trainer.config.preset,
@@ -449,9 +456,9 @@ fn run(cli: &Cli) -> Result<()> {
             csv.push_str(&csv_row(r));
             csv.push('\n');
         }
-        write_atomic(&csv_path, &csv).map_err(anyhow::Error::msg)?;
+        write_text(&csv_path, &csv)?;
         let json = serde_json::to_string_pretty(history)?;
-        write_atomic(&cfg.output.join("metrics.json"), &json).map_err(anyhow::Error::msg)?;
+        write_text(&cfg.output.join("metrics.json"), &json)?;
         // The picture is a convenience: failing to draw it (a full disk) must not stop training.
         if let Err(e) = curves::write(&curves_path, &curves_title, history, &LEVEL_NAMES) {
             eprintln!("warning: {e:#}");
@@ -466,7 +473,7 @@ fn run(cli: &Cli) -> Result<()> {
         let epoch = trainer.epochs_done + 1;
         let bar = ProgressBar::new(train.patches_per_epoch() as u64).with_style(style.clone());
         bar.set_message(format!("epoch {epoch}/{}", cfg.epochs));
-        let mut on_batch = |p: model::training::BatchProgress| {
+        let mut on_batch = |p: train::training::BatchProgress| {
             bar.set_position(p.done as u64);
             bar.set_message(format!("epoch {epoch}/{} loss {:.4}", cfg.epochs, p.loss));
         };

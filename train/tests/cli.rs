@@ -64,7 +64,9 @@ fn write_dataset(root: &Path) {
             bundle::write_rgb_exr_image(&root.join(&reference_rel), &reference).unwrap();
         }
         samples.push(serde_json::json!({
-            "bundle": bundle_rel, "scene": name, "split": split, "reference": reference_rel
+            "bundle": bundle_rel, "scene": name, "family": "synthetic", "split": split,
+            "seed": seed, "seed_index": 0, "passes": 16, "photons": 1000,
+            "reference": reference_rel, "sha256": ""
         }));
     };
     add("good0", "train", 1, "");
@@ -73,7 +75,11 @@ fn write_dataset(root: &Path) {
     add("nan", "train", 4, "nan");
     add("noref", "train", 5, "missing");
     add("badsize", "train", 6, "size");
-    let manifest = serde_json::json!({ "format": "test", "samples": samples });
+    let manifest = serde_json::json!({
+        "format": bundle::manifest::MANIFEST_FORMAT, "name": "test", "config_sha256": "",
+        "width": 24, "height": 24, "reference_level": "y", "scenes": [], "samples": samples,
+        "config": {}
+    });
     std::fs::write(root.join("manifest.json"), manifest.to_string()).unwrap();
 }
 

@@ -71,10 +71,10 @@ pub fn stand_in_bundle(
 ) -> Bundle {
     Bundle {
         meta: BundleMeta {
-            scene: spec.scene_id.clone(),
-            seed: spec.seed,
+            scene: spec.sppm.scene_name.clone(),
+            seed: spec.sppm.seed,
             passes,
-            photons_per_pass: spec.photons_per_pass,
+            photons_per_pass: spec.sppm.photons_per_pass,
             seconds: 1.5,
             integrator: "sppm-ml".into(),
             width: width as u32,

@@ -4,7 +4,7 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use renderer::film::with_threads;
+use renderer::threads::with_threads;
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::RayIntegrator;
 use renderer::scene::Scene;
@@ -57,9 +57,11 @@ fn run() -> Result<()> {
     let defines = vec![("res".to_string(), cli.res.to_string())];
     cli_output::paths::check_default_input(&cli.scene, DEFAULT_SCENE, "the default scene (Mitsuba's Cornell box from the shared test scenes next to the repository)")
         .map_err(anyhow::Error::msg)?;
-    let desc = renderer::xml::load_scene(&cli.scene, &defines, false)
-        .with_context(|| format!("loading {}", cli.scene.display()))?;
-    let scene = Scene::build(&desc)?;
+    let loaded = renderer::scene_file::load(&cli.scene, &defines, false)?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
+    }
+    let scene = loaded.scene;
     let res = scene.camera.resolution();
     let pt = PathTracer {
         max_depth: cli.max_depth,

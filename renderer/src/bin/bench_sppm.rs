@@ -93,9 +93,11 @@ fn run() -> Result<()> {
     let defines = vec![("res".to_string(), cli.res.to_string())];
     cli_output::paths::check_default_input(&cli.scene, DEFAULT_SCENE, "the bundled default scene")
         .map_err(anyhow::Error::msg)?;
-    let desc = renderer::xml::load_scene(&cli.scene, &defines, false)
-        .with_context(|| format!("loading {}", cli.scene.display()))?;
-    let scene = Scene::build(&desc)?;
+    let loaded = renderer::scene_file::load_for_sppm(&cli.scene, &defines, false)?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
+    }
+    let scene = loaded.scene;
     let res = scene.camera.resolution();
     println!(
         "{}: {}x{}, {} photons/pass, {} passes per run, {} runs per mode (median), seed {}",

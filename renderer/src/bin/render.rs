@@ -9,7 +9,8 @@ use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, ValueEnum};
 use cli_output::paths::{check_distinct, check_extension, check_not_directory, extension};
 use indicatif::{ProgressBar, ProgressStyle};
 use renderer::description::{AovSpec, IntegratorDesc};
-use renderer::film::{with_threads, Film};
+use renderer::film::Film;
+use renderer::threads::with_threads;
 use renderer::image_io::{write_channels_exr, write_png_srgb, write_rgb_exr};
 use renderer::integrators::aov::{environment_seen, render_aovs, DepthIntegrator};
 use renderer::integrators::direct::DirectIntegrator;
@@ -249,22 +250,27 @@ fn run() -> Result<()> {
     // bad name fails at once instead of after the render.
     let outputs = check_outputs(&cli)?;
     let t0 = Instant::now();
-    let desc = renderer::xml::load_scene(&cli.scene, &cli.define, cli.lenient)
-        .map_err(|e| renderer::xml::load_error(e, &cli.scene))?;
-    for w in &desc.warnings {
+    let mut loaded = renderer::scene_file::load(&cli.scene, &cli.define, cli.lenient)?;
+    for w in &loaded.warnings {
         eprintln!("warning: {w}");
     }
-    let scene = Scene::from_description(desc)
-        .with_context(|| format!("building {}", cli.scene.display()))?;
     create_parent_dirs(&outputs)?;
     eprintln!(
         "loaded {} ({} shapes, {} lights) in {:.2} s",
         cli.scene.display(),
-        scene.shapes.len(),
-        scene.lights.len(),
+        loaded.scene.shapes.len(),
+        loaded.scene.lights.len(),
         t0.elapsed().as_secs_f64()
     );
-    let integrator = chosen_integrator(&cli, &matches, &scene)?;
+    let integrator = chosen_integrator(&cli, &matches, &loaded.scene)?;
+    if matches!(integrator, IntegratorKind::Sppm | IntegratorKind::SppmMl) {
+        let before = loaded.warnings.len();
+        loaded.check_for_sppm();
+        for w in &loaded.warnings[before..] {
+            eprintln!("warning: {w}");
+        }
+    }
+    let scene = loaded.scene;
     with_threads(cli.threads, || match integrator {
         IntegratorKind::Path
         | IntegratorKind::Volpath

@@ -163,7 +163,8 @@ mod tests {
     use super::*;
     use crate::bsdf::{Bsdf, Diffuse};
     use crate::description::{test_sphere_scene, EmitterDesc};
-    use crate::film::{with_threads, Film};
+    use crate::film::Film;
+    use crate::threads::with_threads;
     use crate::integrators::path::PathTracer;
     use crate::texture::Texture;
     use glam::Vec3;

@@ -168,7 +168,8 @@ mod tests {
     use crate::description::{
         test_camera, EmitterDesc, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
     };
-    use crate::film::{with_threads, Film};
+    use crate::film::Film;
+    use crate::threads::with_threads;
     use crate::texture::Texture;
     use glam::Vec3;
 

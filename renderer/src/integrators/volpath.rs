@@ -386,7 +386,8 @@ mod tests {
     use super::*;
     use crate::bsdf::{Bsdf, Dielectric, Mask};
     use crate::description::{test_sphere_scene, EmitterDesc, Projection, SceneDescription};
-    use crate::film::{with_threads, Film};
+    use crate::film::Film;
+    use crate::threads::with_threads;
     use crate::media::phase::{BlendPhase, TabulatedPhase};
     use crate::media::{Medium, MediumInterface, PhaseFunction, VolumeTexture};
     use crate::texture::Texture;

@@ -1,5 +1,5 @@
-//! Which light next-event estimation samples from a point. Lights are chosen by power (SPEC
-//! §3.2), with the infinite lights' share capped ([`nee_light_weights`]). Where a scene has
+//! Which light next-event estimation samples from a point. Lights are chosen by power (docs/method.md
+//! §2.2), with the infinite lights' share capped ([`nee_light_weights`]). Where a scene has
 //! several finite lights, their share is redistributed at each point by how much each can light
 //! it ([`EmitterBounds::importance`], pbrt-v4's exhaustive light sampler); likewise the
 //! infinite lights' share when a directional light is among them (a sun's irradiance follows

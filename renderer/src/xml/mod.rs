@@ -1,4 +1,4 @@
-//! Mitsuba 3 XML scene importer (SPEC §3.1): reads a scene file into a [`SceneDescription`].
+//! Mitsuba 3 XML scene importer (docs/method.md §2.1): reads a scene file into a [`SceneDescription`].
 //!
 //! Loading runs in two stages, like Mitsuba's own parser:
 //! 1. **read** ([`read_file`]): the XML is parsed, `$name` parameters are substituted (values

@@ -10,9 +10,10 @@ use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use clap::{Parser, ValueEnum};
-use model::data::Batch;
+use train::data::Batch;
 use model::loss::Loss;
-use model::training::{adam, reconstruct, train_step};
+use model::combine::reconstruct;
+use train::training::{adam, train_step};
 use model::{ModelConfig, Preset};
 use serde_json::{json, Value};
 

@@ -1,4 +1,4 @@
-//! Photon gathering at a visible point (SPEC §3.4 step 4): one range query at the largest
+//! Photon gathering at a visible point (docs/method.md §3.5): one range query at the largest
 //! radius of the levels the point feeds, each photon added to every level whose radius covers
 //! it, with photons from the other side of the surface or from differently oriented surfaces
 //! rejected.

@@ -1,4 +1,4 @@
-//! Stochastic progressive photon mapping with five nested kernel bandwidths (SPEC §3.4), and
+//! Stochastic progressive photon mapping with five nested kernel bandwidths (docs/method.md §3), and
 //! its single-level baseline; the result of a run is a series of [`bundle::Bundle`]s.
 //!
 //! One pass *i* (1-based):
@@ -35,7 +35,7 @@ use bundle::{Bundle, BundleMeta, Image};
 use glam::UVec2;
 use rayon::prelude::*;
 
-use crate::film::with_threads;
+use crate::threads::with_threads;
 use crate::sampling::{rng_for, UniformSource};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;

@@ -1,4 +1,4 @@
-//! The photon pass (SPEC §3.4 step 2): photons leave the lights by power, scatter with Russian
+//! The photon pass (docs/method.md §3.3): photons leave the lights by power, scatter with Russian
 //! roulette, and are deposited at every diffuse/rough hit after at least one bounce (light
 //! arriving directly from a light is next-event estimation's job) — from the first hit for a
 //! collimated light (`directionalarea`), whose direct light NEE cannot sample.

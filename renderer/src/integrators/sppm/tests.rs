@@ -677,7 +677,7 @@ fn assert_disk_in_lit_enclosure_matches_the_path_tracer_after(material: Bsdf, pa
         ],
         vec![],
     );
-    let pt = crate::film::with_threads(2, || PathTracer::default().render(&scene, 8192, 5, None))
+    let pt = crate::threads::with_threads(2, || PathTracer::default().render(&scene, 8192, 5, None))
         .unwrap();
     let mut s = settings(SppmMode::MultiLevel, 20_000, 6);
     s.threads = 2;

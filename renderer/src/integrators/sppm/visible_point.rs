@@ -1,5 +1,5 @@
 //! SPPM eye subpaths: from the camera through delta and glossy bounces to the first diffuse or
-//! rough surface, where a visible point is stored (SPEC §3.4 step 1).
+//! rough surface, where a visible point is stored (docs/method.md §3.2).
 //!
 //! Along the way the path collects everything that is not a photon-density estimate: emission
 //! seen directly or through delta bounces, direct light at glossy vertices (NEE + MIS with the

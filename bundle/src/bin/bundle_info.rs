@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use bundle::{read_bundle, Bundle, Image, LEVEL_NAMES};
 use clap::Parser;
+use fileio::srgb::encode8;
 
 /// Inspect a multi-level SPPM sample bundle (docs/formats.md).
 #[derive(Parser, Debug)]
@@ -72,34 +73,25 @@ fn print_layer(name: &str, channels: &[&str], img: &Image) {
     }
 }
 
-/// Linear → sRGB-encoded 8-bit value.
-fn srgb8(v: f32) -> u8 {
-    let v = if v.is_finite() {
-        v.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let s = if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0 + 0.5) as u8
-}
-
-/// Writes the first three channels of `img` (or its single channel as grey), mapped by `map`.
+/// Writes the first three channels of `img` (or its single channel as grey), mapped by `map`,
+/// as an 8-bit sRGB PNG (non-finite values black).
 fn write_png(path: &Path, img: &Image, map: impl Fn(f32) -> f32) -> Result<()> {
-    let mut out = image::RgbImage::new(img.width as u32, img.height as u32);
-    for (x, y, px) in out.enumerate_pixels_mut() {
-        let p = img.pixel(x as usize, y as usize);
-        let rgb = if img.channels >= 3 {
-            [p[0], p[1], p[2]]
-        } else {
-            [p[0]; 3]
-        };
-        *px = image::Rgb(rgb.map(|v| srgb8(map(v))));
+    let mut bytes = Vec::with_capacity(img.width * img.height * 3);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let p = img.pixel(x, y);
+            let rgb = if img.channels >= 3 {
+                [p[0], p[1], p[2]]
+            } else {
+                [p[0]; 3]
+            };
+            bytes.extend(rgb.map(|v| {
+                let v = map(v);
+                encode8(if v.is_finite() { v } else { 0.0 })
+            }));
+        }
     }
-    out.save(path)
+    fileio::png::write_rgb8(path, img.width, img.height, &bytes)
         .with_context(|| format!("writing {}", path.display()))
 }
 

@@ -1,9 +1,9 @@
-//! Evaluation (SPEC §7): standard SPPM against multi-level SPPM + inference on held-out
+//! Evaluation (docs/method.md §8): standard SPPM against multi-level SPPM + inference on held-out
 //! scenes, at equal wall time (inference counted), at equal passes, and per pass (overhead);
 //! writes results.json, convergence plots, comparison images and one self-contained HTML page.
 
 pub mod ablation;
-pub mod combine;
+pub mod summary;
 pub mod compare;
 pub mod config;
 pub mod html;
@@ -23,9 +23,9 @@ use self::ablation::{Ablation, AblationModel};
 use self::compare::{geometric_mean, median};
 use self::config::{EvalConfig, EvalScene};
 use self::images::{error_panel, error_scale, relative_error_map, row_png, srgb_panel};
-use self::runs::RunSettings;
+use renderer::integrators::sppm::{SppmSettings, DEFAULT_MAX_DEPTH};
 use self::scene::{evaluate_scene, SceneEval};
-use crate::TrainedModel;
+use model::model_dir::TrainedModel;
 
 /// How the comparison is made, stored in results.json and shown on the page.
 pub const METHOD_NOTE: &str = "Equal time: ours is charged render seconds (multi-level SPPM up \
@@ -154,16 +154,17 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
     let mut results = Vec::new();
     for (i, s) in scenes.iter().enumerate() {
         eprintln!("[{}/{}] {}", i + 1, scenes.len(), s.name);
-        let settings = RunSettings {
+        let settings = SppmSettings {
             photons_per_pass: config.photons_per_pass,
             seed: config.seed,
             threads: config.threads,
-            max_depth: config.max_depth,
+            max_depth: config.max_depth.unwrap_or(DEFAULT_MAX_DEPTH),
             scene_name: s.name.clone(),
+            ..SppmSettings::default()
         };
-        let inference = crate::Inference {
+        let inference = infer::Inference {
             tile: config.tile,
-            engine: config.engine.unwrap_or(crate::Engine::default_for(backend)),
+            engine: config.engine.unwrap_or(infer::Engine::default_for(backend)),
             device: &device,
         };
         // A scene whose files cannot be read has no fingerprint: it is evaluated (and its
@@ -264,11 +265,11 @@ fn file_stem(name: &str) -> String {
 fn evaluate_one(
     config: &EvalConfig,
     s: &EvalScene,
-    settings: &RunSettings,
+    settings: &SppmSettings,
     passes: &[u32],
     model: &TrainedModel,
     variants: &[TrainedModel],
-    inference: &crate::Inference,
+    inference: &infer::Inference,
 ) -> SceneResult {
     let mut r = SceneResult::new(s.name.clone(), s.xml.clone(), s.reference.clone());
     let outcome = (|| -> Result<()> {

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use burn::tensor::Device;
-use model::training::save_burnpack;
+use model::weights::save_burnpack;
 use model::{ModelConfig, Preset};
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
 
@@ -65,6 +65,16 @@ const BOX_XML: &str = r#"<scene version="3.0.0">
     </shape>
 </scene>
 "#;
+
+
+/// A dataset manifest (`bundle::manifest`) of 16×16 `scenes` and no samples.
+fn dataset_manifest(scenes: Vec<serde_json::Value>) -> serde_json::Value {
+    serde_json::json!({
+        "format": bundle::manifest::MANIFEST_FORMAT, "name": "test", "config_sha256": "",
+        "width": 16, "height": 16, "reference_level": "y", "scenes": scenes, "samples": [],
+        "config": {}
+    })
+}
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("evaluate-{name}-{}", std::process::id()));
@@ -155,16 +165,15 @@ fn evaluates_explicit_and_dataset_scenes() {
     std::fs::create_dir_all(data.join("references")).unwrap();
     std::fs::copy(&reference, data.join("references/000-box.exr")).unwrap();
     std::fs::copy(&reference, data.join("references/001-box.exr")).unwrap();
-    let manifest = serde_json::json!({
-        "format": "sppm-ml-dataset/1",
-        "scenes": [
-            {"id": "000-box", "split": "train", "xml": "scenes/000-box/scene.xml",
-             "reference": "references/000-box.exr", "defines": {"res": "16"}},
-            {"id": "001-box", "split": "test", "xml": "scenes/001-box/scene.xml",
-             "reference": "references/001-box.exr", "defines": {"res": "16"}}
-        ],
-        "samples": []
-    });
+    let scene = |id: &str, split: &str| {
+        serde_json::json!({
+            "id": id, "family": "external", "split": split,
+            "xml": format!("scenes/{id}/scene.xml"), "reference": format!("references/{id}.exr"),
+            "reference_sha256": "", "reference_seed": 1, "reference_passes": 64,
+            "reference_photons": 1000, "defines": {"res": "16"}
+        })
+    };
+    let manifest = dataset_manifest(vec![scene("000-box", "train"), scene("001-box", "test")]);
     std::fs::write(data.join("manifest.json"), manifest.to_string()).unwrap();
 
     let out = dir.join("out");
@@ -430,10 +439,16 @@ fn bad_configs_fail_naming_the_problem() {
     // A split the dataset lacks: the error lists the splits it has.
     let data = dir.join("data");
     std::fs::create_dir_all(&data).unwrap();
+    let scene = |id: &str, split: &str| {
+        serde_json::json!({
+            "id": id, "family": "external", "split": split, "xml": format!("{id}.xml"),
+            "reference": format!("{id}.exr"), "reference_sha256": "", "reference_seed": 1,
+            "reference_passes": 64, "reference_photons": 1000
+        })
+    };
     std::fs::write(
         data.join("manifest.json"),
-        r#"{"scenes": [{"id": "a", "split": "test", "xml": "a.xml", "reference": "a.exr"},
-                       {"id": "b", "split": "val", "xml": "b.xml", "reference": "b.exr"}]}"#,
+        dataset_manifest(vec![scene("a", "test"), scene("b", "val")]).to_string(),
     )
     .unwrap();
     std::fs::write(

@@ -6,16 +6,17 @@ use std::time::Instant;
 
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::store::{BurnpackStore, ModuleSnapshot, SafetensorsStore};
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Device;
+use model::combine::reconstruct;
+use model::loss::Loss;
+use model::metrics::relmse_sum_planar;
+use model::model_dir::TrainedModel;
+use model::network::{ModelConfig, Network, LEVELS};
+use model::sample::BadSample;
 use serde::{Deserialize, Serialize};
 
-use crate::combine::combine;
-use crate::data::{BadSample, Batch, PatchDataset};
-use crate::loss::Loss;
-use crate::metrics::relmse_sum_planar;
-use crate::model::{ModelConfig, Network, LEVELS};
-use crate::model_dir::TrainedModel;
+use crate::data::{Batch, PatchDataset};
+
 
 /// Optimisation settings (the parts of the train TOML the loop needs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -145,34 +146,10 @@ pub struct BatchProgress {
     pub loss: f64,
 }
 
-/// Training state that is checkpointed besides the weights and the optimizer.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-struct CheckpointState {
-    model: ModelConfig,
-    settings: TrainSettings,
-    epochs_done: usize,
-    history: Vec<EpochReport>,
-}
-
 /// Adam with the paper's learning rate handled by the caller and ε = 1e-8 (Burn's default
 /// is 1e-5).
 pub fn adam() -> ModuleOptimizer {
     AdamConfig::new().with_epsilon(1e-8).init()
-}
-
-/// Forward pass of network + combination: `[B, 3, P, P]` reconstruction of a batch, clamped
-/// at zero.
-///
-/// Eq. 6 is a control-variate form (ỹ_i + z̃_c − z̃_i) and goes negative next to bright spots
-/// that the smooth levels spread out; the loss (SPEC §4, Eq. 8) sees ŷ clamped ≥ 0, so the
-/// clamped image is what the network was trained to produce — and radiance is never negative.
-pub fn reconstruct(
-    model: &Network,
-    config: &ModelConfig,
-    features: Tensor<4>,
-    levels: Tensor<4>,
-) -> Tensor<4> {
-    combine(levels, model.weights(features), config.window).clamp_min(0.0)
 }
 
 /// One optimisation step minimising `loss`; returns the updated model and the batch loss.
@@ -235,141 +212,6 @@ pub fn validate(
     })
 }
 
-/// Saves a module as burnpack, atomically (temp file + rename).
-pub fn save_burnpack(model: &Network, path: &Path) -> Result<(), String> {
-    let tmp = temp_path(path);
-    let mut store = BurnpackStore::from_file(&tmp)
-        .auto_extension(false)
-        .overwrite(true);
-    model
-        .save_into(&mut store)
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
-}
-
-/// Saves a module as safetensors, atomically, with its header in a canonical order.
-pub fn save_safetensors(model: &Network, path: &Path) -> Result<(), String> {
-    let tmp = temp_path(path);
-    let mut store = SafetensorsStore::from_file(&tmp);
-    model
-        .save_into(&mut store)
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    canonical_safetensors_header(&tmp).map_err(|e| format!("{}: {e}", path.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
-}
-
-/// Rewrites a safetensors file's JSON header with its keys sorted. Burn writes the
-/// `__metadata__` entries from a hash map, in an order that changes from run to run, so the
-/// same weights would give different files. The tensor entries name their byte ranges, so their
-/// order is free; the header keeps its length (padded with spaces, as the format allows), so the
-/// tensor data is not moved.
-pub fn canonical_safetensors_header(path: &Path) -> Result<(), String> {
-    let mut bytes = std::fs::read(path).map_err(|e| e.to_string())?;
-    let len_bytes: [u8; 8] = bytes
-        .get(..8)
-        .and_then(|b| b.try_into().ok())
-        .ok_or("not a safetensors file (shorter than its header length)")?;
-    let len = usize::try_from(u64::from_le_bytes(len_bytes)).map_err(|e| e.to_string())?;
-    let header = bytes
-        .get(8..8 + len)
-        .ok_or("not a safetensors file (header longer than the file)")?;
-    let value: serde_json::Value =
-        serde_json::from_slice(header).map_err(|e| format!("safetensors header: {e}"))?;
-    let mut sorted = serde_json::to_vec(&sort_keys(value)).map_err(|e| e.to_string())?;
-    if sorted.len() > len {
-        return Err("safetensors header grew when sorted".into());
-    }
-    sorted.resize(len, b' ');
-    bytes[8..8 + len].copy_from_slice(&sorted);
-    std::fs::write(path, bytes).map_err(|e| e.to_string())
-}
-
-/// Writes the burnpack file `from` to `to` with its tensors in name order. Burn's optimizer
-/// lists its per-parameter state in hash-map order, which changes from run to run, so the same
-/// training would otherwise write different checkpoint files. (Scalars and metadata are kept in
-/// maps ordered by key already.)
-fn sorted_burnpack(from: &Path, to: &Path) -> Result<(), String> {
-    let reader = burn_pack::Reader::from_file_exact(from).map_err(|e| e.to_string())?;
-    let scalars = reader.scalars().clone();
-    let metadata = reader.metadata().clone();
-    let mut tensors = reader.into_tensors().map_err(|e| e.to_string())?;
-    tensors.sort_by(|a, b| a.name.cmp(&b.name));
-    let mut writer = burn_pack::Writer::new(tensors)
-        .auto_extension(false)
-        .overwrite(true);
-    for (key, value) in &scalars {
-        writer = writer.with_scalar(key, *value);
-    }
-    for (key, value) in &metadata {
-        writer = writer.with_metadata(key, value);
-    }
-    writer.write_to_file(to).map_err(|e| e.to_string())
-}
-
-/// `value` with the keys of every object in sorted order (whatever order serde_json's map
-/// keeps, which depends on its `preserve_order` feature).
-fn sort_keys(value: serde_json::Value) -> serde_json::Value {
-    match value {
-        serde_json::Value::Object(map) => {
-            let sorted: std::collections::BTreeMap<String, serde_json::Value> =
-                map.into_iter().map(|(k, v)| (k, sort_keys(v))).collect();
-            serde_json::Value::Object(sorted.into_iter().collect())
-        }
-        serde_json::Value::Array(items) => {
-            serde_json::Value::Array(items.into_iter().map(sort_keys).collect())
-        }
-        other => other,
-    }
-}
-
-/// Loads burnpack weights into a freshly built network of `config`.
-pub fn load_burnpack(
-    config: &ModelConfig,
-    path: &Path,
-    device: &Device,
-) -> Result<Network, String> {
-    if !path.exists() {
-        return Err(format!("{}: no such file", path.display()));
-    }
-    let mut model = config.init(0, device);
-    let mut store = BurnpackStore::from_file(path).auto_extension(false);
-    let result = model
-        .load_from(&mut store)
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    if !result.is_success() || !result.missing.is_empty() {
-        return Err(format!(
-            "{}: weights do not match the model config: {result:?}",
-            path.display()
-        ));
-    }
-    // Tensors the network has no place for (a deeper network's extra layers) are not ignored.
-    if !result.unused.is_empty() {
-        return Err(format!(
-            "{}: weights do not match the model config: the file holds {} that a network of \
-             {} hidden layers does not have",
-            path.display(),
-            result.unused.join(", "),
-            config.hidden_layers
-        ));
-    }
-    Ok(model)
-}
-
-/// Writes `text` to `path` atomically.
-pub fn write_atomic(path: &Path, text: &str) -> Result<(), String> {
-    let tmp = temp_path(path);
-    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
-}
-
-fn temp_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp{}", std::process::id()))
-}
-
 /// A training run: model, optimizer, settings and history.
 pub struct Trainer {
     /// The model being trained (on the autodiff device).
@@ -384,7 +226,7 @@ pub struct Trainer {
     pub epochs_done: usize,
     /// Reports of the completed epochs.
     pub history: Vec<EpochReport>,
-    device: Device,
+    pub(crate) device: Device,
 }
 
 impl Trainer {
@@ -505,76 +347,6 @@ impl Trainer {
         };
         self.history.push(report.clone());
         Ok(report)
-    }
-
-    /// Writes `model.bpk`, `optimizer.bpk` and `state.json` into `dir` (each atomically;
-    /// `state.json` last, so a checkpoint is complete once it names the epoch).
-    pub fn save_checkpoint(&self, dir: &Path) -> Result<(), String> {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-        save_burnpack(&self.model, &dir.join("model.bpk"))?;
-        let optim_path = dir.join("optimizer.bpk");
-        let raw = temp_path(&dir.join("optimizer.raw.bpk"));
-        self.optim
-            .save(&raw)
-            .map_err(|e| format!("{}: {e:?}", optim_path.display()))?;
-        let tmp = temp_path(&optim_path);
-        let sorted = sorted_burnpack(&raw, &tmp);
-        let _ = std::fs::remove_file(&raw);
-        sorted.map_err(|e| format!("{}: {e}", optim_path.display()))?;
-        std::fs::rename(&tmp, &optim_path).map_err(|e| format!("{}: {e}", optim_path.display()))?;
-        let state = CheckpointState {
-            model: self.config.clone(),
-            settings: self.settings.clone(),
-            epochs_done: self.epochs_done,
-            history: self.history.clone(),
-        };
-        let json = serde_json::to_string_pretty(&state).expect("state serialises");
-        write_atomic(&dir.join("state.json"), &json)
-    }
-
-    /// Restores a run from a checkpoint directory; `settings` may raise the epoch count (not
-    /// with a decaying learning rate, whose schedule spans the epochs) but must otherwise match
-    /// the checkpoint's.
-    pub fn resume(dir: &Path, settings: TrainSettings, device: &Device) -> Result<Self, String> {
-        let state_path = dir.join("state.json");
-        let text = std::fs::read_to_string(&state_path)
-            .map_err(|e| format!("{}: {e}", state_path.display()))?;
-        let state: CheckpointState =
-            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", state_path.display()))?;
-        let differences = settings_differences(&state.settings, &settings);
-        if !differences.is_empty() {
-            return Err(format!(
-                "{}: checkpoint settings differ from the config: {}",
-                state_path.display(),
-                differences.join("; ")
-            ));
-        }
-        let device = device.clone().autodiff();
-        let model = load_burnpack(&state.model, &dir.join("model.bpk"), &device)?;
-        let optim_path = dir.join("optimizer.bpk");
-        let optim = adam()
-            .load(&optim_path)
-            .map_err(|e| format!("{}: {e:?}", optim_path.display()))?;
-        Ok(Self {
-            model,
-            optim,
-            config: state.model,
-            settings,
-            epochs_done: state.epochs_done,
-            history: state.history,
-            device,
-        })
-    }
-
-    /// Writes the final weights (`model.bpk`, `model.safetensors`) and `model.json` (the
-    /// architecture) into `dir`.
-    pub fn save_final(&self, dir: &Path) -> Result<(), String> {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-        let valid = self.model.valid();
-        save_burnpack(&valid, &dir.join("model.bpk"))?;
-        save_safetensors(&valid, &dir.join("model.safetensors"))?;
-        let json = serde_json::to_string_pretty(&self.config).expect("config serialises");
-        write_atomic(&dir.join("model.json"), &json)
     }
 }
 

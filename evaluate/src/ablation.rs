@@ -3,13 +3,13 @@
 
 use std::path::PathBuf;
 
-use model::model::all_levels;
+use model::network::all_levels;
 use model::{ModelConfig, Preset};
 use serde::Serialize;
 
-use super::compare::geometric_mean;
-use super::SceneResult;
-use crate::report::LEVEL_NAMES;
+use crate::compare::geometric_mean;
+use crate::SceneResult;
+use infer::report::LEVEL_NAMES;
 
 /// The note shown when the config has no `[ablation]`.
 pub const NOT_RUN: &str = "Not run: the config has no [ablation] section. Train a network \
@@ -177,8 +177,8 @@ pub fn build(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::evaluate::scene::fixtures::{self, scene};
-    use crate::evaluate::scene::Checkpoint;
+    use crate::scene::fixtures::{self, scene};
+    use crate::scene::Checkpoint;
 
     fn checkpoint(passes: u32, ours: f64, variants: Vec<f64>) -> Checkpoint {
         Checkpoint {

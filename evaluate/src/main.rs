@@ -1,4 +1,4 @@
-//! `evaluate --config configs/eval/<name>.toml` (SPEC §7): standard SPPM against multi-level
+//! `evaluate --config configs/eval/<name>.toml` (docs/method.md §8): standard SPPM against multi-level
 //! SPPM + inference at equal wall time on held-out scenes; writes results.json, convergence
 //! plots, comparison images and a self-contained index.html into the config's output folder.
 
@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::Parser;
-use infer::evaluate::config::EvalConfig;
+use evaluate::config::EvalConfig;
 
 /// Equal-time evaluation of multi-level SPPM + neural reconstruction against standard SPPM.
 #[derive(Debug, Parser)]
@@ -68,7 +68,7 @@ fn run(cli: &Cli) -> Result<bool> {
         config.limit = cli.limit;
     }
     config.validate()?;
-    let results = infer::evaluate::run(&config, cli.resume)?;
+    let results = evaluate::run(&config, cli.resume)?;
     let s = &results.summary;
     println!(
         "{} scene(s), {} failed; at {} passes ours beats standard SPPM at equal time on {} (median ratio {})",
@@ -99,10 +99,10 @@ fn run(cli: &Cli) -> Result<bool> {
 /// `--combine`: the summary over several finished evaluations. Returns whether none of their
 /// scenes failed.
 fn combine(cli: &Cli) -> Result<bool> {
-    let combined = infer::evaluate::combine::combine(&cli.combine)?;
-    print!("{}", infer::evaluate::combine::markdown(&combined));
+    let combined = evaluate::summary::summarize_evaluations(&cli.combine)?;
+    print!("{}", evaluate::summary::markdown(&combined));
     if let Some(path) = &cli.output {
-        infer::evaluate::combine::write_json(&combined, path)?;
+        evaluate::summary::write_json(&combined, path)?;
         println!("wrote {}", path.display());
     }
     Ok(combined.summary.failed == 0)

@@ -1,4 +1,4 @@
-//! The patch dataset: manifest reading, bad-data screening, a bounded image cache, seeded
+//! The patch dataset: the dataset's manifest (`bundle::manifest`) read, bad-data screening, a bounded image cache, seeded
 //! shuffling and flips, and batch assembly.
 //!
 //! Memory stays bounded for any dataset size: images are loaded lazily and at most
@@ -16,78 +16,11 @@ use std::sync::Arc;
 use burn::tensor::{Device, Tensor, TensorData};
 use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
-use serde::Deserialize;
+use bundle::manifest::Manifest;
 
-use crate::features::{
-    colour_channels, feature_channels, pack, planar_reference, PackedImage, COLOUR_CHANNELS,
-};
-use crate::model::all_levels;
-
-/// One entry of a dataset's `manifest.json` (paths relative to the manifest's directory).
-#[derive(Clone, Debug, Deserialize)]
-pub struct ManifestSample {
-    /// The sample bundle EXR.
-    pub bundle: PathBuf,
-    /// Scene identifier (samples of one scene share a reference).
-    pub scene: String,
-    /// `train`, `val` or `test`.
-    pub split: String,
-    /// The scene's reference RGB EXR.
-    pub reference: PathBuf,
-}
-
-/// A dataset manifest: `{ "samples": [ ... ] }`; other top-level keys are ignored.
-#[derive(Clone, Debug, Deserialize)]
-pub struct Manifest {
-    /// All samples of all splits.
-    pub samples: Vec<ManifestSample>,
-}
-
-impl Manifest {
-    /// Reads `<root>/manifest.json`.
-    pub fn read(root: &Path) -> Result<Self, String> {
-        let path = root.join("manifest.json");
-        let text =
-            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
-    }
-}
-
-/// A sample that was screened out, with the file and the reason.
-#[derive(Clone, Debug, PartialEq)]
-pub struct BadSample {
-    /// The offending file (bundle or reference).
-    pub file: PathBuf,
-    /// What is wrong with it.
-    pub reason: String,
-}
-
-/// A loaded image: network input, raw colours and the planar reference.
-#[derive(Clone, Debug)]
-pub struct Sample {
-    /// Features and raw levels.
-    pub packed: PackedImage,
-    /// Planar RGB reference.
-    pub reference: Vec<f32>,
-}
-
-/// Loads and checks one bundle and its reference.
-pub fn load_sample(bundle_path: &Path, reference_path: &Path) -> Result<Sample, BadSample> {
-    let bad = |file: &Path, reason: String| BadSample {
-        file: file.to_owned(),
-        reason,
-    };
-    if !reference_path.exists() {
-        return Err(bad(reference_path, "missing reference".into()));
-    }
-    let bundle = bundle::read_bundle(bundle_path).map_err(|e| bad(bundle_path, e.to_string()))?;
-    let packed = pack(&bundle).map_err(|e| bad(bundle_path, e.to_string()))?;
-    let reference = bundle::read_rgb_exr_image(reference_path)
-        .map_err(|e| bad(reference_path, e.to_string()))?;
-    let reference = planar_reference(&reference, packed.width, packed.height)
-        .map_err(|e| bad(reference_path, e.to_string()))?;
-    Ok(Sample { packed, reference })
-}
+use model::features::{colour_channels, feature_channels, PackedImage, COLOUR_CHANNELS};
+use model::network::all_levels;
+use model::sample::{load_sample, BadSample, Sample};
 
 /// Where a sample's pixels come from: files, or memory (tests, synthetic data).
 #[derive(Clone, Debug)]
@@ -221,11 +154,11 @@ impl PatchDataset {
         cache_images: usize,
         references: Option<&Path>,
     ) -> Result<Self, String> {
-        let manifest = Manifest::read(root)?;
+        let manifest: Manifest = Manifest::load(root).map_err(|e| e.to_string())?;
         // A misspelt split would otherwise read as an empty one (e.g. training without
         // validation, silently).
-        if !manifest.samples.iter().any(|s| s.split == split) {
-            let mut splits: Vec<&str> = manifest.samples.iter().map(|s| s.split.as_str()).collect();
+        if !manifest.samples.iter().any(|s| s.split.name() == split) {
+            let mut splits: Vec<&str> = manifest.samples.iter().map(|s| s.split.name()).collect();
             splits.sort_unstable();
             splits.dedup();
             return Err(format!(
@@ -236,7 +169,7 @@ impl PatchDataset {
         }
         let mut images = Vec::new();
         let mut bad = Vec::new();
-        for entry in manifest.samples.iter().filter(|s| s.split == split) {
+        for entry in manifest.samples.iter().filter(|s| s.split.name() == split) {
             let bundle = root.join(&entry.bundle);
             let reference = match references {
                 Some(dir) => bundle::scene_reference_path(&root.join(dir), &entry.scene),
@@ -300,7 +233,7 @@ impl PatchDataset {
         }
     }
 
-    /// The same dataset feeding only `levels` (a model's [`crate::ModelConfig::levels`]).
+    /// The same dataset feeding only `levels` (a model's [`model::ModelConfig::levels`]).
     pub fn with_levels(mut self, levels: Vec<usize>) -> Self {
         self.levels = levels;
         self
@@ -449,7 +382,7 @@ fn shuffle<T>(items: &mut [T], rng: &mut Pcg64Mcg) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::INPUT_CHANNELS;
+    use model::network::INPUT_CHANNELS;
 
     fn ramp_sample(w: usize, h: usize) -> Sample {
         let pixels = w * h;

@@ -7,8 +7,8 @@ use anyhow::{anyhow, Result};
 use plots::{LogAxis, LogTicks, Series, LEVEL_COLOURS, OURS, STANDARD};
 use plotters::prelude::*;
 
-use super::scene::SceneEval;
-use crate::report::LEVEL_NAMES;
+use crate::scene::SceneEval;
+use infer::report::LEVEL_NAMES;
 
 /// Positive finite points only (a log axis cannot show the rest).
 fn loggable(points: impl IntoIterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {

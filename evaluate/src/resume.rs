@@ -10,8 +10,8 @@ use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::config::{EvalConfig, EvalScene};
-use super::SceneResult;
+use crate::config::{EvalConfig, EvalScene};
+use crate::SceneResult;
 
 /// Format tag of a per-scene result file.
 const FORMAT: &str = "sppm-ml-eval-scene/1";
@@ -109,7 +109,7 @@ pub fn save(path: &Path, fingerprint: &str, result: &SceneResult) -> Result<()> 
         result: result.clone(),
     };
     let json = serde_json::to_string_pretty(&saved)?;
-    super::images::write_atomic(path, json.as_bytes())
+    crate::images::write_atomic(path, json.as_bytes())
 }
 
 /// The saved result of a scene if it can be reused: written by a run with the same

@@ -13,8 +13,7 @@
 //! Determinism: rows are cut into fixed chunks (independent of the thread count) and each
 //! chunk's product runs single-threaded, so the result is bit-identical on any thread count.
 
-use model::model::{Network, Weighting, LEVELS};
-use model::ModelConfig;
+use crate::network::{ModelConfig, Network, Weighting, LEVELS};
 use rayon::prelude::*;
 
 /// A pixel rectangle `[x0, y0, x1, y1)` in image coordinates.

@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
-use super::ablation::Ablation;
-use super::images::base64;
-use super::{read_output_file, EvalResults};
-use crate::report::LEVEL_NAMES;
+use crate::ablation::Ablation;
+use crate::images::base64;
+use crate::{read_output_file, EvalResults};
+use infer::report::LEVEL_NAMES;
 
 /// Escapes text for HTML element content and attribute values.
 pub fn escape(s: &str) -> String {
@@ -92,7 +92,7 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
         c.engine
             .or_else(|| model::backend::Backend::parse(&c.backend)
                 .ok()
-                .map(crate::Engine::default_for))
+                .map(infer::Engine::default_for))
             .map_or("?".to_string(), |e| format!("{e:?}").to_lowercase())
     );
     let _ = writeln!(
@@ -392,7 +392,7 @@ mod tests {
 
     #[test]
     fn ablation_table_lists_every_model_and_scene() {
-        use super::super::ablation::{not_run, AblationModel, AblationRow};
+        use crate::ablation::{not_run, AblationModel, AblationRow};
         use model::{ModelConfig, Preset};
         let mut h = String::new();
         ablation_section(&mut h, &not_run(16));

@@ -11,11 +11,13 @@ use model::metrics::relmse_planar;
 use renderer::integrators::sppm::{SppmMode, StopCondition};
 use serde::{Deserialize, Serialize};
 
-use super::compare::{dense_checkpoints, relmse_at_time, CurvePoint, Interpolated};
-use super::config::EvalScene;
-use super::runs::{load_scene, multi_level, run_timed, RunSettings};
-use crate::report::LEVEL_NAMES;
-use crate::{ErrorReport, Inference, TrainedModel};
+use crate::compare::{dense_checkpoints, relmse_at_time, CurvePoint, Interpolated};
+use crate::config::EvalScene;
+use crate::runs::{load_scene, multi_level, run_timed};
+use renderer::integrators::sppm::SppmSettings;
+use infer::report::LEVEL_NAMES;
+use infer::{ErrorReport, Inference};
+use model::model_dir::TrainedModel;
 
 /// The standard run's dense checkpoints go up to this multiple of the largest pass count.
 const STANDARD_PASS_CAP_FACTOR: u32 = 64;
@@ -84,7 +86,7 @@ pub struct SceneImages {
 /// `model`.
 pub fn evaluate_scene(
     scene: &EvalScene,
-    settings: &RunSettings,
+    settings: &SppmSettings,
     passes: &[u32],
     model: &TrainedModel,
     variants: &[TrainedModel],
@@ -235,8 +237,8 @@ pub fn evaluate_scene(
 #[cfg(test)]
 pub(crate) mod fixtures {
     use super::{Checkpoint, SceneEval};
-    use crate::evaluate::compare::Interpolated;
-    use crate::evaluate::SceneResult;
+    use crate::compare::Interpolated;
+    use crate::SceneResult;
 
     /// A checkpoint where ours has relMSE `ours` and standard SPPM 1 at equal time; no
     /// equal-pass figures, no overhead, no variants (tests override what they look at).

@@ -1,11 +1,10 @@
 //! Comparison images: sRGB panels, false-colour relative-error maps, a row of panels as PNG
 //! (kept in memory for embedding into the HTML page), and base64 for data URIs.
 
-use std::io::Cursor;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use renderer::image_io::linear_to_srgb;
+use fileio::srgb::encode8;
 
 /// White gap between panels, in pixels.
 const GAP: usize = 4;
@@ -18,14 +17,13 @@ pub fn srgb_panel(planes: &[f32], pixels: usize) -> Panel {
     let mut out = Vec::with_capacity(3 * pixels);
     for p in 0..pixels {
         for c in 0..3 {
-            let v = planes[c * pixels + p].clamp(0.0, 1.0);
-            out.push((linear_to_srgb(v) * 255.0 + 0.5) as u8);
+            out.push(encode8(planes[c * pixels + p]));
         }
     }
     out
 }
 
-/// Per-pixel relative squared error, the summand of relMSE (SPEC §4):
+/// Per-pixel relative squared error, the summand of relMSE (docs/method.md §5.6):
 /// mean over RGB of (x − r)² / (mean_RGB(r)² + 0.01).
 pub fn relative_error_map(image: &[f32], reference: &[f32], pixels: usize) -> Vec<f32> {
     (0..pixels)
@@ -114,50 +112,12 @@ pub fn row_png(panels: &[Panel], width: usize, height: usize) -> Result<Vec<u8>>
             bytes[d..d + width * 3].copy_from_slice(src);
         }
     }
-    let mut out = Cursor::new(Vec::new());
-    image::write_buffer_with_format(
-        &mut out,
-        &bytes,
-        total_w as u32,
-        height as u32,
-        image::ExtendedColorType::Rgb8,
-        image::ImageFormat::Png,
-    )
-    .context("encoding PNG")?;
-    Ok(out.into_inner())
+    fileio::png::encode_rgb8(total_w, height, &bytes).context("encoding PNG")
 }
 
-/// Writes `bytes` to `path` atomically (temp file in the same folder + rename).
+/// Writes `bytes` to `path` atomically (`fileio::atomic`), the error naming the file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
-}
-
-/// Standard base64 (RFC 4648, with padding), for `data:` URIs.
-pub fn base64(bytes: &[u8]) -> String {
-    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            chunk.get(1).copied().unwrap_or(0),
-            chunk.get(2).copied().unwrap_or(0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for i in 0..4 {
-            if i <= chunk.len() {
-                out.push(ALPHABET[((n >> (18 - 6 * i)) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
+    fileio::atomic::write_bytes(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
 #[cfg(test)]

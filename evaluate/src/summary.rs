@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
-use super::html::opt_sci;
-use super::{summarise, SceneResult, Summary};
+use crate::html::opt_sci;
+use crate::{summarise, SceneResult, Summary};
 
 /// The part of an evaluation's `results.json` the combined summary needs.
 #[derive(Deserialize)]
@@ -48,7 +48,7 @@ pub struct CombinedRow {
 
 /// What `--combine` prints and writes.
 #[derive(Clone, Debug, Serialize)]
-pub struct Combined {
+pub struct EvaluationsSummary {
     /// The evaluation directories, in the order given.
     pub evaluations: Vec<PathBuf>,
     /// Per scene, evaluation by evaluation.
@@ -59,7 +59,7 @@ pub struct Combined {
 
 /// Reads `results.json` of each directory and summarises all their scenes together, at the
 /// largest pass count every evaluation has. Errors name the file.
-pub fn combine(dirs: &[PathBuf]) -> Result<Combined> {
+pub fn summarize_evaluations(dirs: &[PathBuf]) -> Result<EvaluationsSummary> {
     if dirs.is_empty() {
         bail!("--combine needs at least one evaluation directory");
     }
@@ -105,7 +105,7 @@ pub fn combine(dirs: &[PathBuf]) -> Result<Combined> {
             scenes.push(r);
         }
     }
-    Ok(Combined {
+    Ok(EvaluationsSummary {
         evaluations: dirs.to_vec(),
         rows,
         summary: summarise(&scenes, passes),
@@ -121,7 +121,7 @@ fn describe_passes(dirs: &[PathBuf], stored: &[StoredResults]) -> String {
 }
 
 /// The combined table as Markdown (scene rows, then the aggregates), as printed.
-pub fn markdown(c: &Combined) -> String {
+pub fn markdown(c: &EvaluationsSummary) -> String {
     let ratio = |v: Option<f64>| v.map_or_else(|| "–".into(), |x| format!("{x:.3}"));
     let overhead =
         |v: Option<f64>| v.map_or_else(|| "–".into(), |x| format!("{:+.0} %", 100.0 * x));
@@ -162,17 +162,17 @@ pub fn markdown(c: &Combined) -> String {
 }
 
 /// Writes the combined summary as JSON, atomically (temp file + rename).
-pub fn write_json(c: &Combined, path: &Path) -> Result<()> {
+pub fn write_json(c: &EvaluationsSummary, path: &Path) -> Result<()> {
     let text = serde_json::to_string_pretty(c).context("serialising the combined summary")?;
-    super::images::write_atomic(path, text.as_bytes())
+    crate::images::write_atomic(path, text.as_bytes())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::evaluate::compare::Interpolated;
-    use crate::evaluate::scene::fixtures::{self, scene};
-    use crate::evaluate::scene::Checkpoint;
+    use crate::compare::Interpolated;
+    use crate::scene::fixtures::{self, scene};
+    use crate::scene::Checkpoint;
 
     fn checkpoint(passes: u32, ours: f64, standard: f64, overhead: f64) -> Checkpoint {
         Checkpoint {
@@ -238,7 +238,7 @@ mod tests {
                 failed,
             ],
         );
-        let c = combine(&[a.clone(), b.clone()]).unwrap();
+        let c = summarize_evaluations(&[a.clone(), b.clone()]).unwrap();
         assert_eq!(c.summary.passes, 32);
         assert_eq!(c.summary.scenes, 4);
         assert_eq!(c.summary.failed, 1);
@@ -276,14 +276,14 @@ mod tests {
     fn missing_or_disjoint_evaluations_are_errors_naming_them() {
         let dir = temp_dir("bad");
         let (a, b) = (dir.join("a"), dir.join("b"));
-        let err = format!("{:#}", combine(std::slice::from_ref(&a)).unwrap_err());
+        let err = format!("{:#}", summarize_evaluations(std::slice::from_ref(&a)).unwrap_err());
         assert!(err.contains("results.json"), "{err}");
         write_results(&a, 1000, &[8], &[]);
         write_results(&b, 1000, &[16], &[]);
-        let err = format!("{:#}", combine(&[a.clone(), b.clone()]).unwrap_err());
+        let err = format!("{:#}", summarize_evaluations(&[a.clone(), b.clone()]).unwrap_err());
         assert!(err.contains("share no pass count"), "{err}");
         std::fs::write(b.join("results.json"), "{ not json").unwrap();
-        let err = format!("{:#}", combine(&[a, b.clone()]).unwrap_err());
+        let err = format!("{:#}", summarize_evaluations(&[a, b.clone()]).unwrap_err());
         assert!(
             err.contains(&b.join("results.json").display().to_string()),
             "{err}"

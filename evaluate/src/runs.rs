@@ -28,21 +28,6 @@ pub struct TimedBundle {
     pub assembly_seconds: f64,
 }
 
-/// Settings shared by both runs.
-#[derive(Clone, Debug)]
-pub struct RunSettings {
-    /// Photons per pass.
-    pub photons_per_pass: u64,
-    /// Seed.
-    pub seed: u64,
-    /// Worker threads (0 = all).
-    pub threads: usize,
-    /// Bound on eye/photon bounces (`None`: the renderer's default).
-    pub max_depth: Option<u32>,
-    /// Scene name for bundle metadata.
-    pub scene_name: String,
-}
-
 /// Returned by the checkpoint callback to end a run early; not a failure.
 #[derive(Debug, thiserror::Error)]
 #[error("enough checkpoints")]
@@ -55,24 +40,17 @@ struct Enough;
 /// assembly seconds.
 pub fn run_timed<T: Send>(
     scene: &Scene,
-    settings: &RunSettings,
+    settings: &SppmSettings,
     mode: SppmMode,
     stop: &StopCondition,
     label: &str,
     mut keep: impl FnMut(Bundle, f64) -> Result<T> + Send,
     done: impl Fn(u32, f64) -> bool + Send + Sync,
 ) -> Result<Vec<(T, f64, f64)>> {
-    let mut sppm = SppmSettings {
-        photons_per_pass: settings.photons_per_pass,
-        seed: settings.seed,
+    let sppm = SppmSettings {
         mode,
-        threads: settings.threads,
-        scene_name: settings.scene_name.clone(),
-        ..SppmSettings::default()
+        ..settings.clone()
     };
-    if let Some(d) = settings.max_depth {
-        sppm.max_depth = d;
-    }
     let bar = ProgressBar::new(stop.checkpoints.iter().copied().max().unwrap_or(0) as u64);
     bar.set_style(
         ProgressStyle::with_template(
@@ -119,20 +97,20 @@ pub fn run_timed<T: Send>(
     }
 }
 
-/// Loads and builds a Mitsuba XML scene, printing the loader's warnings.
+/// Loads and builds a Mitsuba XML scene for SPPM under the toolkit's scene policy
+/// (`renderer::scene_file`, strict), printing its warnings.
 pub fn load_scene(xml: &std::path::Path, defines: &[(String, String)]) -> Result<Scene> {
-    let desc = renderer::xml::load_scene(xml, defines, false)
-        .with_context(|| format!("loading {}", xml.display()))?;
-    for w in &desc.warnings {
+    let loaded = renderer::scene_file::load_for_sppm(xml, defines, false)?;
+    for w in &loaded.warnings {
         eprintln!("warning: {}: {w}", xml.display());
     }
-    Scene::from_description(desc).with_context(|| format!("building {}", xml.display()))
+    Ok(loaded.scene)
 }
 
 /// Multi-level run: one bundle per configured pass count.
 pub fn multi_level(
     scene: &Scene,
-    settings: &RunSettings,
+    settings: &SppmSettings,
     passes: &[u32],
 ) -> Result<Vec<TimedBundle>> {
     let stop = StopCondition {

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use bundle::manifest::Manifest;
 use serde::{Deserialize, Serialize};
 
 /// `configs/eval/<name>.toml`. Relative paths are relative to the current directory (run from
@@ -33,7 +34,7 @@ pub struct EvalConfig {
     pub backend: String,
     /// Inference engine (`native`, `burn`); absent: native on `flex`, Burn otherwise.
     #[serde(default)]
-    pub engine: Option<crate::Engine>,
+    pub engine: Option<infer::Engine>,
     /// Bound on SPPM eye (delta/glossy) and photon bounces; default the renderer's (16).
     #[serde(default)]
     pub max_depth: Option<u32>,
@@ -120,23 +121,6 @@ pub struct EvalScene {
     pub defines: Vec<(String, String)>,
 }
 
-/// The part of a dataset manifest `evaluate` reads (the manifest has more keys).
-#[derive(Deserialize)]
-struct Manifest {
-    scenes: Vec<ManifestScene>,
-}
-
-#[derive(Deserialize)]
-struct ManifestScene {
-    id: String,
-    split: String,
-    xml: PathBuf,
-    reference: PathBuf,
-    /// Overrides of a scene the user brought to the dataset (absent for generated scenes).
-    #[serde(default)]
-    defines: BTreeMap<String, String>,
-}
-
 impl EvalConfig {
     /// Reads and checks a config file; errors name the file.
     pub fn load(path: &Path) -> Result<Self> {
@@ -160,11 +144,11 @@ impl EvalConfig {
                 self.output.display()
             );
         }
-        if self.threads > renderer::film::MAX_THREADS {
+        if self.threads > renderer::threads::MAX_THREADS {
             bail!(
                 "threads = {}: at most {} worker threads are supported",
                 self.threads,
-                renderer::film::MAX_THREADS
+                renderer::threads::MAX_THREADS
             );
         }
         if self.photons_per_pass == 0 {
@@ -215,21 +199,14 @@ impl EvalConfig {
             });
         }
         if let Some(d) = &self.dataset {
-            let path = d.dir.join("manifest.json");
-            let text = std::fs::read_to_string(&path).with_context(|| {
-                format!(
-                    "[dataset] dir = {}: reading {}",
-                    d.dir.display(),
-                    path.display()
-                )
-            })?;
-            let manifest: Manifest = serde_json::from_str(&text)
-                .with_context(|| format!("parsing {}", path.display()))?;
-            let all_splits: Vec<String> = manifest.scenes.iter().map(|s| s.split.clone()).collect();
+            let path = d.dir.join(bundle::manifest::MANIFEST_FILE);
+            let manifest: Manifest = Manifest::load(&d.dir)
+                .with_context(|| format!("[dataset] dir = {}", d.dir.display()))?;
+            let all_splits: Vec<&str> = manifest.scenes.iter().map(|s| s.split.name()).collect();
             let mut chosen: Vec<EvalScene> = manifest
                 .scenes
                 .into_iter()
-                .filter(|s| s.split == d.split)
+                .filter(|s| s.split.name() == d.split)
                 .map(|s| EvalScene {
                     reference: match &d.references {
                         Some(dir) => bundle::scene_reference_path(&d.dir.join(dir), &s.id),
@@ -241,7 +218,7 @@ impl EvalConfig {
                 })
                 .collect();
             if chosen.is_empty() {
-                let mut splits: Vec<&str> = all_splits.iter().map(String::as_str).collect();
+                let mut splits = all_splits;
                 splits.sort_unstable();
                 splits.dedup();
                 bail!(
@@ -312,7 +289,7 @@ mod tests {
         assert!(toml::from_str::<EvalConfig>(&bad).is_err());
         assert_eq!(c.engine, None);
         let native: EvalConfig = toml::from_str(&format!("engine = \"native\"\n{base}")).unwrap();
-        assert_eq!(native.engine, Some(crate::Engine::Native));
+        assert_eq!(native.engine, Some(infer::Engine::Native));
         let err = toml::from_str::<EvalConfig>(&format!("engine = \"gpu\"\n{base}"))
             .unwrap_err()
             .to_string();

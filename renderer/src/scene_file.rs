@@ -1,0 +1,66 @@
+//! Loading a scene file under the toolkit's one policy, the same for every command that renders
+//! (`render`, `infer --scene`, `datagen render`, `evaluate`), so that a scene one of them accepts
+//! no other refuses for reasons of its own:
+//!
+//! 1. The Mitsuba 3 XML is read with the command's `-D` overrides; unknown plugins, parameters
+//!    and attributes are errors unless the user asked for `--lenient` (only the commands a person
+//!    points at a foreign scene offer it: `render`, `infer`).
+//! 2. A `-D` that no file of the scene reads is an error: it is most likely a misspelt name, and
+//!    would otherwise shape a render — or a whole dataset — unnoticed.
+//! 3. The loader's other warnings are returned for the command to print.
+//! 4. For SPPM ([`load_for_sppm`], [`LoadedScene::check_for_sppm`]): a reconstruction filter
+//!    other than the box is a warning — each pixel's samples spread over its neighbours, so the
+//!    bundle is smoother than those the networks were trained on. (A dataset refuses it, by the
+//!    dataset's own rule that its bundles are alike: `datagen`.)
+//!
+//! Every error names the file.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+
+use crate::scene::Scene;
+
+/// A built scene and the warnings its loading produced (to be printed by the command).
+pub struct LoadedScene {
+    /// The scene, ready to render.
+    pub scene: Scene,
+    /// What the loader noticed but accepted (rule 3), and for SPPM the filter note (rule 4).
+    pub warnings: Vec<String>,
+}
+
+impl LoadedScene {
+    /// Adds the SPPM notes (rule 4) to the warnings.
+    pub fn check_for_sppm(&mut self) {
+        if let Some(w) =
+            crate::integrators::sppm::filter_warning(self.scene.camera.filter().desc())
+        {
+            self.warnings.push(w);
+        }
+    }
+
+}
+
+/// Loads and builds the scene `xml` under rules 1–3.
+pub fn load(xml: &Path, defines: &[(String, String)], lenient: bool) -> Result<LoadedScene> {
+    let desc = crate::xml::load_scene(xml, defines, lenient)
+        .map_err(|e| crate::xml::load_error(e, xml))?;
+    if let Some(unused) = desc.warnings.iter().find(|w| w.starts_with("-D ")) {
+        anyhow::bail!("{}: {unused}", xml.display());
+    }
+    let warnings = desc.warnings.clone();
+    let scene =
+        Scene::from_description(desc).with_context(|| format!("building {}", xml.display()))?;
+    Ok(LoadedScene { scene, warnings })
+}
+
+/// Loads and builds the scene `xml` for SPPM: rules 1–4.
+pub fn load_for_sppm(
+    xml: &Path,
+    defines: &[(String, String)],
+    lenient: bool,
+) -> Result<LoadedScene> {
+    let mut loaded = load(xml, defines, lenient)?;
+    loaded.check_for_sppm();
+    Ok(loaded)
+}
