@@ -20,5 +20,7 @@ pub mod scene;
 pub mod shapes;
 pub mod spectrum;
 pub mod state_file;
+#[cfg(test)]
+mod test_data;
 pub mod texture;
 pub mod xml;

@@ -311,14 +311,39 @@ mod tests {
         }
     }
 
+    /// Radiance of Mitsuba 3's `envmap` emitter: the data file
+    /// `renderer/tests/data/envmap_reference.json`, written by `envmap_reference.py` there.
+    #[derive(Debug, serde::Deserialize)]
+    struct MitsubaReference {
+        /// Image width and height of the test map (texels by the formula in the generator).
+        size: (u32, u32),
+        cases: Vec<ReferenceCase>,
+        values: Vec<ReferenceValue>,
+    }
+
+    /// A case: the map's `scale` and the rotation of its `to_world` about +y in degrees.
+    #[derive(Debug, serde::Deserialize)]
+    struct ReferenceCase {
+        scale: f32,
+        degrees: f32,
+    }
+
+    /// The radiance a case's map sends along an escaping ray direction.
+    #[derive(Debug, serde::Deserialize)]
+    struct ReferenceValue {
+        case: usize,
+        direction: [f32; 3],
+        radiance: [f32; 3],
+    }
+
     /// Radiance equals Mitsuba 3's `envmap` for the same image, `scale` and `to_world`
-    /// (values computed by Mitsuba itself, `envmap_reference.py`): texel centres, the seam, the
-    /// poles. With a rotation, directions within ≈ 2.5° of a pole are skipped: Mitsuba's f32
-    /// rotation matrix is off by 10⁻⁷, enough to move the azimuth there.
+    /// (values computed by Mitsuba itself, `envmap_reference.json`): texel centres, the seam,
+    /// the poles. With a rotation, directions within ≈ 2.5° of a pole are skipped: Mitsuba's
+    /// f32 rotation matrix is off by 10⁻⁷, enough to move the azimuth there.
     #[test]
     fn radiance_matches_mitsuba() {
-        use crate::lights::envmap_reference::{CASES, SIZE, VALUES};
-        let (w, h) = SIZE;
+        let reference: MitsubaReference = crate::test_data::read_json("envmap_reference.json");
+        let (w, h) = reference.size;
         let texels = (0..h)
             .flat_map(|y| {
                 (0..w).map(move |x| {
@@ -337,11 +362,16 @@ mod tests {
             texels,
         };
         let mut checked = 0;
-        for (case, &(scale, degrees)) in CASES.iter().enumerate() {
+        for (case, &ReferenceCase { scale, degrees }) in reference.cases.iter().enumerate() {
             let light =
                 EnvmapLight::new(&image, Mat3::from_rotation_y(degrees.to_radians()), scale)
                     .unwrap();
-            for &(c, d, want) in VALUES.iter().filter(|v| v.0 == case) {
+            for &ReferenceValue {
+                case: c,
+                direction: d,
+                radiance: want,
+            } in reference.values.iter().filter(|v| v.case == case)
+            {
                 let d = Vec3::from(d);
                 if degrees != 0.0 && d.y.abs() > 0.999 {
                     continue;
@@ -533,4 +563,44 @@ mod tests {
             EnvmapError::NotARotation
         );
     }
+
+    // TMP-BEGIN
+    #[test]
+    fn tmp_dump_envmap_table() {
+        use crate::lights::envmap_reference::*;
+        use serde_json::json;
+        let v = |a: &[f32]| a.iter().map(|&x| x as f64).collect::<Vec<f64>>();
+        let doc = json!({
+            "size": [SIZE.0, SIZE.1],
+            "cases": CASES.iter().map(|(s, d)| json!([*s as f64, *d as f64])).collect::<Vec<_>>(),
+            "values": VALUES.iter().map(|(c, d, r)| json!([c, v(d), v(r)])).collect::<Vec<_>>(),
+        });
+        std::fs::write("/tmp/renderer-check/envmap_dump.json", doc.to_string()).unwrap();
+    }
+
+    #[test]
+    fn tmp_envmap_json_equals_old_table_bit_for_bit() {
+        use crate::lights::envmap_reference::*;
+        let r: MitsubaReference = crate::test_data::read_json("envmap_reference.json");
+        let b3 = |a: [f32; 3]| a.map(f32::to_bits);
+        assert_eq!(r.size, SIZE);
+        assert_eq!(r.cases.len(), CASES.len());
+        for (a, &(s, d)) in r.cases.iter().zip(CASES) {
+            assert_eq!(
+                (a.scale.to_bits(), a.degrees.to_bits()),
+                (s.to_bits(), d.to_bits())
+            );
+        }
+        assert_eq!(r.values.len(), VALUES.len());
+        for (a, &(c, d, rad)) in r.values.iter().zip(VALUES) {
+            assert_eq!(a.case, c);
+            assert_eq!(b3(a.direction), b3(d));
+            assert_eq!(b3(a.radiance), b3(rad));
+        }
+        eprintln!(
+            "TMP-COMPARED envmap: {} f32 values, all bit-identical",
+            CASES.len() * 2 + VALUES.len() * 6
+        );
+    }
+    // TMP-END
 }
