@@ -563,44 +563,4 @@ mod tests {
             EnvmapError::NotARotation
         );
     }
-
-    // TMP-BEGIN
-    #[test]
-    fn tmp_dump_envmap_table() {
-        use crate::lights::envmap_reference::*;
-        use serde_json::json;
-        let v = |a: &[f32]| a.iter().map(|&x| x as f64).collect::<Vec<f64>>();
-        let doc = json!({
-            "size": [SIZE.0, SIZE.1],
-            "cases": CASES.iter().map(|(s, d)| json!([*s as f64, *d as f64])).collect::<Vec<_>>(),
-            "values": VALUES.iter().map(|(c, d, r)| json!([c, v(d), v(r)])).collect::<Vec<_>>(),
-        });
-        std::fs::write("/tmp/renderer-check/envmap_dump.json", doc.to_string()).unwrap();
-    }
-
-    #[test]
-    fn tmp_envmap_json_equals_old_table_bit_for_bit() {
-        use crate::lights::envmap_reference::*;
-        let r: MitsubaReference = crate::test_data::read_json("envmap_reference.json");
-        let b3 = |a: [f32; 3]| a.map(f32::to_bits);
-        assert_eq!(r.size, SIZE);
-        assert_eq!(r.cases.len(), CASES.len());
-        for (a, &(s, d)) in r.cases.iter().zip(CASES) {
-            assert_eq!(
-                (a.scale.to_bits(), a.degrees.to_bits()),
-                (s.to_bits(), d.to_bits())
-            );
-        }
-        assert_eq!(r.values.len(), VALUES.len());
-        for (a, &(c, d, rad)) in r.values.iter().zip(VALUES) {
-            assert_eq!(a.case, c);
-            assert_eq!(b3(a.direction), b3(d));
-            assert_eq!(b3(a.radiance), b3(rad));
-        }
-        eprintln!(
-            "TMP-COMPARED envmap: {} f32 values, all bit-identical",
-            CASES.len() * 2 + VALUES.len() * 6
-        );
-    }
-    // TMP-END
 }
