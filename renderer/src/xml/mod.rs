@@ -18,8 +18,6 @@ mod emitters;
 pub mod error;
 pub mod ior;
 mod media;
-mod mesh_attributes;
-mod obj;
 mod props;
 mod sensors;
 mod shapes;
@@ -611,7 +609,7 @@ pub(crate) struct MeshScope<'a> {
     /// The `<shape>` element (for messages).
     pub shape: &'a Element,
     /// Its mesh's attributes; `None` for analytic shapes (sphere, disk, cylinder).
-    pub attributes: Option<mesh_attributes::MeshAttributes>,
+    pub attributes: Option<crate::shapes::mesh_attributes::MeshAttributes>,
 }
 
 impl<'a> Builder<'a> {
