@@ -13,7 +13,7 @@ use super::emitters::area_radiance;
 use super::props::Props;
 use super::{Builder, Element, MeshScope, SceneError};
 use crate::description::{Geometry, ShapeDesc, TriangleMesh};
-use crate::media::MediumInterface;
+use crate::parity::media::MediumInterface;
 use crate::shapes::mesh_attributes::MeshAttributes;
 use crate::shapes::mesh_file::{finish_mesh, flip, transform_mesh, MeshSides};
 use crate::texture::Texture;
