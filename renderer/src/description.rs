@@ -74,7 +74,7 @@ pub struct ShapeDesc {
     /// normal (a collimated beam), which only photons can carry.
     pub collimated: bool,
     /// The participating media inside and outside the shape (`interior`, `exterior`).
-    pub media: crate::media::MediumInterface,
+    pub media: crate::parity::media::MediumInterface,
 }
 
 /// A light source that is not attached to a shape.
@@ -367,7 +367,7 @@ pub struct SceneDescription {
     /// Non-fatal messages from the importer (e.g. an ignored parameter).
     pub warnings: Vec<String>,
     /// Participating media; shapes and the camera refer to them by index.
-    pub media: Vec<crate::media::Medium>,
+    pub media: Vec<crate::parity::media::Medium>,
     /// The medium the camera sits in (the sensor's nested medium), if any.
     pub camera_medium: Option<u32>,
 }

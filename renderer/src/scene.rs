@@ -15,7 +15,7 @@ use crate::lights::{
     LightSample, PointLight, ProjectorLight, SceneSphere, SpotLight,
 };
 use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
-use crate::media::{Medium, MediumInterface};
+use crate::parity::media::{Medium, MediumInterface};
 use crate::sampling::Distribution1D;
 use crate::shapes::Shape;
 use crate::spectrum::Rgb;

@@ -140,7 +140,7 @@ mod tests {
     /// Mitsuba 3.9.1 (`scalar_rgb`) on the same height field and shading point: the texture's
     /// `eval_1_grad` is (−0.9, 0.4); `bumpmap`'s `eval` (f·cos) and `pdf` for a diffuse and a
     /// GGX conductor, with and without flip and shadowing, a negative scale, two viewers.
-    /// Printed by `bumpmap_reference.py` next to this file.
+    /// Printed by `renderer/tests/data/bumpmap_reference.py`.
     /// Model, scale, flip, shadowing, wo, wi, Mitsuba's eval (f·cos) and pdf.
     type ProbeCase = (&'static str, f32, bool, bool, [f32; 3], [f32; 3], f32, f32);
 

@@ -37,8 +37,6 @@ mod roughplastic;
 mod thindielectric;
 
 #[cfg(test)]
-mod mitsuba_reference;
-#[cfg(test)]
 mod tests;
 
 use crate::spectrum::Rgb;

@@ -126,7 +126,62 @@ fn on(v: f32) -> Option<Texture> {
     Some(constant(v))
 }
 
-/// The models of [`mitsuba_reference::CASES`], in the same order.
+/// Values computed by Mitsuba 3 itself for the models of [`mitsuba_cases`]: the data file
+/// `renderer/tests/data/bsdf_reference.json`, written by `bsdf_reference.py` there.
+mod mitsuba_reference {
+    use serde::Deserialize;
+    use std::sync::OnceLock;
+
+    /// The whole file.
+    #[derive(Debug, Deserialize)]
+    pub struct Reference {
+        /// Test BSDFs, as constructor expressions of `tests.rs` (index = case id).
+        pub cases: Vec<String>,
+        /// Surface uv at which each case is evaluated (index = case id).
+        pub case_uvs: Vec<[f32; 2]>,
+        pub evals: Vec<Eval>,
+        pub albedos: Vec<Albedo>,
+        pub diffuse_reflectances: Vec<DiffuseReflectance>,
+    }
+
+    /// A case's f (no cosine) in both transport modes and its pdf at one direction pair.
+    #[derive(Debug, Deserialize)]
+    pub struct Eval {
+        pub case: usize,
+        pub wo: [f32; 3],
+        pub wi: [f32; 3],
+        pub f_radiance: [f32; 3],
+        pub f_importance: [f32; 3],
+        pub pdf: f32,
+    }
+
+    /// A case's directional albedo from `wo`: the mean sample weight and its standard error.
+    #[derive(Debug, Deserialize)]
+    pub struct Albedo {
+        pub case: usize,
+        pub wo: [f32; 3],
+        /// Importance transport (else radiance).
+        pub importance: bool,
+        pub mean: [f32; 3],
+        pub std_error: [f32; 3],
+    }
+
+    /// A case's `eval_diffuse_reflectance` from `wo`.
+    #[derive(Debug, Deserialize)]
+    pub struct DiffuseReflectance {
+        pub case: usize,
+        pub wo: [f32; 3],
+        pub value: [f32; 3],
+    }
+
+    /// The file, read once.
+    pub fn get() -> &'static Reference {
+        static REFERENCE: OnceLock<Reference> = OnceLock::new();
+        REFERENCE.get_or_init(|| crate::test_data::read_json("bsdf_reference.json"))
+    }
+}
+
+/// The models of [`mitsuba_reference::Reference::cases`], in the same order.
 fn mitsuba_cases() -> Vec<Bsdf> {
     use MicrofacetKind::{Beckmann, Ggx};
     vec![
@@ -154,7 +209,7 @@ fn mitsuba_cases() -> Vec<Bsdf> {
     .collect()
 }
 
-/// The `principledthin` models of [`mitsuba_reference::CASES`], in the same order.
+/// The `principledthin` models of [`mitsuba_reference::Reference::cases`], in the same order.
 fn thin_cases() -> Vec<Bsdf> {
     let d = PrincipledThinParams::default;
     vec![
@@ -232,7 +287,7 @@ fn thin_catalogue() -> Vec<(&'static str, Bsdf, bool)> {
     ]
 }
 
-/// The principled models of [`mitsuba_reference::CASES`], in the same order.
+/// The principled models of [`mitsuba_reference::Reference::cases`], in the same order.
 fn principled_cases() -> Vec<Bsdf> {
     let d = PrincipledParams::default;
     vec![
@@ -312,15 +367,25 @@ fn everything_principled() -> PrincipledParams {
 
 #[test]
 fn eval_and_pdf_match_mitsuba() {
-    use super::mitsuba_reference::{CASES, CASE_UVS, EVALS};
+    use mitsuba_reference::Eval;
+    let reference = mitsuba_reference::get();
+    let (names, uvs) = (&reference.cases, &reference.case_uvs);
     let cases = mitsuba_cases();
-    assert_eq!(cases.len(), CASES.len());
-    assert_eq!(cases.len(), CASE_UVS.len());
+    assert_eq!(cases.len(), names.len());
+    assert_eq!(cases.len(), uvs.len());
     let mut failures = Vec::new();
-    for &(ci, wo, wi, f_rad, f_imp, pdf) in EVALS {
+    for &Eval {
+        case: ci,
+        wo,
+        wi,
+        f_radiance: f_rad,
+        f_importance: f_imp,
+        pdf,
+    } in &reference.evals
+    {
         let (wo, wi) = (Vec3::from(wo), Vec3::from(wi));
         let b = &cases[ci];
-        let uv = Vec2::from(CASE_UVS[ci]);
+        let uv = Vec2::from(uvs[ci]);
         for (mode, expect) in [
             (TransportMode::Radiance, f_rad),
             (TransportMode::Importance, f_imp),
@@ -330,7 +395,7 @@ fn eval_and_pdf_match_mitsuba() {
             if (got - expect).abs().max_element() > 2e-3 * expect.max_element() + 1e-6 {
                 failures.push(format!(
                     "{} {mode:?} wo={wo} wi={wi}: f {got} vs Mitsuba {expect}",
-                    CASES[ci]
+                    names[ci]
                 ));
             }
         }
@@ -338,7 +403,7 @@ fn eval_and_pdf_match_mitsuba() {
         if (got - pdf).abs() > 2e-3 * pdf + 1e-6 {
             failures.push(format!(
                 "{} wo={wo} wi={wi}: pdf {got} vs Mitsuba {pdf}",
-                CASES[ci]
+                names[ci]
             ));
         }
     }
@@ -355,16 +420,23 @@ fn diffuse_reflectance_matches_mitsuba() {
     // Mitsuba's `eval_diffuse_reflectance` (the `albedo` AOV) from the front and the back:
     // the reflectance of diffuse and plastic models, the base colour of the principled ones,
     // the viewer's side of `twosided`, π·f(wo, n) otherwise (zero for delta models).
-    use super::mitsuba_reference::{CASES, CASE_UVS, DIFFUSE_REFLECTANCES};
+    use mitsuba_reference::DiffuseReflectance;
+    let reference = mitsuba_reference::get();
+    let (names, uvs) = (&reference.cases, &reference.case_uvs);
     let cases = mitsuba_cases();
-    assert_eq!(DIFFUSE_REFLECTANCES.len(), 2 * CASES.len());
+    assert_eq!(reference.diffuse_reflectances.len(), 2 * names.len());
     let mut failures = Vec::new();
-    for &(ci, wo, expect) in DIFFUSE_REFLECTANCES {
+    for &DiffuseReflectance {
+        case: ci,
+        wo,
+        value: expect,
+    } in &reference.diffuse_reflectances
+    {
         let (wo, expect) = (Vec3::from(wo), Rgb::from(expect));
-        let sp = ShadingPoint::flat(Vec2::from(CASE_UVS[ci]));
+        let sp = ShadingPoint::flat(Vec2::from(uvs[ci]));
         let got = cases[ci].diffuse_reflectance(wo, &sp);
         if (got - expect).abs().max_element() > 2e-3 * expect.max_element() + 1e-6 {
-            failures.push(format!("{} wo={wo}: {got} vs Mitsuba {expect}", CASES[ci]));
+            failures.push(format!("{} wo={wo}: {got} vs Mitsuba {expect}", names[ci]));
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -372,10 +444,22 @@ fn diffuse_reflectance_matches_mitsuba() {
 
 #[test]
 fn directional_albedo_matches_mitsuba() {
-    use super::mitsuba_reference::{ALBEDOS, CASES, CASE_UVS};
+    use mitsuba_reference::Albedo;
+    let reference = mitsuba_reference::get();
+    let (names, uvs) = (&reference.cases, &reference.case_uvs);
     let cases = mitsuba_cases();
     let mut failures = Vec::new();
-    for (k, &(ci, wo, importance, mean, err)) in ALBEDOS.iter().enumerate() {
+    for (
+        k,
+        &Albedo {
+            case: ci,
+            wo,
+            importance,
+            mean,
+            std_error: err,
+        },
+    ) in reference.albedos.iter().enumerate()
+    {
         let mode = if importance {
             TransportMode::Importance
         } else {
@@ -384,7 +468,7 @@ fn directional_albedo_matches_mitsuba() {
         let (ours, our_err) = albedo_at(
             &cases[ci],
             Vec3::from(wo),
-            Vec2::from(CASE_UVS[ci]),
+            Vec2::from(uvs[ci]),
             mode,
             200_000,
             1000 + k as u64,
@@ -397,7 +481,7 @@ fn directional_albedo_matches_mitsuba() {
         if !ok {
             failures.push(format!(
                 "{} wo={wo:?} {mode:?}: albedo {ours} ± {our_err} vs Mitsuba {mean} ± {err}",
-                CASES[ci]
+                names[ci]
             ));
         }
     }
@@ -605,7 +689,8 @@ fn principled_catalogue() -> Vec<(&'static str, Bsdf, bool)> {
 
 /// Principled models with sheen or clearcoat, terms that can make the model reflect more than
 /// it receives, in Mitsuba 3.9.1 as here (its importance-mode albedo of the first reaches
-/// 1.089 in blue at 80°, of the second 1.10 in red, of the third 1.12 in blue: `ALBEDOS`), so
+/// 1.089 in blue at 80°, of the second 1.10 in red, of the third 1.12 in blue: the `albedos` of
+/// `bsdf_reference.json`), so
 /// they stay out of the energy test.
 fn principled_energy_gaining() -> Vec<(&'static str, Bsdf, bool)> {
     let d = PrincipledParams::default;

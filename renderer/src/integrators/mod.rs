@@ -1,11 +1,8 @@
 //! Light transport algorithms: each integrator turns a scene into images.
 
-pub mod aov;
-pub mod direct;
 pub mod path;
 pub mod ray_integrator;
 pub mod sppm;
-pub mod volpath;
 
 pub use ray_integrator::RayIntegrator;
 

@@ -311,14 +311,39 @@ mod tests {
         }
     }
 
+    /// Radiance of Mitsuba 3's `envmap` emitter: the data file
+    /// `renderer/tests/data/envmap_reference.json`, written by `envmap_reference.py` there.
+    #[derive(Debug, serde::Deserialize)]
+    struct MitsubaReference {
+        /// Image width and height of the test map (texels by the formula in the generator).
+        size: (u32, u32),
+        cases: Vec<ReferenceCase>,
+        values: Vec<ReferenceValue>,
+    }
+
+    /// A case: the map's `scale` and the rotation of its `to_world` about +y in degrees.
+    #[derive(Debug, serde::Deserialize)]
+    struct ReferenceCase {
+        scale: f32,
+        degrees: f32,
+    }
+
+    /// The radiance a case's map sends along an escaping ray direction.
+    #[derive(Debug, serde::Deserialize)]
+    struct ReferenceValue {
+        case: usize,
+        direction: [f32; 3],
+        radiance: [f32; 3],
+    }
+
     /// Radiance equals Mitsuba 3's `envmap` for the same image, `scale` and `to_world`
-    /// (values computed by Mitsuba itself, `envmap_reference.py`): texel centres, the seam, the
-    /// poles. With a rotation, directions within ≈ 2.5° of a pole are skipped: Mitsuba's f32
-    /// rotation matrix is off by 10⁻⁷, enough to move the azimuth there.
+    /// (values computed by Mitsuba itself, `envmap_reference.json`): texel centres, the seam,
+    /// the poles. With a rotation, directions within ≈ 2.5° of a pole are skipped: Mitsuba's
+    /// f32 rotation matrix is off by 10⁻⁷, enough to move the azimuth there.
     #[test]
     fn radiance_matches_mitsuba() {
-        use crate::lights::envmap_reference::{CASES, SIZE, VALUES};
-        let (w, h) = SIZE;
+        let reference: MitsubaReference = crate::test_data::read_json("envmap_reference.json");
+        let (w, h) = reference.size;
         let texels = (0..h)
             .flat_map(|y| {
                 (0..w).map(move |x| {
@@ -337,11 +362,16 @@ mod tests {
             texels,
         };
         let mut checked = 0;
-        for (case, &(scale, degrees)) in CASES.iter().enumerate() {
+        for (case, &ReferenceCase { scale, degrees }) in reference.cases.iter().enumerate() {
             let light =
                 EnvmapLight::new(&image, Mat3::from_rotation_y(degrees.to_radians()), scale)
                     .unwrap();
-            for &(c, d, want) in VALUES.iter().filter(|v| v.0 == case) {
+            for &ReferenceValue {
+                case: c,
+                direction: d,
+                radiance: want,
+            } in reference.values.iter().filter(|v| v.case == case)
+            {
                 let d = Vec3::from(d);
                 if degrees != 0.0 && d.y.abs() > 0.999 {
                     continue;

@@ -16,8 +16,6 @@ pub mod constant;
 pub mod directional;
 pub mod emitter_tree;
 pub mod envmap;
-#[cfg(test)]
-mod envmap_reference;
 pub mod point;
 pub mod projector;
 pub mod selection;

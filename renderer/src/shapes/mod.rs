@@ -1,10 +1,21 @@
 //! Renderable shapes: triangle meshes, analytic spheres, disks and open cylinders. Each shape can be intersected
 //! primitive by primitive (for the BVH), describe the local surface at a hit, and be sampled
 //! uniformly by area (for area lights and photon emission).
+//!
+//! The mesh-file loaders live here too, next to the meshes they build: Wavefront OBJ
+//! (`obj.rs`), PLY with its extra properties as mesh attributes (`ply.rs`,
+//! `mesh_attributes.rs`) and Mitsuba's `serialized` (`serialized.rs`), each reading a
+//! [`mesh_file::RawMesh`] that `mesh_file.rs` turns into a world-space triangle mesh. The XML
+//! reader (`xml/shapes.rs`) calls them.
 
 pub mod cylinder;
 pub mod disk;
 pub mod mesh;
+pub(crate) mod mesh_attributes;
+pub(crate) mod mesh_file;
+pub(crate) mod obj;
+pub(crate) mod ply;
+pub(crate) mod serialized;
 pub mod sphere;
 
 pub use cylinder::Cylinder;

@@ -5,9 +5,11 @@
 
 use super::props::Props;
 use super::{Builder, Element, SceneError};
-use crate::media::grid::{read_vol, unit_cube_bounds, GridFilter, VolumeGrid};
-use crate::media::phase::{BlendPhase, TabulatedPhase};
-use crate::media::{Density, Heterogeneous, Medium, MediumInterface, PhaseFunction, VolumeTexture};
+use crate::parity::media::grid::{read_vol, unit_cube_bounds, GridFilter, VolumeGrid};
+use crate::parity::media::phase::{BlendPhase, TabulatedPhase};
+use crate::parity::media::{
+    Density, Heterogeneous, Medium, MediumInterface, PhaseFunction, VolumeTexture,
+};
 use crate::spectrum::{Rgb, SpectrumKind};
 use std::sync::Arc;
 

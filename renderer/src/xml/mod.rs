@@ -18,19 +18,17 @@ mod emitters;
 pub mod error;
 pub mod ior;
 mod media;
-mod mesh_attributes;
-mod obj;
 mod props;
 mod sensors;
 mod shapes;
 mod textures;
 pub mod transform;
-mod upgrade;
 
 pub use error::{Location, SceneError};
 
 use crate::bsdf::{Bsdf, Diffuse};
 use crate::description::{CameraDesc, EmitterDesc, IntegratorDesc, SceneDescription, ShapeDesc};
+use crate::parity::upgrade;
 use crate::spectrum::Rgb;
 use crate::texture::{Bitmap, Texture};
 use std::collections::{HashMap, HashSet};
@@ -576,7 +574,7 @@ pub(crate) struct Builder<'a> {
     /// Already built media with an id → index into `media`.
     medium_ids: HashMap<String, u32>,
     /// Already built volumes (grids) with an id, and the boxes they cover.
-    volume_ids: HashMap<String, (crate::media::VolumeTexture, media::Bounds)>,
+    volume_ids: HashMap<String, (crate::parity::media::VolumeTexture, media::Bounds)>,
     /// Ids being built (reference cycle detection).
     building: Vec<String>,
     /// Decoded images by (path, raw).
@@ -592,7 +590,7 @@ pub(crate) struct Builder<'a> {
     /// The sensor, once seen.
     pub camera: Option<CameraDesc>,
     /// Participating media.
-    pub media: Vec<crate::media::Medium>,
+    pub media: Vec<crate::parity::media::Medium>,
     /// The medium of the (first) sensor.
     pub camera_medium: Option<u32>,
     /// The sampler's sample count.
@@ -611,7 +609,7 @@ pub(crate) struct MeshScope<'a> {
     /// The `<shape>` element (for messages).
     pub shape: &'a Element,
     /// Its mesh's attributes; `None` for analytic shapes (sphere, disk, cylinder).
-    pub attributes: Option<mesh_attributes::MeshAttributes>,
+    pub attributes: Option<crate::shapes::mesh_attributes::MeshAttributes>,
 }
 
 impl<'a> Builder<'a> {
@@ -873,7 +871,7 @@ impl<'a> Builder<'a> {
         &mut self,
         el: &'a Element,
         kind: crate::spectrum::SpectrumKind,
-    ) -> Result<(crate::media::VolumeTexture, media::Bounds), SceneError> {
+    ) -> Result<(crate::parity::media::VolumeTexture, media::Bounds), SceneError> {
         let target = self.deref(el)?;
         if target.tag != "volume" {
             return Err(el.error(format!(

@@ -2942,7 +2942,7 @@ fn scenes_before_version_2_are_upgraded_as_mitsuba_does() {
         ("already_snake", "already_snake"),
         ("aBcD", "a_bc_d"),
     ] {
-        assert_eq!(super::upgrade::snake_case(from), to);
+        assert_eq!(crate::parity::upgrade::snake_case(from), to);
     }
     // A texture offset that is not a number is an error at its line.
     let bad = "<shape type=\"sphere\"><bsdf type=\"diffuse\"><texture type=\"checkerboard\" name=\"reflectance\">\n<string name=\"uscale\" value=\"x\"/></texture></bsdf></shape>";
@@ -3305,7 +3305,7 @@ fn dollar_escapes_and_longest_parameter_names() {
 /// shape's exterior, the sensor's medium by `<ref>`, Mitsuba's defaults and `scale`.
 #[test]
 fn media_are_read_with_their_interfaces() {
-    use crate::media::{Density, MediumInterface, PhaseFunction};
+    use crate::parity::media::{Density, MediumInterface, PhaseFunction};
     let dir = temp_dir("media");
     let body = r#"<medium type="homogeneous" id="fog">
     <rgb name="sigma_t" value="0.5, 0.25, 1"/>
@@ -3426,7 +3426,7 @@ fn error_media_cases_name_file_and_line() {
 /// order), and their errors with file and line.
 #[test]
 fn tabulated_and_blended_phases_are_read() {
-    use crate::media::PhaseFunction;
+    use crate::parity::media::PhaseFunction;
     let dir = temp_dir("phases");
     let body = format!(
         r#"{SENSOR}
@@ -3526,8 +3526,8 @@ fn tabulated_and_blended_phases_are_read() {
 /// the majorant; a declared volume named by `<ref>`; and the grid's errors with file and line.
 #[test]
 fn heterogeneous_media_read_their_grids() {
-    use crate::media::grid::{encode_vol, VolFile};
-    use crate::media::{Density, VolumeTexture};
+    use crate::parity::media::grid::{encode_vol, VolFile};
+    use crate::parity::media::{Density, VolumeTexture};
     let dir = temp_dir("heterogeneous");
     let vol = VolFile {
         res: glam::UVec3::new(2, 1, 1),

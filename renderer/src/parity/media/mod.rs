@@ -1,7 +1,7 @@
 //! Participating media: Mitsuba 3's `homogeneous` medium (constant extinction and albedo) and
 //! `heterogeneous` medium (both from voxel grids, `grid.rs`), their phase functions, the
 //! interior/exterior media a shape separates, and the free-flight sampling and transmittance
-//! the volumetric path tracer (`integrators/volpath.rs`) uses.
+//! the volumetric path tracer (`parity/volpath.rs`) uses.
 //!
 //! A heterogeneous medium is tracked against majorants σ̄ — the largest extinction in each of
 //! up to 16³ blocks of its grid's box (`grid::MajorantGrid`), walked block by block — with

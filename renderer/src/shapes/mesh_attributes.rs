@@ -211,7 +211,7 @@ fn srgb_to_linear(x: f64) -> f64 {
 
 /// An attribute as loaded: `channels` numbers per vertex, or per polygon of the file.
 #[derive(Debug, Clone, PartialEq)]
-pub(super) struct RawAttribute {
+pub(crate) struct RawAttribute {
     /// Full name, `vertex_…` or `face_…`.
     pub name: String,
     /// Numbers per element.
@@ -231,16 +231,16 @@ impl RawAttribute {
 #[derive(Debug, Clone, Default)]
 pub(crate) struct MeshAttributes {
     /// The attributes, in file order.
-    pub(super) attributes: Vec<RawAttribute>,
+    pub(crate) attributes: Vec<RawAttribute>,
     /// The mesh's final triangles (after fan triangulation).
-    pub(super) triangles: Vec<[u32; 3]>,
+    pub(crate) triangles: Vec<[u32; 3]>,
     /// For each triangle, the file polygon it was cut from.
-    pub(super) polygon_of: Vec<u32>,
+    pub(crate) polygon_of: Vec<u32>,
 }
 
 impl MeshAttributes {
     /// Attribute `name` laid out per triangle, or a message saying why it cannot be read.
-    pub(super) fn bind(&self, name: &str) -> Result<Arc<AttributeValues>, String> {
+    pub(crate) fn bind(&self, name: &str) -> Result<Arc<AttributeValues>, String> {
         let Some(a) = self.attributes.iter().find(|a| a.name == name) else {
             let names: Vec<&str> = self.attributes.iter().map(|a| a.name.as_str()).collect();
             return Err(if names.is_empty() {

@@ -5,10 +5,10 @@
 //! `vscale` become its `to_uv` transform. Plugin names are not translated (nor are they by
 //! Mitsuba 3): a plugin that no longer exists is an unknown plugin.
 
-use super::{Element, SceneError};
+use crate::xml::{Element, SceneError};
 
 /// Whether a file of scene `version` ("major.minor.patch") predates Mitsuba 2's names.
-pub(super) fn is_legacy(version: &str) -> bool {
+pub(crate) fn is_legacy(version: &str) -> bool {
     version
         .split('.')
         .next()
@@ -19,7 +19,7 @@ pub(super) fn is_legacy(version: &str) -> bool {
 /// A camelCase parameter name in snake_case, as Mitsuba 3 converts it: an underscore where a
 /// lower-case letter is followed by an upper-case one, and that run of capitals lowered
 /// (`intIOR` → `int_ior`, `specularReflectance` → `specular_reflectance`; `IOR` stays).
-pub(super) fn snake_case(name: &str) -> String {
+pub(crate) fn snake_case(name: &str) -> String {
     let chars: Vec<char> = name.chars().collect();
     let mut out = String::with_capacity(name.len() + 4);
     let mut i = 0;
@@ -41,7 +41,7 @@ pub(super) fn snake_case(name: &str) -> String {
 }
 
 /// Renames the `name` attribute of a parameter or nested plugin of a legacy file.
-pub(super) fn rename_parameter(el: &mut Element) {
+pub(crate) fn rename_parameter(el: &mut Element) {
     // `<default name>` names a `$` parameter of the file, not a plugin parameter.
     if el.tag == "default" {
         return;
@@ -53,7 +53,7 @@ pub(super) fn rename_parameter(el: &mut Element) {
 }
 
 /// The plugin-level upgrades of a legacy file's element whose parameters are already renamed.
-pub(super) fn upgrade_plugin(el: &mut Element) -> Result<(), SceneError> {
+pub(crate) fn upgrade_plugin(el: &mut Element) -> Result<(), SceneError> {
     let named = |el: &Element, name: &str| {
         el.children
             .iter()

@@ -3,13 +3,13 @@
 //! a failed file is read a second time by [`locate_error`], which follows `tobj`'s own rules
 //! line by line; the success path streams the file once and pays nothing for this.
 
-use super::shapes::RawMesh;
+use super::mesh_file::RawMesh;
 use glam::{Vec2, Vec3};
 use std::io::BufRead;
 use std::path::Path;
 
 /// Reads a Wavefront OBJ (all objects/groups merged into one mesh, as Mitsuba).
-pub(super) fn load_obj(path: &Path) -> Result<RawMesh, String> {
+pub(crate) fn load_obj(path: &Path) -> Result<RawMesh, String> {
     if !path.is_file() {
         return Err("file not found".into());
     }

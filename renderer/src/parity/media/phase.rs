@@ -282,7 +282,7 @@ fn hg(g: f32, cos_theta: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::media::grid::{GridFilter, VolFile, VolumeGrid};
+    use crate::parity::media::grid::{GridFilter, VolFile, VolumeGrid};
     use crate::sampling::{Pcg32, UniformSource};
     use crate::spectrum::Rgb;
     use crate::texture::BitmapWrap;

@@ -1,5 +1,5 @@
 //! Volumetric path tracer, as Mitsuba 3's `volpath` integrator: the path tracer of `path.rs`
-//! extended to homogeneous participating media (`media/`).
+//! extended to homogeneous participating media (`parity/media/`).
 //!
 //! * The medium a ray travels in is tracked: the camera's, then whatever a crossed surface
 //!   names on the side the ray leaves towards (`MediumInterface::target`); surfaces that name
@@ -23,14 +23,14 @@
 //!
 //! The estimator is unbiased for the same image as Mitsuba's `volpath` (its sampling differs:
 //! distances are drawn for one hero channel per path, as Mitsuba, but the path is weighted by
-//! the balance heuristic over the three channels (`media/mod.rs`), and transmittance on shadow
+//! the balance heuristic over the three channels (`parity/media/mod.rs`), and transmittance on shadow
 //! rays is evaluated in closed form, which a homogeneous medium allows).
 
-use super::{russian_roulette, RayIntegrator};
 use crate::bsdf::TransportMode;
+use crate::integrators::{russian_roulette, RayIntegrator};
 use crate::lights::LightSample;
 use crate::math::{offset_point, Ray};
-use crate::media::FreeFlight;
+use crate::parity::media::FreeFlight;
 use crate::sampling::{power_heuristic, Pcg32, UniformSource};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
@@ -387,9 +387,9 @@ mod tests {
     use crate::bsdf::{Bsdf, Dielectric, Mask};
     use crate::description::{test_sphere_scene, EmitterDesc, Projection, SceneDescription};
     use crate::film::Film;
+    use crate::parity::media::phase::{BlendPhase, TabulatedPhase};
+    use crate::parity::media::{Medium, MediumInterface, PhaseFunction, VolumeTexture};
     use crate::threads::with_threads;
-    use crate::media::phase::{BlendPhase, TabulatedPhase};
-    use crate::media::{Medium, MediumInterface, PhaseFunction, VolumeTexture};
     use crate::texture::Texture;
 
     /// Mitsuba's `null` BSDF, as the importer builds it.
@@ -495,8 +495,8 @@ mod tests {
     /// sphere: delta tracking's null collisions and ratio tracking's shadow rays add up to 1.
     #[test]
     fn white_furnace_with_a_heterogeneous_medium() {
-        use crate::media::grid::{GridFilter, VolFile, VolumeGrid};
-        use crate::media::{Density, Heterogeneous, VolumeTexture};
+        use crate::parity::media::grid::{GridFilter, VolFile, VolumeGrid};
+        use crate::parity::media::{Density, Heterogeneous, VolumeTexture};
         let data: Vec<f32> = (0..8)
             .flat_map(|i| {
                 let v = i as f32 * 0.5;

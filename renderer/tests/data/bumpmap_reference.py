@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
-"""Print the Mitsuba 3 values that `bumpmap.rs`'s `matches_mitsuba_values` test compares against:
+"""Print the Mitsuba 3 values that `renderer/src/bsdf/bumpmap.rs`'s `matches_mitsuba_values` test
+compares against (pasted into the test):
 the bitmap's eval_1_grad and bumpmap's eval (f*cos) and pdf on a 3x2 height field at one shading
 point with sheared surface derivatives (needs `pip install mitsuba`; development only).
 
-    python3 renderer/src/bsdf/bumpmap_reference.py
+    python3 renderer/tests/data/bumpmap_reference.py
 """
 import numpy as np, mitsuba as mi
 mi.set_variant("scalar_rgb")

@@ -8,8 +8,8 @@
 //! `emitter_samples`, `bsdf_samples` (each defaults to `shading_samples`; not both zero), and
 //! `hide_emitters` (the camera sees through area emitters and not the environment).
 
-use super::RayIntegrator;
 use crate::bsdf::TransportMode;
+use crate::integrators::RayIntegrator;
 use crate::math::Ray;
 use crate::sampling::{power_heuristic, Pcg32, UniformSource};
 use crate::scene::{EmitterHit, Scene};
