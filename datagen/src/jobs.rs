@@ -6,7 +6,6 @@
 use crate::config::Config;
 use crate::families::generate;
 use crate::fsutil::{remove_if_present, sha256_file, write_atomic};
-use fileio::atomic::remove_stale_temps;
 use crate::manifest::{
     assemble_manifest, config_fingerprint, jobs_of_other_config, outputs_intact, read_record,
     to_json, JobRecord, SampleEntry, SceneEntry, MANIFEST_FORMAT,
@@ -15,7 +14,9 @@ use crate::plan::{Job, Plan, Shard};
 use crate::scene::write_scene_files;
 use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, write_bundle, write_rgb_exr_image, Bundle, Image};
+use fileio::atomic::remove_stale_temps;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
+use renderer::integrators::sppm::{SppmMode, SppmSettings};
 use renderer::state_file::scene_fingerprint;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -589,7 +590,13 @@ fn run_job(
         }
         Job::Inputs { seed_index, .. } => {
             let spec = RunSpec {
-                sppm: run_settings(&sp.id, seed, r.photons_per_pass, r.max_depth, options.threads),
+                sppm: run_settings(
+                    &sp.id,
+                    seed,
+                    r.photons_per_pass,
+                    r.max_depth,
+                    options.threads,
+                ),
                 passes: r.passes.clone(),
                 state: Some(state.clone()),
                 defines,

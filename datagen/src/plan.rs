@@ -6,7 +6,6 @@ use crate::config::Config;
 use crate::families::scene_list;
 use crate::rng::{hash_seq, hash_str, Rng};
 use crate::scene::Family;
-use serde::{Deserialize, Serialize};
 
 pub use bundle::manifest::Split;
 

@@ -3,7 +3,7 @@
 //! one long multi-level run; inputs are bundles of one continuing run at each pass count.
 
 use crate::jobs::{RunSpec, SampleRenderer};
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use bundle::{Bundle, Image};
 use renderer::integrators::sppm::{render_sppm_resumable, StopCondition};
 use renderer::scene::Scene;
@@ -101,14 +101,9 @@ impl SampleRenderer for SppmBackend {
             seconds: None,
         };
         let state = state_file(xml, spec)?;
-        render_sppm_resumable(
-            &scene,
-            &spec.sppm,
-            &stop,
-            state.as_ref(),
-            on_bundle,
-            |p| on_pass(p.pass),
-        )?;
+        render_sppm_resumable(&scene, &spec.sppm, &stop, state.as_ref(), on_bundle, |p| {
+            on_pass(p.pass)
+        })?;
         Ok(())
     }
 }

@@ -59,7 +59,7 @@ impl SampleRenderer for StandIn {
         _: &mut (dyn FnMut(u32) + Send),
     ) -> Result<Image> {
         self.references.fetch_add(1, Ordering::SeqCst);
-        Ok(run_image(spec.seed, 3))
+        Ok(run_image(spec.sppm.seed, 3))
     }
 
     fn inputs(
@@ -75,7 +75,7 @@ impl SampleRenderer for StandIn {
                 p,
                 (SIDE, SIDE),
                 false,
-                |channels, _| run_image(spec.seed, channels),
+                |channels, _| run_image(spec.sppm.seed, channels),
             ))?;
         }
         Ok(())

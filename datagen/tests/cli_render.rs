@@ -527,7 +527,7 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
     assert_eq!(&ids[5..], ["005-floor", "006-bright-lamp"]);
     let floor_entry = &manifest.scenes[5];
     assert_eq!(floor_entry.split, Split::Test, "the fixed split is kept");
-    assert_eq!(floor_entry.family.name(), "external");
+    assert_eq!(floor_entry.family, "external");
     // The manifest finds the user's file from the dataset root, and records its checksum.
     assert_eq!(floor_entry.xml, "../mine/floor/scene.xml");
     assert!(data.join(&floor_entry.xml).is_file());

@@ -28,7 +28,7 @@ fn value(seed: u64, passes: u32, i: usize, c: usize) -> f32 {
 fn image(spec: &RunSpec, w: usize, h: usize, channels: usize, passes: u32, salt: usize) -> Image {
     let mut img = Image::new(w, h, channels);
     for (i, v) in img.data.iter_mut().enumerate() {
-        *v = value(spec.seed, passes, i, salt);
+        *v = value(spec.sppm.seed, passes, i, salt);
     }
     img
 }

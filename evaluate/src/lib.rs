@@ -3,7 +3,6 @@
 //! writes results.json, convergence plots, comparison images and one self-contained HTML page.
 
 pub mod ablation;
-pub mod summary;
 pub mod compare;
 pub mod config;
 pub mod html;
@@ -12,6 +11,7 @@ pub mod plot;
 pub mod resume;
 pub mod runs;
 pub mod scene;
+pub mod summary;
 
 use std::path::{Path, PathBuf};
 
@@ -23,9 +23,9 @@ use self::ablation::{Ablation, AblationModel};
 use self::compare::{geometric_mean, median};
 use self::config::{EvalConfig, EvalScene};
 use self::images::{error_panel, error_scale, relative_error_map, row_png, srgb_panel};
-use renderer::integrators::sppm::{SppmSettings, DEFAULT_MAX_DEPTH};
 use self::scene::{evaluate_scene, SceneEval};
 use model::model_dir::TrainedModel;
+use renderer::integrators::sppm::{SppmSettings, DEFAULT_MAX_DEPTH};
 
 /// How the comparison is made, stored in results.json and shown on the page.
 pub const METHOD_NOTE: &str = "Equal time: ours is charged render seconds (multi-level SPPM up \

@@ -12,7 +12,7 @@
 use std::sync::Mutex;
 use std::time::Instant;
 
-use anyhow::{Context as _, Result};
+use anyhow::Result;
 use bundle::Bundle;
 use indicatif::{ProgressBar, ProgressStyle};
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};

@@ -14,10 +14,10 @@ use serde::{Deserialize, Serialize};
 use crate::compare::{dense_checkpoints, relmse_at_time, CurvePoint, Interpolated};
 use crate::config::EvalScene;
 use crate::runs::{load_scene, multi_level, run_timed};
-use renderer::integrators::sppm::SppmSettings;
 use infer::report::LEVEL_NAMES;
 use infer::{ErrorReport, Inference};
 use model::model_dir::TrainedModel;
+use renderer::integrators::sppm::SppmSettings;
 
 /// The standard run's dense checkpoints go up to this multiple of the largest pass count.
 const STANDARD_PASS_CAP_FACTOR: u32 = 64;

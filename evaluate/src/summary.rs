@@ -276,11 +276,17 @@ mod tests {
     fn missing_or_disjoint_evaluations_are_errors_naming_them() {
         let dir = temp_dir("bad");
         let (a, b) = (dir.join("a"), dir.join("b"));
-        let err = format!("{:#}", summarize_evaluations(std::slice::from_ref(&a)).unwrap_err());
+        let err = format!(
+            "{:#}",
+            summarize_evaluations(std::slice::from_ref(&a)).unwrap_err()
+        );
         assert!(err.contains("results.json"), "{err}");
         write_results(&a, 1000, &[8], &[]);
         write_results(&b, 1000, &[16], &[]);
-        let err = format!("{:#}", summarize_evaluations(&[a.clone(), b.clone()]).unwrap_err());
+        let err = format!(
+            "{:#}",
+            summarize_evaluations(&[a.clone(), b.clone()]).unwrap_err()
+        );
         assert!(err.contains("share no pass count"), "{err}");
         std::fs::write(b.join("results.json"), "{ not json").unwrap();
         let err = format!("{:#}", summarize_evaluations(&[a, b.clone()]).unwrap_err());

@@ -66,7 +66,6 @@ const BOX_XML: &str = r#"<scene version="3.0.0">
 </scene>
 "#;
 
-
 /// A dataset manifest (`bundle::manifest`) of 16×16 `scenes` and no samples.
 fn dataset_manifest(scenes: Vec<serde_json::Value>) -> serde_json::Value {
     serde_json::json!({

@@ -221,13 +221,20 @@ mod tests {
         let b = temp_path(&path);
         assert_ne!(a, b);
         let name = a.file_name().unwrap().to_string_lossy().into_owned();
-        assert!(name.starts_with(".img.png.tmp-") && name.ends_with(".png"), "{name}");
+        assert!(
+            name.starts_with(".img.png.tmp-") && name.ends_with(".png"),
+            "{name}"
+        );
         // A leftover of a live process (this one) stays; one of a dead process goes; one of
         // another host stays.
         std::fs::write(&a, b"x").unwrap();
         let dead = dir.join(format!(".img.png.tmp-{}-0-{}.png", u32::MAX, host_tag()));
         std::fs::write(&dead, b"x").unwrap();
-        let other = dir.join(format!(".img.png.tmp-{}-0-{}.png", u32::MAX, "0".repeat(16)));
+        let other = dir.join(format!(
+            ".img.png.tmp-{}-0-{}.png",
+            u32::MAX,
+            "0".repeat(16)
+        ));
         std::fs::write(&other, b"x").unwrap();
         assert_eq!(remove_stale_temps(&dir), 1);
         assert!(a.exists() && !dead.exists() && other.exists());

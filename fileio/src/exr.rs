@@ -9,8 +9,8 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use exr::prelude::{
-    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer,
-    LayerAttributes, ReadChannels, ReadLayers, Text, WritableImage,
+    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer, LayerAttributes,
+    ReadChannels, ReadLayers, Text, WritableImage,
 };
 
 use crate::atomic::write_with;
@@ -202,8 +202,6 @@ fn find_nul(bytes: &[u8], from: usize) -> Result<usize, String> {
         None => Err("truncated EXR header".into()),
     }
 }
-
-
 
 /// Writes an RGB image given as three planes (`R`, `G`, `B`) to `path`, atomically.
 pub fn write_rgb(
@@ -416,7 +414,6 @@ fn raw_window_and_channels(bytes: &[u8]) -> Option<([i32; 4], usize)> {
 mod tests {
     use super::*;
 
-
     /// A minimal header with attributes `b`, `a` (not a real image; only the header matters).
     fn header(names: &[&str]) -> Vec<u8> {
         let mut v = vec![0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0];
@@ -454,16 +451,17 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("fileio-exr-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let (w, h) = (3, 2);
-        let plane = |salt: f32| (0..w * h).map(|i| salt + i as f32 * 0.5).collect::<Vec<_>>();
+        let plane = |salt: f32| {
+            (0..w * h)
+                .map(|i| salt + i as f32 * 0.5)
+                .collect::<Vec<_>>()
+        };
         let path = dir.join("a.exr");
         write_channels(
             &path,
             w,
             h,
-            vec![
-                ("z.Y".into(), plane(10.0)),
-                ("a ✓".into(), plane(20.0)),
-            ],
+            vec![("z.Y".into(), plane(10.0)), ("a ✓".into(), plane(20.0))],
             &[("meta", "ü {}".as_bytes()), ("format", b"v1")],
         )
         .unwrap();
@@ -488,7 +486,10 @@ mod tests {
         };
         assert_eq!(values, &plane(10.0));
         let meta = &layer.attributes.other[&Text::from("meta")];
-        assert_eq!(meta, &AttributeValue::Text(Text::from_slice_unchecked("ü {}".as_bytes())));
+        assert_eq!(
+            meta,
+            &AttributeValue::Text(Text::from_slice_unchecked("ü {}".as_bytes()))
+        );
 
         // The same pixels give the same bytes.
         let again = dir.join("b.exr");
@@ -498,12 +499,23 @@ mod tests {
         assert_eq!(std::fs::read(&again).unwrap(), first);
 
         for (name, want) in [("", "is empty"), ("a\0b", "NUL")] {
-            let err = write_channels(&dir.join("c.exr"), w, h, vec![(name.into(), plane(0.0))], &[])
-                .unwrap_err();
+            let err = write_channels(
+                &dir.join("c.exr"),
+                w,
+                h,
+                vec![(name.into(), plane(0.0))],
+                &[],
+            )
+            .unwrap_err();
             assert!(err.to_string().contains(want), "{err}");
         }
-        let err = write_rgb(&dir.join("c.exr"), w, h, [plane(0.0), vec![1.0], plane(0.0)])
-            .unwrap_err();
+        let err = write_rgb(
+            &dir.join("c.exr"),
+            w,
+            h,
+            [plane(0.0), vec![1.0], plane(0.0)],
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("holds 1 values"), "{err}");
         assert!(!dir.join("c.exr").exists());
         std::fs::remove_dir_all(&dir).unwrap();

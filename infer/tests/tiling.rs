@@ -7,8 +7,8 @@ use std::process::Command;
 
 use burn::tensor::Device;
 use infer::{reconstruct_tiled, Engine};
-use model::model_dir::TrainedModel;
 use model::features::pack;
+use model::model_dir::TrainedModel;
 use model::synthetic::{synthetic_bundle, with_biases, with_distinct_biases};
 use model::weights::save_burnpack;
 use model::{ModelConfig, Network, Preset, Weighting};

@@ -179,7 +179,6 @@ pub fn reconstruct(
     combine(levels, model.weights(features), config.window).clamp_min(0.0)
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

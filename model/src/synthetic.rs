@@ -12,10 +12,10 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use crate::sample::Sample;
-use crate::features::{interleaved, pack, planar_reference};
 use crate::combine::reconstruct;
+use crate::features::{interleaved, pack, planar_reference};
 use crate::network::{ModelConfig, Network};
+use crate::sample::Sample;
 
 /// Approximately standard-normal noise (sum of four uniforms, rescaled).
 fn gaussian(rng: &mut Pcg64Mcg) -> f32 {
@@ -174,7 +174,11 @@ pub fn conv_bias(conv: &burn::nn::conv::Conv2d) -> Vec<f32> {
 /// layer).
 pub fn parameters(network: &Network) -> Vec<f32> {
     let mut out = Vec::new();
-    for conv in network.hidden.iter().chain(std::iter::once(&network.output)) {
+    for conv in network
+        .hidden
+        .iter()
+        .chain(std::iter::once(&network.output))
+    {
         out.extend(
             conv.weight
                 .val()

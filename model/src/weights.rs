@@ -6,7 +6,6 @@
 
 use std::path::Path;
 
-use burn::module::Module;
 use burn::optim::ModuleOptimizer;
 use burn::store::{BurnpackStore, ModuleSnapshot, SafetensorsStore};
 use burn::tensor::Device;
@@ -65,9 +64,13 @@ pub fn canonical_safetensors_header(path: &Path) -> Result<(), String> {
 /// order ([`sorted_burnpack`]).
 pub fn save_optimizer(optim: &ModuleOptimizer, path: &Path) -> Result<(), String> {
     let raw = temp_path(&path.with_file_name("optimizer.raw.bpk"));
-    let saved = optim.save(&raw).map_err(|e| format!("{e:?}")).and_then(|()| {
-        write_with(path, |tmp| sorted_burnpack(&raw, tmp)).map_err(|e| e.into_error(|e| e.to_string()))
-    });
+    let saved = optim
+        .save(&raw)
+        .map_err(|e| format!("{e:?}"))
+        .and_then(|()| {
+            write_with(path, |tmp| sorted_burnpack(&raw, tmp))
+                .map_err(|e| e.into_error(|e| e.to_string()))
+        });
     let _ = std::fs::remove_file(&raw);
     saved.map_err(|e| format!("{}: {e}", path.display()))
 }

@@ -1,9 +1,12 @@
 //! Network-level tests: parameter count, the reconstruction's clamp, weight files saved and
 //! loaded, backend agreement.
 
+use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use model::combine::reconstruct;
-use model::synthetic::{max_relative_difference, synthetic_reconstruction, synthetic_sample};
+use model::synthetic::{
+    conv_bias as bias, max_relative_difference, synthetic_reconstruction, synthetic_sample,
+};
 use model::weights::{load_burnpack, save_burnpack};
 use model::{ModelConfig, Preset};
 
@@ -133,4 +136,3 @@ fn ndarray_and_flex_agree() {
     let max_diff = max_relative_difference(&a, &b);
     assert!(max_diff < 1e-4, "flex vs ndarray differ by {max_diff}");
 }
-

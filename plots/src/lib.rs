@@ -56,7 +56,9 @@ pub fn write_atomically(
     draw: impl FnOnce(&Path) -> Result<(), Box<dyn Error>>,
 ) -> Result<(), String> {
     fileio::atomic::write_with(path, |tmp| {
-        register_font().map_err(|e| e.into()).and_then(|()| draw(tmp))
+        register_font()
+            .map_err(|e| e.into())
+            .and_then(|()| draw(tmp))
     })
     .map_err(|e| match e {
         fileio::atomic::AtomicError::Write(e) => format!("drawing {}: {e}", path.display()),

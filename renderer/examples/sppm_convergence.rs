@@ -17,11 +17,11 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use bundle::{read_rgb_exr_image, write_bundle, write_rgb_exr_image, Image, LEVEL_NAMES};
 use clap::Parser;
-use renderer::threads::with_threads;
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
 use renderer::integrators::RayIntegrator;
 use renderer::scene::Scene;
+use renderer::threads::with_threads;
 
 /// relMSE of every SPPM level against a path-traced reference, per doubling of passes.
 #[derive(Parser, Debug)]

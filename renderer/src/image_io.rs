@@ -348,7 +348,10 @@ fn read_exr(path: &Path) -> Result<RgbImage, ImageIoError> {
             .filter(|plane| plane.len() == read.width * read.height)
             .ok_or_else(|| ImageIoError::ExrLayout {
                 path: path.to_owned(),
-                why: format!("no channel `{name}` of {}x{} pixels", read.width, read.height),
+                why: format!(
+                    "no channel `{name}` of {}x{} pixels",
+                    read.width, read.height
+                ),
             })
     });
     let (r, g, b) = (r?, g?, b?);

@@ -21,9 +21,9 @@ pub mod memory;
 pub mod parity;
 pub mod sampling;
 pub mod scene;
+pub mod scene_file;
 pub mod shapes;
 pub mod spectrum;
-pub mod scene_file;
 pub mod state_file;
 #[cfg(test)]
 mod test_data;

@@ -32,13 +32,11 @@ pub struct LoadedScene {
 impl LoadedScene {
     /// Adds the SPPM notes (rule 4) to the warnings.
     pub fn check_for_sppm(&mut self) {
-        if let Some(w) =
-            crate::integrators::sppm::filter_warning(self.scene.camera.filter().desc())
+        if let Some(w) = crate::integrators::sppm::filter_warning(self.scene.camera.filter().desc())
         {
             self.warnings.push(w);
         }
     }
-
 }
 
 /// Loads and builds the scene `xml` under rules 1–3.

@@ -24,7 +24,8 @@ struct CheckpointState {
 
 /// Writes `text` to `path` atomically, the error naming the file.
 fn write_text(path: &Path, text: &str) -> Result<(), String> {
-    fileio::atomic::write_bytes(path, text.as_bytes()).map_err(|e| format!("{}: {e}", path.display()))
+    fileio::atomic::write_bytes(path, text.as_bytes())
+        .map_err(|e| format!("{}: {e}", path.display()))
 }
 
 impl Trainer {

@@ -2,9 +2,9 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::training::{toml_name, TrainSettings};
 use anyhow::{bail, Context, Result};
 use model::loss::Loss;
-use crate::training::{toml_name, TrainSettings};
 use model::{ModelConfig, Preset, Weighting};
 use serde::Deserialize;
 

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Result};
 use crate::training::EpochReport;
+use anyhow::{anyhow, Result};
 use plots::{LogAxis, LogTicks, Series};
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;

@@ -13,12 +13,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use bundle::manifest::Manifest;
 use burn::tensor::{Device, Tensor, TensorData};
 use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
-use bundle::manifest::Manifest;
 
-use model::features::{colour_channels, feature_channels, PackedImage, COLOUR_CHANNELS};
+use model::features::{colour_channels, feature_channels, COLOUR_CHANNELS};
 use model::network::all_levels;
 use model::sample::{load_sample, BadSample, Sample};
 
@@ -382,6 +382,7 @@ fn shuffle<T>(items: &mut [T], rng: &mut Pcg64Mcg) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use model::features::PackedImage;
     use model::network::INPUT_CHANNELS;
 
     fn ramp_sample(w: usize, h: usize) -> Sample {

@@ -1,9 +1,6 @@
 //! `train --config configs/train/<name>.toml [--resume]`: trains the combiner network on a
 //! dataset written by `datagen` (docs/method.md §6).
 
-
-
-
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -12,8 +9,8 @@ use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
-use train::data::PatchDataset;
 use model::weights::load_burnpack;
+use train::data::PatchDataset;
 use train::training::{validate, EpochReport, Trainer};
 use train::{config, curves};
 

@@ -10,9 +10,10 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use infer::{reconstruct_tiled, Engine, TrainedModel};
+use infer::{reconstruct_tiled, Engine};
 use model::backend::Backend;
 use model::features::pack;
+use model::model_dir::TrainedModel;
 use model::synthetic::synthetic_bundle;
 use model::{ModelConfig, Preset};
 use serde_json::{json, Value};

@@ -2,12 +2,11 @@
 //! counts given), for docs/performance.md. Default: Mitsuba's Cornell box at 256×256,
 //! max_depth 8, as in the Mitsuba 3 peer measurement of BASELINES.md.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Parser;
-use renderer::threads::with_threads;
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::RayIntegrator;
-use renderer::scene::Scene;
+use renderer::threads::with_threads;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;

@@ -10,7 +10,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Parser;
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
 use renderer::scene::Scene;

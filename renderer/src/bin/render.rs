@@ -10,7 +10,6 @@ use cli_output::paths::{check_distinct, check_extension, check_not_directory, ex
 use indicatif::{ProgressBar, ProgressStyle};
 use renderer::description::{AovSpec, IntegratorDesc};
 use renderer::film::Film;
-use renderer::threads::with_threads;
 use renderer::image_io::{write_channels_exr, write_png_srgb, write_rgb_exr};
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::RayIntegrator;
@@ -19,6 +18,7 @@ use renderer::parity::direct::DirectIntegrator;
 use renderer::parity::volpath::VolPathTracer;
 use renderer::scene::Scene;
 use renderer::state_file::StateFile;
+use renderer::threads::with_threads;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;

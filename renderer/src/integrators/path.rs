@@ -169,8 +169,8 @@ mod tests {
         test_camera, EmitterDesc, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
     };
     use crate::film::Film;
-    use crate::threads::with_threads;
     use crate::texture::Texture;
+    use crate::threads::with_threads;
     use glam::Vec3;
 
     fn diffuse(r: f32) -> Bsdf {

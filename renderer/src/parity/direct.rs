@@ -164,9 +164,9 @@ mod tests {
     use crate::bsdf::{Bsdf, Diffuse};
     use crate::description::{test_sphere_scene, EmitterDesc};
     use crate::film::Film;
-    use crate::threads::with_threads;
     use crate::integrators::path::PathTracer;
     use crate::texture::Texture;
+    use crate::threads::with_threads;
     use glam::Vec3;
 
     /// A diffuse sphere of albedo `rho` (radius 1 at the origin) lit by `emitter` alone.

@@ -389,8 +389,8 @@ mod tests {
     use crate::film::Film;
     use crate::parity::media::phase::{BlendPhase, TabulatedPhase};
     use crate::parity::media::{Medium, MediumInterface, PhaseFunction, VolumeTexture};
-    use crate::threads::with_threads;
     use crate::texture::Texture;
+    use crate::threads::with_threads;
 
     /// Mitsuba's `null` BSDF, as the importer builds it.
     fn null() -> Bsdf {

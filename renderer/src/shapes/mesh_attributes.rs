@@ -186,7 +186,7 @@ impl Grouping<'_> {
 /// A PLY property value as Mitsuba 3.9.1 stores it in an attribute (see the module comment);
 /// `None` for lists.
 pub(super) fn attribute_value(p: &Property) -> Option<f32> {
-    let unit = |v: f64, max: f64| srgb_to_linear(v / max) as f32;
+    let unit = |v: f64, max: f64| fileio::srgb::decode_f64(v / max) as f32;
     Some(match *p {
         Property::Float(v) => v,
         Property::Double(v) => v as f32,
@@ -198,15 +198,6 @@ pub(super) fn attribute_value(p: &Property) -> Option<f32> {
         Property::UInt(v) => unit(v as f64, u32::MAX as f64),
         _ => return None,
     })
-}
-
-/// The sRGB transfer function inverted (values ≤ 0.04045, negative ones included, linear).
-fn srgb_to_linear(x: f64) -> f64 {
-    if x <= 0.04045 {
-        x / 12.92
-    } else {
-        ((x + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 /// An attribute as loaded: `channels` numbers per vertex, or per polygon of the file.

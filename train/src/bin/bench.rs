@@ -10,12 +10,12 @@ use anyhow::{bail, Context, Result};
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use clap::{Parser, ValueEnum};
-use train::data::Batch;
-use model::loss::Loss;
 use model::combine::reconstruct;
-use train::training::{adam, train_step};
+use model::loss::Loss;
 use model::{ModelConfig, Preset};
 use serde_json::{json, Value};
+use train::data::Batch;
+use train::training::{adam, train_step};
 
 /// Time Burn against the PyTorch peer on the combiner network.
 #[derive(Parser, Debug)]

@@ -35,10 +35,10 @@ use bundle::{Bundle, BundleMeta, Image};
 use glam::UVec2;
 use rayon::prelude::*;
 
-use crate::threads::with_threads;
 use crate::sampling::{rng_for, UniformSource};
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
+use crate::threads::with_threads;
 
 use crate::state_file::StateFile;
 use accumulate::{GBufferSum, Welford};

@@ -677,8 +677,9 @@ fn assert_disk_in_lit_enclosure_matches_the_path_tracer_after(material: Bsdf, pa
         ],
         vec![],
     );
-    let pt = crate::threads::with_threads(2, || PathTracer::default().render(&scene, 8192, 5, None))
-        .unwrap();
+    let pt =
+        crate::threads::with_threads(2, || PathTracer::default().render(&scene, 8192, 5, None))
+            .unwrap();
     let mut s = settings(SppmMode::MultiLevel, 20_000, 6);
     s.threads = 2;
     let bundle = render(&scene, &s, passes);
