@@ -43,7 +43,7 @@ pub struct EvalConfig {
     pub limit: Option<usize>,
     /// Explicit scenes.
     #[serde(default)]
-    pub scenes: Vec<SceneEntry>,
+    pub scenes: Vec<ExplicitScene>,
     /// Scenes of a dataset split.
     #[serde(default)]
     pub dataset: Option<DatasetSource>,
@@ -65,7 +65,7 @@ pub struct AblationConfig {
 /// One explicit scene.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub struct SceneEntry {
+pub struct ExplicitScene {
     /// Name shown in the report (default: the XML's parent directory name or file stem).
     #[serde(default)]
     pub name: Option<String>,

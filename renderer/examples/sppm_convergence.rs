@@ -128,9 +128,11 @@ fn main() -> Result<()> {
     let args = Args::parse();
     let res = args.res.to_string();
     let defaults = vec![("res".to_string(), res)];
-    let desc = renderer::xml::load_scene(&args.scene, &defaults, false)
-        .with_context(|| format!("loading {}", args.scene.display()))?;
-    let scene = Scene::build(&desc)?;
+    let loaded = renderer::scene_file::load_for_sppm(&args.scene, &defaults, false)?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
+    }
+    let scene = loaded.scene;
     if let Some(dir) = args.out.parent() {
         std::fs::create_dir_all(dir)?;
     }
