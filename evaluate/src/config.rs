@@ -353,20 +353,18 @@ mod tests {
             std::fs::write(dir.join(f), "x").unwrap();
         }
         let scene = |id: &str, split: &str| {
-            format!(
-                "{{\"id\": \"{id}\", \"split\": \"{split}\", \"xml\": \"scenes/{id}/scene.xml\", \
-                 \"reference\": \"references/{id}.exr\", \"family\": \"room\"}}"
-            )
+            serde_json::json!({
+                "id": id, "family": "room", "split": split, "xml": format!("scenes/{id}/scene.xml"),
+                "reference": format!("references/{id}.exr"), "reference_sha256": "",
+                "reference_seed": 1, "reference_passes": 64, "reference_photons": 1000
+            })
         };
-        std::fs::write(
-            dir.join("manifest.json"),
-            format!(
-                "{{\"name\": \"t\", \"scenes\": [{}, {}]}}",
-                scene("a", "train"),
-                scene("b", "test")
-            ),
-        )
-        .unwrap();
+        let manifest = serde_json::json!({
+            "format": bundle::manifest::MANIFEST_FORMAT, "name": "t", "config_sha256": "",
+            "width": 16, "height": 16, "reference_level": "y",
+            "scenes": [scene("a", "train"), scene("b", "test")], "samples": [], "config": {}
+        });
+        std::fs::write(dir.join("manifest.json"), manifest.to_string()).unwrap();
         let config = |extra: &str| -> EvalConfig {
             toml::from_str(&format!(
                 "model = \"m\"\noutput = \"o\"\nphotons_per_pass = 10\npasses = [2]\nseed = 1\n\

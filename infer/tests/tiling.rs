@@ -452,5 +452,15 @@ fn cli_renders_a_scene_by_passes_or_by_time_then_reconstructs() {
         assert!(!stderr.contains("panicked"), "{stderr}");
         assert!(!dir.join("bad.exr").exists());
     }
+    // The scene policy of every command (renderer::scene_file): a define the scene never reads
+    // (a misspelt name) is an error naming it, before anything is rendered.
+    let out = infer("misspelt", &["--passes", "1", "-D", "rez=16"]);
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("-D rez=16") && stderr.contains("scene.xml"),
+        "{stderr}"
+    );
+    assert!(!dir.join("misspelt.exr").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -20,7 +20,6 @@ use clap::Parser;
 use renderer::integrators::path::PathTracer;
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
 use renderer::integrators::RayIntegrator;
-use renderer::scene::Scene;
 use renderer::threads::with_threads;
 
 /// relMSE of every SPPM level against a path-traced reference, per doubling of passes.

@@ -62,3 +62,76 @@ pub fn load_for_sppm(
     loaded.check_for_sppm();
     Ok(loaded)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene in its own folder: the lit floor of the CLI tests with `filter` as its film's
+    /// reconstruction filter and its floor's BSDF of type `bsdf`.
+    fn scene(name: &str, filter: &str, bsdf: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("scene-file-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let text = include_str!("../tests/fixtures/lit-floor.xml")
+            .replace(r#"<rfilter type="box"/>"#, filter)
+            .replace(r#"type="diffuse""#, &format!("type=\"{bsdf}\""));
+        let path = dir.join("scene.xml");
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    fn define(name: &str, value: &str) -> Vec<(String, String)> {
+        vec![(name.into(), value.into())]
+    }
+
+    #[test]
+    fn an_unused_define_is_an_error_naming_the_file_and_the_define() {
+        let path = scene("unused", r#"<rfilter type="box"/>"#, "diffuse");
+        let ok = load(&path, &define("res", "8"), false).unwrap();
+        assert_eq!(ok.scene.camera.resolution().x, 8);
+        assert!(ok.warnings.is_empty(), "{:?}", ok.warnings);
+        for lenient in [false, true] {
+            let err = format!(
+                "{:#}",
+                load(&path, &define("rez", "8"), lenient).err().unwrap()
+            );
+            assert!(
+                err.contains("scene.xml") && err.contains("-D rez=8"),
+                "lenient {lenient}: {err}"
+            );
+            assert!(load_for_sppm(&path, &define("rez", "8"), lenient).is_err());
+        }
+    }
+
+    #[test]
+    fn sppm_warns_about_a_non_box_filter_and_the_path_tracer_does_not() {
+        let path = scene("gaussian", r#"<rfilter type="gaussian"/>"#, "diffuse");
+        let plain = load(&path, &[], false).unwrap();
+        assert!(plain.warnings.is_empty(), "{:?}", plain.warnings);
+        let sppm = load_for_sppm(&path, &[], false).unwrap();
+        assert_eq!(sppm.warnings.len(), 1, "{:?}", sppm.warnings);
+        assert!(
+            sppm.warnings[0].contains("gaussian") && sppm.warnings[0].contains("box"),
+            "{}",
+            sppm.warnings[0]
+        );
+        let boxed = scene("box", r#"<rfilter type="box"/>"#, "diffuse");
+        assert!(load_for_sppm(&boxed, &[], false)
+            .unwrap()
+            .warnings
+            .is_empty());
+    }
+
+    #[test]
+    fn unknown_plugins_are_errors_unless_lenient() {
+        let path = scene("unknown", r#"<rfilter type="box"/>"#, "velvet");
+        let err = format!("{:#}", load(&path, &[], false).err().unwrap());
+        assert!(err.contains("scene.xml") && err.contains("velvet"), "{err}");
+        let lenient = load(&path, &[], true).unwrap();
+        assert!(
+            lenient.warnings.iter().any(|w| w.contains("velvet")),
+            "{:?}",
+            lenient.warnings
+        );
+    }
+}

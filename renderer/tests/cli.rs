@@ -104,7 +104,8 @@ fn render_writes_images_and_bundles_that_read_back() {
         assert!(bundle.exists(), "{} missing", bundle.display());
         let b = bundle::read_bundle(&bundle).unwrap();
         assert_eq!(b.meta.passes, passes);
-        assert_eq!((b.meta.width, b.meta.height), (12, 12));
+        // (the fixture's default `res`)
+        assert_eq!((b.meta.width, b.meta.height), (16, 16));
         assert_eq!(b.find_non_finite(), None);
     }
     let _ = std::fs::remove_dir_all(&dir);
@@ -222,6 +223,23 @@ fn bad_input_names_the_file_and_line_and_fails() {
     ]
     .map(String::from);
     render_fails_naming(&endless, &["time limit", "finite", "got inf"]);
+    // A define the scene never reads (a misspelt name) is an error naming it and the scene,
+    // with every integrator (renderer::scene_file), and nothing is written.
+    for integrator in [&["path"][..], &["sppm-ml", "--passes", "1"]] {
+        let mut misspelt: Vec<String> = vec![scene.to_str().unwrap().into(), "--integrator".into()];
+        misspelt.extend(integrator.iter().map(|a| a.to_string()));
+        misspelt.extend(
+            [
+                "-D",
+                "rez=12",
+                "--out",
+                dir.join("misspelt.exr").to_str().unwrap(),
+            ]
+            .map(String::from),
+        );
+        render_fails_naming(&misspelt, &["-D rez=12", "scene.xml"]);
+        assert!(!dir.join("misspelt.exr").exists() && !dir.join("misspelt_p0001.exr").exists());
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
