@@ -5,7 +5,7 @@
 
 use crate::config::Config;
 use crate::families::generate;
-use crate::fsutil::{remove_if_present, sha256_file, write_atomic};
+use crate::fsutil::{create_parent, remove_if_present, sha256_file, write_atomic};
 use crate::manifest::{
     assemble_manifest, config_fingerprint, jobs_of_other_config, outputs_intact, read_record,
     to_json, JobRecord, SampleEntry, SceneEntry, MANIFEST_FORMAT,
@@ -571,9 +571,9 @@ fn run_job(
             }
             let rel = sp.reference();
             let path = root.join(&rel);
-            write_output(&path, |tmp| {
-                write_rgb_exr_image(tmp, &image).map_err(Into::into)
-            })?;
+            create_parent(&path)
+                .with_context(|| format!("creating the folder of {}", path.display()))?;
+            write_rgb_exr_image(&path, &image)?;
             record.scene = Some(SceneEntry {
                 id: sp.id.clone(),
                 family: sp.family.name().to_owned(),
@@ -626,8 +626,10 @@ fn run_job(
                 b.meta.seconds = 0.0;
                 let rel = plan.bundle_path(sp.index, seed_index, passes);
                 let path = root.join(&rel);
-                // (`write_bundle` writes byte-reproducible headers: `fileio::exr`.)
-                write_output(&path, |tmp| Ok(write_bundle(tmp, &b)?))?;
+                // Atomic, with byte-reproducible headers (`fileio::exr`).
+                create_parent(&path)
+                    .with_context(|| format!("creating the folder of {}", path.display()))?;
+                write_bundle(&path, &b)?;
                 record.samples.push(sample_entry(rel, passes, &path)?);
                 Ok(())
             };
@@ -665,16 +667,4 @@ fn run_job(
     // The outputs are written: the run's state is of no further use.
     remove_if_present(&state.path)?;
     Ok(record)
-}
-
-/// Writes an output through `write` into a unique temp file, then renames it into place
-/// ([`fileio::atomic`]); its folder is created.
-fn write_output(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("creating {}", parent.display()))?;
-    }
-    fileio::atomic::write_with(path, write).map_err(|e| {
-        e.into_error(|e| anyhow::Error::new(e).context(format!("renaming onto {}", path.display())))
-    })
 }

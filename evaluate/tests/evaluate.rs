@@ -66,6 +66,15 @@ const BOX_XML: &str = r#"<scene version="3.0.0">
 </scene>
 "#;
 
+/// A manifest scene entry: `id` of `split` read from `xml`, its reference `<id>.exr`.
+fn manifest_scene(id: &str, split: &str, xml: &str) -> serde_json::Value {
+    serde_json::json!({
+        "id": id, "family": "external", "split": split, "xml": xml,
+        "reference": format!("{id}.exr"), "reference_sha256": "", "reference_seed": 1,
+        "reference_passes": 64, "reference_photons": 1000
+    })
+}
+
 /// A dataset manifest (`bundle::manifest`) of 16×16 `scenes` and no samples.
 fn dataset_manifest(scenes: Vec<serde_json::Value>) -> serde_json::Value {
     serde_json::json!({
@@ -165,12 +174,10 @@ fn evaluates_explicit_and_dataset_scenes() {
     std::fs::copy(&reference, data.join("references/000-box.exr")).unwrap();
     std::fs::copy(&reference, data.join("references/001-box.exr")).unwrap();
     let scene = |id: &str, split: &str| {
-        serde_json::json!({
-            "id": id, "family": "external", "split": split,
-            "xml": format!("scenes/{id}/scene.xml"), "reference": format!("references/{id}.exr"),
-            "reference_sha256": "", "reference_seed": 1, "reference_passes": 64,
-            "reference_photons": 1000, "defines": {"res": "16"}
-        })
+        let mut s = manifest_scene(id, split, &format!("scenes/{id}/scene.xml"));
+        s["reference"] = format!("references/{id}.exr").into();
+        s["defines"] = serde_json::json!({"res": "16"});
+        s
     };
     let manifest = dataset_manifest(vec![scene("000-box", "train"), scene("001-box", "test")]);
     std::fs::write(data.join("manifest.json"), manifest.to_string()).unwrap();
@@ -438,13 +445,7 @@ fn bad_configs_fail_naming_the_problem() {
     // A split the dataset lacks: the error lists the splits it has.
     let data = dir.join("data");
     std::fs::create_dir_all(&data).unwrap();
-    let scene = |id: &str, split: &str| {
-        serde_json::json!({
-            "id": id, "family": "external", "split": split, "xml": format!("{id}.xml"),
-            "reference": format!("{id}.exr"), "reference_sha256": "", "reference_seed": 1,
-            "reference_passes": 64, "reference_photons": 1000
-        })
-    };
+    let scene = |id: &str, split: &str| manifest_scene(id, split, &format!("{id}.xml"));
     std::fs::write(
         data.join("manifest.json"),
         dataset_manifest(vec![scene("a", "test"), scene("b", "val")]).to_string(),

@@ -13,7 +13,7 @@ use exr::prelude::{
     ReadChannels, ReadLayers, Text, WritableImage,
 };
 
-use crate::atomic::write_with;
+use crate::atomic::write_bytes;
 
 /// Channel names of an RGB image.
 pub const RGB: [&str; 3] = ["R", "G", "B"];
@@ -127,19 +127,18 @@ pub fn write_channels(
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(list),
     );
-    let image = Image::from_layer(layer);
-    write_with(path, |tmp| {
-        image.write().to_file(tmp).map_err(ExrError::from)?;
-        // The `exr` crate writes custom attributes in `HashMap` order, which differs between
-        // processes: with more than one, the same pixels would give different bytes.
-        if attributes.len() > 1 {
-            let mut bytes = std::fs::read(tmp).map_err(ExrError::Io)?;
-            sort_header_attributes(&mut bytes).map_err(ExrError::Header)?;
-            std::fs::write(tmp, &bytes).map_err(ExrError::Io)?;
-        }
-        Ok(())
-    })
-    .map_err(|e| e.into_error(ExrError::Io))
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(ExrError::from)?;
+    let mut bytes = bytes.into_inner();
+    // The `exr` crate writes custom attributes in `HashMap` order, which differs between
+    // processes: with more than one, the same pixels would give different bytes.
+    if attributes.len() > 1 {
+        sort_header_attributes(&mut bytes).map_err(ExrError::Header)?;
+    }
+    write_bytes(path, &bytes).map_err(ExrError::Io)
 }
 
 /// Sorts the attribute records of a single-part EXR header by name, in place (multi-part files

@@ -41,12 +41,12 @@ impl LoadedScene {
 
 /// Loads and builds the scene `xml` under rules 1–3.
 pub fn load(xml: &Path, defines: &[(String, String)], lenient: bool) -> Result<LoadedScene> {
-    let desc = crate::xml::load_scene(xml, defines, lenient)
+    let mut desc = crate::xml::load_scene(xml, defines, lenient)
         .map_err(|e| crate::xml::load_error(e, xml))?;
     if let Some(unused) = desc.warnings.iter().find(|w| w.starts_with("-D ")) {
         anyhow::bail!("{}: {unused}", xml.display());
     }
-    let warnings = desc.warnings.clone();
+    let warnings = std::mem::take(&mut desc.warnings);
     let scene =
         Scene::from_description(desc).with_context(|| format!("building {}", xml.display()))?;
     Ok(LoadedScene { scene, warnings })
