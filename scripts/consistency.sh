@@ -12,7 +12,9 @@
 # Environment (all optional): NO_BUILD=1 skips `cargo build`; RENDER / INFER name the binaries
 # (default: ${CARGO_TARGET_DIR:-target}/release/{render,infer}); OUT_ROOT replaces
 # out/consistency; REF_SPP (default 8192) sets the reference's spp; THREADS is passed to
-# render and infer as --threads (default 0: all cores). Existing files are reused.
+# render and infer as --threads (default 0: all cores); REFERENCE names a reference EXR to use
+# instead of rendering one (e.g. the external scenes' own); MAX_DEPTH is passed to the SPPM
+# render as --max-depth (default: render's). Existing files are reused.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 MODEL=${1:-models/default}
@@ -27,11 +29,13 @@ BIN=${CARGO_TARGET_DIR:-target}/release
 RENDER=${RENDER:-$BIN/render}
 INFER=${INFER:-$BIN/infer}
 THREADS=${THREADS:-0}
+[ -z "${REFERENCE:-}" ] || [ -f "$OUT/reference.exr" ] || cp "$REFERENCE" "$OUT/reference.exr"
 [ -f "$OUT/reference.exr" ] || "$RENDER" "$SCENE" --integrator path --spp "${REF_SPP:-8192}" --max-depth 24 \
     --seed 7 --threads "$THREADS" --out "$OUT/reference.exr" --png "$OUT/reference.png"
 LAST=$(printf 'p%04d' "${PASSES##*,}")
 [ -f "$OUT/bundle_$LAST.exr" ] || "$RENDER" "$SCENE" --integrator sppm-ml --photons "$PHOTONS" \
-    --passes "$PASSES" --seed 3 --threads "$THREADS" --out "$OUT/bundle"
+    --passes "$PASSES" --seed 3 --threads "$THREADS" ${MAX_DEPTH:+--max-depth "$MAX_DEPTH"} \
+    --out "$OUT/bundle"
 echo "| passes | y | z1 | z2 | z3 | z4 | ours | ours / best input |"
 echo "|---:|---:|---:|---:|---:|---:|---:|---:|"
 for p in ${PASSES//,/ }; do

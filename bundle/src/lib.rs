@@ -202,6 +202,23 @@ pub struct BundleMeta {
     pub height: u32,
 }
 
+/// The radiance each eye subpath gathered without photons — emission seen directly or through
+/// specular bounces, next-event estimation — averaged over passes: the part of ỹ (path A) and
+/// of every z̃ level (path B) that is not a photon-density estimate (docs/method.md §4).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DirectLight {
+    /// Path A's part of ỹ, RGB (layer `ydirect`).
+    pub y: Image,
+    /// Path B's part of z̃1..z̃4, RGB (layer `zdirect`).
+    pub z: Image,
+    /// Variance of the mean of each, averaged over RGB: 2 channels in [`DIRECT_NAMES`] order
+    /// (layer `directvariance`).
+    pub variance: Image,
+}
+
+/// Channel names of the `directvariance` layer: path A's part (in `y`), path B's (in the z̃).
+pub const DIRECT_NAMES: [&str; 2] = ["y", "z"];
+
 /// One rendered sample: five estimates, their variances and the G-buffer.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bundle {
@@ -219,6 +236,8 @@ pub struct Bundle {
     pub depth: Image,
     /// Current kernel radius per level, 5 channels in [`LEVEL_NAMES`] order.
     pub radius: Option<Image>,
+    /// The photon-free part of the levels (bundles rendered before it existed have none).
+    pub direct: Option<DirectLight>,
 }
 
 impl Bundle {
@@ -234,6 +253,11 @@ impl Bundle {
         out.push(("depth", vec!["Z"], &self.depth));
         if let Some(radius) = &self.radius {
             out.push(("radius", LEVEL_NAMES.to_vec(), radius));
+        }
+        if let Some(direct) = &self.direct {
+            out.push(("ydirect", RGB.to_vec(), &direct.y));
+            out.push(("zdirect", RGB.to_vec(), &direct.z));
+            out.push(("directvariance", DIRECT_NAMES.to_vec(), &direct.variance));
         }
         out
     }
@@ -501,6 +525,25 @@ pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
     } else {
         None
     };
+    let has_layer = |layer: &str| {
+        decoded
+            .planes
+            .keys()
+            .any(|k| k.strip_prefix(layer).is_some_and(|c| c.starts_with('.')))
+    };
+    // All photon-free layers or none: some alone cannot be used and mean a damaged file.
+    let direct = if ["ydirect", "zdirect", "directvariance"]
+        .iter()
+        .any(|l| has_layer(l))
+    {
+        Some(DirectLight {
+            y: decoded.image(path, "ydirect", &RGB)?,
+            z: decoded.image(path, "zdirect", &RGB)?,
+            variance: decoded.image(path, "directvariance", &DIRECT_NAMES)?,
+        })
+    } else {
+        None
+    };
     let bundle = Bundle {
         meta,
         levels,
@@ -509,11 +552,19 @@ pub fn read_bundle(path: &Path) -> Result<Bundle, BundleError> {
         normal: decoded.image(path, "normal", &XYZ)?,
         depth: decoded.image(path, "depth", &["Z"])?,
         radius,
+        direct,
     };
-    let non_negative: [(&str, &[&str], Option<&Image>); 3] = [
+    let non_negative: [(&str, &[&str], Option<&Image>); 6] = [
         ("variance", &LEVEL_NAMES, Some(&bundle.variance)),
         ("radius", &LEVEL_NAMES, bundle.radius.as_ref()),
         ("depth", &["Z"], Some(&bundle.depth)),
+        ("ydirect", &RGB, bundle.direct.as_ref().map(|d| &d.y)),
+        ("zdirect", &RGB, bundle.direct.as_ref().map(|d| &d.z)),
+        (
+            "directvariance",
+            &DIRECT_NAMES,
+            bundle.direct.as_ref().map(|d| &d.variance),
+        ),
     ];
     for (layer, names, img) in non_negative {
         if let Some((x, y, c)) = img.and_then(find_negative) {
@@ -560,8 +611,9 @@ mod tests {
 
     /// A bundle with distinct, position-dependent values in every channel: sample `i` of a
     /// layer is [`sample_value`]`(salt, i)`, salts y 0, z1 100, z2 200, z3 300, z4 400,
-    /// variance 1000, albedo 2000, normal −3000, depth 4000, radius 5000.
-    fn sample_bundle(width: usize, height: usize, with_radius: bool) -> Bundle {
+    /// variance 1000, albedo 2000, normal −3000, depth 4000, radius 5000, ydirect 6000,
+    /// zdirect 7000, directvariance 8000; `with_optional` adds the optional layers.
+    fn sample_bundle(width: usize, height: usize, with_optional: bool) -> Bundle {
         let fill = |channels: usize, salt: f32| {
             let mut img = Image::new(width, height, channels);
             for (i, v) in img.data.iter_mut().enumerate() {
@@ -585,7 +637,12 @@ mod tests {
             albedo: fill(3, 2000.0),
             normal: fill(3, -3000.0),
             depth: fill(1, 4000.0),
-            radius: with_radius.then(|| fill(5, 5000.0)),
+            radius: with_optional.then(|| fill(5, 5000.0)),
+            direct: with_optional.then(|| DirectLight {
+                y: fill(3, 6000.0),
+                z: fill(3, 7000.0),
+                variance: fill(2, 8000.0),
+            }),
         }
     }
 
@@ -598,9 +655,9 @@ mod tests {
     #[test]
     fn bundle_round_trip_is_exact() {
         let dir = temp_dir("roundtrip");
-        for with_radius in [false, true] {
-            let b = sample_bundle(7, 5, with_radius);
-            let path = dir.join(format!("b{with_radius}.exr"));
+        for with_optional in [false, true] {
+            let b = sample_bundle(7, 5, with_optional);
+            let path = dir.join(format!("b{with_optional}.exr"));
             write_bundle(&path, &b).unwrap();
             let back = read_bundle(&path).unwrap();
             assert_eq!(back, b);
@@ -639,6 +696,12 @@ mod tests {
         for c in XYZ {
             expected.push(format!("normal.{c}"));
         }
+        for c in RGB {
+            expected.push(format!("ydirect.{c}"));
+            expected.push(format!("zdirect.{c}"));
+        }
+        expected.push("directvariance.y".into());
+        expected.push("directvariance.z".into());
         expected.push("depth.Z".into());
         expected.sort();
         assert_eq!(names, expected);
@@ -660,6 +723,12 @@ mod tests {
         for (c, channel) in ["X", "Y", "Z"].into_iter().enumerate() {
             layout.push((format!("normal.{channel}"), -3000.0, 3, c));
         }
+        for (c, channel) in ["R", "G", "B"].into_iter().enumerate() {
+            layout.push((format!("ydirect.{channel}"), 6000.0, 3, c));
+            layout.push((format!("zdirect.{channel}"), 7000.0, 3, c));
+        }
+        layout.push(("directvariance.y".into(), 8000.0, 2, 0));
+        layout.push(("directvariance.z".into(), 8000.0, 2, 1));
         layout.push(("depth.Z".into(), 4000.0, 1, 0));
         assert_eq!(layout.len(), names.len());
         for (name, salt, channels, c) in &layout {
@@ -812,27 +881,33 @@ mod tests {
     fn missing_channel_is_an_error_naming_it() {
         let dir = temp_dir("missing");
         let path = dir.join("partial.exr");
-        let b = sample_bundle(4, 3, false);
-        // Write every documented channel except `z3.G`.
-        let mut channels = Vec::new();
-        for (layer, names, img) in b.layers() {
-            for (c, name) in names.iter().enumerate() {
-                let full = format!("{layer}.{name}");
-                if full != "z3.G" {
-                    channels.push((full, img.plane(c)));
+        let b = sample_bundle(4, 3, true);
+        // Every documented channel but one: a level's, or one of the photon-free layers (the
+        // other layer of the pair being there, the file is damaged, not an older bundle).
+        for missing in ["z3.G", "zdirect.B", "ydirect.R", "directvariance.z"] {
+            let mut channels = Vec::new();
+            for (layer, names, img) in b.layers() {
+                for (c, name) in names.iter().enumerate() {
+                    let full = format!("{layer}.{name}");
+                    if full != missing {
+                        channels.push((full, img.plane(c)));
+                    }
                 }
             }
+            let json = serde_json::to_string(&b.meta).unwrap();
+            let attributes = [
+                (META_ATTRIBUTE, json.as_bytes()),
+                (FORMAT_ATTRIBUTE, FORMAT_VERSION.as_bytes()),
+            ];
+            write_exr(&path, 4, 3, channels, &attributes).unwrap();
+            let err = read_bundle(&path).unwrap_err();
+            let msg = err.to_string();
+            assert!(matches!(err, BundleError::MissingChannel { .. }), "{msg}");
+            assert!(
+                msg.contains(missing) && msg.contains("partial.exr"),
+                "{msg}"
+            );
         }
-        let json = serde_json::to_string(&b.meta).unwrap();
-        let attributes = [
-            (META_ATTRIBUTE, json.as_bytes()),
-            (FORMAT_ATTRIBUTE, FORMAT_VERSION.as_bytes()),
-        ];
-        write_exr(&path, 4, 3, channels, &attributes).unwrap();
-        let err = read_bundle(&path).unwrap_err();
-        let msg = err.to_string();
-        assert!(matches!(err, BundleError::MissingChannel { .. }), "{msg}");
-        assert!(msg.contains("z3.G") && msg.contains("partial.exr"), "{msg}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -1,7 +1,7 @@
 //! `bundle_info` through its real binary: it describes itself in `--help`, prints a bundle's
 //! metadata, writes one PNG per layer (into a folder it makes), takes a negative exposure,
-//! refuses an exposure without `--png`, and ends with an error instead of a panic on a missing
-//! file or an unwritable standard output.
+//! refuses an exposure without `--png`, writes one level as an RGB EXR (`--exr`), and ends with
+//! an error instead of a panic on a missing file or an unwritable standard output.
 
 use std::path::PathBuf;
 use std::process::{Command, Output};
@@ -53,6 +53,7 @@ fn write_sample(path: &std::path::Path, passes: u32) {
         normal: fill(3, 1.0),
         depth: fill(1, 3.0),
         radius: None,
+        direct: None,
     };
     write_bundle(path, &b).unwrap();
 }
@@ -125,5 +126,34 @@ fn prints_the_metadata_and_writes_a_png_per_layer() {
         "{}",
         stderr(&missing)
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn writes_one_level_as_a_plain_rgb_exr() {
+    let dir = temp_dir("exr");
+    let bundle = dir.join("ml_p0002.exr");
+    write_sample(&bundle, 2);
+    let file = dir.join("made/z3.exr");
+    let out = run(&[
+        bundle.to_str().unwrap(),
+        "--exr",
+        "z3",
+        file.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let level = bundle::read_bundle(&bundle).unwrap().levels[3].clone();
+    assert_eq!(bundle::read_rgb_exr_image(&file).unwrap(), level);
+    // A level that does not exist is refused by name, before anything is written.
+    let other = dir.join("other.exr");
+    let out = run(&[
+        bundle.to_str().unwrap(),
+        "--exr",
+        "z5",
+        other.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("z5"), "{}", stderr(&out));
+    assert!(!other.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

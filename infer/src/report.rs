@@ -81,6 +81,7 @@ mod tests {
             height: 1,
             features: vec![0.0; 27],
             levels,
+            direct: None,
         };
         let output = vec![1.05, 1.05, 1.05];
         let r = ErrorReport::new(&packed, &output, &reference);

@@ -27,7 +27,7 @@ use burn::nn::conv::Conv2d;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor, TensorData};
-use model::combine::{combine_block, level_weight_shares_block};
+use model::combine::{combine_guarded_block, level_weight_shares_block, Guard};
 use model::features::PackedImage;
 use model::network::{positive_weights, LEVELS};
 
@@ -238,11 +238,14 @@ pub fn reconstruct_native(
     let network = NativeNetwork::new(&model.network, &model.config);
     let layers = model.config.hidden_layers + 1;
     let share_planes = share_planes(chosen);
+    let (levels, added) = packed.combination_inputs();
+    let variances = packed.variances(chosen.len());
     let colours = CombinationInputs {
         width,
         height,
-        levels: &packed.levels,
+        levels: &levels,
         share_planes: &share_planes,
+        variances: &variances,
     };
     let mut image = vec![0.0f32; 3 * pixels];
     let mut shares = vec![0.0f32; (LEVELS - 1) * pixels];
@@ -253,6 +256,7 @@ pub fn reconstruct_native(
         network.combine(&x, region, t.interior, &colours, &mut image, &mut shares);
         on_tile(done + 1, tiles.len());
     }
+    add_direct(&mut image, added);
     Reconstruction {
         width,
         height,
@@ -276,6 +280,8 @@ pub fn reconstruct_banded(
     let (width, height) = (packed.width, packed.height);
     let feature_channels = packed.features.len() / (width * height).max(1);
     let colour_channels = packed.levels.len() / (width * height).max(1);
+    let (combined_levels, added) = packed.combination_inputs();
+    let variances = packed.variances(chosen.len());
     let share_planes = share_planes(chosen);
     let pairs = share_planes.len();
     let pixels = width * height;
@@ -313,7 +319,7 @@ pub fn reconstruct_banded(
             let weights = positive_weights(raw, network.weighting);
             let reach = grow(band, window_reach, width, height);
             let margins = insets(reach, band).map(|inset| window_reach - inset);
-            let levels = crop_planes(&packed.levels, colour_channels, width, height, reach);
+            let levels = crop_planes(&combined_levels, colour_channels, width, height, reach);
             let levels = Tensor::<4>::from_data(
                 TensorData::new(
                     levels,
@@ -321,8 +327,18 @@ pub fn reconstruct_banded(
                 ),
                 device,
             );
+            let guard = (model.config.guard > 0.0).then(|| Guard {
+                variances: Tensor::<4>::from_data(
+                    TensorData::new(
+                        crop_planes(&variances, chosen.len(), width, height, band),
+                        [1, chosen.len(), bh, bw],
+                    ),
+                    device,
+                ),
+                strength: model.config.guard,
+            });
             // Clamped at zero like `model::combine::reconstruct` (what the loss saw).
-            let combined = combine_block(levels, weights.clone(), window, margins)
+            let combined = combine_guarded_block(levels, weights.clone(), guard, window, margins)
                 .clamp_min(0.0)
                 .into_data()
                 .try_to_vec::<f32>()
@@ -347,11 +363,22 @@ pub fn reconstruct_banded(
         }
         on_tile(done + 1, tiles.len());
     }
+    add_direct(&mut image, added);
     Reconstruction {
         width,
         height,
         image,
         shares,
+    }
+}
+
+/// Adds the photon-free part the combination left out ([`PackedImage::combination_inputs`]) to
+/// the combined, clamped image.
+fn add_direct(image: &mut [f32], added: Option<Vec<f32>>) {
+    if let Some(added) = added {
+        for (v, d) in image.iter_mut().zip(added) {
+            *v += d;
+        }
     }
 }
 

@@ -173,6 +173,53 @@ fn native_engine_equals_burn() {
     }
 }
 
+/// The emission split (docs/method.md §5.4): a light that path A saw in one pixel — in ỹ and its
+/// `ydirect` layer — stays in that pixel. Against the same bundle without it, the pixel gains
+/// the light's weighted share (half, the two subpaths' variances being equal) and no other
+/// pixel gains more than 0.2 % of the light (the network sees the light in its features, so
+/// neighbouring weights may shift, but only over photon-part values of order one; Eq. 6 on the
+/// whole levels hands ≈ 1/121 of it to each pixel of an 11×11 window), on both engines with the
+/// guard on and off.
+#[test]
+fn a_light_seen_in_one_pixel_stays_in_that_pixel() {
+    let (w, h) = (23, 19);
+    let (mut bundle, _) = synthetic_bundle(w, h, 0.3, 12);
+    bundle.direct = Some(bundle::DirectLight {
+        y: bundle::Image::new(w, h, 3),
+        z: bundle::Image::new(w, h, 3),
+        variance: bundle::Image::new(w, h, 2),
+    });
+    let plain = pack(&bundle).unwrap();
+    let (lx, ly) = (11, 9);
+    let light = 5000.0f32;
+    for c in 0..3 {
+        let v = bundle.levels[0].get(lx, ly, c);
+        bundle.levels[0].set(lx, ly, c, v + light);
+        bundle.direct.as_mut().unwrap().y.set(lx, ly, c, light);
+    }
+    let lit = pack(&bundle).unwrap();
+    let device = Device::flex();
+    for guard in [0.0, 4.0] {
+        let mut m = model(Preset::Small, Weighting::Relu, 5);
+        m.config.guard = guard;
+        for engine in [Engine::Native, Engine::Burn] {
+            let before = reconstruct_tiled(&m, &plain, 0, engine, &device, |_, _| {});
+            let after = reconstruct_tiled(&m, &lit, 0, engine, &device, |_, _| {});
+            let pixels = w * h;
+            for c in 0..3 {
+                for p in 0..pixels {
+                    let (b, a) = (before.image[c * pixels + p], after.image[c * pixels + p]);
+                    let expected = if p == ly * w + lx { b + light / 2.0 } else { b };
+                    assert!(
+                        (a - expected).abs() <= 2e-3 * light,
+                        "guard {guard} {engine:?}: pixel {p} channel {c}: {a} vs {expected}"
+                    );
+                }
+            }
+        }
+    }
+}
+
 /// Largest |a − b| over all samples.
 fn max_abs_difference(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());

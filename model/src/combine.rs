@@ -7,6 +7,10 @@
 //! zero-padded input: with padding in the unfold options Burn would run a one-hot convolution.
 //! Window entries outside the image get zero weight and W_c is the sum of the remaining ones,
 //! so the weights are renormalised over the pixels that exist.
+//!
+//! The safeguard ([`combine_guarded_block`], `guard` in the model's config) then pulls each
+//! pixel towards the smoothest combined level where Eq. 6 departs from it by less than its
+//! estimated noise (docs/method.md §5.4); `reconstruct` is what training and inference output.
 
 use burn::tensor::module::unfold4d;
 use burn::tensor::ops::{PadMode, UnfoldOptions};
@@ -95,6 +99,36 @@ pub fn combine_block(
     window: usize,
     margins: [usize; 4],
 ) -> Tensor<4> {
+    combine_guarded_block(levels, weights, None, window, margins)
+}
+
+/// The safeguard's inputs: the raw variances of the combined levels at the output pixels
+/// `[B, m, h, w]` (ỹ first, as the levels) and its strength κ.
+pub struct Guard {
+    /// Variance of the mean of each combined level, ỹ first.
+    pub variances: Tensor<4>,
+    /// Strength κ (> 0).
+    pub strength: f32,
+}
+
+/// [`combine_block`] followed, with a [`Guard`], by the safeguard of docs/method.md §5.4: with
+/// z̃ₛ the smoothest combined level at the pixel and Δ = ŷ − z̃ₛ, the output is
+/// z̃ₛ + Δ · Δ² / (Δ² + κ·V), V an estimate of Δ's variance:
+///
+///   V = Σ_j (Σ_i (w^j_i)² / W²) (v_ỹ + v_j) + Σ_j (W_j / W)² v_j + v_s,
+///
+/// W_j = Σ_i w^j_i, W = Σ_j W_j, v the variances of the levels' means at the pixel itself
+/// (the window's pixels are taken to be as noisy as its centre, and the levels independent).
+/// Where the network's departure from the smoothest level is within its noise, the output
+/// stays near that level; where it is well beyond (a bias the network removes), it is kept.
+/// Any blend between two estimates that converge converges, so consistency holds.
+pub fn combine_guarded_block(
+    levels: Tensor<4>,
+    weights: Tensor<4>,
+    guard: Option<Guard>,
+    window: usize,
+    margins: [usize; 4],
+) -> Tensor<4> {
     let [batch, channels, _, _] = levels.dims();
     let [_, _, height, width] = weights.dims();
     assert!(
@@ -133,14 +167,44 @@ pub fn combine_block(
     } else {
         z.narrow(2, r - top, height).narrow(3, r - left, width)
     };
+    let z = z.reshape([batch, pairs, 3, 1, pixels]);
 
     let w = masked_weights(weights, window, pairs, margins);
     let weight_sums = w.clone().sum_dim(3); // [B, 4, 1, 1, HW]
+    let squares = guard.as_ref().map(|_| (w.clone() * w.clone()).sum_dim(3));
     let window_term = (gathered * w).sum_dim(3); // [B, 4, 3, 1, HW]
-    let centre_term = weight_sums.clone() * z.reshape([batch, pairs, 3, 1, pixels]);
+    let centre_term = weight_sums.clone() * z.clone();
     let numerator = (window_term + centre_term).sum_dim(1); // [B, 1, 3, 1, HW]
-    let normaliser = weight_sums.sum_dim(1); // [B, 1, 1, 1, HW]
-    (numerator / normaliser).reshape([batch, 3, height, width])
+    let normaliser = weight_sums.clone().sum_dim(1); // [B, 1, 1, 1, HW]
+    let combined = numerator / normaliser.clone();
+    let (Some(guard), Some(squares)) = (guard, squares) else {
+        return combined.reshape([batch, 3, height, width]);
+    };
+    let v = guard.variances.reshape([batch, pairs + 1, 1, 1, pixels]);
+    let v_y = v.clone().narrow(1, 0, 1);
+    let v_z = v.narrow(1, 1, pairs);
+    let total_squared = normaliser.clone() * normaliser.clone();
+    let window_noise = (squares * (v_z.clone() + v_y)).sum_dim(1) / total_squared.clone();
+    let shares = weight_sums.clone() * weight_sums / total_squared;
+    let centre_noise = (shares * v_z.clone()).sum_dim(1);
+    let smoothest_noise = v_z.narrow(1, pairs - 1, 1);
+    let noise = window_noise + centre_noise + smoothest_noise; // [B, 1, 1, 1, HW]
+    let smoothest = z.narrow(1, pairs - 1, 1); // [B, 1, 3, 1, HW]
+    let delta = combined - smoothest.clone();
+    let delta_squared = delta.clone() * delta.clone();
+    let kept = delta_squared.clone()
+        / (delta_squared + noise.mul_scalar(guard.strength)).add_scalar(1e-30);
+    (smoothest + delta * kept).reshape([batch, 3, height, width])
+}
+
+/// Raw variances from the network features' log(1 + v) planes (docs/method.md §5.1), exact to
+/// float precision also where v is tiny (exp(x) − 1 alone would round those to zero).
+pub fn variances_from_features(log_variances: Tensor<4>) -> Tensor<4> {
+    let x = log_variances;
+    let series =
+        x.clone() * (x.clone().mul_scalar(1.0 / 6.0).add_scalar(0.5) * x.clone()).add_scalar(1.0);
+    let small = x.clone().lower_elem(1e-3);
+    x.exp().sub_scalar(1.0).mask_where(small, series)
 }
 
 /// Share of the total weight each pair j carries at each pixel, `[B, m−1, H, W]` (sums to 1):
@@ -176,7 +240,23 @@ pub fn reconstruct(
     features: Tensor<4>,
     levels: Tensor<4>,
 ) -> Tensor<4> {
-    combine(levels, model.weights(features), config.window).clamp_min(0.0)
+    let guard = guard_of(config, &features);
+    let weights = model.weights(features);
+    let margins = [config.window / 2; 4];
+    combine_guarded_block(levels, weights, guard, config.window, margins).clamp_min(0.0)
+}
+
+/// The [`Guard`] of `config` for network input `features` (all pixels of the block), or `None`
+/// when its strength is 0: the variances are the features' variance planes, which follow the
+/// colour planes of the combined levels ([`crate::features::feature_channels`]).
+pub fn guard_of(config: &ModelConfig, features: &Tensor<4>) -> Option<Guard> {
+    (config.guard > 0.0).then(|| {
+        let m = config.levels.len();
+        Guard {
+            variances: variances_from_features(features.clone().narrow(1, 3 * m, m)),
+            strength: config.guard,
+        }
+    })
 }
 
 #[cfg(test)]
@@ -458,6 +538,86 @@ mod tests {
                 "weights[{i}]: fd {fd} vs {}",
                 g_weights[i]
             );
+        }
+    }
+
+    /// The safeguard by hand on one pixel (1×1 image, window 1, one pair of weight 1): ŷ = ỹ,
+    /// z̃ₛ = z̃, Δ = ỹ − z̃, V = (v_ỹ + v_z) + v_z + v_z; the output z̃ + Δ·Δ²/(Δ² + κV).
+    #[test]
+    fn guard_by_hand_on_one_pixel() {
+        let (y, z, vy, vz, kappa) = (5.0f32, 3.0f32, 0.5f32, 0.25f32, 4.0f32);
+        let mut levels = vec![y; 3];
+        levels.extend([z; 3]);
+        let guard = Guard {
+            variances: tensor4(vec![vy, vz], [1, 2, 1, 1]),
+            strength: kappa,
+        };
+        let out = values(combine_guarded_block(
+            tensor4(levels, [1, 6, 1, 1]),
+            tensor4(vec![1.0], [1, 1, 1, 1]),
+            Some(guard),
+            1,
+            [0; 4],
+        ));
+        let (delta, noise) = (y - z, vy + 3.0 * vz);
+        let want = z + delta * delta * delta / (delta * delta + kappa * noise);
+        for o in out {
+            assert!((o - want).abs() < 1e-6, "{o} vs {want}");
+        }
+    }
+
+    /// The guarded output always lies between Eq. 6 and the smoothest level (a blend of two
+    /// estimates that converge converges), equals Eq. 6 with zero variances, and tends to the
+    /// smoothest level as the variances grow.
+    #[test]
+    fn guard_blends_between_eq6_and_the_smoothest_level() {
+        let (h, w, window) = (5, 4, 3);
+        let hw = h * w;
+        let levels = noise(15 * hw, 21, 0.0, 2.0);
+        let weights = noise(4 * window * window * hw, 22, 0.01, 1.0);
+        let run = |variance: f32| {
+            let guard = Guard {
+                variances: tensor4(vec![variance; 5 * hw], [1, 5, h, w]),
+                strength: 4.0,
+            };
+            values(combine_guarded_block(
+                tensor4(levels.clone(), [1, 15, h, w]),
+                tensor4(weights.clone(), [1, 36, h, w]),
+                Some(guard),
+                window,
+                [1; 4],
+            ))
+        };
+        let eq6 = values(combine(
+            tensor4(levels.clone(), [1, 15, h, w]),
+            tensor4(weights.clone(), [1, 36, h, w]),
+            window,
+        ));
+        let smoothest = &levels[12 * hw..];
+        for (g, e) in run(0.0).iter().zip(&eq6) {
+            assert!((g - e).abs() < 1e-5, "{g} vs {e}");
+        }
+        for variance in [1e-3, 0.1, 10.0] {
+            for ((g, e), s) in run(variance).iter().zip(&eq6).zip(smoothest) {
+                let (lo, hi) = (e.min(*s), e.max(*s));
+                assert!(
+                    *g >= lo - 1e-5 && *g <= hi + 1e-5,
+                    "{g} not in [{lo}, {hi}]"
+                );
+            }
+        }
+        for (g, s) in run(1e6).iter().zip(smoothest) {
+            assert!((g - s).abs() < 1e-3, "{g} vs {s}");
+        }
+    }
+
+    #[test]
+    fn variances_come_back_from_the_features_log() {
+        let v = [0.0f32, 1e-9, 3e-7, 1e-3, 0.5, 40.0];
+        let logs: Vec<f32> = v.iter().map(|x| x.ln_1p()).collect();
+        let back = values(variances_from_features(tensor4(logs, [1, 6, 1, 1])));
+        for (b, x) in back.iter().zip(v) {
+            assert!((b - x).abs() <= 1e-6 * x.max(1e-6), "{b} vs {x}");
         }
     }
 }

@@ -6,6 +6,11 @@
 //! raw linear colours. Depth is normalised per whole image, before any tiling, so tiles of an
 //! image see the same values as the whole image.
 //!
+//! A bundle with the photon-free layers (`ydirect`, `zdirect`, `directvariance`) also packs
+//! them: the combination filters the levels less their photon-free part and adds a weighted mean
+//! of the two subpaths' parts back afterwards ([`split_direct`], docs/method.md §5.4), while the
+//! features stay those of the whole levels.
+//!
 //! A network combining only some levels (the Dual(ỹ, z̃j) variant of paper Table 1) reads the
 //! colour and variance planes of its levels plus the G-buffer, in the same order:
 //! [`feature_channels`] and [`PackedImage::select_levels`] pick them out of the full packing.
@@ -16,6 +21,10 @@ use crate::network::{GBUFFER_CHANNELS, INPUT_CHANNELS, LEVELS};
 
 /// Number of raw colour planes: five RGB estimates.
 pub const COLOUR_CHANNELS: usize = 3 * LEVELS;
+
+/// Number of photon-free planes: path A's RGB (part of ỹ), path B's RGB (part of every z̃), the
+/// variance of the mean of A's and of B's.
+pub const DIRECT_CHANNELS: usize = 8;
 
 /// A whole image's network input in planar layout (`plane[c][y * width + x]`).
 #[derive(Clone, Debug, PartialEq)]
@@ -28,6 +37,10 @@ pub struct PackedImage {
     pub features: Vec<f32>,
     /// [`COLOUR_CHANNELS`] raw linear colour planes: ỹ RGB, z̃1 RGB, …, z̃4 RGB.
     pub levels: Vec<f32>,
+    /// [`DIRECT_CHANNELS`] planes of the photon-free part: path A's (in ỹ) RGB, path B's (in
+    /// every z̃ level) RGB, then the variance of the mean of A's and of B's; `None` for a bundle
+    /// rendered without it.
+    pub direct: Option<Vec<f32>>,
 }
 
 impl PackedImage {
@@ -57,8 +70,69 @@ impl PackedImage {
             height: self.height,
             features: gather(&self.features, feature_channels(levels)),
             levels: gather(&self.levels, colour_channels(levels)),
+            direct: self.direct.clone(),
         }
     }
+
+    /// The variances of the means of the image's `m` levels (the planes after their colours,
+    /// [`feature_channels`]), undone from log(1 + v): planar `[m][pixels]`, the safeguard's input.
+    pub fn variances(&self, m: usize) -> Vec<f32> {
+        let pixels = self.pixels();
+        self.features[3 * m * pixels..4 * m * pixels]
+            .iter()
+            .map(|x| x.exp_m1())
+            .collect()
+    }
+
+    /// The combination's inputs: the colour planes less their photon-free part (all of them
+    /// when the image has none), and what is added to the combined image afterwards.
+    pub fn combination_inputs(&self) -> (Vec<f32>, Option<Vec<f32>>) {
+        let mut levels = self.levels.clone();
+        let added = self
+            .direct
+            .as_ref()
+            .map(|direct| split_direct(&mut levels, direct, self.pixels()));
+        (levels, added)
+    }
+}
+
+/// Takes the photon-free part out of planar colour planes `levels` (ỹ RGB first, then any
+/// number of z̃ levels, `pixels` values per plane) in place, given `direct`
+/// ([`DIRECT_CHANNELS`] planes: path A's RGB, path B's RGB, their variances of the mean), and
+/// returns the three planes to add to the combined image: the two subpaths' parts weighted by
+/// the inverse of their variances (equal weights where both variances are zero).
+///
+/// Why (docs/method.md §5.4): emission and next-event estimation are known per sample, and A and
+/// B estimate them independently and alike. Left in the levels, Eq. 6 carries them through its
+/// window (Σ_i w_i (ỹ_i − z̃_i): a light that path A saw in one pixel lights the whole window)
+/// and never averages them (the output holds B's part at the pixel with weight one). Taken out,
+/// the two estimates are fused per pixel; inverse-variance weights make that the mean where the
+/// two agree in spread (their expected variances are equal) and trust the calm one where a
+/// single rare sample — a sub-pixel light, a light seen through glass — made the other's
+/// variance explode. Any weights in [0, 1] keep the sum between two estimates that converge, so
+/// the output still converges.
+pub fn split_direct(levels: &mut [f32], direct: &[f32], pixels: usize) -> Vec<f32> {
+    assert_eq!(direct.len(), DIRECT_CHANNELS * pixels, "direct planes");
+    assert!(
+        levels.len().is_multiple_of(3 * pixels) && levels.len() >= 6 * pixels,
+        "colour planes of ỹ and at least one z level"
+    );
+    let (a, rest) = direct.split_at(3 * pixels);
+    let (b, variances) = rest.split_at(3 * pixels);
+    let (var_a, var_b) = variances.split_at(pixels);
+    for (l, level) in levels.chunks_exact_mut(3 * pixels).enumerate() {
+        let part = if l == 0 { a } else { b };
+        for (v, d) in level.iter_mut().zip(part) {
+            *v -= d;
+        }
+    }
+    (0..3 * pixels)
+        .map(|i| {
+            let (va, vb) = (var_a[i % pixels], var_b[i % pixels]);
+            let weight_a = if va + vb > 0.0 { vb / (va + vb) } else { 0.5 };
+            weight_a * a[i] + (1.0 - weight_a) * b[i]
+        })
+        .collect()
 }
 
 /// Planes of the full feature packing that a network combining `levels` reads: the log colours
@@ -169,6 +243,11 @@ pub fn pack(bundle: &Bundle) -> Result<PackedImage, FeatureError> {
     check(&bundle.albedo, "albedo", width, height, 3)?;
     check(&bundle.normal, "normal", width, height, 3)?;
     check(&bundle.depth, "depth", width, height, 1)?;
+    if let Some(d) = &bundle.direct {
+        check(&d.y, "ydirect", width, height, 3)?;
+        check(&d.z, "zdirect", width, height, 3)?;
+        check(&d.variance, "directvariance", width, height, 2)?;
+    }
     if let Some((layer, channel, x, y)) = bundle.find_non_finite() {
         return Err(FeatureError::NonFinite {
             layer: layer.into(),
@@ -190,6 +269,13 @@ pub fn pack(bundle: &Bundle) -> Result<PackedImage, FeatureError> {
     push_planes(&mut features, &bundle.variance, log_transform);
     push_planes(&mut features, &bundle.albedo, |v| v);
     push_planes(&mut features, &bundle.normal, |v| v);
+    let direct = bundle.direct.as_ref().map(|d| {
+        let mut planes = Vec::with_capacity(DIRECT_CHANNELS * pixels);
+        push_planes(&mut planes, &d.y, |v| v);
+        push_planes(&mut planes, &d.z, |v| v);
+        push_planes(&mut planes, &d.variance, |v| v);
+        planes
+    });
     let max_depth = bundle.depth.data.iter().fold(0.0f32, |m, &d| m.max(d));
     let scale = if max_depth > 0.0 {
         1.0 / max_depth
@@ -203,6 +289,7 @@ pub fn pack(bundle: &Bundle) -> Result<PackedImage, FeatureError> {
         height,
         features,
         levels,
+        direct,
     })
 }
 
@@ -251,6 +338,7 @@ mod tests {
             height: 1,
             features: (0..INPUT_CHANNELS).flat_map(plane).collect(),
             levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
+            direct: Some((0..DIRECT_CHANNELS).flat_map(|c| plane(50 + c)).collect()),
         }
     }
 
@@ -280,5 +368,36 @@ mod tests {
         assert_eq!(s.features, expect(&want));
         assert_eq!(s.levels, expect(&[0, 1, 2, 6, 7, 8]));
         assert_eq!((s.width, s.height), (2, 1));
+        assert_eq!(s.direct, labelled().direct);
+    }
+
+    #[test]
+    fn split_direct_takes_each_subpaths_part_and_adds_their_weighted_mean() {
+        // Two pixels; ỹ = 10 + pixel in every channel, z̃ levels 20 + …; path A's photon-free
+        // part 4 (pixel 0) and 6 (pixel 1), path B's 2 and 0. Variances: equal at pixel 0 (the
+        // mean, 3), A's three times B's at pixel 1 (B weighs 3/4: 1.5).
+        let mut levels = Vec::new();
+        for base in [10.0f32, 20.0, 30.0] {
+            for _ in 0..3 {
+                levels.extend([base, base + 1.0]);
+            }
+        }
+        let mut direct = Vec::new();
+        for part in [[4.0f32, 6.0], [2.0, 0.0]] {
+            for _ in 0..3 {
+                direct.extend(part);
+            }
+        }
+        direct.extend([0.5, 3.0, 0.5, 1.0]);
+        let added = split_direct(&mut levels, &direct, 2);
+        assert_eq!(added, [3.0, 1.5].repeat(3));
+        assert_eq!(&levels[..6], &[6.0, 5.0].repeat(3)[..]);
+        assert_eq!(&levels[6..12], &[18.0, 21.0].repeat(3)[..]);
+        assert_eq!(&levels[12..], &[28.0, 31.0].repeat(3)[..]);
+        // No variance at all (a constant or no photon-free part): the plain mean.
+        let mut levels = vec![1.0f32; 12];
+        let mut direct = vec![0.0f32; 16];
+        direct[..6].fill(1.0);
+        assert_eq!(split_direct(&mut levels, &direct, 2), vec![0.5; 6]);
     }
 }

@@ -172,6 +172,8 @@ pub struct NativeNetwork {
     weighting: Weighting,
     window: usize,
     pairs: usize,
+    /// Safeguard strength κ ([`crate::combine::combine_guarded_block`]; 0: Eq. 6 alone).
+    guard: f32,
 }
 
 /// Planar colours of the whole image that the combination reads.
@@ -185,6 +187,9 @@ pub struct CombinationInputs<'a> {
     /// The output plane of each correlated level's weight share (level j of the network →
     /// plane `share_planes[j]`).
     pub share_planes: &'a [usize],
+    /// Planar variances of the levels' means `[m][pixels]`, ỹ first, for the safeguard (read
+    /// only when the network's guard is on).
+    pub variances: &'a [f32],
 }
 
 impl NativeNetwork {
@@ -196,6 +201,7 @@ impl NativeNetwork {
             weighting: network.weighting,
             window: config.window,
             pairs: config.pairs(),
+            guard: config.guard,
         }
     }
 
@@ -296,8 +302,9 @@ impl NativeNetwork {
         }
     }
 
-    /// Eq. 6 at pixel (px, py) from its raw network outputs (overwritten with the positive
-    /// weights): returns ŷ clamped at zero and each correlated level's share of the weight.
+    /// Eq. 6 and the safeguard at pixel (px, py) from its raw network outputs (overwritten with
+    /// the positive weights): returns ŷ clamped at zero and each correlated level's share of
+    /// the weight (the same as [`crate::combine::combine_guarded_block`]).
     fn combine_pixel(
         &self,
         weights: &mut [f32],
@@ -339,10 +346,12 @@ impl NativeNetwork {
         let y_planes = &colours.levels[..3 * pixels];
         let mut numerator = [0.0f32; 3];
         let mut sums = [0.0f32; LEVELS - 1];
+        let mut squares = [0.0f32; LEVELS - 1];
         for j in 0..self.pairs {
             let z_planes = &colours.levels[3 * (j + 1) * pixels..3 * (j + 2) * pixels];
             let w_j = &weights[j * area..(j + 1) * area];
             let mut sum = 0.0f32;
+            let mut square = 0.0f32;
             let mut acc = [0.0f32; 3];
             for ky in ky0..ky1 {
                 // First in-image pixel of this window row (px + kx0 ≥ r by construction).
@@ -350,6 +359,9 @@ impl NativeNetwork {
                 let len = kx1 - kx0;
                 let w_row = &w_j[ky * window + kx0..ky * window + kx1];
                 sum += w_row.iter().sum::<f32>();
+                if self.guard > 0.0 {
+                    square += w_row.iter().map(|w| w * w).sum::<f32>();
+                }
                 for c in 0..3 {
                     let yc = &y_planes[c * pixels + start..][..len];
                     let zc = &z_planes[c * pixels + start..][..len];
@@ -364,9 +376,29 @@ impl NativeNetwork {
                 numerator[c] += acc[c] + sum * z_planes[c * pixels + centre];
             }
             sums[j] = sum;
+            squares[j] = square;
         }
         let total: f32 = sums.iter().sum();
-        let rgb = numerator.map(|v| (v / total).max(0.0));
+        let mut rgb = numerator.map(|v| v / total);
+        if self.guard > 0.0 {
+            let v = |level: usize| colours.variances[level * pixels + centre];
+            let total_squared = total * total;
+            let mut noise = v(self.pairs);
+            for j in 0..self.pairs {
+                noise += squares[j] / total_squared * (v(j + 1) + v(0))
+                    + sums[j] * sums[j] / total_squared * v(j + 1);
+            }
+            let smoothest = &colours.levels[3 * self.pairs * pixels..];
+            // A non-finite Eq. 6 (overflow) is left as it is, for the caller to report.
+            for (c, out) in rgb.iter_mut().enumerate().filter(|(_, v)| v.is_finite()) {
+                let base = smoothest[c * pixels + centre];
+                let delta = *out - base;
+                let delta_squared = delta * delta;
+                *out =
+                    base + delta * (delta_squared / (delta_squared + self.guard * noise + 1e-30));
+            }
+        }
+        let rgb = rgb.map(|v| v.max(0.0));
         for s in sums.iter_mut() {
             *s /= total;
         }
@@ -404,6 +436,7 @@ mod tests {
             weighting,
             window,
             pairs,
+            guard: 0.0,
         }
     }
 
@@ -422,6 +455,7 @@ mod tests {
             height: 2,
             levels: &levels,
             share_planes: &[0],
+            variances: &[],
         };
         // Raw outputs: 0 inside, 1000 outside. ReLU: outside 1000 + 1e-4 but masked; inside
         // 1e-4 each. Softmax: exp(1000 − max) would overflow or, with the maximum taken over

@@ -78,6 +78,21 @@ pub struct ModelConfig {
     /// levels. All five by default; `[0, j]` is the paper's Dual(ỹ, z̃j) of Table 1.
     #[serde(default = "all_levels")]
     pub levels: Vec<usize>,
+    /// Strength κ of the safeguard that pulls the output towards the smoothest combined level
+    /// where it differs from it by less than its estimated noise (docs/method.md §5.4): 0 is
+    /// the paper's Eq. 6 alone. Absent from a model.json: [`DEFAULT_GUARD`].
+    #[serde(default = "default_guard")]
+    pub guard: f32,
+}
+
+/// The safeguard strength of every preset and of model files that name none: chosen on
+/// renderer validation scenes, none of them a test scene (docs/results.md, "Never worse than
+/// its inputs").
+pub const DEFAULT_GUARD: f32 = 16.0;
+
+/// Serde default of [`ModelConfig::guard`].
+fn default_guard() -> f32 {
+    DEFAULT_GUARD
 }
 
 impl ModelConfig {
@@ -98,6 +113,7 @@ impl ModelConfig {
             window,
             weighting: Weighting::Relu,
             levels: all_levels(),
+            guard: DEFAULT_GUARD,
         }
     }
 
@@ -150,6 +166,12 @@ impl ModelConfig {
         }
         if self.hidden_layers == 0 || self.filters == 0 {
             return Err("hidden_layers and filters must be positive".into());
+        }
+        if !(self.guard.is_finite() && self.guard >= 0.0) {
+            return Err(format!(
+                "guard must be a finite number ≥ 0, got {}",
+                self.guard
+            ));
         }
         Ok(())
     }

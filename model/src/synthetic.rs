@@ -113,6 +113,7 @@ pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, I
         normal,
         depth,
         radius: None,
+        direct: None,
     };
     (bundle, interleaved(&t, w, h, 3))
 }

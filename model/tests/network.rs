@@ -42,11 +42,15 @@ fn paper_preset_has_about_2_4_million_parameters() {
 
 /// Eq. 6 goes negative next to a spike that only the correlated levels hold (ỹ ≡ 0, z̃ = a
 /// spike): ŷ_c = Σ w_i (0 + z̃_c − z̃_i) / Σ w_i < 0 around it for any positive weights. The
-/// reconstruction is that combination clamped at zero — what the loss trains on (docs/method.md §5.5).
+/// reconstruction without the safeguard is that combination clamped at zero — what the loss
+/// trains on (docs/method.md §5.5).
 #[test]
 fn reconstruction_is_the_combination_clamped_at_zero() {
     let device = Device::flex();
-    let config = ModelConfig::preset(Preset::Tiny);
+    let config = ModelConfig {
+        guard: 0.0,
+        ..ModelConfig::preset(Preset::Tiny)
+    };
     let net = config.init(7, &device);
     let (w, h) = (9, 8);
     let s = synthetic_sample(w, h, 0.3, 5);

@@ -56,6 +56,11 @@ pub struct TrainConfig {
     /// all five by default (the paper's network); `[0, j]` trains Dual(ỹ, z̃j) of paper Table 1.
     #[serde(default)]
     pub levels: Option<Vec<usize>>,
+    /// Strength of the safeguard towards the smoothest level (docs/method.md §5.4; 0 = Eq. 6
+    /// alone), which the loss sees and `model.json` keeps for inference. Absent: the preset's
+    /// (`model::network::DEFAULT_GUARD`).
+    #[serde(default)]
+    pub guard: Option<f32>,
     /// Patch side in pixels.
     pub patch: usize,
     /// Patch stride in pixels.
@@ -129,6 +134,9 @@ impl TrainConfig {
         if let Some(window) = self.window {
             c.window = window;
         }
+        if let Some(guard) = self.guard {
+            c.guard = guard;
+        }
         match &self.levels {
             Some(levels) => c.with_levels(levels.clone()),
             None => c,
@@ -149,7 +157,7 @@ impl TrainConfig {
 
     /// What a checkpoint of network `model` trained with `settings` cannot continue as this
     /// config says, one `<key> <checkpoint's> (checkpoint) vs <config's> (config)` per differing
-    /// TOML key: the network (`preset`, `weighting`, `window`, `levels`) and the optimisation
+    /// TOML key: the network (`preset`, `weighting`, `window`, `guard`, `levels`) and the optimisation
     /// (`batch`, `lr`, `lr_end`, `seed`, `loss`; `epochs` too under a decaying rate, whose
     /// schedule spans them). Empty: the checkpoint resumes with this config.
     pub fn checkpoint_differences(
@@ -174,6 +182,7 @@ impl TrainConfig {
             toml_name(&net.weighting),
         );
         differ("window", model.window.to_string(), net.window.to_string());
+        differ("guard", model.guard.to_string(), net.guard.to_string());
         differ(
             "levels",
             format!("{:?}", model.levels),

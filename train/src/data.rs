@@ -18,7 +18,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use model::features::{colour_channels, feature_channels, COLOUR_CHANNELS};
+use model::features::{
+    colour_channels, feature_channels, split_direct, COLOUR_CHANNELS, DIRECT_CHANNELS,
+};
 use model::network::all_levels;
 use model::sample::{load_sample, BadSample, Sample};
 
@@ -79,8 +81,12 @@ pub struct HostBatch {
     pub levels: Vec<f32>,
     /// Colour planes per patch the combination reads (3·m).
     pub combined_channels: usize,
-    /// `[B, 3·m, P, P]`: raw colours of the chosen levels, ỹ first (the combination's input).
+    /// `[B, 3·m, P, P]`: raw colours of the chosen levels, ỹ first, less their photon-free
+    /// part (the combination's input).
     pub combined: Vec<f32>,
+    /// `[B, 3, P, P]`: the photon-free part added to the combined image (zero for a bundle
+    /// without photon-free layers; [`model::features::split_direct`]).
+    pub direct: Vec<f32>,
     /// `[B, 3, P, P]`.
     pub reference: Vec<f32>,
 }
@@ -90,8 +96,10 @@ pub struct HostBatch {
 pub struct Batch {
     /// Network input `[B, feature_channels, P, P]`.
     pub features: Tensor<4>,
-    /// Raw colours of the combined levels `[B, 3·m, P, P]`.
+    /// Raw colours of the combined levels less their photon-free part `[B, 3·m, P, P]`.
     pub levels: Tensor<4>,
+    /// Photon-free part added after the combination `[B, 3, P, P]`.
+    pub direct: Tensor<4>,
     /// Reference `[B, 3, P, P]`.
     pub reference: Tensor<4>,
 }
@@ -106,6 +114,7 @@ impl HostBatch {
         Batch {
             features: t(&self.features, self.feature_channels),
             levels: t(&self.combined, self.combined_channels),
+            direct: t(&self.direct, 3),
             reference: t(&self.reference, 3),
         }
     }
@@ -323,15 +332,28 @@ impl PatchDataset {
             levels: Vec::with_capacity(COLOUR_CHANNELS * n),
             combined_channels: combined.len(),
             combined: Vec::with_capacity(combined.len() * n),
+            direct: Vec::with_capacity(3 * n),
             reference: Vec::with_capacity(3 * n),
         };
+        let direct_planes: Vec<usize> = (0..DIRECT_CHANNELS).collect();
+        let mut patch_direct = Vec::with_capacity(DIRECT_CHANNELS * p * p);
         for r in refs {
             let sample = self.sample(r.image)?;
             let packed = &sample.packed;
             let (w, h) = (packed.width, packed.height);
             crop(&packed.features, &features, w, h, r, p, &mut batch.features);
             crop(&packed.levels, &all_colours, w, h, r, p, &mut batch.levels);
+            let start = batch.combined.len();
             crop(&packed.levels, &combined, w, h, r, p, &mut batch.combined);
+            match &packed.direct {
+                Some(direct) => {
+                    patch_direct.clear();
+                    crop(direct, &direct_planes, w, h, r, p, &mut patch_direct);
+                    let added = split_direct(&mut batch.combined[start..], &patch_direct, p * p);
+                    batch.direct.extend(added);
+                }
+                None => batch.direct.resize(batch.direct.len() + 3 * p * p, 0.0),
+            }
             crop(
                 &sample.reference,
                 &[0, 1, 2],
@@ -394,6 +416,7 @@ mod tests {
                 height: h,
                 features: (0..INPUT_CHANNELS).flat_map(plane).collect(),
                 levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
+                direct: None,
             },
             reference: (0..3).flat_map(plane).collect(),
         }

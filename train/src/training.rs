@@ -160,7 +160,7 @@ pub fn train_step(
     lr: f64,
     loss: Loss,
 ) -> (Network, f64) {
-    let prediction = reconstruct(&model, config, batch.features, batch.levels);
+    let prediction = reconstruct(&model, config, batch.features, batch.levels) + batch.direct;
     let loss = loss.evaluate(prediction, batch.reference);
     let grads = loss.backward();
     let value: f32 = loss.into_scalar::<f32>();
@@ -188,7 +188,7 @@ pub fn validate(
     for chunk in refs.chunks(batch.max(1)) {
         let host = dataset.batch(chunk)?;
         let b = host.to_device(device);
-        let prediction = reconstruct(model, config, b.features, b.levels);
+        let prediction = reconstruct(model, config, b.features, b.levels) + b.direct;
         let prediction = prediction
             .into_data()
             .try_to_vec::<f32>()

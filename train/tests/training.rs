@@ -242,10 +242,17 @@ fn wgpu_and_flex_agree_when_an_adapter_exists() {
 }
 
 /// Trains the tiny preset 6 epochs on the synthetic sets minimising `loss` and checks that the
-/// validation relMSE falls clearly, to clearly below the best single input level.
+/// validation relMSE falls clearly, to clearly below the best single input level. The learner
+/// is checked on Eq. 6 alone (guard 0): the guard pulls the output towards the smoothest level
+/// where the network departs from it by less than the noise the bundle's variances claim, and
+/// the synthetic levels' bias and variances are not a renderer's (here the smoothest level is
+/// not the best one, and the guarded output stays near it).
 fn training_beats_the_best_input_level_with(loss: Loss) {
     let device = Device::flex();
-    let config = ModelConfig::preset(Preset::Tiny);
+    let config = ModelConfig {
+        guard: 0.0,
+        ..ModelConfig::preset(Preset::Tiny)
+    };
     let settings = TrainSettings {
         loss,
         ..tiny_settings(6, 3e-3, 1)

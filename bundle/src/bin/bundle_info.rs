@@ -1,5 +1,6 @@
 //! `bundle_info`: prints a sample bundle's metadata and per-layer statistics, and optionally
-//! writes each estimate level (and the G-buffer) as an sRGB PNG for a quick look.
+//! writes each estimate level (and the G-buffer) as an sRGB PNG for a quick look, or one level
+//! as a plain RGB EXR (e.g. a long single-level render as a reference image).
 
 use std::path::{Path, PathBuf};
 
@@ -25,6 +26,10 @@ struct Args {
         allow_hyphen_values = true
     )]
     exposure: f32,
+    /// Write level LEVEL (y, z1..z4) as a plain RGB float EXR to FILE, e.g. `--exr y ref.exr`
+    /// to use a long `render --integrator sppm` run as a reference.
+    #[arg(long, num_args = 2, value_names = ["LEVEL", "FILE"])]
+    exr: Option<Vec<String>>,
 }
 
 /// Min, max, mean and non-finite count of one channel.
@@ -131,6 +136,20 @@ fn main() -> std::process::ExitCode {
 /// Prints the bundle's metadata and statistics, and writes the PNGs if asked.
 fn run(args: &Args) -> Result<()> {
     let b = read_bundle(&args.bundle)?;
+    let exr = match args.exr.as_deref() {
+        Some([level, file]) => {
+            let Some(l) = LEVEL_NAMES.iter().position(|n| n == level) else {
+                anyhow::bail!(
+                    "--exr: no level `{level}` (one of {})",
+                    LEVEL_NAMES.join(", ")
+                );
+            };
+            let file = PathBuf::from(file);
+            cli_output::paths::create_parent_dir("--exr", &file).map_err(anyhow::Error::msg)?;
+            Some((l, file))
+        }
+        _ => None,
+    };
     if let Some(prefix) = &args.png {
         // Before any output: a folder that cannot be made fails at once (missing ones are
         // made, as every other command does for its outputs).
@@ -152,11 +171,20 @@ fn run(args: &Args) -> Result<()> {
     if let Some(radius) = &b.radius {
         print_layer("radius", &LEVEL_NAMES, radius);
     }
+    if let Some(direct) = &b.direct {
+        print_layer("ydirect", &["R", "G", "B"], &direct.y);
+        print_layer("zdirect", &["R", "G", "B"], &direct.z);
+        print_layer("directvariance", &bundle::DIRECT_NAMES, &direct.variance);
+    }
     if let Some((layer, channel, x, y)) = b.find_non_finite() {
         println!("first non-finite sample: {layer}.{channel} at ({x}, {y})");
     }
     if let Some(prefix) = &args.png {
         write_pngs(&b, prefix, args.exposure)?;
+    }
+    if let Some((level, file)) = exr {
+        bundle::write_rgb_exr_image(&file, &b.levels[level])?;
+        eprintln!("wrote {} ({})", file.display(), LEVEL_NAMES[level]);
     }
     Ok(())
 }

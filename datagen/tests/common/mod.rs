@@ -61,7 +61,9 @@ pub fn assert_same(a: &BTreeMap<String, Vec<u8>>, b: &BTreeMap<String, Vec<u8>>)
 }
 
 /// A stand-in renderer's bundle of `spec` at `passes`: every layer is `image(channels, salt)`
-/// (salts: levels 1–5, variance 10, albedo 11, normal 12, depth 13, radius 14).
+/// (salts: levels 1–5, variance 10, albedo 11, normal 12, depth 13, radius 14, ydirect 15,
+/// zdirect 16, directvariance 17; the photon-free layers come with the radius, as a render
+/// writes both).
 pub fn stand_in_bundle(
     spec: &RunSpec,
     passes: u32,
@@ -86,5 +88,10 @@ pub fn stand_in_bundle(
         normal: image(3, 12),
         depth: image(1, 13),
         radius: with_radius.then(|| image(5, 14)),
+        direct: with_radius.then(|| bundle::DirectLight {
+            y: image(3, 15),
+            z: image(3, 16),
+            variance: image(2, 17),
+        }),
     }
 }

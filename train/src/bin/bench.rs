@@ -146,6 +146,7 @@ fn run(cli: &Cli) -> Result<()> {
         let batch = Batch {
             features: tensor([b, 27, p, p], 1, &ad),
             levels: tensor([b, 15, p, p], 2, &ad),
+            direct: tensor([b, 3, p, p], 4, &ad),
             reference: tensor([b, 3, p, p], 3, &ad),
         };
         let (next, _) = train_step(

@@ -31,7 +31,7 @@ mod tests;
 use std::time::Instant;
 
 use anyhow::{bail, Result};
-use bundle::{Bundle, BundleMeta, Image};
+use bundle::{Bundle, BundleMeta, DirectLight, Image};
 use glam::UVec2;
 use rayon::prelude::*;
 
@@ -213,6 +213,11 @@ struct PixelState {
     levels: [Welford; LEVELS],
     /// G-buffer sums from path A.
     gbuffer: GBufferSum,
+    /// Welford accumulators of the radiance each eye subpath gathered without photons
+    /// (emission, next-event estimation): `[A, B]`; [`SppmMode::Single`] uses A only. Stored
+    /// as the bundle's `ydirect`, `zdirect` and `directvariance` layers, so the reconstruction
+    /// can leave this per-sample part out of the window filter (docs/method.md §5.4).
+    direct: [Welford; 2],
 }
 
 impl PixelState {
@@ -301,9 +306,13 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
             for e in &mut estimates[1..] {
                 *e *= weight_b;
             }
+            let direct_a = sanitize_pair(&mut estimates[..1], a.direct * weight_a);
+            let direct_b = sanitize_pair(&mut estimates[1..], b.direct * weight_b);
             for (w, e) in state.levels.iter_mut().zip(&estimates) {
-                w.push(sanitize(*e));
+                w.push(*e);
             }
+            state.direct[0].push(direct_a);
+            state.direct[1].push(direct_b);
         }
         SppmMode::Single => {
             estimates[0] = a.direct;
@@ -311,7 +320,10 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
                 gather::gather(scene, ctx.grid, vp, &radii[..1], n, &mut estimates[..1]);
                 found += 1;
             }
-            state.levels[0].push(sanitize(estimates[0] * weight_a));
+            estimates[0] *= weight_a;
+            let direct = sanitize_pair(&mut estimates[..1], a.direct * weight_a);
+            state.levels[0].push(estimates[0]);
+            state.direct[0].push(direct);
         }
     }
     state.gbuffer.push(&a.gbuffer);
@@ -321,19 +333,21 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
     found
 }
 
-/// Replaces a non-finite per-pass estimate (a numerical accident) by zero, so one bad sample
-/// cannot poison a pixel's mean for the rest of the run.
+/// Replaces the per-pass estimates of one eye subpath, and the photon-free part they contain,
+/// by zero if any of them is not finite (a numerical accident), so one bad sample cannot poison
+/// a pixel's mean for the rest of the run. Returns the photon-free part as kept.
 #[inline]
-fn sanitize(e: Rgb) -> Rgb {
-    if e.is_finite() {
-        e
+fn sanitize_pair(estimates: &mut [Rgb], direct: Rgb) -> Rgb {
+    if direct.is_finite() && estimates.iter().all(|e| e.is_finite()) {
+        direct
     } else {
+        estimates.fill(Rgb::ZERO);
         Rgb::ZERO
     }
 }
 
 /// The bundle of the current state, or an error naming the first non-finite sample: every
-/// per-pass estimate is finite (`sanitize`), but a mean or variance of huge values can still
+/// per-pass estimate is finite (`sanitize_pair`), but a mean or variance of huge values can still
 /// overflow float32, and a bundle of infinities would only be refused by whoever reads it.
 fn finite_bundle(
     scene: &Scene,
@@ -369,7 +383,19 @@ fn make_bundle(
     let mut normal = Image::new(w, h, 3);
     let mut depth = Image::new(w, h, 1);
     let mut radius = Image::new(w, h, LEVELS);
+    let mut direct_y = Image::new(w, h, 3);
+    let mut direct_z = Image::new(w, h, 3);
+    let mut direct_variance = Image::new(w, h, 2);
     for (i, s) in states.iter().enumerate() {
+        // The single level's one subpath is also what its z levels hold.
+        let b = match settings.mode {
+            SppmMode::MultiLevel => &s.direct[1],
+            SppmMode::Single => &s.direct[0],
+        };
+        direct_y.data[3 * i..3 * i + 3].copy_from_slice(&s.direct[0].mean_rgb().to_array());
+        direct_z.data[3 * i..3 * i + 3].copy_from_slice(&b.mean_rgb().to_array());
+        direct_variance.data[2 * i] = s.direct[0].variance_of_mean();
+        direct_variance.data[2 * i + 1] = b.variance_of_mean();
         for (l, level) in levels.iter_mut().enumerate() {
             // The single level fills every level layer (docs/formats.md).
             let acc = match settings.mode {
@@ -411,6 +437,11 @@ fn make_bundle(
         normal,
         depth,
         radius: Some(radius),
+        direct: Some(DirectLight {
+            y: direct_y,
+            z: direct_z,
+            variance: direct_variance,
+        }),
     }
 }
 
@@ -526,7 +557,7 @@ pub fn render_sppm_resumable(
     }
 
     // Per pixel: the state, and the bundle assembled at checkpoints (f32 layers).
-    let pixel_bytes = std::mem::size_of::<PixelState>() as u64 + 4 * 31;
+    let pixel_bytes = std::mem::size_of::<PixelState>() as u64 + 4 * 39;
     let state_bytes = pixel_count as u64 * pixel_bytes;
     crate::memory::check_fits(&format!("SPPM on a {}x{} image", res.x, res.y), state_bytes)?;
     crate::memory::check_fits(

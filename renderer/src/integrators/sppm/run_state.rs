@@ -4,11 +4,14 @@
 //! one that never stopped (every random stream is keyed by seed, pass and pixel, and the photon
 //! grid's cell size is a function of the saved radii).
 //!
-//! The file ([`crate::state_file`] framing, first line `sppm-run-state 1`): the header
+//! The file ([`crate::state_file`] framing, first line `sppm-run-state 2`): the header
 //! ([`StateHeader`]: the run's identity, pass count and totals), then per pixel, little-endian:
 //! r² (f32), the pass that set it (u32), for each stored level the Welford count (u32), mean
-//! (3 × f64) and sum of squared deviations (3 × f64), and the G-buffer sums: albedo (3 × f64),
-//! normal (3 × f64), depth (f64). `sppm` stores one level, `sppm-ml` five.
+//! (3 × f64) and sum of squared deviations (3 × f64), the G-buffer sums: albedo (3 × f64),
+//! normal (3 × f64), depth (f64), and the Welford accumulators (count, mean, sum of squared
+//! deviations) of the photon-free radiance of subpaths A and B.
+//! `sppm` stores one level, `sppm-ml` five. (Version 1 had no photon-free sums: such a file is
+//! refused by its first line.)
 
 use anyhow::{bail, Result};
 use glam::DVec3;
@@ -20,7 +23,7 @@ use super::{PixelState, RenderSummary, SppmMode, SppmSettings};
 use crate::state_file::{self, check_identity, Cursor, StateFile};
 
 /// First line of an SPPM state file.
-const MAGIC: &str = "sppm-run-state 1";
+const MAGIC: &str = "sppm-run-state 2";
 
 /// The settings that decide what a run computes; a state is resumed only under equal ones.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -85,7 +88,7 @@ pub(super) struct RunState {
 
 /// Bytes of one pixel's record with `levels` accumulators.
 fn pixel_bytes(levels: usize) -> usize {
-    8 + levels * (4 + 48) + 56
+    8 + (levels + 2) * (4 + 48) + 56
 }
 
 /// Appends a vector of three f64.
@@ -109,6 +112,11 @@ fn encode_pixels(pixels: &[PixelState], levels: usize) -> Vec<u8> {
         put_dvec3(&mut out, p.gbuffer.albedo);
         put_dvec3(&mut out, p.gbuffer.normal);
         out.extend_from_slice(&p.gbuffer.depth.to_le_bytes());
+        for w in &p.direct {
+            out.extend_from_slice(&w.count.to_le_bytes());
+            put_dvec3(&mut out, w.mean);
+            put_dvec3(&mut out, w.m2);
+        }
     }
     out
 }
@@ -135,6 +143,13 @@ fn decode_pixels(body: &[u8], levels: usize) -> Vec<PixelState> {
                 normal: c.dvec3(),
                 depth: c.f64(),
             };
+            for w in &mut p.direct {
+                *w = Welford {
+                    count: c.u32(),
+                    mean: c.dvec3(),
+                    m2: c.dvec3(),
+                };
+            }
             p
         })
         .collect()

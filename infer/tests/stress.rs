@@ -1,0 +1,89 @@
+//! The stress set (scenes/stress, docs/results.md "Never worse than its inputs"): scenes built to
+//! break a window filter — a light smaller than a pixel seen directly, a light seen through glass
+//! and in a mirror, caustic fireflies in the sharp level, a saturated highlight next to black —
+//! rendered here with multi-level SPPM and reconstructed with the shipped weights
+//! (models/default). On each, the output's relMSE against the scene's shipped reference must be
+//! at most 1.05 × that of the best input level: the reconstruction never makes the image worse
+//! than what went in. And a light that one subpath saw in one pixel stays in that pixel.
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+use infer::{reconstruct_tiled, Engine, ErrorReport};
+use model::features::{pack, planar_reference};
+use model::model_dir::TrainedModel;
+use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
+
+fn repository() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Renders stress scene `name` at 64×64 with multi-level SPPM and reconstructs it with the
+/// shipped weights: the error report against the scene's reference.
+fn stress_report(name: &str, passes: u32, photons: u64) -> ErrorReport {
+    let dir = repository().join("scenes/stress").join(name);
+    let loaded = renderer::scene_file::load_for_sppm(&dir.join("scene.xml"), &[], false).unwrap();
+    let settings = SppmSettings {
+        photons_per_pass: photons,
+        seed: 1,
+        mode: SppmMode::MultiLevel,
+        max_depth: 12,
+        threads: 2,
+        scene_name: name.into(),
+        ..SppmSettings::default()
+    };
+    let stop = StopCondition {
+        checkpoints: vec![passes],
+        seconds: None,
+    };
+    let mut bundle = None;
+    render_sppm(
+        &loaded.scene,
+        &settings,
+        &stop,
+        |b| {
+            bundle = Some(b);
+            Ok(())
+        },
+        |_| {},
+    )
+    .unwrap();
+    let packed = pack(&bundle.expect("one bundle")).unwrap();
+    let device = Device::flex();
+    let model = TrainedModel::open(&repository().join("models/default"), &device).unwrap();
+    let out = reconstruct_tiled(&model, &packed, 0, Engine::Native, &device, |_, _| {});
+    let reference = bundle::read_rgb_exr_image(&dir.join("reference.exr")).unwrap();
+    let reference = planar_reference(&reference, packed.width, packed.height).unwrap();
+    ErrorReport::new(&packed, &out.image, &reference)
+}
+
+/// Output relMSE ≤ 1.05 × the best input level's on every stress scene, at two photon
+/// densities (≈ 5 and ≈ 0.5 photons per pixel per pass: the second one speckles ỹ).
+#[test]
+fn never_worse_than_the_best_input_level() {
+    let mut failures = Vec::new();
+    for name in [
+        "subpixel-light",
+        "glass-mirror",
+        "caustic-fireflies",
+        "highlight-black",
+    ] {
+        for (passes, photons) in [(32, 20_000), (32, 2_000)] {
+            let r = stress_report(name, passes, photons);
+            eprintln!(
+                "{name} {passes} x {photons}: output {:.4e}, best input {} {:.4e}, ratio {:.3}",
+                r.output, r.best_level, r.best_level_relmse, r.ratio_to_best
+            );
+            if r.ratio_to_best.is_nan() || r.ratio_to_best > 1.05 {
+                failures.push(format!(
+                    "{name} at {passes} x {photons}: {:.3}",
+                    r.ratio_to_best
+                ));
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "worse than the best input: {failures:?}"
+    );
+}
