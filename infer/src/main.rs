@@ -65,6 +65,15 @@ struct Cli {
     /// the combination run in bands of rows, so memory stays near 1 GB); 0 = whole image.
     #[arg(long, default_value_t = 512)]
     tile: usize,
+    /// Strength κ of the guard towards the smoothest level, replacing the model's (`guard` in
+    /// model.json; docs/method.md §5.4); 0 = Eq. 6 alone.
+    #[arg(long)]
+    guard: Option<f32>,
+    /// Combine the whole levels with Eq. 6, as the paper does, instead of leaving the bundle's
+    /// photon-free part (emission, direct light) out of the window filter. With `--guard 0`:
+    /// the paper's reconstruction exactly.
+    #[arg(long)]
+    whole_levels: bool,
 
     /// `--scene`: SPPM passes to render [default: 64, or no pass limit with --time].
     #[arg(long, help_heading = "Rendering (--scene)")]
@@ -309,7 +318,7 @@ fn run(cli: &Cli) -> Result<()> {
     if let Some(note) = cli.backend.adapter_note(&device) {
         eprintln!("{note}");
     }
-    let model = TrainedModel::open(&cli.model, &device).with_context(|| {
+    let mut model = TrainedModel::open(&cli.model, &device).with_context(|| {
         // The default is relative to the repository root: say so where it is the default.
         let hint = if cli.model == Path::new(DEFAULT_MODEL) && !cli.model.exists() {
             " (the default, relative to the repository root: run from there or give --model DIR)"
@@ -318,6 +327,13 @@ fn run(cli: &Cli) -> Result<()> {
         };
         format!("loading model {}{hint}", cli.model.display())
     })?;
+    if let Some(guard) = cli.guard {
+        model.config.guard = guard;
+        model
+            .config
+            .validate()
+            .map_err(|e| anyhow::anyhow!("--guard: {e}"))?;
+    }
     eprintln!(
         "model {}: preset {:?}, window {}×{}, receptive radius {} px, backend {:?}, engine {:?}",
         cli.model.display(),
@@ -349,7 +365,10 @@ fn run(cli: &Cli) -> Result<()> {
         }
         (None, None) => bail!("give --input bundle.exr or --scene scene.xml"),
     };
-    let packed = pack(&bundle).with_context(|| format!("bundle {}", source.display()))?;
+    let mut packed = pack(&bundle).with_context(|| format!("bundle {}", source.display()))?;
+    if cli.whole_levels {
+        packed.direct = None;
+    }
     let reference = match reference_image {
         Some((path, image)) => Some(
             planar_reference(&image, packed.width, packed.height)

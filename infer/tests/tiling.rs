@@ -511,3 +511,65 @@ fn cli_renders_a_scene_by_passes_or_by_time_then_reconstructs() {
     assert!(!dir.join("misspelt.exr").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--whole-levels --guard 0` is the paper's reconstruction (Eq. 6 on the whole levels): a
+/// light that path A saw in one pixel spreads over the window (the halo the emission split
+/// removes), while the default keeps it in its pixel; `--guard` must be a number ≥ 0.
+#[test]
+fn cli_whole_levels_and_guard_give_the_papers_eq6() {
+    let dir = temp_dir("cli-whole");
+    write_tiny_model(&dir);
+    let (w, h) = (16, 12);
+    let (mut bundle, _) = synthetic_bundle(w, h, 0.3, 8);
+    let mut direct = bundle::DirectLight {
+        y: bundle::Image::new(w, h, 3),
+        z: bundle::Image::new(w, h, 3),
+        variance: bundle::Image::new(w, h, 2),
+    };
+    let light = 5000.0f32;
+    for c in 0..3 {
+        let v = bundle.levels[0].get(8, 6, c);
+        bundle.levels[0].set(8, 6, c, v + light);
+        direct.y.set(8, 6, c, light);
+    }
+    bundle.direct = Some(direct);
+    let input = dir.join("lit.exr");
+    bundle::write_bundle(&input, &bundle).unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let out = infer_input(&dir, &input, dir.join(format!("{name}.exr")))
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        bundle::read_rgb_exr_image(&dir.join(format!("{name}.exr"))).unwrap()
+    };
+    let split = run("split", &[]);
+    let paper = run("paper", &["--whole-levels", "--guard", "0"]);
+    // The brightest pixel other than the light's, in each image.
+    let brightest_neighbour = |img: &bundle::Image| {
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .filter(|&(x, y)| (x, y) != (8, 6))
+            .map(|(x, y)| img.get(x, y, 0))
+            .fold(0.0f32, f32::max)
+    };
+    assert!(
+        brightest_neighbour(&paper) > 0.01 * light,
+        "Eq. 6 on the whole levels should spread the light: {}",
+        brightest_neighbour(&paper)
+    );
+    assert!(
+        brightest_neighbour(&split) < 0.002 * light,
+        "the split keeps the light in its pixel: {}",
+        brightest_neighbour(&split)
+    );
+    assert!(split.get(8, 6, 0) > 0.4 * light);
+    let bad = infer_input(&dir, &input, dir.join("bad.exr"))
+        .args(["--guard", "nan"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(1), "{bad:?}");
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--guard"));
+    assert!(!dir.join("bad.exr").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
