@@ -351,7 +351,8 @@ fn cli_names_a_missing_bundle_and_exits_non_zero() {
 }
 
 /// Finite input values so large that the combination overflows float32 give an error naming
-/// the bundle and a pixel, and no output image (not an image of infinities with exit 0).
+/// the bundle and a pixel, and no output image (not an image of infinities, nor one the guard
+/// or the clamp turned into zeros, with exit 0) — on both engines, guard on and off.
 #[test]
 fn cli_refuses_to_write_a_non_finite_reconstruction() {
     let dir = temp_dir("cli-overflow");
@@ -362,16 +363,24 @@ fn cli_refuses_to_write_a_non_finite_reconstruction() {
     }
     let input = dir.join("huge.exr");
     bundle::write_bundle(&input, &bundle).unwrap();
-    let out = infer_input(&dir, &input, dir.join("out.exr"))
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("huge.exr") && stderr.contains("not finite at pixel"),
-        "{stderr}"
-    );
-    assert!(!dir.join("out.exr").exists());
+    for (engine, guard) in [
+        ("native", "16"),
+        ("burn", "16"),
+        ("native", "0"),
+        ("burn", "0"),
+    ] {
+        let out = infer_input(&dir, &input, dir.join("out.exr"))
+            .args(["--engine", engine, "--guard", guard])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{engine} {guard}: {stderr}");
+        assert!(
+            stderr.contains("huge.exr") && stderr.contains("not finite at pixel"),
+            "{engine} {guard}: {stderr}"
+        );
+        assert!(!dir.join("out.exr").exists());
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

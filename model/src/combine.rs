@@ -194,6 +194,8 @@ pub fn combine_guarded_block(
     let delta_squared = delta.clone() * delta.clone();
     let kept = delta_squared.clone()
         / (delta_squared + noise.mul_scalar(guard.strength)).add_scalar(1e-30);
+    // A non-finite Eq. 6 (overflow: inf / inf) is kept as it is, for the caller to report.
+    let kept = kept.clone().mask_fill(kept.is_nan(), 1.0);
     (smoothest + delta * kept).reshape([batch, 3, height, width])
 }
 
