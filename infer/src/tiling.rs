@@ -239,7 +239,7 @@ pub fn reconstruct_native(
     let layers = model.config.hidden_layers + 1;
     let share_planes = share_planes(chosen);
     let (levels, added) = packed.combination_inputs();
-    let variances = packed.variances(chosen.len());
+    let variances = guard_variances(model, packed);
     let colours = CombinationInputs {
         width,
         height,
@@ -281,7 +281,7 @@ pub fn reconstruct_banded(
     let feature_channels = packed.features.len() / (width * height).max(1);
     let colour_channels = packed.levels.len() / (width * height).max(1);
     let (combined_levels, added) = packed.combination_inputs();
-    let variances = packed.variances(chosen.len());
+    let variances = guard_variances(model, packed);
     let share_planes = share_planes(chosen);
     let pairs = share_planes.len();
     let pixels = width * height;
@@ -369,6 +369,15 @@ pub fn reconstruct_banded(
         height,
         image,
         shares,
+    }
+}
+
+/// The variances the guard reads (none when the model's guard is off).
+fn guard_variances(model: &TrainedModel, packed: &PackedImage) -> Vec<f32> {
+    if model.config.guard > 0.0 {
+        packed.variances(model.config.levels.len())
+    } else {
+        Vec::new()
     }
 }
 

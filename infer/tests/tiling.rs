@@ -173,6 +173,25 @@ fn native_engine_equals_burn() {
     }
 }
 
+/// Photon-free layers of a `w`×`h` bundle with no photon-free light at all.
+fn no_direct_light(w: usize, h: usize) -> bundle::DirectLight {
+    bundle::DirectLight {
+        y: bundle::Image::new(w, h, 3),
+        z: bundle::Image::new(w, h, 3),
+        variance: bundle::Image::new(w, h, 2),
+    }
+}
+
+/// Adds a light of radiance `light` that path A saw at pixel (x, y): to ỹ and to its
+/// photon-free layer (the bundle has the layers).
+fn add_light_seen_by_path_a(bundle: &mut bundle::Bundle, x: usize, y: usize, light: f32) {
+    for c in 0..3 {
+        let v = bundle.levels[0].get(x, y, c);
+        bundle.levels[0].set(x, y, c, v + light);
+        bundle.direct.as_mut().unwrap().y.set(x, y, c, light);
+    }
+}
+
 /// The emission split (docs/method.md §5.4): a light that path A saw in one pixel — in ỹ and its
 /// `ydirect` layer — stays in that pixel. Against the same bundle without it, the pixel gains
 /// the light's weighted share (half, the two subpaths' variances being equal) and no other
@@ -184,19 +203,11 @@ fn native_engine_equals_burn() {
 fn a_light_seen_in_one_pixel_stays_in_that_pixel() {
     let (w, h) = (23, 19);
     let (mut bundle, _) = synthetic_bundle(w, h, 0.3, 12);
-    bundle.direct = Some(bundle::DirectLight {
-        y: bundle::Image::new(w, h, 3),
-        z: bundle::Image::new(w, h, 3),
-        variance: bundle::Image::new(w, h, 2),
-    });
+    bundle.direct = Some(no_direct_light(w, h));
     let plain = pack(&bundle).unwrap();
     let (lx, ly) = (11, 9);
     let light = 5000.0f32;
-    for c in 0..3 {
-        let v = bundle.levels[0].get(lx, ly, c);
-        bundle.levels[0].set(lx, ly, c, v + light);
-        bundle.direct.as_mut().unwrap().y.set(lx, ly, c, light);
-    }
+    add_light_seen_by_path_a(&mut bundle, lx, ly, light);
     let lit = pack(&bundle).unwrap();
     let device = Device::flex();
     for guard in [0.0, 4.0] {
@@ -530,18 +541,9 @@ fn cli_whole_levels_and_guard_give_the_papers_eq6() {
     write_tiny_model(&dir);
     let (w, h) = (16, 12);
     let (mut bundle, _) = synthetic_bundle(w, h, 0.3, 8);
-    let mut direct = bundle::DirectLight {
-        y: bundle::Image::new(w, h, 3),
-        z: bundle::Image::new(w, h, 3),
-        variance: bundle::Image::new(w, h, 2),
-    };
+    bundle.direct = Some(no_direct_light(w, h));
     let light = 5000.0f32;
-    for c in 0..3 {
-        let v = bundle.levels[0].get(8, 6, c);
-        bundle.levels[0].set(8, 6, c, v + light);
-        direct.y.set(8, 6, c, light);
-    }
-    bundle.direct = Some(direct);
+    add_light_seen_by_path_a(&mut bundle, 8, 6, light);
     let input = dir.join("lit.exr");
     bundle::write_bundle(&input, &bundle).unwrap();
     let run = |name: &str, extra: &[&str]| {

@@ -15,6 +15,8 @@
 //! colour and variance planes of its levels plus the G-buffer, in the same order:
 //! [`feature_channels`] and [`PackedImage::select_levels`] pick them out of the full packing.
 
+use std::borrow::Cow;
+
 use bundle::{Bundle, Image};
 
 use crate::network::{GBUFFER_CHANNELS, INPUT_CHANNELS, LEVELS};
@@ -84,15 +86,18 @@ impl PackedImage {
             .collect()
     }
 
-    /// The combination's inputs: the colour planes less their photon-free part (all of them
-    /// when the image has none), and what is added to the combined image afterwards.
-    pub fn combination_inputs(&self) -> (Vec<f32>, Option<Vec<f32>>) {
-        let mut levels = self.levels.clone();
-        let added = self
-            .direct
-            .as_ref()
-            .map(|direct| split_direct(&mut levels, direct, self.pixels()));
-        (levels, added)
+    /// The combination's inputs: the colour planes less their photon-free part (the planes
+    /// themselves, not copied, when the image has none), and what is added to the combined
+    /// image afterwards.
+    pub fn combination_inputs(&self) -> (Cow<'_, [f32]>, Option<Vec<f32>>) {
+        match &self.direct {
+            None => (Cow::Borrowed(&self.levels), None),
+            Some(direct) => {
+                let mut levels = self.levels.clone();
+                let added = split_direct(&mut levels, direct, self.pixels());
+                (Cow::Owned(levels), Some(added))
+            }
+        }
     }
 }
 
