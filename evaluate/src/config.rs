@@ -50,6 +50,24 @@ pub struct EvalConfig {
     /// The dual-vs-multi ablation (paper Table 1), run when present.
     #[serde(default)]
     pub ablation: Option<AblationConfig>,
+    /// Peers denoised by Intel Open Image Denoise at equal time, beside standard SPPM:
+    /// `"sppm-oidn"`, `"pt-oidn"` (`crate::peers`; need Python with `pyoidn`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub peers: Vec<crate::peers::Peer>,
+    /// Python interpreter running the OIDN peer script.
+    #[serde(default = "default_python")]
+    pub oidn_python: String,
+    /// The OIDN peer script.
+    #[serde(default = "default_oidn_script")]
+    pub oidn_script: PathBuf,
+}
+
+fn default_python() -> String {
+    "python3".into()
+}
+
+fn default_oidn_script() -> PathBuf {
+    "scripts/oidn_denoise.py".into()
 }
 
 /// `[ablation]`: networks combining fewer levels (e.g. Dual(ỹ, z̃2), trained with
@@ -168,6 +186,11 @@ impl EvalConfig {
         }
         if self.max_depth == Some(0) {
             bail!("max_depth must be positive");
+        }
+        for (i, peer) in self.peers.iter().enumerate() {
+            if self.peers[..i].contains(peer) {
+                bail!("peers lists {:?} twice", crate::peers::Peer::name(*peer));
+            }
         }
         if let Some(a) = &self.ablation {
             if a.dual_models.is_empty() {

@@ -8,6 +8,7 @@ use anyhow::Result;
 
 use crate::ablation::Ablation;
 use crate::images::base64;
+use crate::peers::Peer;
 use crate::{read_output_file, EvalResults};
 use infer::report::LEVEL_NAMES;
 
@@ -181,6 +182,7 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
              its timings are that run's.</p>\n",
         );
     }
+    peers_section(&mut h, results);
     let _ = writeln!(
         h,
         "<div class=\"note\"><p><b>Method.</b> {}</p></div>",
@@ -273,13 +275,30 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
                 .comparison_standard
                 .map_or((0, f64::NAN), |p| (p.passes, p.seconds));
             let ours = e.checkpoints.last();
+            let mut peers = String::new();
+            for peer in [Peer::SppmOidn, Peer::PtOidn] {
+                if let Some(p) = ours.and_then(|c| c.peer(peer)) {
+                    let unit = match peer {
+                        Peer::SppmOidn => "passes",
+                        Peer::PtOidn => "spp",
+                    };
+                    let _ = write!(
+                        peers,
+                        " | {} ({} {unit}, {:.2} s incl. denoising) | its relative error",
+                        peer.name(),
+                        p.samples,
+                        p.total_seconds
+                    );
+                }
+            }
             let _ = writeln!(
                 h,
                 "<p>Left to right: standard SPPM ({sp} passes, {ss:.2} s) | ours ({} passes, {:.2} s \
                  incl. inference) | reference | relative error of standard SPPM | relative error of \
-                 ours (per-pixel relMSE summand, log colour scale over three decades up to {}).</p>",
+                 ours{} (per-pixel relMSE summand, log colour scale over three decades up to {}).</p>",
                 ours.map_or(0, |c| c.passes),
                 ours.map_or(f64::NAN, |c| c.total_seconds),
+                escape(&peers),
                 r.error_scale
                     .map_or_else(|| "–".into(), |v| sci(f64::from(v)))
             );
@@ -291,6 +310,75 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
     }
     h.push_str("</body></html>\n");
     Ok(h)
+}
+
+/// Ours against the OIDN peers at equal time (absent when none was run): one row per scene
+/// and checkpoint, each peer's relMSE, what it rendered, and ours / it.
+fn peers_section(h: &mut String, results: &EvalResults) {
+    let s = &results.summary;
+    if s.peers.is_empty() {
+        return;
+    }
+    let _ = writeln!(h, "<h2 id=\"peers\">Peers at equal time</h2>");
+    for p in &s.peers {
+        let _ = writeln!(
+            h,
+            "<p>At {} passes ours is better than <b>{}</b> on <b>{} of {}</b> scenes, median \
+             ratio ours/it <b>{}</b>.</p>",
+            s.passes,
+            p.peer.name(),
+            p.ours_better,
+            p.scenes,
+            p.median_ratio
+                .map_or_else(|| "–".into(), |v| format!("{v:.3}"))
+        );
+    }
+    h.push_str("<table><tr><th class=\"l\">scene</th><th>passes</th><th>ours relMSE</th>");
+    for p in &s.peers {
+        let _ = write!(
+            h,
+            "<th>{0} relMSE</th><th>{0}<br>samples, render s + OIDN s</th><th>ours / it</th>",
+            p.peer.name()
+        );
+    }
+    h.push_str("</tr>\n");
+    for r in &results.scenes {
+        let Some(e) = &r.eval else { continue };
+        for c in &e.checkpoints {
+            let _ = write!(
+                h,
+                "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td>",
+                escape(&r.name),
+                c.passes,
+                sci(c.ours_relmse)
+            );
+            for p in &s.peers {
+                match c.peer(p.peer) {
+                    Some(v) => {
+                        let class = if v.ratio < 1.0 { "win" } else { "loss" };
+                        let _ = write!(
+                            h,
+                            "<td>{}</td><td>{}, {:.2} + {:.2}</td><td class=\"{class}\">{:.3}</td>",
+                            sci(v.relmse),
+                            v.samples,
+                            v.render_seconds,
+                            v.denoise_seconds,
+                            v.ratio
+                        );
+                    }
+                    None => h.push_str("<td>–</td><td>–</td><td>–</td>"),
+                }
+            }
+            h.push_str("</tr>\n");
+        }
+    }
+    h.push_str(
+        "</table>\n<p>Each peer renders to the first of its checkpoints at or past ours' total \
+         time less the denoiser's (so it gets at least ours' time), then OIDN 2.5 (HDR, albedo + \
+         normal, quality high) denoises it; the denoiser's time is the median of three calls \
+         after a warm-up. SPPM + OIDN: standard SPPM with its own G-buffer; PT + OIDN: the \
+         path tracer, with the G-buffer of ours' bundle.</p>\n",
+    );
 }
 
 /// The dual-vs-multi table (paper Table 1), scenes as rows, models as columns.

@@ -7,6 +7,7 @@ pub mod compare;
 pub mod config;
 pub mod html;
 pub mod images;
+pub mod peers;
 pub mod plot;
 pub mod resume;
 pub mod runs;
@@ -104,6 +105,22 @@ pub struct Summary {
     pub median_overhead: Option<f64>,
     /// Scenes where ours beats the best input level.
     pub ours_better_than_best_input: usize,
+    /// Ours against each peer that was run (`peers`), at equal time.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub peers: Vec<PeerSummary>,
+}
+
+/// Ours against one peer over the scenes, at the summary's pass count.
+#[derive(Clone, Debug, Serialize)]
+pub struct PeerSummary {
+    /// The peer.
+    pub peer: peers::Peer,
+    /// Scenes with a result of this peer.
+    pub scenes: usize,
+    /// Scenes where ours beats it.
+    pub ours_better: usize,
+    /// Median over scenes of ours / peer.
+    pub median_ratio: Option<f64>,
 }
 
 /// Everything written to results.json.
@@ -149,6 +166,27 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
     std::fs::create_dir_all(&config.output)
         .with_context(|| format!("output = {}: creating it", config.output.display()))?;
     let passes = config.pass_counts();
+    let denoiser = peers::Denoiser {
+        python: config.oidn_python.clone(),
+        script: config.oidn_script.clone(),
+    };
+    if !config.peers.is_empty() {
+        let version = denoiser.check()?;
+        eprintln!(
+            "peers: {} (pyoidn {version})",
+            config
+                .peers
+                .iter()
+                .map(|p| p.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let peer_setup = scene::PeerSetup {
+        peers: &config.peers,
+        denoiser: &denoiser,
+        max_depth: config.max_depth,
+    };
     // The settings and model files, hashed once for every scene's saved result.
     let run_fingerprint = resume::run_fingerprint(config)?;
     let mut results = Vec::new();
@@ -188,7 +226,16 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
                 r
             }
             None => {
-                let r = evaluate_one(config, s, &settings, &passes, &model, &variants, &inference);
+                let r = evaluate_one(
+                    config,
+                    s,
+                    &settings,
+                    &passes,
+                    &model,
+                    &variants,
+                    &inference,
+                    &peer_setup,
+                );
                 if let Some(f) = &fingerprint {
                     resume::save(&saved, f, &r)?;
                 }
@@ -207,6 +254,19 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
                         c.standard_equal_time.relmse,
                         c.ratio_equal_time
                     );
+                    for peer in &config.peers {
+                        if let Some(p) = c.peer(*peer) {
+                            eprintln!(
+                                "  {}: {:.3e} ({} samples, {:.2} s + {:.2} s): ratio {:.3}",
+                                peer.name(),
+                                p.relmse,
+                                p.samples,
+                                p.render_seconds,
+                                p.denoise_seconds,
+                                p.ratio
+                            );
+                        }
+                    }
                     for (v, e) in variants.iter().zip(&c.variant_relmse) {
                         eprintln!(
                             "  ablation {}: {e:.3e} (ours / it = {:.3})",
@@ -262,6 +322,7 @@ fn file_stem(name: &str) -> String {
         .collect()
 }
 
+#[allow(clippy::too_many_arguments)]
 fn evaluate_one(
     config: &EvalConfig,
     s: &EvalScene,
@@ -270,10 +331,11 @@ fn evaluate_one(
     model: &TrainedModel,
     variants: &[TrainedModel],
     inference: &infer::Inference,
+    peers: &scene::PeerSetup,
 ) -> SceneResult {
     let mut r = SceneResult::new(s.name.clone(), s.xml.clone(), s.reference.clone());
     let outcome = (|| -> Result<()> {
-        let (eval, imgs) = evaluate_scene(s, settings, passes, model, variants, inference)?;
+        let (eval, imgs) = evaluate_scene(s, settings, passes, model, variants, inference, peers)?;
         let stem = file_stem(&s.name);
         let plot = format!("{stem}_convergence.png");
         plot::write_convergence_plot(
@@ -284,18 +346,27 @@ fn evaluate_one(
         let pixels = eval.width * eval.height;
         let err_std = relative_error_map(&imgs.standard, &imgs.reference, pixels);
         let err_ours = relative_error_map(&imgs.ours, &imgs.reference, pixels);
-        let scale = error_scale(&[&err_std, &err_ours]);
-        let row = row_png(
-            &[
-                srgb_panel(&imgs.standard, pixels),
-                srgb_panel(&imgs.ours, pixels),
-                srgb_panel(&imgs.reference, pixels),
-                error_panel(&err_std, scale),
-                error_panel(&err_ours, scale),
-            ],
-            eval.width,
-            eval.height,
-        )?;
+        let err_peers: Vec<Vec<f32>> = imgs
+            .peers
+            .iter()
+            .map(|(_, image)| relative_error_map(image, &imgs.reference, pixels))
+            .collect();
+        let mut all_errors: Vec<&[f32]> = vec![&err_std, &err_ours];
+        all_errors.extend(err_peers.iter().map(Vec::as_slice));
+        let scale = error_scale(&all_errors);
+        // standard | ours | reference | error maps, then each peer's image and error map.
+        let mut panels = vec![
+            srgb_panel(&imgs.standard, pixels),
+            srgb_panel(&imgs.ours, pixels),
+            srgb_panel(&imgs.reference, pixels),
+            error_panel(&err_std, scale),
+            error_panel(&err_ours, scale),
+        ];
+        for ((_, image), err) in imgs.peers.iter().zip(&err_peers) {
+            panels.push(srgb_panel(image, pixels));
+            panels.push(error_panel(err, scale));
+        }
+        let row = row_png(&panels, eval.width, eval.height)?;
         let comparison = format!("{stem}_compare.png");
         images::write_atomic(&config.output.join(&comparison), &row)?;
         let levels: Vec<images::Panel> =
@@ -346,6 +417,21 @@ pub fn summarise(results: &[SceneResult], passes: u32) -> Summary {
                 c.ours_relmse < c.level_relmse.iter().copied().fold(f64::INFINITY, f64::min)
             })
             .count(),
+        peers: [peers::Peer::SppmOidn, peers::Peer::PtOidn]
+            .into_iter()
+            .filter_map(|peer| {
+                let ratios: Vec<f64> = last
+                    .iter()
+                    .filter_map(|c| c.peer(peer).map(|p| p.ratio))
+                    .collect();
+                (!ratios.is_empty()).then(|| PeerSummary {
+                    peer,
+                    scenes: ratios.len(),
+                    ours_better: ratios.iter().filter(|r| **r < 1.0).count(),
+                    median_ratio: median(&ratios),
+                })
+            })
+            .collect(),
     }
 }
 

@@ -13,10 +13,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::compare::{dense_checkpoints, relmse_at_time, CurvePoint, Interpolated};
 use crate::config::EvalScene;
+use crate::peers::{path_trace_progressive, Denoiser, Guides, Peer, PeerResult};
 use crate::runs::{load_scene, multi_level, run_timed};
 use infer::report::LEVEL_NAMES;
 use infer::{ErrorReport, Inference};
 use model::model_dir::TrainedModel;
+use renderer::integrators::path::PathTracer;
 use renderer::integrators::sppm::SppmSettings;
 
 /// The standard run's dense checkpoints go up to this multiple of the largest pass count.
@@ -53,6 +55,34 @@ pub struct Checkpoint {
     pub standard_seconds_equal_passes: Option<f64>,
     /// Multi-level render time per pass over single-level's, minus one (paper Table 2).
     pub overhead: Option<f64>,
+    /// Standard SPPM denoised by OIDN, at (at least) `total_seconds` (`peers`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sppm_oidn: Option<PeerResult>,
+    /// Path tracing denoised by OIDN, at (at least) `total_seconds` (`peers`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pt_oidn: Option<PeerResult>,
+}
+
+impl Checkpoint {
+    /// This checkpoint's result of `peer`, if it was run.
+    pub fn peer(&self, peer: Peer) -> Option<&PeerResult> {
+        match peer {
+            Peer::SppmOidn => self.sppm_oidn.as_ref(),
+            Peer::PtOidn => self.pt_oidn.as_ref(),
+        }
+    }
+}
+
+/// What the peers need: which to run, the denoiser, and the path tracer's depth when the scene
+/// file names none.
+pub struct PeerSetup<'a> {
+    /// The peers to run (none: the evaluation is ours against standard SPPM only).
+    pub peers: &'a [Peer],
+    /// The OIDN runner.
+    pub denoiser: &'a Denoiser,
+    /// Path depth of the path tracer when the scene has no `<integrator>`: the evaluation's
+    /// `max_depth` (the references' depth), else unbounded.
+    pub max_depth: Option<u32>,
 }
 
 /// Everything measured on one scene.
@@ -80,6 +110,17 @@ pub struct SceneImages {
     pub reference: Vec<f32>,
     /// Input levels ỹ, z̃1..z̃4.
     pub levels: Vec<Vec<f32>>,
+    /// The peers' denoised images at the last checkpoint, in `peers` order.
+    pub peers: Vec<(Peer, Vec<f32>)>,
+}
+
+/// A peer's image captured at the first of its checkpoints at or past a target time.
+struct Capture {
+    samples: u32,
+    seconds: f64,
+    image: Vec<f32>,
+    albedo: Vec<f32>,
+    normal: Vec<f32>,
 }
 
 /// Evaluates one scene; `variants` (the ablation's models) reconstruct the same bundles as
@@ -91,6 +132,7 @@ pub fn evaluate_scene(
     model: &TrainedModel,
     variants: &[TrainedModel],
     inference: &Inference,
+    peers: &PeerSetup,
 ) -> Result<(SceneEval, SceneImages)> {
     let built = load_scene(&scene.xml, &scene.defines)?;
     let res = built.camera.resolution();
@@ -136,6 +178,8 @@ pub fn evaluate_scene(
             standard_equal_passes: None,
             standard_seconds_equal_passes: None,
             overhead: None,
+            sppm_oidn: None,
+            pt_oidn: None,
         });
         last_levels = (0..LEVEL_NAMES.len())
             .map(|l| packed.level(l).to_vec())
@@ -159,6 +203,34 @@ pub fn evaluate_scene(
     // Only one standard image is kept for the comparison: the first checkpoint at or past
     // ours' last total time (or the last one, if the run never got there).
     let last_total = checkpoints.last().map_or(0.0, |c| c.total_seconds);
+    // The peers' render budgets: ours' totals less the denoiser's time, measured once on an
+    // image of this size (its time does not depend on the content).
+    let denoise_seconds = match (peers.peers.is_empty(), bundles.last()) {
+        (false, Some(tb)) => {
+            let (albedo, normal) = guides_of(&tb.bundle, width, height)?;
+            let color = planar_reference(&tb.bundle.levels[1], width, height)?;
+            let (_, s) = peers
+                .denoiser
+                .denoise(
+                    width,
+                    height,
+                    &color,
+                    &Guides {
+                        albedo: &albedo,
+                        normal: &normal,
+                    },
+                )
+                .with_context(|| format!("{}: OIDN", scene.name))?;
+            s
+        }
+        _ => 0.0,
+    };
+    let targets: Vec<f64> = checkpoints
+        .iter()
+        .map(|c| (c.total_seconds - denoise_seconds).max(0.0))
+        .collect();
+    let want_sppm_oidn = peers.peers.contains(&Peer::SppmOidn);
+    let mut sppm_captures: Vec<Option<Capture>> = (0..targets.len()).map(|_| None).collect();
     let mut shown: Option<(u32, f64, Vec<f32>)> = None;
     let mut shown_final = false;
     let kept = run_timed(
@@ -172,6 +244,20 @@ pub fn evaluate_scene(
             let image = planar_reference(&b.levels[1], width, height)
                 .with_context(|| format!("{}: standard SPPM bundle", scene.name))?;
             let relmse = relmse_planar(&image, &reference);
+            if want_sppm_oidn {
+                for (slot, &target) in sppm_captures.iter_mut().zip(&targets) {
+                    if slot.is_none() && seconds >= target {
+                        let (albedo, normal) = guides_of(&b, width, height)?;
+                        *slot = Some(Capture {
+                            samples: b.meta.passes,
+                            seconds,
+                            image: image.clone(),
+                            albedo,
+                            normal,
+                        });
+                    }
+                }
+            }
             if !shown_final {
                 shown_final = seconds >= last_total;
                 shown = Some((b.meta.passes, seconds, image));
@@ -204,6 +290,84 @@ pub fn evaluate_scene(
         }
     }
 
+    // (e) the peers: path tracing to the same budgets, then every capture denoised.
+    let mut pt_captures: Vec<Option<Capture>> = (0..targets.len()).map(|_| None).collect();
+    if peers.peers.contains(&Peer::PtOidn) {
+        let file = built.integrator.as_ref();
+        let tracer = PathTracer {
+            max_depth: file
+                .map(|i| i.max_depth)
+                .or(peers.max_depth.map(|d| d as i32))
+                .unwrap_or(-1),
+            rr_depth: file.map_or(5, |i| i.rr_depth),
+        };
+        let until = targets.iter().copied().fold(0.0, f64::max);
+        let mut failure = None;
+        path_trace_progressive(
+            &built,
+            &tracer,
+            settings.seed,
+            until,
+            PT_MAX_SPP,
+            |spp, seconds, image| {
+                for (c, (slot, &target)) in pt_captures.iter_mut().zip(&targets).enumerate() {
+                    if slot.is_none() && seconds >= target && failure.is_none() {
+                        // The G-buffer of ours' bundle at the same checkpoint: the same first-hit
+                        // albedo and normal a path tracer would output.
+                        match guides_of(&bundles[c].bundle, width, height) {
+                            Ok((albedo, normal)) => {
+                                *slot = Some(Capture {
+                                    samples: spp,
+                                    seconds,
+                                    image: image.to_vec(),
+                                    albedo,
+                                    normal,
+                                })
+                            }
+                            Err(e) => failure = Some(e),
+                        }
+                    }
+                }
+            },
+        );
+        if let Some(e) = failure {
+            return Err(e);
+        }
+    }
+    let mut peer_images = Vec::new();
+    let last = checkpoints.len().saturating_sub(1);
+    for (peer, captures) in [(Peer::SppmOidn, sppm_captures), (Peer::PtOidn, pt_captures)] {
+        for (c, capture) in captures.into_iter().enumerate() {
+            let Some(cap) = capture else { continue };
+            let guides = Guides {
+                albedo: &cap.albedo,
+                normal: &cap.normal,
+            };
+            let (image, denoise) = peers
+                .denoiser
+                .denoise(width, height, &cap.image, &guides)
+                .with_context(|| format!("{}: {}", scene.name, peer.name()))?;
+            let relmse = relmse_planar(&image, &reference);
+            let checkpoint = &mut checkpoints[c];
+            let result = PeerResult {
+                samples: cap.samples,
+                render_seconds: cap.seconds,
+                render_budget_seconds: targets[c],
+                denoise_seconds: denoise,
+                total_seconds: cap.seconds + denoise,
+                relmse,
+                ratio: checkpoint.ours_relmse / relmse,
+            };
+            match peer {
+                Peer::SppmOidn => checkpoint.sppm_oidn = Some(result),
+                Peer::PtOidn => checkpoint.pt_oidn = Some(result),
+            }
+            if c == last {
+                peer_images.push((peer, image));
+            }
+        }
+    }
+
     let Some((shown_passes, shown_seconds, standard_image)) = shown else {
         anyhow::bail!("{}: the standard run produced no bundle", scene.name);
     };
@@ -229,7 +393,19 @@ pub fn evaluate_scene(
             ours: last_ours,
             reference,
             levels: last_levels,
+            peers: peer_images,
         },
+    ))
+}
+
+/// Path-tracing samples per pixel beyond which the PT peer stops even short of its budget.
+const PT_MAX_SPP: u32 = 1 << 20;
+
+/// A bundle's albedo and normal, planar RGB, for OIDN.
+fn guides_of(b: &bundle::Bundle, width: usize, height: usize) -> Result<(Vec<f32>, Vec<f32>)> {
+    Ok((
+        planar_reference(&b.albedo, width, height).context("bundle albedo")?,
+        planar_reference(&b.normal, width, height).context("bundle normal")?,
     ))
 }
 
@@ -260,6 +436,8 @@ pub(crate) mod fixtures {
             standard_equal_passes: None,
             standard_seconds_equal_passes: None,
             overhead: None,
+            sppm_oidn: None,
+            pt_oidn: None,
         }
     }
 

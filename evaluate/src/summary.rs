@@ -9,6 +9,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::html::opt_sci;
+use crate::peers::Peer;
 use crate::{summarise, SceneResult, Summary};
 
 /// The part of an evaluation's `results.json` the combined summary needs.
@@ -42,6 +43,12 @@ pub struct CombinedRow {
     pub ratio_equal_time: Option<f64>,
     /// Multi-level overhead per pass at this pass count.
     pub overhead: Option<f64>,
+    /// Ours / (SPPM + OIDN) at equal time, when that peer was run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ratio_sppm_oidn: Option<f64>,
+    /// Ours / (PT + OIDN) at equal time, when that peer was run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ratio_pt_oidn: Option<f64>,
     /// Why the scene failed.
     pub error: Option<String>,
 }
@@ -100,6 +107,12 @@ pub fn summarize_evaluations(dirs: &[PathBuf]) -> Result<EvaluationsSummary> {
                 standard_relmse_equal_time: checkpoint.map(|c| c.standard_equal_time.relmse),
                 ratio_equal_time: checkpoint.map(|c| c.ratio_equal_time),
                 overhead: checkpoint.and_then(|c| c.overhead),
+                ratio_sppm_oidn: checkpoint
+                    .and_then(|c| c.peer(Peer::SppmOidn))
+                    .map(|p| p.ratio),
+                ratio_pt_oidn: checkpoint
+                    .and_then(|c| c.peer(Peer::PtOidn))
+                    .map(|p| p.ratio),
                 error: r.error.clone(),
             });
             scenes.push(r);
@@ -125,10 +138,20 @@ pub fn markdown(c: &EvaluationsSummary) -> String {
     let ratio = |v: Option<f64>| v.map_or_else(|| "–".into(), |x| format!("{x:.3}"));
     let overhead =
         |v: Option<f64>| v.map_or_else(|| "–".into(), |x| format!("{:+.0} %", 100.0 * x));
+    // Peer columns only when some scene has that peer.
+    let sppm_oidn = c.rows.iter().any(|r| r.ratio_sppm_oidn.is_some());
+    let pt_oidn = c.rows.iter().any(|r| r.ratio_pt_oidn.is_some());
     let mut out = String::from(
-        "| evaluation | scene | photons/pass | ours relMSE | standard relMSE, equal time | ours / standard | overhead |\n\
-         |---|---|---|---|---|---|---|\n",
+        "| evaluation | scene | photons/pass | ours relMSE | standard relMSE, equal time | ours / standard | overhead |",
     );
+    let mut rule = String::from("|---|---|---|---|---|---|---|");
+    for (shown, name) in [(sppm_oidn, "SPPM + OIDN"), (pt_oidn, "PT + OIDN")] {
+        if shown {
+            out += &format!(" ours / {name} |");
+            rule += "---|";
+        }
+    }
+    out += &format!("\n{rule}\n");
     for r in &c.rows {
         let outcome = match (&r.error, r.ratio_equal_time) {
             (Some(e), _) => format!("failed: {e}"),
@@ -136,7 +159,7 @@ pub fn markdown(c: &EvaluationsSummary) -> String {
             (None, None) => "–".into(),
         };
         out += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} |",
             r.evaluation.display(),
             r.scene,
             r.photons_per_pass,
@@ -145,6 +168,12 @@ pub fn markdown(c: &EvaluationsSummary) -> String {
             outcome,
             overhead(r.overhead),
         );
+        for (shown, value) in [(sppm_oidn, r.ratio_sppm_oidn), (pt_oidn, r.ratio_pt_oidn)] {
+            if shown {
+                out += &format!(" {} |", ratio(value));
+            }
+        }
+        out.push('\n');
     }
     let s = &c.summary;
     out += &format!(
@@ -158,6 +187,15 @@ pub fn markdown(c: &EvaluationsSummary) -> String {
         ratio(s.geomean_ratio_equal_time),
         overhead(s.median_overhead),
     );
+    for p in &s.peers {
+        out += &format!(
+            "Against {}: ours better on {} of {} scenes, median ratio {}.\n",
+            p.peer.name(),
+            p.ours_better,
+            p.scenes,
+            ratio(p.median_ratio)
+        );
+    }
     out
 }
 

@@ -469,3 +469,108 @@ fn bad_configs_fail_naming_the_problem() {
     assert!(!dir.join("out").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The OIDN peers (`scripts/oidn_denoise.py`, Python `pyoidn`: installed by `.ci/run`).
+#[test]
+fn oidn_peers_get_at_least_ours_time_and_are_reported() {
+    let dir = temp_dir("peers");
+    let (xml, reference) = box_scene(&dir.join("box"));
+    tiny_model(&dir.join("model"));
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/oidn_denoise.py");
+    let write_config = |name: &str, python: &str| {
+        let config = dir.join(format!("{name}.toml"));
+        std::fs::write(
+            &config,
+            format!(
+                "model = {}\noutput = {}\nphotons_per_pass = 2000\npasses = [2, 4]\nseed = 5\n\
+                 tile = 8\nthreads = 1\npeers = [\"sppm-oidn\", \"pt-oidn\"]\n\
+                 oidn_python = {python:?}\noidn_script = {}\n\n[[scenes]]\nname = \"box\"\n\
+                 xml = {}\nreference = {}\ndefines = {{ res = \"16\" }}\n",
+                toml_path(&dir.join("model")),
+                toml_path(&dir.join(format!("{name}-out"))),
+                toml_path(&script),
+                toml_path(&xml),
+                toml_path(&reference)
+            ),
+        )
+        .unwrap();
+        config
+    };
+    let run = evaluate(&write_config("ok", "python3"));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("ok-out/results.json")).unwrap())
+            .unwrap();
+    let checkpoints = results["scenes"][0]["eval"]["checkpoints"]
+        .as_array()
+        .unwrap();
+    assert_eq!(checkpoints.len(), 2);
+    for c in checkpoints {
+        let ours = finite(&c["ours_relmse"], "ours");
+        let total = finite(&c["total_seconds"], "ours' total");
+        for peer in ["sppm_oidn", "pt_oidn"] {
+            let p = &c[peer];
+            let what = |f: &str| format!("{peer}.{f} at {} passes", c["passes"]);
+            let relmse = finite(&p["relmse"], &what("relmse"));
+            let render = finite(&p["render_seconds"], &what("render_seconds"));
+            let budget = finite(&p["render_budget_seconds"], &what("render_budget_seconds"));
+            let denoise = finite(&p["denoise_seconds"], &what("denoise_seconds"));
+            // At least ours' time: the render reaches its budget, which is ours' total less
+            // the denoiser's time (so never more than ours' total).
+            assert!(render >= budget, "{}: {render} < {budget}", what("render"));
+            assert!(budget <= total && denoise > 0.0, "{}", what("budget"));
+            assert!(p["samples"].as_u64().unwrap() >= 1, "{}", what("samples"));
+            let ratio = finite(&p["ratio"], &what("ratio"));
+            assert!(
+                (ratio - ours / relmse).abs() <= 1e-9 * ratio.abs(),
+                "{}",
+                what("ratio")
+            );
+        }
+    }
+    let peers = results["summary"]["peers"].as_array().unwrap();
+    assert_eq!(peers.len(), 2, "{peers:?}");
+    assert_eq!(peers[0]["peer"], "sppm-oidn");
+    assert_eq!(peers[1]["scenes"], 1);
+    let html = std::fs::read_to_string(dir.join("ok-out/index.html")).unwrap();
+    assert!(
+        html.contains("Peers at equal time") && html.contains("PT + OIDN ("),
+        "the page shows the peers"
+    );
+    // The comparison row: 5 panels, then each peer's image and error map (9 panels).
+    let row = image::open(dir.join("ok-out/box_compare.png")).unwrap();
+    let five = image::open(dir.join("ok-out/box_inputs.png")).unwrap();
+    assert!(
+        row.width() > five.width() * 9 / 5 - 16,
+        "{} vs {}",
+        row.width(),
+        five.width()
+    );
+    // The Markdown summary over it has the peers' columns and lines.
+    let combine = Command::new(env!("CARGO_BIN_EXE_evaluate"))
+        .arg("--combine")
+        .arg(dir.join("ok-out"))
+        .output()
+        .unwrap();
+    let table = String::from_utf8_lossy(&combine.stdout);
+    assert!(
+        combine.status.success(),
+        "{}",
+        String::from_utf8_lossy(&combine.stderr)
+    );
+    assert!(
+        table.contains("ours / SPPM + OIDN |")
+            && table.contains("Against PT + OIDN: ours better on"),
+        "{table}"
+    );
+    // Without a working denoiser: one clear error before any scene is rendered.
+    let broken = evaluate(&write_config("broken", "/nonexistent/python3"));
+    let stderr = String::from_utf8_lossy(&broken.stderr);
+    assert_eq!(broken.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("/nonexistent/python3") && stderr.contains("oidn_denoise.py"),
+        "{stderr}"
+    );
+    assert!(!dir.join("broken-out/results.json").exists());
+}

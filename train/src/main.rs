@@ -38,6 +38,26 @@ struct Cli {
     /// files do not depend on it.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=1024))]
     threads: u16,
+    /// Wall-time budget of this invocation's training, in seconds: no epoch starts that the
+    /// previous epoch's duration says would end past it (the first always runs). The checkpoint
+    /// and the weights are then written as after a finished run; `--resume` continues.
+    #[arg(long, value_name = "SECONDS", conflicts_with_all = ["evaluate", "plot"],
+          value_parser = positive_seconds)]
+    time: Option<f64>,
+}
+
+/// A `--time` budget: a finite number of seconds above zero.
+fn positive_seconds(text: &str) -> Result<f64, String> {
+    let value: f64 = text
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number of seconds"))?;
+    if value.is_finite() && value > 0.0 {
+        Ok(value)
+    } else {
+        Err(format!(
+            "`{text}`: the budget must be a finite number of seconds above 0"
+        ))
+    }
 }
 
 fn main() -> ExitCode {
@@ -466,8 +486,23 @@ fn run(cli: &Cli) -> Result<()> {
     let style =
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} patches, {per_sec}, ETA {eta}")?
             .progress_chars("=> ");
+    let started = std::time::Instant::now();
+    let mut last_epoch_seconds = 0.0_f64;
+    let mut epochs_this_run = 0usize;
     while trainer.epochs_done < cfg.epochs {
         let epoch = trainer.epochs_done + 1;
+        if let Some(budget) = cli.time {
+            let elapsed = started.elapsed().as_secs_f64();
+            if epochs_this_run > 0 && elapsed + last_epoch_seconds > budget {
+                eprintln!(
+                    "--time {budget} s: stopping after epoch {} of {} ({elapsed:.1} s spent, an \
+                     epoch takes {last_epoch_seconds:.1} s); continue with --resume",
+                    trainer.epochs_done, cfg.epochs
+                );
+                break;
+            }
+        }
+        let epoch_start = std::time::Instant::now();
         let bar = ProgressBar::new(train.patches_per_epoch() as u64).with_style(style.clone());
         bar.set_message(format!("epoch {epoch}/{}", cfg.epochs));
         let mut on_batch = |p: train::training::BatchProgress| {
@@ -496,6 +531,8 @@ fn run(cli: &Cli) -> Result<()> {
             .save_checkpoint(&checkpoint)
             .map_err(anyhow::Error::msg)?;
         rewrite_metrics(&trainer.history)?;
+        last_epoch_seconds = epoch_start.elapsed().as_secs_f64();
+        epochs_this_run += 1;
     }
     trainer
         .save_final(&cfg.output)

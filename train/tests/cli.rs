@@ -550,3 +550,54 @@ fn references_key_replaces_the_manifest_references() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_time_budget_stops_between_epochs_and_resume_finishes_the_same_run() {
+    let (dir, data) = dir_with_data("time");
+    write_dataset(&data);
+    let budgeted = tiny_config(&dir, "budgeted", &data, "");
+    let whole = tiny_config(&dir, "whole", &data, "");
+    for config in [&budgeted, &whole] {
+        let text = std::fs::read_to_string(config).unwrap();
+        std::fs::write(config, text.replace("epochs = 1\n", "epochs = 3\n")).unwrap();
+    }
+    // A budget far below one epoch: the first epoch still runs, no second one starts.
+    let first = train(&budgeted, &["--time", "1e-6"]);
+    let stderr = String::from_utf8_lossy(&first.stderr);
+    assert!(first.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("stopping after epoch 1 of 3") && stderr.contains("--resume"),
+        "{stderr}"
+    );
+    let out = dir.join("budgeted-out");
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 2, "one epoch expected: {csv}");
+    assert!(out.join("model.bpk").is_file() && out.join("checkpoint/state.json").is_file());
+    // A generous budget: the resumed run finishes all epochs, bit-identical to one run.
+    let resumed = train(&budgeted, &["--resume", "--time", "3600"]);
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let once = train(&whole, &[]);
+    assert!(
+        once.status.success(),
+        "{}",
+        String::from_utf8_lossy(&once.stderr)
+    );
+    let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 4, "{csv}");
+    assert_eq!(
+        std::fs::read(out.join("model.bpk")).unwrap(),
+        std::fs::read(dir.join("whole-out/model.bpk")).unwrap(),
+        "a run stopped by --time and resumed differs from an uninterrupted one"
+    );
+    // Budgets that are not a positive number of seconds are refused before anything runs.
+    for bad in ["0", "-5", "soon", "inf"] {
+        let refused = train(&whole, &["--time", bad]);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "--time {bad}: {stderr}");
+        assert!(stderr.contains("--time"), "--time {bad}: {stderr}");
+    }
+}

@@ -25,9 +25,12 @@ struct Cli {
     /// Network preset: paper, medium, small or tiny.
     #[arg(long, default_value = "paper")]
     preset: String,
-    /// Image side in pixels (square synthetic bundle).
-    #[arg(long, default_value_t = 512)]
-    size: usize,
+    /// Image width in pixels (and height, unless `--height` is given).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    size: u32,
+    /// Image height in pixels, e.g. `--size 1280 --height 720`; absent: square.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    height: Option<u32>,
     /// Tile side (0 = whole image); `infer`'s default.
     #[arg(long, default_value_t = 512)]
     tile: usize,
@@ -90,8 +93,8 @@ fn run(cli: &Cli) -> Result<()> {
         config,
         network,
     };
-    let n = cli.size;
-    let (bundle, _) = synthetic_bundle(n, n, 0.3, 1);
+    let (n, h) = (cli.size as usize, cli.height.unwrap_or(cli.size) as usize);
+    let (bundle, _) = synthetic_bundle(n, h, 0.3, 1);
     let packed = pack(&bundle)?;
     drop(bundle);
     let rss_before = peak_rss_mib();
@@ -121,7 +124,8 @@ fn run(cli: &Cli) -> Result<()> {
     }
     let ours = timed[0].1;
 
-    let peer = if cli.peer == "none" || preset != Preset::Paper {
+    // The peer reconstructs square images only.
+    let peer = if cli.peer == "none" || preset != Preset::Paper || n != h {
         Value::Null
     } else {
         eprintln!("running the PyTorch peer {} on {n}x{n} ...", cli.peer);
@@ -149,7 +153,7 @@ fn run(cli: &Cli) -> Result<()> {
     };
 
     println!(
-        "{:?} preset, {n}x{n}, tile {} (+{} px halo), backend {:?}",
+        "{:?} preset, {n}x{h}, tile {} (+{} px halo), backend {:?}",
         preset,
         cli.tile,
         model.config.receptive_radius(),
@@ -173,13 +177,15 @@ fn run(cli: &Cli) -> Result<()> {
         println!("  ours ({:?}) / pytorch: {:.2}", timed[0].0, ours / p);
     } else if !peer.is_null() {
         println!("  peer failed: {}", peer["error"]);
+    } else if cli.peer != "none" && n != h {
+        println!("  (no PyTorch peer: it reconstructs square images only)");
     } else if cli.peer != "none" {
         // Said, not silently left out: the peer implements the paper preset only.
         println!("  (no PyTorch peer: it implements the paper preset only; this is {preset:?})");
     }
     if let Some(path) = &cli.output {
         let all = json!({
-            "preset": cli.preset, "size": n, "tile": cli.tile, "backend": format!("{:?}", cli.backend),
+            "preset": cli.preset, "width": n, "height": h, "tile": cli.tile, "backend": format!("{:?}", cli.backend),
             "infer_s": ours,
             "engines": timed.iter().map(|(e, median, all, rss)| json!({
                 "engine": format!("{e:?}"), "infer_s": median, "all_s": all, "peak_rss_mib": rss,
