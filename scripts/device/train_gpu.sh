@@ -8,7 +8,7 @@
 #   scripts/device/train_gpu.sh pack [options]   # here, with a network: builds and packs .gpu/
 #   scripts/device/train_gpu.sh run  [options]   # there, offline: times, trains, reports
 #
-# `pack` builds release binaries with the `wgpu` feature (stripped, gzipped), downloads the
+# `pack` builds release binaries with the `wgpu` feature (stripped, one xz archive), downloads the
 # Vulkan loader (Debian's libvulkan1; the node's NVIDIA driver brings the Vulkan driver itself),
 # and copies a dataset's scenes and converged references without its input bundles: the node
 # renders the inputs itself on its CPU cores (deterministic, so the same bundles as here) in
@@ -85,8 +85,12 @@ pack() {
     for b in $BINS; do
         [ -x "$target/release/$b" ] || die "pack: $target/release/$b missing (build without --no-build)"
         strip -o "$PACK/bin/$b" "$target/release/$b"
-        gzip -9 "$PACK/bin/$b"
     done
+    # One archive with a dictionary larger than any binary: the four wgpu binaries share most of
+    # their code, so xz stores it about once (≈ 20 MiB for 220 MiB; a few minutes here).
+    echo "compressing the binaries (xz -9e, a few minutes) ..."
+    tar cf - -C "$PACK/bin" $BINS | xz -T2 -9e --lzma2=preset=9e,dict=256MiB >"$PACK/bin.tar.xz"
+    rm -rf "$PACK/bin"
     # The Vulkan loader for an amd64 node, whatever this machine's architecture.
     local lists
     lists=$(mktemp -d)
@@ -144,7 +148,7 @@ run() {
             *) die "run: unknown option $1 (see --help)" ;;
         esac
     done
-    [ -d "$PACK/bin" ] || die "run: $PACK/bin missing: run \`$0 pack\` first and carry $PACK"
+    [ -f "$PACK/bin.tar.xz" ] || die "run: $PACK/bin.tar.xz missing: run \`$0 pack\` first and carry $PACK"
     local iw=${infer_size%x*} ih=${infer_size#*x}
     START=$(date +%s)
     mkdir -p "$out"
@@ -156,12 +160,9 @@ run() {
 
     # 1. Binaries, Vulkan loader, driver manifest, adapter.
     mkdir -p "$work/bin"
-    for b in $BINS; do
-        gzip -dc "$PACK/bin/$b.gz" >"$work/bin/$b"
-        chmod +x "$work/bin/$b"
-    done
+    xz -dc "$PACK/bin.tar.xz" | tar xf - -C "$work/bin"
     local bin="$work/bin"
-    if ! ldconfig -p | grep -q 'libvulkan\.so\.1'; then
+    if ! ldconfig -p | grep 'libvulkan\.so\.1' >/dev/null; then
         echo "no Vulkan loader installed: unpacking $(ls "$PACK"/debs)"
         for f in "$PACK"/debs/*.deb; do dpkg -x "$f" /; done
         ldconfig
