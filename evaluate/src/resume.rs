@@ -45,7 +45,7 @@ fn hash_file(h: &mut Sha256, path: &Path) -> Result<()> {
 /// and the reconstruction (photons, passes, seed, threads, tile, backend, engine, depth) and
 /// every file of the model directories (main and ablation). Computed once per evaluation.
 pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
-    let settings = serde_json::json!({
+    let mut settings = serde_json::json!({
         "photons_per_pass": config.photons_per_pass,
         "passes": config.pass_counts(),
         "seed": config.seed,
@@ -55,6 +55,11 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
         "engine": config.engine,
         "max_depth": config.max_depth,
     });
+    // Only CPPM is named: the fingerprints of SPPM evaluations stay what they were before
+    // the option existed.
+    if config.schedule != renderer::integrators::sppm::RadiusSchedule::Sppm {
+        settings["schedule"] = serde_json::json!(config.schedule.name());
+    }
     let mut h = Sha256::new();
     h.update(settings.to_string().as_bytes());
     let models =

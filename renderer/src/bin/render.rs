@@ -151,14 +151,7 @@ fn main() -> ExitCode {
 }
 
 /// Options that only the SPPM integrators read, by their clap ids.
-const SPPM_ONLY: [&str; 6] = [
-    "photons",
-    "passes",
-    "time",
-    "knn",
-    "max_radius",
-    "schedule",
-];
+const SPPM_ONLY: [&str; 6] = ["photons", "passes", "time", "knn", "max_radius", "schedule"];
 /// Options that only the direct integrator reads.
 const DIRECT_ONLY: [&str; 2] = ["emitter_samples", "bsdf_samples"];
 

@@ -270,8 +270,16 @@ mod tests {
         let at = |d: Vec3| cell_index(d, d.length_squared(), &frame, 1.0);
         assert_eq!(at(Vec3::new(0.5, 0.1, 0.0)), 0);
         assert_eq!(at(Vec3::new(-0.8, -0.1, 0.0)), 9);
-        assert_eq!(at(Vec3::new(-1.0, -0.0, 0.0)), 9, "φ = −π wraps to π: sector 3");
-        assert_eq!(at(Vec3::new(0.3, -1e-9, 0.0)), 5, "just below +s: last sector");
+        assert_eq!(
+            at(Vec3::new(-1.0, -0.0, 0.0)),
+            9,
+            "φ = −π wraps to π: sector 3"
+        );
+        assert_eq!(
+            at(Vec3::new(0.3, -1e-9, 0.0)),
+            5,
+            "just below +s: last sector"
+        );
         // The normal component moves a photon between rings (3-D distance) but not sectors.
         assert_eq!(at(Vec3::new(0.1, 0.3, 0.0)), 1);
         assert_eq!(at(Vec3::new(0.1, 0.3, 0.7)), 7);
@@ -358,7 +366,9 @@ mod tests {
         assert!(
             edge.iter().all(|l| l.r2 < 0.5 && l.stage >= 3),
             "step edge: every pixel must shrink repeatedly: {:?}",
-            edge.iter().map(|l| (l.r2, l.stage)).max_by(|a, b| a.0.total_cmp(&b.0))
+            edge.iter()
+                .map(|l| (l.r2, l.stage))
+                .max_by(|a, b| a.0.total_cmp(&b.0))
         );
         let mean_edge: f64 = edge.iter().map(|l| l.r2 as f64).sum::<f64>() / pixels as f64;
         assert!(

@@ -50,8 +50,8 @@ use crate::state_file::StateFile;
 use accumulate::{GBufferSum, Welford};
 use cppm::CppmLevel;
 use photon_map::PhotonGrid;
-use radius::{nested_radii, shrink_factor, LEVELS};
 pub use radius::RadiusSchedule;
+use radius::{nested_radii, shrink_factor, LEVELS};
 use run_state::StateStore;
 use visible_point::{trace_eye_path, EyePath};
 
@@ -334,15 +334,14 @@ fn render_pixel(
     let radii = state.radii(ctx.settings.mode);
     let n = ctx.settings.photons_per_pass;
     // Gathers the levels `range` at `vp` into `out`: nested SPPM radii, or CPPM's own.
-    let mut gather_levels = |vp: &visible_point::VisiblePoint,
-                             range: std::ops::Range<usize>,
-                             out: &mut [Rgb]| {
-        if cppm.is_empty() {
-            gather::gather(scene, ctx.grid, vp, &radii[range], n, out);
-        } else {
-            gather::gather_counting(scene, ctx.grid, vp, &mut cppm[range], n, out);
-        }
-    };
+    let mut gather_levels =
+        |vp: &visible_point::VisiblePoint, range: std::ops::Range<usize>, out: &mut [Rgb]| {
+            if cppm.is_empty() {
+                gather::gather(scene, ctx.grid, vp, &radii[range], n, out);
+            } else {
+                gather::gather_counting(scene, ctx.grid, vp, &mut cppm[range], n, out);
+            }
+        };
     let mut estimates = [Rgb::ZERO; LEVELS];
     let mut found = 0;
     match ctx.settings.mode {

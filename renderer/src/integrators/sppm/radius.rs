@@ -13,9 +13,7 @@ pub const LEVEL_RATIO: f32 = std::f32::consts::SQRT_2;
 
 /// How the kernel radii evolve over passes. Either way each level starts from its nested
 /// initial radius and the pixel value is the mean of the per-pass kernel estimates.
-#[derive(
-    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum RadiusSchedule {
     /// SPPM: every radius shrinks after every pass by r² ← r²·(i+α)/(i+1), all levels

@@ -626,7 +626,14 @@ fn gather_matches_brute_force_sum() {
         gather(&scene, &grid, &vp, &radii[1..], n_photons, &mut got);
         let mut levels = cppm_radii.map(|r| cppm::CppmLevel::new(r * r));
         let mut got_counting = [Rgb::ZERO; 4];
-        gather::gather_counting(&scene, &grid, &vp, &mut levels, n_photons, &mut got_counting);
+        gather::gather_counting(
+            &scene,
+            &grid,
+            &vp,
+            &mut levels,
+            n_photons,
+            &mut got_counting,
+        );
         for (l, r) in radii[1..].iter().chain(&cppm_radii).enumerate() {
             let (got, level) = if l < 4 {
                 (got[l], None)
@@ -663,7 +670,8 @@ fn gather_matches_brute_force_sum() {
             );
             if let Some(level) = level {
                 assert_eq!(
-                    level.cells, cells,
+                    level.cells,
+                    cells,
                     "material {material} wo {wo_world} CPPM level {}: cell counts",
                     l - 4
                 );
