@@ -276,7 +276,7 @@ fn an_option_the_chosen_integrator_would_ignore_is_refused() {
     let out = dir.join("out");
     let out = out.to_str().unwrap();
     // (integrator, the option, what the error must name)
-    let cases: [(&str, &[&str], &str); 11] = [
+    let cases: [(&str, &[&str], &str); 12] = [
         ("path", &["--time", "5"], "--time"),
         ("path", &["--emitter-samples", "2"], "--emitter-samples"),
         ("direct", &["--max-depth", "3"], "--max-depth"),
