@@ -37,6 +37,13 @@ pub const FORMAT_VERSION: &str = "sppm-ml-bundle/1";
 /// layer holds the one estimate), or a synthetic test bundle (`model::synthetic`).
 pub const INTEGRATORS: [&str; 3] = ["sppm-ml", "sppm", "synthetic"];
 
+/// What [`BundleMeta::schedule`] may say: SPPM's radius shrink after every pass, or CPPM's
+/// χ² test per level (docs/sppm.md).
+pub const SCHEDULES: [&str; 2] = ["sppm", "cppm"];
+
+/// The schedule of a bundle whose metadata names none (every bundle written before CPPM).
+pub const DEFAULT_SCHEDULE: &str = "sppm";
+
 /// Channel names of an RGB layer.
 const RGB: [&str; 3] = ["R", "G", "B"];
 /// Channel names of the normal layer.
@@ -196,10 +203,27 @@ pub struct BundleMeta {
     pub seconds: f64,
     /// Integrator name (`sppm-ml` or `sppm`).
     pub integrator: String,
+    /// Radius schedule ([`SCHEDULES`]). Not written for `sppm`, so SPPM bundles keep the
+    /// metadata they always had; a bundle without it is an SPPM one.
+    #[serde(
+        default = "default_schedule",
+        skip_serializing_if = "is_default_schedule"
+    )]
+    pub schedule: String,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
+}
+
+/// [`DEFAULT_SCHEDULE`] as a `String` (serde's default of [`BundleMeta::schedule`]).
+fn default_schedule() -> String {
+    DEFAULT_SCHEDULE.into()
+}
+
+/// Whether `schedule` is [`DEFAULT_SCHEDULE`] (then it is not written).
+fn is_default_schedule(schedule: &str) -> bool {
+    schedule == DEFAULT_SCHEDULE
 }
 
 /// The radiance each eye subpath gathered without photons — emission seen directly or through
@@ -469,6 +493,15 @@ fn check_meta(path: &Path, decoded: &Decoded, meta: &BundleMeta) -> Result<(), B
             ),
         ));
     }
+    if !SCHEDULES.contains(&meta.schedule.as_str()) {
+        return Err(bad(
+            META_ATTRIBUTE,
+            format!(
+                "schedule \"{}\" (expected one of {SCHEDULES:?})",
+                meta.schedule
+            ),
+        ));
+    }
     if meta.passes == 0 {
         return Err(bad(META_ATTRIBUTE, "passes is 0".into()));
     }
@@ -629,6 +662,7 @@ mod tests {
                 photons_per_pass: 100_000,
                 seconds: 12.5,
                 integrator: "sppm-ml".into(),
+                schedule: DEFAULT_SCHEDULE.into(),
                 width: width as u32,
                 height: height as u32,
             },
@@ -669,6 +703,37 @@ mod tests {
             .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
             .collect();
         assert!(leftovers.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The radius schedule: an SPPM bundle's metadata JSON has no `schedule` key (what SPPM
+    /// bundles always held, so old bundles read as SPPM), a CPPM bundle's says so and reads
+    /// back, and an unknown schedule is refused naming it.
+    #[test]
+    fn schedule_is_written_for_cppm_only_and_checked() {
+        let dir = temp_dir("schedule");
+        let sppm = sample_bundle(4, 3, false);
+        let path = dir.join("sppm.exr");
+        write_bundle(&path, &sppm).unwrap();
+        let json = Decoded::read(&path)
+            .unwrap()
+            .text_attribute(&path, META_ATTRIBUTE)
+            .unwrap();
+        assert!(!json.contains("schedule"), "{json}");
+        assert_eq!(read_bundle(&path).unwrap().meta.schedule, "sppm");
+        let mut cppm = sppm.clone();
+        cppm.meta.schedule = "cppm".into();
+        let path = dir.join("cppm.exr");
+        write_bundle(&path, &cppm).unwrap();
+        assert_eq!(read_bundle(&path).unwrap(), cppm);
+        let mut bytes = std::fs::read(&path).unwrap();
+        patch(&mut bytes, b"\"cppm\"", b"\"xppm\"");
+        std::fs::write(&path, &bytes).unwrap();
+        let err = read_bundle(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("cppm.exr") && err.contains("schedule \"xppm\""),
+            "{err}"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -44,6 +44,7 @@ fn write_sample(path: &std::path::Path, passes: u32) {
             photons_per_pass: 1000,
             seconds: 0.5,
             integrator: "sppm-ml".into(),
+            schedule: bundle::DEFAULT_SCHEDULE.into(),
             width: w as u32,
             height: h as u32,
         },

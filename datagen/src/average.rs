@@ -11,6 +11,7 @@ use crate::manifest::{to_json, Manifest, SceneEntry};
 use crate::plan::Split;
 use anyhow::{bail, Context, Result};
 use bundle::{read_rgb_exr_image, scene_reference_path, write_rgb_exr_image, Image};
+use renderer::integrators::sppm::RadiusSchedule;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Component, Path, PathBuf};
@@ -337,6 +338,8 @@ pub fn average_references(
                         seed,
                         scene.reference_photons,
                         manifest.config.render.max_depth,
+                        // References are SPPM's whatever the inputs' schedule.
+                        RadiusSchedule::Sppm,
                         options.threads,
                     ),
                     passes: vec![scene.reference_passes],

@@ -3,6 +3,7 @@
 //! unknown fields so typos are errors naming the field.
 
 use crate::plan::Split;
+use renderer::integrators::sppm::RadiusSchedule;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -43,6 +44,16 @@ pub struct RenderConfig {
     pub reference_photons_per_pass: u64,
     /// Maximum path depth for eye and photon paths.
     pub max_depth: u32,
+    /// Radius schedule of the input runs (`sppm` or `cppm`; absent: `sppm`). References are
+    /// rendered with SPPM's whatever this says. Not serialised when `sppm`, so the
+    /// fingerprint of a config without it is what it was before the option existed.
+    #[serde(default, skip_serializing_if = "is_sppm")]
+    pub schedule: RadiusSchedule,
+}
+
+/// Whether `schedule` is the default, SPPM's.
+fn is_sppm(schedule: &RadiusSchedule) -> bool {
+    *schedule == RadiusSchedule::Sppm
 }
 
 /// Fractions of scenes per split; they must sum to 1.

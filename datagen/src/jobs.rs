@@ -16,7 +16,7 @@ use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, write_bundle, write_rgb_exr_image, Bundle, Image};
 use fileio::atomic::remove_stale_temps;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
-use renderer::integrators::sppm::{SppmMode, SppmSettings};
+use renderer::integrators::sppm::{RadiusSchedule, SppmMode, SppmSettings};
 use renderer::state_file::scene_fingerprint;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -38,18 +38,20 @@ pub struct RunSpec {
     pub size: (u32, u32),
 }
 
-/// The multi-level SPPM settings of a dataset run.
+/// The multi-level SPPM settings of a dataset run with radius schedule `schedule`.
 pub fn run_settings(
     scene_id: &str,
     seed: u64,
     photons_per_pass: u64,
     max_depth: u32,
+    schedule: RadiusSchedule,
     threads: usize,
 ) -> SppmSettings {
     SppmSettings {
         photons_per_pass,
         seed,
         mode: SppmMode::MultiLevel,
+        schedule,
         max_depth,
         threads,
         scene_name: scene_id.to_owned(),
@@ -551,6 +553,8 @@ fn run_job(
                     seed,
                     r.reference_photons_per_pass,
                     r.max_depth,
+                    // References are SPPM's whatever the inputs' schedule.
+                    RadiusSchedule::Sppm,
                     options.threads,
                 ),
                 passes: vec![r.reference_passes],
@@ -595,6 +599,7 @@ fn run_job(
                     seed,
                     r.photons_per_pass,
                     r.max_depth,
+                    r.schedule,
                     options.threads,
                 ),
                 passes: r.passes.clone(),

@@ -156,6 +156,41 @@ fn config_errors_name_file_and_field() {
     }
 }
 
+/// `[render] schedule`: absent is SPPM's and leaves the config's fingerprint as it was (a
+/// dataset made before the option still belongs to its config); `"cppm"` parses and changes
+/// the fingerprint; any other value is refused naming it.
+#[test]
+fn render_schedule_defaults_to_sppm_and_takes_cppm() {
+    use renderer::integrators::sppm::RadiusSchedule;
+    let text = std::fs::read_to_string(preset_path("tiny")).unwrap();
+    let tiny = Config::parse(&text, "tiny.toml").unwrap();
+    assert_eq!(tiny.render.schedule, RadiusSchedule::Sppm);
+    let json = serde_json::to_string(&tiny).unwrap();
+    assert!(!json.contains("schedule"), "{json}");
+    let with = |value: &str| {
+        let edited = text.replacen(
+            "max_depth = 8",
+            &format!("max_depth = 8\nschedule = {value}"),
+            1,
+        );
+        assert_ne!(edited, text, "tiny.toml no longer has `max_depth = 8`");
+        Config::parse(&edited, "s.toml")
+    };
+    let explicit_sppm = with("\"sppm\"").unwrap();
+    assert_eq!(
+        datagen::manifest::config_fingerprint(&explicit_sppm),
+        datagen::manifest::config_fingerprint(&tiny)
+    );
+    let cppm = with("\"cppm\"").unwrap();
+    assert_eq!(cppm.render.schedule, RadiusSchedule::Cppm);
+    assert_ne!(
+        datagen::manifest::config_fingerprint(&cppm),
+        datagen::manifest::config_fingerprint(&tiny)
+    );
+    let e = with("\"ppm\"").unwrap_err().to_string();
+    assert!(e.contains("s.toml") && e.contains("ppm"), "{e}");
+}
+
 #[test]
 fn shards_partition_the_jobs() {
     let plan = Plan::new(&preset("small"));

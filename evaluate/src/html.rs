@@ -96,6 +96,13 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
                 .map(infer::Engine::default_for))
             .map_or("?".to_string(), |e| format!("{e:?}").to_lowercase())
     );
+    if c.schedule == renderer::integrators::sppm::RadiusSchedule::Cppm {
+        let _ = writeln!(
+            h,
+            "<p class=\"note\">Radius schedule: CPPM in both runs. \"Standard SPPM\" below is \
+             single-level CPPM; ours is multi-level CPPM + reconstruction (docs/sppm.md).</p>"
+        );
+    }
     let _ = writeln!(
         h,
         "<h2>Summary at {} passes</h2>\n<p>Ours better than standard SPPM at equal time on \

@@ -197,6 +197,7 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
             seed: config.seed,
             threads: config.threads,
             max_depth: config.max_depth.unwrap_or(DEFAULT_MAX_DEPTH),
+            schedule: config.schedule,
             scene_name: s.name.clone(),
             ..SppmSettings::default()
         };

@@ -59,6 +59,11 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
     if !config.peers.is_empty() {
         settings["peers"] = serde_json::json!(config.peers);
     }
+    // Only CPPM is named: the fingerprints of SPPM evaluations stay what they were before
+    // the option existed.
+    if config.schedule != renderer::integrators::sppm::RadiusSchedule::Sppm {
+        settings["schedule"] = serde_json::json!(config.schedule.name());
+    }
     let mut h = Sha256::new();
     h.update(settings.to_string().as_bytes());
     let models =

@@ -20,6 +20,7 @@ use infer::{reconstruct_tiled, Engine, ErrorReport};
 use model::backend::Backend;
 use model::features::{interleaved, pack, planar_reference};
 use model::model_dir::TrainedModel;
+use renderer::integrators::sppm::RadiusSchedule;
 
 /// Reconstruct a multi-level SPPM render with a trained combiner network.
 ///
@@ -86,6 +87,17 @@ struct Cli {
     /// `--scene`: photons traced per pass.
     #[arg(long, default_value_t = 100_000, help_heading = "Rendering (--scene)")]
     photons: u64,
+    /// `--scene`: how the kernel radii evolve over passes (as `render --schedule`): `sppm`
+    /// shrinks them after every pass, `cppm` per level by a chi-squared test of the photons
+    /// in the kernel (docs/sppm.md, "CPPM radius schedule"). The bundled models were trained
+    /// on `sppm` bundles.
+    #[arg(
+        long,
+        value_enum,
+        default_value_t = RadiusSchedule::Sppm,
+        help_heading = "Rendering (--scene)"
+    )]
+    schedule: RadiusSchedule,
     /// `--scene`: random seed of the render.
     #[arg(long, default_value_t = 1, help_heading = "Rendering (--scene)")]
     seed: u64,
@@ -134,10 +146,11 @@ fn backend_parser() -> impl TypedValueParser<Value = Backend> {
 const DEFAULT_MODEL: &str = "models/default";
 
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
-const RENDERING_ONLY: [&str; 9] = [
+const RENDERING_ONLY: [&str; 10] = [
     "passes",
     "time",
     "photons",
+    "schedule",
     "seed",
     "max_depth",
     "lenient",
@@ -491,6 +504,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
         photons_per_pass: cli.photons,
         seed: cli.seed,
         mode: SppmMode::MultiLevel,
+        schedule: cli.schedule,
         threads: cli.threads,
         scene_name: scene_path.display().to_string(),
         max_depth: cli

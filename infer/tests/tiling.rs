@@ -429,6 +429,7 @@ fn cli_refuses_rendering_options_without_a_scene() {
         (&["--passes", "256"][..], "--passes"),
         (&["--time", "60"][..], "--time"),
         (&["--photons", "1000"][..], "--photons"),
+        (&["--schedule", "cppm"][..], "--schedule"),
         (&["--seed", "3"][..], "--seed"),
         (&["--max-depth", "4"][..], "--max-depth"),
         (&["--lenient"][..], "--lenient"),
@@ -502,6 +503,14 @@ fn cli_renders_a_scene_by_passes_or_by_time_then_reconstructs() {
     let out = infer("both", &["--passes", "2", "--time", "600"]);
     assert!(out.status.success(), "{out:?}");
     assert_eq!(passes_of("both"), 2);
+    // `--schedule cppm` renders multi-level CPPM, recorded in the bundle.
+    let out = infer("cppm", &["--passes", "2", "--schedule", "cppm"]);
+    assert!(out.status.success(), "{out:?}");
+    let cppm = bundle::read_bundle(&dir.join("cppm_bundle.exr")).unwrap();
+    assert_eq!(
+        (cppm.meta.integrator.as_str(), cppm.meta.schedule.as_str()),
+        ("sppm-ml", "cppm")
+    );
     // Bad limits are named, and nothing is written.
     for (args, needle) in [
         (

@@ -104,6 +104,7 @@ pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, I
             photons_per_pass: 0,
             seconds: 0.0,
             integrator: "synthetic".into(),
+            schedule: bundle::DEFAULT_SCHEDULE.into(),
             width: w as u32,
             height: h as u32,
         },

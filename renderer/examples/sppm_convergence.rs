@@ -18,7 +18,9 @@ use anyhow::{Context, Result};
 use bundle::{read_rgb_exr_image, write_bundle, write_rgb_exr_image, Image, LEVEL_NAMES};
 use clap::Parser;
 use renderer::integrators::path::PathTracer;
-use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
+use renderer::integrators::sppm::{
+    render_sppm, RadiusSchedule, SppmMode, SppmSettings, StopCondition,
+};
 use renderer::integrators::RayIntegrator;
 use renderer::threads::with_threads;
 
@@ -54,6 +56,9 @@ struct Args {
     /// Single-level mode instead of multi-level.
     #[arg(long)]
     single: bool,
+    /// Radius schedule: `sppm` shrinks every pass, `cppm` by a chi-squared test per level.
+    #[arg(long, value_enum, default_value_t = RadiusSchedule::Sppm)]
+    schedule: RadiusSchedule,
     /// Output prefix.
     #[arg(long)]
     out: PathBuf,
@@ -178,6 +183,7 @@ fn main() -> Result<()> {
         },
         threads: args.threads,
         max_depth: args.max_depth,
+        schedule: args.schedule,
         scene_name: args.scene.display().to_string(),
         ..SppmSettings::default()
     };

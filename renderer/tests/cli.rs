@@ -107,7 +107,32 @@ fn render_writes_images_and_bundles_that_read_back() {
         // (the fixture's default `res`)
         assert_eq!((b.meta.width, b.meta.height), (16, 16));
         assert_eq!(b.find_non_finite(), None);
+        assert_eq!(b.meta.schedule, "sppm");
     }
+    // `--schedule cppm` is recorded in the bundle.
+    let prefix = dir.join("cppm");
+    let out = run(
+        env!("CARGO_BIN_EXE_render"),
+        &[
+            scene,
+            "--integrator",
+            "sppm",
+            "--schedule",
+            "cppm",
+            "--photons",
+            "2000",
+            "--passes",
+            "2",
+            "--out",
+            prefix.to_str().unwrap(),
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let b = bundle::read_bundle(&dir.join("cppm_p0002.exr")).unwrap();
+    assert_eq!(
+        (b.meta.integrator.as_str(), b.meta.schedule.as_str()),
+        ("sppm", "cppm")
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -251,7 +276,7 @@ fn an_option_the_chosen_integrator_would_ignore_is_refused() {
     let out = dir.join("out");
     let out = out.to_str().unwrap();
     // (integrator, the option, what the error must name)
-    let cases: [(&str, &[&str], &str); 11] = [
+    let cases: [(&str, &[&str], &str); 12] = [
         ("path", &["--time", "5"], "--time"),
         ("path", &["--emitter-samples", "2"], "--emitter-samples"),
         ("direct", &["--max-depth", "3"], "--max-depth"),
@@ -265,6 +290,7 @@ fn an_option_the_chosen_integrator_would_ignore_is_refused() {
         ("path", &["--photons", "1000"], "--photons"),
         ("path", &["--knn", "10"], "--knn"),
         ("path", &["--max-radius", "0.1"], "--max-radius"),
+        ("path", &["--schedule", "cppm"], "--schedule"),
         ("sppm", &["--passes", "1", "--spp", "4"], "--spp"),
         (
             "sppm-ml",

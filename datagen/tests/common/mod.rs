@@ -79,6 +79,7 @@ pub fn stand_in_bundle(
             photons_per_pass: spec.sppm.photons_per_pass,
             seconds: 1.5,
             integrator: "sppm-ml".into(),
+            schedule: bundle::DEFAULT_SCHEDULE.into(),
             width: width as u32,
             height: height as u32,
         },

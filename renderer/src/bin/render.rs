@@ -12,6 +12,7 @@ use renderer::description::{AovSpec, IntegratorDesc};
 use renderer::film::Film;
 use renderer::image_io::{write_channels_exr, write_png_srgb, write_rgb_exr};
 use renderer::integrators::path::PathTracer;
+use renderer::integrators::sppm::RadiusSchedule;
 use renderer::integrators::RayIntegrator;
 use renderer::parity::aov::{environment_seen, render_aovs, DepthIntegrator};
 use renderer::parity::direct::DirectIntegrator;
@@ -130,6 +131,12 @@ struct Cli {
     /// SPPM: cap on the initial radius in world units (default: 1/50 of the scene's diagonal).
     #[arg(long, help_heading = "SPPM")]
     max_radius: Option<f32>,
+    /// SPPM: how the kernel radii evolve over passes: `sppm` shrinks them after every pass,
+    /// `cppm` keeps each level's radius while a chi-squared test finds the photons in it
+    /// uniform and shrinks it otherwise (docs/sppm.md, "CPPM radius schedule"). Recorded in
+    /// the bundles.
+    #[arg(long, value_enum, default_value_t = RadiusSchedule::Sppm, help_heading = "SPPM")]
+    schedule: RadiusSchedule,
 }
 
 fn main() -> ExitCode {
@@ -144,7 +151,7 @@ fn main() -> ExitCode {
 }
 
 /// Options that only the SPPM integrators read, by their clap ids.
-const SPPM_ONLY: [&str; 5] = ["photons", "passes", "time", "knn", "max_radius"];
+const SPPM_ONLY: [&str; 6] = ["photons", "passes", "time", "knn", "max_radius", "schedule"];
 /// Options that only the direct integrator reads.
 const DIRECT_ONLY: [&str; 2] = ["emitter_samples", "bsdf_samples"];
 
@@ -699,6 +706,7 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
         max_radius: cli.max_radius,
         knn: cli.knn,
         mode,
+        schedule: cli.schedule,
         // SPPM bounds eye (delta/glossy) and photon bounces; the file's depth is the path
         // tracer's and is not used.
         max_depth: cli
@@ -772,9 +780,13 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
     }
     let secs = summary.seconds.max(1e-9);
     eprintln!(
-        "{}: {}x{}, {} passes x {} photons in {secs:.2} s: {:.3} passes/s, {:.3} M photons/s \
+        "{}{}: {}x{}, {} passes x {} photons in {secs:.2} s: {:.3} passes/s, {:.3} M photons/s \
          (photon pass {:.2} s), {:.3} M visible points/s (eye paths + gathering {:.2} s)",
         mode.name(),
+        match settings.schedule {
+            RadiusSchedule::Sppm => "",
+            RadiusSchedule::Cppm => " (cppm radii)",
+        },
         res.x,
         res.y,
         summary.passes,

@@ -1,7 +1,8 @@
 //! Photon gathering at a visible point (docs/method.md §3.5): one range query at the largest
 //! radius of the levels the point feeds, each photon added to every level whose radius covers
 //! it, with photons from the other side of the surface or from differently oriented surfaces
-//! rejected.
+//! rejected. Under the CPPM schedule the levels' radii are tested one by one (they need not
+//! be nested) and the contributing photons are counted into each level's cells.
 
 use crate::bsdf::{Bsdf, TransportMode};
 use crate::scene::Scene;
@@ -10,6 +11,7 @@ use crate::texture::TexPoint;
 use glam::Vec3;
 use std::f32::consts::{FRAC_1_PI, PI};
 
+use super::cppm::{cell_index, CppmLevel};
 use super::photon_map::{Photon, PhotonGrid};
 use super::visible_point::VisiblePoint;
 
@@ -78,14 +80,10 @@ pub fn gather(
     let Some(&r_max) = radii.last() else {
         return;
     };
-    let bsdf = &scene.bsdfs[vp.material as usize];
-    let allow_other_side = transmits(bsdf);
-    let viewer_side = vp.wo_world.dot(vp.ng) > 0.0;
     let r2: [f32; 8] = std::array::from_fn(|l| radii.get(l).map_or(0.0, |r| r * r));
     let levels = radii.len();
-    // Photons that pass the surface tests; they add `weight` to every level covering them.
     let mut sums = [Rgb::ZERO; 8];
-    let mut add = |d2: f32, weight: Rgb| {
+    let factor = for_each_accepted(scene, grid, vp, r_max, |_, d2, weight| {
         // Radii ascend: the covering levels are a suffix of the list.
         for (sum, r2) in sums.iter_mut().zip(&r2).take(levels).rev() {
             if d2 > *r2 {
@@ -93,7 +91,72 @@ pub fn gather(
             }
             *sum += weight;
         }
-    };
+    });
+    add_estimates(vp, factor, &sums, &r2, n_photons, out);
+}
+
+/// [`gather`] for levels whose radii follow CPPM (`levels[ℓ].r2`, in any order: the
+/// data-driven shrinks need not keep them nested), which also counts every photon that
+/// contributes into the covering levels' cells ([`CppmLevel::count`]). One query at the
+/// largest radius; each level tests its own.
+pub fn gather_counting(
+    scene: &Scene,
+    grid: &PhotonGrid,
+    vp: &VisiblePoint,
+    levels: &mut [CppmLevel],
+    n_photons: u64,
+    out: &mut [Rgb],
+) {
+    debug_assert_eq!(levels.len(), out.len());
+    let r2: [f32; 8] = std::array::from_fn(|l| levels.get(l).map_or(0.0, |level| level.r2));
+    let r2_max = r2.iter().fold(0.0f32, |m, &r2| m.max(r2));
+    if r2_max <= 0.0 {
+        return;
+    }
+    let mut sums = [Rgb::ZERO; 8];
+    let factor = for_each_accepted(scene, grid, vp, r2_max.sqrt(), |photon, d2, weight| {
+        let d = photon.position - vp.p;
+        for ((sum, level), r2) in sums.iter_mut().zip(levels.iter_mut()).zip(&r2) {
+            if d2 <= *r2 {
+                *sum += weight;
+                level.count(cell_index(d, d2, &vp.frame, *r2));
+            }
+        }
+    });
+    add_estimates(vp, factor, &sums, &r2, n_photons, out);
+}
+
+/// out[ℓ] += β·factor·sums[ℓ] / (n_photons·π·r2[ℓ]) for the levels with a radius.
+fn add_estimates(
+    vp: &VisiblePoint,
+    factor: Rgb,
+    sums: &[Rgb],
+    r2: &[f32],
+    n_photons: u64,
+    out: &mut [Rgb],
+) {
+    for ((o, sum), r2) in out.iter_mut().zip(sums).zip(r2) {
+        if *r2 > 0.0 {
+            *o += vp.beta * (factor * *sum) / (n_photons as f32 * PI * r2);
+        }
+    }
+}
+
+/// Calls `add(photon, d², weight)` for every photon within `r_max` of the visible point that
+/// contributes to its estimate — same surface, right side, non-zero BSDF value — in the grid's
+/// visiting order, and returns the factor the weights' sum is to be multiplied by: the
+/// Lambertian f when the weights are bare fluxes (f is one constant there), else one (the
+/// weights are f·Φ).
+fn for_each_accepted(
+    scene: &Scene,
+    grid: &PhotonGrid,
+    vp: &VisiblePoint,
+    r_max: f32,
+    mut add: impl FnMut(&Photon, f32, Rgb),
+) -> Rgb {
+    let bsdf = &scene.bsdfs[vp.material as usize];
+    let allow_other_side = transmits(bsdf);
+    let viewer_side = vp.wo_world.dot(vp.ng) > 0.0;
     let same_surface = |photon: &Photon| {
         photon.normal.dot(vp.ng) >= NORMAL_AGREEMENT_COS
             && (allow_other_side || (photon.wi.dot(vp.ng) > 0.0) == viewer_side)
@@ -101,13 +164,13 @@ pub fn gather(
     // The common case, a Lambertian surface: f is one constant on one hemisphere, so sum the
     // fluxes and multiply by f at the end (no BSDF evaluation per photon).
     // (A Lambertian model has no sharp part, so `broad_only` never applies to it.)
-    let factor = match lambertian(bsdf, vp.wo, vp.sp.tex) {
+    match lambertian(bsdf, vp.wo, vp.sp.tex) {
         Some((f, side)) => {
             if f != Rgb::ZERO {
                 let n = vp.frame.n;
                 grid.for_each_within(vp.p, r_max, |photon, d2| {
                     if same_surface(photon) && side * photon.wi.dot(n) > 0.0 {
-                        add(d2, photon.flux);
+                        add(photon, d2, photon.flux);
                     }
                 });
             }
@@ -125,15 +188,10 @@ pub fn gather(
                     bsdf.eval(vp.wo, wi, &vp.sp, TransportMode::Radiance)
                 };
                 if f != Rgb::ZERO {
-                    add(d2, f * photon.flux);
+                    add(photon, d2, f * photon.flux);
                 }
             });
             Rgb::ONE
-        }
-    };
-    for ((o, sum), r2) in out.iter_mut().zip(&sums).zip(&r2) {
-        if *r2 > 0.0 {
-            *o += vp.beta * (factor * *sum) / (n_photons as f32 * PI * r2);
         }
     }
 }

@@ -11,6 +11,11 @@
 //!    ([`gather`]); the per-pass estimates enter Welford accumulators ([`accumulate`]);
 //!    then all radii shrink by r² ← r²·(i+α)/(i+1) ([`radius`]).
 //!
+//! Under the CPPM schedule ([`RadiusSchedule::Cppm`]) step 2 differs in the radii only: each
+//! level starts from the same nested initial radius, counts the photons it gathers into 12
+//! cells, and at the start of every pass a χ² test of those counts keeps or shrinks that
+//! level's radius ([`cppm`]); the gather tests each level's radius on its own.
+//!
 //! Determinism: pixel `p` uses the streams `rng_for(seed, pass, 2p)` (A) and
 //! `rng_for(seed, pass, 2p+1)` (B), photon `j` a stream of (seed, pass, j) in a separate domain;
 //! photon deposits are concatenated in photon order and the grid is built by a stable counting
@@ -18,6 +23,7 @@
 //! count.
 
 pub mod accumulate;
+pub mod cppm;
 pub mod gather;
 pub mod photon_map;
 pub mod photon_trace;
@@ -42,7 +48,9 @@ use crate::threads::with_threads;
 
 use crate::state_file::StateFile;
 use accumulate::{GBufferSum, Welford};
+use cppm::CppmLevel;
 use photon_map::PhotonGrid;
+pub use radius::RadiusSchedule;
 use radius::{nested_radii, shrink_factor, LEVELS};
 use run_state::StateStore;
 use visible_point::{trace_eye_path, EyePath};
@@ -94,6 +102,25 @@ impl SppmMode {
             SppmMode::MultiLevel => "sppm-ml",
         }
     }
+
+    /// The levels with a radius of their own: five, or the single level.
+    fn radius_levels(self) -> usize {
+        match self {
+            SppmMode::MultiLevel => LEVELS,
+            SppmMode::Single => 1,
+        }
+    }
+}
+
+impl SppmSettings {
+    /// CPPM states per pixel: one per level with a radius of its own under the CPPM
+    /// schedule, none under SPPM's (whose radii live in [`PixelState::r2`]).
+    fn cppm_levels(&self) -> usize {
+        match self.schedule {
+            RadiusSchedule::Sppm => 0,
+            RadiusSchedule::Cppm => self.mode.radius_levels(),
+        }
+    }
 }
 
 /// Settings of an SPPM run.
@@ -112,6 +139,8 @@ pub struct SppmSettings {
     pub alpha: f32,
     /// Multi-level or single-level.
     pub mode: SppmMode,
+    /// How the radii evolve: SPPM's shrink after every pass, or CPPM's χ² test per level.
+    pub schedule: RadiusSchedule,
     /// Bound on delta/glossy eye bounces and on photon bounces.
     pub max_depth: u32,
     /// Worker threads (0: all cores). The output does not depend on it.
@@ -129,6 +158,7 @@ impl Default for SppmSettings {
             knn: DEFAULT_KNN,
             alpha: DEFAULT_ALPHA,
             mode: SppmMode::MultiLevel,
+            schedule: RadiusSchedule::Sppm,
             max_depth: DEFAULT_MAX_DEPTH,
             threads: 0,
             scene_name: String::new(),
@@ -201,11 +231,14 @@ pub struct RenderSummary {
     pub resumed_from: u32,
 }
 
-/// The per-pixel state carried across passes.
+/// The per-pixel state carried across passes. (A CPPM run keeps its per-level radii and
+/// counts beside it, in a [`CppmLevel`] list of [`SppmSettings::cppm_levels`] per pixel, so
+/// SPPM runs do not carry them.)
 #[derive(Debug, Clone, Copy, Default)]
 struct PixelState {
     /// Current r₅² of the pixel (multi-level) or the single level's r² (single); 0 until the
-    /// pixel's first visible point.
+    /// pixel's first visible point. Under CPPM the initial value, kept (the levels' current
+    /// radii are in their [`CppmLevel`]s).
     r2: f32,
     /// Pass in which the radius was initialised.
     init_pass: u32,
@@ -254,8 +287,14 @@ fn initial_r2(ctx: &PassContext, p: glam::Vec3) -> f32 {
     r * r
 }
 
-/// Renders one pass of pixel `index` and updates its state. Returns the visible-point count.
-fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 {
+/// Renders one pass of pixel `index` and updates its state: `state`, and under CPPM its levels'
+/// `cppm` states (empty under SPPM). Returns the visible-point count.
+fn render_pixel(
+    ctx: &PassContext,
+    index: usize,
+    state: &mut PixelState,
+    cppm: &mut [CppmLevel],
+) -> u64 {
     let scene = ctx.scene;
     let width = scene.camera.resolution().x as usize;
     let pixel = UVec2::new((index % width) as u32, (index / width) as u32);
@@ -281,17 +320,35 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
         if let Some(vp) = first {
             state.r2 = initial_r2(ctx, vp.p);
             state.init_pass = ctx.pass;
+            // CPPM levels start from the same nested radii as SPPM's.
+            let initial = state.radii(ctx.settings.mode);
+            for (level, r) in cppm.iter_mut().zip(initial) {
+                *level = CppmLevel::new(r * r);
+            }
         }
+    }
+    // CPPM: the test pending from the photons counted so far decides this pass's radii.
+    for level in cppm.iter_mut() {
+        level.test_and_update();
     }
     let radii = state.radii(ctx.settings.mode);
     let n = ctx.settings.photons_per_pass;
+    // Gathers the levels `range` at `vp` into `out`: nested SPPM radii, or CPPM's own.
+    let mut gather_levels =
+        |vp: &visible_point::VisiblePoint, range: std::ops::Range<usize>, out: &mut [Rgb]| {
+            if cppm.is_empty() {
+                gather::gather(scene, ctx.grid, vp, &radii[range], n, out);
+            } else {
+                gather::gather_counting(scene, ctx.grid, vp, &mut cppm[range], n, out);
+            }
+        };
     let mut estimates = [Rgb::ZERO; LEVELS];
     let mut found = 0;
     match ctx.settings.mode {
         SppmMode::MultiLevel => {
             estimates[0] = a.direct;
             if let Some(vp) = &a.vp {
-                gather::gather(scene, ctx.grid, vp, &radii[..1], n, &mut estimates[..1]);
+                gather_levels(vp, 0..1, &mut estimates[..1]);
                 found += 1;
             }
             let b = b.unwrap_or_default();
@@ -299,7 +356,7 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
                 *e = b.direct;
             }
             if let Some(vp) = &b.vp {
-                gather::gather(scene, ctx.grid, vp, &radii[1..], n, &mut estimates[1..]);
+                gather_levels(vp, 1..LEVELS, &mut estimates[1..]);
                 found += 1;
             }
             estimates[0] *= weight_a;
@@ -317,7 +374,7 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
         SppmMode::Single => {
             estimates[0] = a.direct;
             if let Some(vp) = &a.vp {
-                gather::gather(scene, ctx.grid, vp, &radii[..1], n, &mut estimates[..1]);
+                gather_levels(vp, 0..1, &mut estimates[..1]);
                 found += 1;
             }
             estimates[0] *= weight_a;
@@ -327,7 +384,7 @@ fn render_pixel(ctx: &PassContext, index: usize, state: &mut PixelState) -> u64 
         }
     }
     state.gbuffer.push(&a.gbuffer);
-    if state.r2 > 0.0 {
+    if state.r2 > 0.0 && ctx.settings.schedule == RadiusSchedule::Sppm {
         state.r2 *= shrink_factor(ctx.pass, ctx.settings.alpha);
     }
     found
@@ -353,10 +410,11 @@ fn finite_bundle(
     scene: &Scene,
     settings: &SppmSettings,
     states: &[PixelState],
+    cppm: &[CppmLevel],
     passes: u32,
     seconds: f64,
 ) -> Result<Bundle> {
-    let bundle = make_bundle(scene, settings, states, passes, seconds);
+    let bundle = make_bundle(scene, settings, states, cppm, passes, seconds);
     if let Some((layer, channel, x, y)) = bundle.find_non_finite() {
         bail!(
             "pass {passes}: {layer}.{channel} is not finite at pixel ({x}, {y}): a value \
@@ -367,14 +425,17 @@ fn finite_bundle(
     Ok(bundle)
 }
 
-/// Assembles the bundle of the current state.
+/// Assembles the bundle of the current state (`cppm`: the CPPM levels of every pixel, empty
+/// under SPPM).
 fn make_bundle(
     scene: &Scene,
     settings: &SppmSettings,
     states: &[PixelState],
+    cppm: &[CppmLevel],
     passes: u32,
     seconds: f64,
 ) -> Bundle {
+    let cppm_levels = settings.cppm_levels();
     let res = scene.camera.resolution();
     let (w, h) = (res.x as usize, res.y as usize);
     let mut levels: Vec<Image> = (0..LEVELS).map(|_| Image::new(w, h, 3)).collect();
@@ -409,8 +470,12 @@ fn make_bundle(
         albedo.data[3 * i..3 * i + 3].copy_from_slice(&g.albedo.to_array());
         normal.data[3 * i..3 * i + 3].copy_from_slice(&g.normal.to_array());
         depth.data[i] = g.depth;
-        // Radii used in the last pass (before its shrink).
-        let r = if s.r2 > 0.0 {
+        // Radii used in the last pass (before its shrink). CPPM tests at the start of a pass,
+        // so its current radii are the last pass's.
+        let r = if cppm_levels > 0 {
+            let own = &cppm[cppm_levels * i..cppm_levels * (i + 1)];
+            std::array::from_fn(|l| own[l.min(cppm_levels - 1)].r2.sqrt())
+        } else if s.r2 > 0.0 {
             let last_shrink = shrink_factor(passes, settings.alpha);
             let mut unshrunk = *s;
             unshrunk.r2 /= last_shrink;
@@ -428,6 +493,7 @@ fn make_bundle(
             photons_per_pass: settings.photons_per_pass,
             seconds,
             integrator: settings.mode.name().into(),
+            schedule: settings.schedule.name().into(),
             width: res.x,
             height: res.y,
         },
@@ -466,10 +532,22 @@ const FIRST_PASS_CELL_FRACTION: f32 = 0.5;
 /// Cell size of this pass's photon grid from the radii the pixels will query:
 /// [`cell_factor`] × the mean initialised radius, but at least a quarter of the largest (bounds
 /// the cells a query visits); a fraction of the cap before any pixel has a radius.
-fn grid_cell_size(states: &[PixelState], mode: SppmMode, max_radius: f32) -> f32 {
+/// Under CPPM the radius of a pixel is the largest of its levels' (`cppm`, empty under SPPM).
+fn grid_cell_size(
+    states: &[PixelState],
+    cppm: &[CppmLevel],
+    mode: SppmMode,
+    max_radius: f32,
+) -> f32 {
     let (mut sum, mut count, mut max) = (0.0f64, 0u64, 0.0f32);
-    for s in states.iter().filter(|s| s.r2 > 0.0) {
-        let r = s.radii(mode)[LEVELS - 1];
+    let cppm_levels = cppm.len() / states.len().max(1);
+    for (i, s) in states.iter().enumerate().filter(|(_, s)| s.r2 > 0.0) {
+        let r = if cppm_levels > 0 {
+            let own = &cppm[cppm_levels * i..cppm_levels * (i + 1)];
+            own.iter().fold(0.0f32, |m, l| m.max(l.r2)).sqrt()
+        } else {
+            s.radii(mode)[LEVELS - 1]
+        };
         sum += r as f64;
         count += 1;
         max = max.max(r);
@@ -556,8 +634,10 @@ pub fn render_sppm_resumable(
         }
     }
 
-    // Per pixel: the state, and the bundle assembled at checkpoints (f32 layers).
-    let pixel_bytes = std::mem::size_of::<PixelState>() as u64 + 4 * 39;
+    // Per pixel: the state, CPPM's levels, and the bundle assembled at checkpoints (f32 layers).
+    let pixel_bytes = std::mem::size_of::<PixelState>() as u64
+        + (settings.cppm_levels() * std::mem::size_of::<CppmLevel>()) as u64
+        + 4 * 39;
     let state_bytes = pixel_count as u64 * pixel_bytes;
     crate::memory::check_fits(&format!("SPPM on a {}x{} image", res.x, res.y), state_bytes)?;
     crate::memory::check_fits(
@@ -571,19 +651,24 @@ pub fn render_sppm_resumable(
 
     with_threads(settings.threads, move || -> Result<RenderSummary> {
         let start = Instant::now();
-        let (mut states, mut summary, mut pass) = match saved {
+        let (mut states, mut cppm, mut summary, mut pass) = match saved {
             Some(s) => {
                 let summary = RenderSummary {
                     resumed_from: s.passes,
                     ..s.summary
                 };
-                (s.pixels, summary, s.passes)
+                (s.pixels, s.cppm, summary, s.passes)
             }
             None => (
                 crate::memory::try_filled_vec(
                     pixel_count,
                     PixelState::default(),
                     "the SPPM pixel state",
+                )?,
+                crate::memory::try_filled_vec(
+                    pixel_count * settings.cppm_levels(),
+                    CppmLevel::default(),
+                    "the CPPM level state",
                 )?,
                 RenderSummary::default(),
                 0,
@@ -593,13 +678,16 @@ pub fn render_sppm_resumable(
         let earlier_seconds = summary.seconds;
         let seconds_so_far = || earlier_seconds + start.elapsed().as_secs_f64();
         let mut next_checkpoint = checkpoints.partition_point(|&c| c <= pass);
-        let save = |states: &[PixelState], summary: &RenderSummary, pass: u32| match &store {
+        let save = |states: &[PixelState],
+                    cppm: &[CppmLevel],
+                    summary: &RenderSummary,
+                    pass: u32| match &store {
             Some(store) => {
                 let summary = RenderSummary {
                     seconds: seconds_so_far(),
                     ..*summary
                 };
-                store.save(pass, &summary, states)
+                store.save(pass, &summary, states, cppm)
             }
             None => Ok(()),
         };
@@ -613,6 +701,7 @@ pub fn render_sppm_resumable(
                     scene,
                     settings,
                     &states,
+                    &cppm,
                     pass,
                     earlier_seconds,
                 )?)?;
@@ -639,7 +728,7 @@ pub fn render_sppm_resumable(
             )?;
             let stored = chunks.iter().map(|c| c.len() as u64).sum();
             let t_traced = Instant::now();
-            let cell = grid_cell_size(&states, settings.mode, max_radius);
+            let cell = grid_cell_size(&states, &cppm, settings.mode, max_radius);
             grid.rebuild(&chunks, cell);
             let t1 = Instant::now();
             let ctx = PassContext {
@@ -649,12 +738,23 @@ pub fn render_sppm_resumable(
                 max_radius,
                 pass,
             };
-            let visible_points: u64 = states
-                .par_iter_mut()
-                .enumerate()
-                .with_min_len(64)
-                .map(|(i, s)| render_pixel(&ctx, i, s))
-                .sum();
+            let cppm_levels = settings.cppm_levels();
+            let visible_points: u64 = if cppm_levels == 0 {
+                states
+                    .par_iter_mut()
+                    .enumerate()
+                    .with_min_len(64)
+                    .map(|(i, s)| render_pixel(&ctx, i, s, &mut []))
+                    .sum()
+            } else {
+                states
+                    .par_iter_mut()
+                    .zip(cppm.par_chunks_mut(cppm_levels))
+                    .enumerate()
+                    .with_min_len(64)
+                    .map(|(i, (s, levels))| render_pixel(&ctx, i, s, levels))
+                    .sum()
+            };
             let t2 = Instant::now();
             summary.passes = pass;
             summary.photon_seconds += (t1 - t0).as_secs_f64();
@@ -678,7 +778,9 @@ pub fn render_sppm_resumable(
                 next_checkpoint += 1;
             }
             if at_checkpoint || timed_out {
-                on_checkpoint(finite_bundle(scene, settings, &states, pass, elapsed)?)?;
+                on_checkpoint(finite_bundle(
+                    scene, settings, &states, &cppm, pass, elapsed,
+                )?)?;
             }
             let done = timed_out || (target.is_some() && next_checkpoint == checkpoints.len());
             // The bundle first, then the state: a stop in between redoes a few passes and
@@ -688,7 +790,7 @@ pub fn render_sppm_resumable(
                     || at_checkpoint
                     || last_save.elapsed().as_secs_f64() >= state.map_or(0.0, |f| f.interval))
             {
-                save(&states, &summary, pass)?;
+                save(&states, &cppm, &summary, pass)?;
                 last_save = Instant::now();
             }
             if done {

@@ -1,11 +1,40 @@
-//! Kernel bandwidths of the multi-level estimates: nested initial radii from the k-NN distance
-//! and the deterministic progressive shrink schedule (Knaus & Zwicker's r² ← r²·(i+α)/(i+1)).
+//! Kernel bandwidths of the multi-level estimates: nested initial radii from the k-NN distance,
+//! the choice of radius schedule ([`RadiusSchedule`]), and SPPM's deterministic progressive
+//! shrink (Knaus & Zwicker's r² ← r²·(i+α)/(i+1)). CPPM's data-driven rule is in
+//! [`super::cppm`].
+
+use serde::{Deserialize, Serialize};
 
 /// Number of estimate levels.
 pub const LEVELS: usize = 5;
 
 /// Ratio between consecutive levels' radii: r_ℓ = r₅ / √2^(5−ℓ).
 pub const LEVEL_RATIO: f32 = std::f32::consts::SQRT_2;
+
+/// How the kernel radii evolve over passes. Either way each level starts from its nested
+/// initial radius and the pixel value is the mean of the per-pass kernel estimates.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum RadiusSchedule {
+    /// SPPM: every radius shrinks after every pass by r² ← r²·(i+α)/(i+1), all levels
+    /// together (they stay nested).
+    #[default]
+    Sppm,
+    /// CPPM (chi-squared progressive photon mapping): each level keeps its radius while the
+    /// photons inside look uniform (a χ² test on 12 equal-area cells) and shrinks it
+    /// otherwise, independently of the other levels.
+    Cppm,
+}
+
+impl RadiusSchedule {
+    /// The name on command lines, in configs and in bundle metadata.
+    pub fn name(self) -> &'static str {
+        match self {
+            RadiusSchedule::Sppm => "sppm",
+            RadiusSchedule::Cppm => "cppm",
+        }
+    }
+}
 
 /// The five nested radii (sharpest first) from the largest one, r₅.
 #[inline]

@@ -10,15 +10,18 @@
 //! (3 × f64) and sum of squared deviations (3 × f64), the G-buffer sums: albedo (3 × f64),
 //! normal (3 × f64), depth (f64), and the Welford accumulators (count, mean, sum of squared
 //! deviations) of the photon-free radiance of subpaths A and B.
-//! `sppm` stores one level, `sppm-ml` five. (Version 1 had no photon-free sums: such a file is
-//! refused by its first line.)
+//! `sppm` stores one level, `sppm-ml` five. A CPPM run (`schedule` in the header) appends to
+//! each pixel's record its levels' CPPM states (one for `sppm`, five for `sppm-ml`): r² (f32),
+//! stage (u32), the 12 cell counts (u32). SPPM files have neither, exactly as before CPPM.
+//! (Version 1 had no photon-free sums: such a file is refused by its first line.)
 
 use anyhow::{bail, Result};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use super::accumulate::{GBufferSum, Welford};
-use super::radius::LEVELS;
+use super::cppm::{self, CppmLevel, CELLS};
+use super::radius::{RadiusSchedule, LEVELS};
 use super::{PixelState, RenderSummary, SppmMode, SppmSettings};
 use crate::state_file::{self, check_identity, Cursor, StateFile};
 
@@ -49,6 +52,50 @@ struct RunIdentity {
     alpha: f32,
     /// Bound on eye and photon bounces.
     max_depth: u32,
+    /// The radius schedule; not written for SPPM runs, so their files are what they were
+    /// before CPPM existed (and such files read as SPPM).
+    #[serde(default, skip_serializing_if = "is_sppm")]
+    schedule: RadiusSchedule,
+    /// CPPM's parameters, for CPPM runs: a build with other ones refuses to resume.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    cppm: Option<CppmParameters>,
+}
+
+/// Whether `schedule` is SPPM's (the default, left out of the header).
+fn is_sppm(schedule: &RadiusSchedule) -> bool {
+    *schedule == RadiusSchedule::Sppm
+}
+
+/// The constants of the CPPM rule ([`cppm`]) a CPPM run was saved under.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CppmParameters {
+    /// Rings × sectors of the disk partition.
+    cells: [usize; 2],
+    /// n₀: the first count threshold.
+    min_photons: f64,
+    /// β: threshold growth per shrink.
+    threshold_growth: f64,
+    /// k: r² factor when neither disk looks uniform.
+    area_factor: f32,
+    /// r² factor when only the inner disk looks uniform.
+    inner_area_factor: f32,
+    /// Significance level of the tests.
+    significance: f64,
+}
+
+impl CppmParameters {
+    /// This build's.
+    fn current() -> Self {
+        CppmParameters {
+            cells: [cppm::RINGS, cppm::SECTORS],
+            min_photons: cppm::MIN_PHOTONS,
+            threshold_growth: cppm::THRESHOLD_GROWTH,
+            area_factor: cppm::AREA_FACTOR,
+            inner_area_factor: cppm::INNER_AREA_FACTOR,
+            significance: cppm::SIGNIFICANCE,
+        }
+    }
 }
 
 /// The JSON header of an SPPM state file.
@@ -84,11 +131,16 @@ pub(super) struct RunState {
     pub summary: RenderSummary,
     /// Per-pixel state, row-major.
     pub pixels: Vec<PixelState>,
+    /// CPPM runs: each pixel's CPPM levels, pixel after pixel; empty for SPPM runs.
+    pub cppm: Vec<CppmLevel>,
 }
 
-/// Bytes of one pixel's record with `levels` accumulators.
-fn pixel_bytes(levels: usize) -> usize {
-    8 + (levels + 2) * (4 + 48) + 56
+/// Bytes of one CPPM level's record.
+const CPPM_LEVEL_BYTES: usize = 8 + 4 * CELLS;
+
+/// Bytes of one pixel's record with `levels` accumulators and `cppm_levels` CPPM levels.
+fn pixel_bytes(levels: usize, cppm_levels: usize) -> usize {
+    8 + (levels + 2) * (4 + 48) + 56 + cppm_levels * CPPM_LEVEL_BYTES
 }
 
 /// Appends a vector of three f64.
@@ -98,10 +150,16 @@ fn put_dvec3(out: &mut Vec<u8>, v: DVec3) {
     }
 }
 
-/// Serialises the pixels with `levels` accumulators each.
-fn encode_pixels(pixels: &[PixelState], levels: usize) -> Vec<u8> {
-    let mut out = Vec::with_capacity(pixels.len() * pixel_bytes(levels));
-    for p in pixels {
+/// Serialises the pixels with `levels` accumulators each and their `cppm` levels
+/// (`cppm_levels` per pixel).
+fn encode_pixels(
+    pixels: &[PixelState],
+    levels: usize,
+    cppm: &[CppmLevel],
+    cppm_levels: usize,
+) -> Vec<u8> {
+    let mut out = Vec::with_capacity(pixels.len() * pixel_bytes(levels, cppm_levels));
+    for (i, p) in pixels.iter().enumerate() {
         out.extend_from_slice(&p.r2.to_le_bytes());
         out.extend_from_slice(&p.init_pass.to_le_bytes());
         for w in &p.levels[..levels] {
@@ -117,13 +175,26 @@ fn encode_pixels(pixels: &[PixelState], levels: usize) -> Vec<u8> {
             put_dvec3(&mut out, w.mean);
             put_dvec3(&mut out, w.m2);
         }
+        for level in &cppm[i * cppm_levels..(i + 1) * cppm_levels] {
+            out.extend_from_slice(&level.r2.to_le_bytes());
+            out.extend_from_slice(&level.stage.to_le_bytes());
+            for c in level.cells {
+                out.extend_from_slice(&c.to_le_bytes());
+            }
+        }
     }
     out
 }
 
-/// Reads the pixels back (`body` holds whole records only).
-fn decode_pixels(body: &[u8], levels: usize) -> Vec<PixelState> {
-    body.chunks_exact(pixel_bytes(levels))
+/// Reads the pixels and their CPPM levels back (`body` holds whole records only).
+fn decode_pixels(
+    body: &[u8],
+    levels: usize,
+    cppm_levels: usize,
+) -> (Vec<PixelState>, Vec<CppmLevel>) {
+    let mut cppm = Vec::with_capacity(body.len() / pixel_bytes(levels, cppm_levels) * cppm_levels);
+    let pixels = body
+        .chunks_exact(pixel_bytes(levels, cppm_levels))
         .map(|record| {
             let mut c = Cursor::new(record);
             let mut p = PixelState {
@@ -150,9 +221,17 @@ fn decode_pixels(body: &[u8], levels: usize) -> Vec<PixelState> {
                     m2: c.dvec3(),
                 };
             }
+            for _ in 0..cppm_levels {
+                cppm.push(CppmLevel {
+                    r2: c.f32(),
+                    stage: c.u32(),
+                    cells: std::array::from_fn(|_| c.u32()),
+                });
+            }
             p
         })
-        .collect()
+        .collect();
+    (pixels, cppm)
 }
 
 /// The state file of one run, with what that run computes.
@@ -163,6 +242,8 @@ pub(super) struct StateStore<'a> {
     run: RunIdentity,
     /// Accumulators stored per pixel.
     levels: usize,
+    /// CPPM levels stored per pixel (0 for SPPM runs).
+    cppm_levels: usize,
 }
 
 impl<'a> StateStore<'a> {
@@ -188,16 +269,27 @@ impl<'a> StateStore<'a> {
                 knn: settings.knn,
                 alpha: settings.alpha,
                 max_depth: settings.max_depth,
+                schedule: settings.schedule,
+                cppm: (settings.schedule == RadiusSchedule::Cppm).then(CppmParameters::current),
             },
             levels: match settings.mode {
                 SppmMode::MultiLevel => LEVELS,
                 SppmMode::Single => 1,
             },
+            cppm_levels: settings.cppm_levels(),
         }
     }
 
-    /// Writes the state after `passes` passes atomically: the totals `s` and the `pixels`.
-    pub fn save(&self, passes: u32, s: &RenderSummary, pixels: &[PixelState]) -> Result<()> {
+    /// Writes the state after `passes` passes atomically: the totals `s`, the `pixels` and
+    /// their `cppm` levels (empty for SPPM runs).
+    pub fn save(
+        &self,
+        passes: u32,
+        s: &RenderSummary,
+        pixels: &[PixelState],
+        cppm: &[CppmLevel],
+    ) -> Result<()> {
+        debug_assert_eq!(cppm.len(), pixels.len() * self.cppm_levels);
         let header = StateHeader {
             run: self.run.clone(),
             passes,
@@ -209,7 +301,7 @@ impl<'a> StateStore<'a> {
             photons_stored: s.photons_stored,
             visible_points: s.visible_points,
         };
-        let body = encode_pixels(pixels, self.levels);
+        let body = encode_pixels(pixels, self.levels, cppm, self.cppm_levels);
         state_file::save(&self.file.path, MAGIC, &header, &body)
     }
 
@@ -220,18 +312,30 @@ impl<'a> StateStore<'a> {
         let Some((header, body)) = state_file::load::<StateHeader>(path, MAGIC)? else {
             return Ok(None);
         };
+        if header.run.schedule != self.run.schedule {
+            bail!(
+                "{}: the saved run used the {} radius schedule, this one {}; resume with \
+                 --schedule {}, or give --state a new file name",
+                path.display(),
+                header.run.schedule.name(),
+                self.run.schedule.name(),
+                header.run.schedule.name()
+            );
+        }
         check_identity(path, &header.run, &self.run)?;
         let pixels = self.run.width as usize * self.run.height as usize;
-        if body.len() != pixels * pixel_bytes(self.levels) || header.passes == 0 {
+        let record = pixel_bytes(self.levels, self.cppm_levels);
+        if body.len() != pixels * record || header.passes == 0 {
             bail!(
                 "{}: damaged run state: {} bytes of pixel data at pass {}, expected {} for \
                  {pixels} pixels",
                 path.display(),
                 body.len(),
                 header.passes,
-                pixels * pixel_bytes(self.levels)
+                pixels * record
             );
         }
+        let (pixels, cppm) = decode_pixels(&body, self.levels, self.cppm_levels);
         Ok(Some(RunState {
             passes: header.passes,
             summary: RenderSummary {
@@ -245,7 +349,8 @@ impl<'a> StateStore<'a> {
                 visible_points: header.visible_points,
                 resumed_from: 0,
             },
-            pixels: decode_pixels(&body, self.levels),
+            pixels,
+            cppm,
         }))
     }
 }

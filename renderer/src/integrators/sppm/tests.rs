@@ -148,19 +148,126 @@ fn furnace_every_level_converges_to_the_geometric_series() {
     let rho = 0.5;
     let scene = furnace(rho);
     let expected = 1.0 / (1.0 - rho as f64);
-    for mode in [SppmMode::MultiLevel, SppmMode::Single] {
-        let b = render(&scene, &settings(mode, 20_000, 3), 8);
+    for (mode, schedule) in MODES_AND_SCHEDULES {
+        let s = SppmSettings {
+            schedule,
+            ..settings(mode, 20_000, 3)
+        };
+        let b = render(&scene, &s, 8);
         assert_eq!(b.find_non_finite(), None);
+        assert_eq!(b.meta.schedule, schedule.name());
         for (l, img) in b.levels.iter().enumerate() {
             let m = mean_rgb(img);
             assert!(
                 (m - expected).abs() < 0.03 * expected,
-                "{mode:?} level {l}: mean {m}, expected {expected}"
+                "{mode:?} {schedule:?} level {l}: mean {m}, expected {expected}"
             );
         }
         // G-buffer: albedo ρ, unit normals facing the camera side, depth ≈ distance to the wall.
         assert!((mean_rgb(&b.albedo) - rho as f64).abs() < 1e-5);
         assert!(b.depth.data.iter().all(|&d| d > 0.7 && d < 1.3));
+    }
+}
+
+/// Renders with checkpoints and returns the bundles.
+fn render_checkpoints(scene: &Scene, s: &SppmSettings, checkpoints: &[u32]) -> Vec<Bundle> {
+    let mut out = Vec::new();
+    let stop = StopCondition {
+        checkpoints: checkpoints.to_vec(),
+        seconds: None,
+    };
+    render_sppm(
+        scene,
+        s,
+        &stop,
+        |b| {
+            out.push(b);
+            Ok(())
+        },
+        |_| {},
+    )
+    .unwrap();
+    out
+}
+
+/// CPPM in the furnace, where the photon density is uniform everywhere: most levels of most
+/// pixels keep the radius they started with (SPPM's all shrink), the per-pass tests run on
+/// growing counts.
+#[test]
+fn cppm_keeps_most_radii_in_a_uniform_photon_field() {
+    let scene = furnace(0.5);
+    for mode in [SppmMode::MultiLevel, SppmMode::Single] {
+        let s = SppmSettings {
+            schedule: RadiusSchedule::Cppm,
+            ..settings(mode, 20_000, 3)
+        };
+        let bundles = render_checkpoints(&scene, &s, &[1, 24]);
+        let (first, last) = (
+            bundles[0].radius.as_ref().unwrap(),
+            bundles[1].radius.as_ref().unwrap(),
+        );
+        let kept = first
+            .data
+            .iter()
+            .zip(&last.data)
+            .filter(|(a, b)| a == b)
+            .count();
+        let shrunk = first
+            .data
+            .iter()
+            .zip(&last.data)
+            .filter(|(a, b)| b < a)
+            .count();
+        assert_eq!(kept + shrunk, first.data.len(), "radii never grow");
+        eprintln!("{mode:?}: {kept} of {} radii kept", first.data.len());
+        assert!(
+            kept as f64 > 0.6 * first.data.len() as f64,
+            "{mode:?}: only {kept} of {} radii kept",
+            first.data.len()
+        );
+    }
+}
+
+/// CPPM is consistent in practice: in the lit box (corners, a light's footprint: kernel bias
+/// where the radius is kept too large) every level's per-pixel relative error against a
+/// path-traced reference falls at each 4× of passes, in both modes.
+#[test]
+fn cppm_error_falls_as_passes_grow() {
+    use crate::integrators::path::PathTracer;
+    use crate::integrators::RayIntegrator;
+    let scene = lit_box(8);
+    let reference =
+        crate::threads::with_threads(2, || PathTracer::default().render(&scene, 8192, 77, None))
+            .unwrap();
+    let rel_mse = |img: &Image| -> f64 {
+        let mut sum = 0.0;
+        for (i, p) in reference.pixels.iter().enumerate() {
+            for c in 0..3 {
+                let (x, r) = (img.data[3 * i + c] as f64, p[c] as f64);
+                sum += (x - r).powi(2) / (r * r + 1e-2);
+            }
+        }
+        sum / (3 * reference.pixels.len()) as f64
+    };
+    for mode in [SppmMode::MultiLevel, SppmMode::Single] {
+        let s = SppmSettings {
+            schedule: RadiusSchedule::Cppm,
+            threads: 2,
+            ..settings(mode, 4_000, 12)
+        };
+        let bundles = render_checkpoints(&scene, &s, &[8, 32, 128]);
+        let levels = match mode {
+            SppmMode::MultiLevel => LEVELS,
+            SppmMode::Single => 1,
+        };
+        for l in 0..levels {
+            let errors: Vec<f64> = bundles.iter().map(|b| rel_mse(&b.levels[l])).collect();
+            eprintln!("{mode:?} level {l}: relMSE at 8, 32, 128 passes {errors:?}");
+            assert!(
+                errors.windows(2).all(|w| w[1] < 0.7 * w[0]),
+                "{mode:?} level {l}: relMSE at 8, 32, 128 passes {errors:?}"
+            );
+        }
     }
 }
 
@@ -337,11 +444,22 @@ fn thin_wall_lit_from_one_side_stays_dark_on_the_other() {
     }
 }
 
+/// Both modes under both radius schedules.
+const MODES_AND_SCHEDULES: [(SppmMode, RadiusSchedule); 4] = [
+    (SppmMode::MultiLevel, RadiusSchedule::Sppm),
+    (SppmMode::Single, RadiusSchedule::Sppm),
+    (SppmMode::MultiLevel, RadiusSchedule::Cppm),
+    (SppmMode::Single, RadiusSchedule::Cppm),
+];
+
 #[test]
 fn bundles_are_bit_identical_for_one_and_two_threads() {
     let scene = lit_box(10);
-    for mode in [SppmMode::MultiLevel, SppmMode::Single] {
-        let mut s = settings(mode, 3_000, 9);
+    for (mode, schedule) in MODES_AND_SCHEDULES {
+        let mut s = SppmSettings {
+            schedule,
+            ..settings(mode, 3_000, 9)
+        };
         let mut one = render(&scene, &s, 3);
         s.threads = 2;
         let mut two = render(&scene, &s, 3);
@@ -351,7 +469,7 @@ fn bundles_are_bit_identical_for_one_and_two_threads() {
         assert_eq!(one.meta, two.meta);
         assert!(
             bits(&one) == bits(&two),
-            "{mode:?}: thread count changed the bundle"
+            "{mode:?} {schedule:?}: thread count changed the bundle"
         );
         s.seed = 10;
         let other = render(&scene, &s, 3);
@@ -480,6 +598,8 @@ fn gather_matches_brute_force_sum() {
         .collect();
     let grid = photon_map::PhotonGrid::build(photons.clone(), 0.07);
     let radii = nested_radii(0.3);
+    // CPPM's radii need not be nested: levels in another order, two equal.
+    let cppm_radii = [radii[3], radii[1], radii[4], radii[3]];
     let n_photons = 10_000u64;
     let mut lambertian_nonzero = 0;
     for (material, wo_world) in [
@@ -504,8 +624,24 @@ fn gather_matches_brute_force_sum() {
         let bsdf = &scene.bsdfs[material as usize];
         let mut got = [Rgb::ZERO; 4];
         gather(&scene, &grid, &vp, &radii[1..], n_photons, &mut got);
-        for (l, r) in radii[1..].iter().enumerate() {
+        let mut levels = cppm_radii.map(|r| cppm::CppmLevel::new(r * r));
+        let mut got_counting = [Rgb::ZERO; 4];
+        gather::gather_counting(
+            &scene,
+            &grid,
+            &vp,
+            &mut levels,
+            n_photons,
+            &mut got_counting,
+        );
+        for (l, r) in radii[1..].iter().chain(&cppm_radii).enumerate() {
+            let (got, level) = if l < 4 {
+                (got[l], None)
+            } else {
+                (got_counting[l - 4], Some(&levels[l - 4]))
+            };
             let mut sum = Rgb::ZERO;
+            let mut cells = [0u32; cppm::CELLS];
             for ph in &photons {
                 if ph.position.distance_squared(vp.p) > r * r
                     || ph.normal.dot(ng) < NORMAL_AGREEMENT_COS
@@ -520,14 +656,27 @@ fn gather_matches_brute_force_sum() {
                     TransportMode::Radiance,
                 );
                 sum += f * ph.flux;
+                // CPPM counts the photons that contribute, in their cells.
+                if f != Rgb::ZERO {
+                    let d = ph.position - vp.p;
+                    cells[cppm::cell_index(d, d.length_squared(), &frame, r * r)] += 1;
+                }
             }
             let want = vp.beta * sum / (n_photons as f32 * std::f32::consts::PI * r * r);
-            let err = (got[l] - want).abs().max_element();
+            let err = (got - want).abs().max_element();
             assert!(
                 err <= 1e-5 * want.max_element().max(1e-3),
-                "material {material} wo {wo_world} level {l}: {:?} vs {want:?}",
-                got[l]
+                "material {material} wo {wo_world} level {l}: {got:?} vs {want:?}"
             );
+            if let Some(level) = level {
+                assert_eq!(
+                    level.cells,
+                    cells,
+                    "material {material} wo {wo_world} CPPM level {}: cell counts",
+                    l - 4
+                );
+                assert_eq!(level.r2, r * r, "gathering leaves the radius alone");
+            }
             if material < 2 && want.max_element() > 0.0 {
                 lambertian_nonzero += 1;
             }
@@ -780,8 +929,12 @@ fn run_with_state(
 #[test]
 fn a_resumed_run_is_bit_identical_to_an_uninterrupted_one() {
     let scene = lit_box(8);
-    for mode in [SppmMode::MultiLevel, SppmMode::Single] {
-        let s = settings(mode, 2_000, 5);
+    for (mode, schedule) in MODES_AND_SCHEDULES {
+        let s = SppmSettings {
+            schedule,
+            ..settings(mode, 2_000, 5)
+        };
+        let name = format!("{}-{}", mode.name(), schedule.name());
         let whole = {
             let mut got = Vec::new();
             let stop = StopCondition {
@@ -802,7 +955,7 @@ fn a_resumed_run_is_bit_identical_to_an_uninterrupted_one() {
             got
         };
         let file = StateFile {
-            path: state_path(&format!("resume-{}", mode.name())),
+            path: state_path(&format!("resume-{name}")),
             // Saved after every pass.
             interval: 1e-12,
             scene_fingerprint: "lit box".into(),
@@ -817,17 +970,17 @@ fn a_resumed_run_is_bit_identical_to_an_uninterrupted_one() {
         assert_eq!(
             resumed.len(),
             1,
-            "{mode:?}: only the bundle at pass 7 is left to write"
+            "{name}: only the bundle at pass 7 is left to write"
         );
         assert_eq!(resumed[0].meta.passes, 7);
         assert!(
             bundle_bits(&resumed[0]) == bundle_bits(&whole[1]),
-            "{mode:?}: the resumed run's bundle differs from the uninterrupted run's"
+            "{name}: the resumed run's bundle differs from the uninterrupted run's"
         );
         // The bundle at pass 3 of the second session, resumed from pass 2, is the same too.
         let from_two = {
             let f = StateFile {
-                path: state_path(&format!("resume-3-{}", mode.name())),
+                path: state_path(&format!("resume-3-{name}")),
                 ..file.clone()
             };
             assert!(run_with_state(&scene, &s, &[3], &f, Some(3)).is_err());
@@ -900,6 +1053,27 @@ fn a_state_file_from_another_run_or_damaged_is_refused() {
         e.contains(r#"integrator: "sppm-ml" in the file, "sppm" in this run"#),
         "{e}"
     );
+    // The other radius schedule, both ways.
+    let cppm = SppmSettings {
+        schedule: RadiusSchedule::Cppm,
+        ..s.clone()
+    };
+    let e = error(&cppm, &file, &[4]);
+    assert!(
+        e.contains(&name) && e.contains("used the sppm radius schedule, this one cppm"),
+        "{e}"
+    );
+    let cppm_file = StateFile {
+        path: state_path("refused-cppm"),
+        ..file.clone()
+    };
+    run_with_state(&scene, &cppm, &[2], &cppm_file, None).unwrap();
+    let e = error(&s, &cppm_file, &[4]);
+    assert!(
+        e.contains("used the cppm radius schedule, this one sppm"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(cppm_file.path.parent().unwrap());
     // Asking for fewer passes than the file holds.
     let e = error(&s, &file, &[1]);
     assert!(e.contains("past the last requested pass 1"), "{e}");
