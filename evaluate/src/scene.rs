@@ -302,7 +302,12 @@ pub fn evaluate_scene(
             rr_depth: file.map_or(5, |i| i.rr_depth),
         };
         let until = targets.iter().copied().fold(0.0, f64::max);
-        let mut failure = None;
+        // The G-buffer of ours' bundle at each checkpoint: the same first-hit albedo and
+        // normal a path tracer would output.
+        let guides = bundles
+            .iter()
+            .map(|tb| guides_of(&tb.bundle, width, height))
+            .collect::<Result<Vec<_>>>()?;
         path_trace_progressive(
             &built,
             &tracer,
@@ -310,29 +315,21 @@ pub fn evaluate_scene(
             until,
             PT_MAX_SPP,
             |spp, seconds, image| {
-                for (c, (slot, &target)) in pt_captures.iter_mut().zip(&targets).enumerate() {
-                    if slot.is_none() && seconds >= target && failure.is_none() {
-                        // The G-buffer of ours' bundle at the same checkpoint: the same first-hit
-                        // albedo and normal a path tracer would output.
-                        match guides_of(&bundles[c].bundle, width, height) {
-                            Ok((albedo, normal)) => {
-                                *slot = Some(Capture {
-                                    samples: spp,
-                                    seconds,
-                                    image: image.to_vec(),
-                                    albedo,
-                                    normal,
-                                })
-                            }
-                            Err(e) => failure = Some(e),
-                        }
+                for ((slot, &target), (albedo, normal)) in
+                    pt_captures.iter_mut().zip(&targets).zip(&guides)
+                {
+                    if slot.is_none() && seconds >= target {
+                        *slot = Some(Capture {
+                            samples: spp,
+                            seconds,
+                            image: image.to_vec(),
+                            albedo: albedo.clone(),
+                            normal: normal.clone(),
+                        });
                     }
                 }
             },
         );
-        if let Some(e) = failure {
-            return Err(e);
-        }
     }
     let mut peer_images = Vec::new();
     let last = checkpoints.len().saturating_sub(1);
