@@ -70,6 +70,10 @@ struct Cli {
     /// model.json; docs/method.md §5.4); 0 = Eq. 6 alone.
     #[arg(long)]
     guard: Option<f32>,
+    /// The guard's trust λ in the smoothest level, replacing the model's (`guard_target_noise`
+    /// in model.json; docs/method.md §5.4); 0 = the smoothest level taken as exact.
+    #[arg(long, value_name = "LAMBDA")]
+    guard_target_noise: Option<f32>,
     /// Combine the whole levels with Eq. 6, as the paper does, instead of leaving the bundle's
     /// photon-free part (emission, direct light) out of the window filter. With `--guard 0`:
     /// the paper's reconstruction exactly.
@@ -346,6 +350,13 @@ fn run(cli: &Cli) -> Result<()> {
             .config
             .validate()
             .map_err(|e| anyhow::anyhow!("--guard: {e}"))?;
+    }
+    if let Some(lambda) = cli.guard_target_noise {
+        model.config.guard_target_noise = lambda;
+        model
+            .config
+            .validate()
+            .map_err(|e| anyhow::anyhow!("--guard-target-noise: {e}"))?;
     }
     eprintln!(
         "model {}: preset {:?}, window {}×{}, receptive radius {} px, backend {:?}, engine {:?}",

@@ -336,6 +336,7 @@ pub fn reconstruct_banded(
                     device,
                 ),
                 strength: model.config.guard,
+                target_noise: model.config.guard_target_noise,
             });
             // Clamped at zero like `model::combine::reconstruct` (what the loss saw).
             let combined = combine_guarded_block(levels, weights.clone(), guard, window, margins)

@@ -1,10 +1,11 @@
 //! The stress set (scenes/stress, docs/results.md "Never worse than its inputs"): scenes built to
 //! break a window filter — a light smaller than a pixel seen directly, a light seen through glass
 //! and in a mirror, caustic fireflies in the sharp level, a saturated highlight next to black —
-//! rendered here with multi-level SPPM and reconstructed with the shipped weights
-//! (models/default) with the guard on (`--guard 16`; it is off by default). On each, the output's relMSE against the scene's shipped reference must be
-//! at most 1.05 × that of the best input level: the reconstruction never makes the image worse
-//! than what went in. And a light that one subpath saw in one pixel stays in that pixel.
+//! rendered here with multi-level SPPM and reconstructed with the shipped weights and defaults
+//! (models/default: emission split and guard). On each, the output's relMSE against the scene's
+//! shipped reference must be at most 1.05 × that of the best input level: the reconstruction
+//! never makes the image worse than what went in. And a light that one subpath saw in one pixel
+//! stays in that pixel.
 
 use std::path::{Path, PathBuf};
 
@@ -13,9 +14,6 @@ use infer::{reconstruct_tiled, Engine, ErrorReport};
 use model::features::{pack, planar_reference};
 use model::model_dir::TrainedModel;
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
-
-/// The guard strength the stress set is checked with (`infer --guard 16`).
-const STRESS_GUARD: f32 = 16.0;
 
 fn repository() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -53,10 +51,7 @@ fn stress_report(name: &str, passes: u32, photons: u64) -> ErrorReport {
     .unwrap();
     let packed = pack(&bundle.expect("one bundle")).unwrap();
     let device = Device::flex();
-    let mut model = TrainedModel::open(&repository().join("models/default"), &device).unwrap();
-    // The guard is opt-in (off by default: it loses on held-out glass and metal scenes at
-    // ≈ 1 photon per pixel per pass); this is the guarded reconstruction.
-    model.config.guard = STRESS_GUARD;
+    let model = TrainedModel::open(&repository().join("models/default"), &device).unwrap();
     let out = reconstruct_tiled(&model, &packed, 0, Engine::Native, &device, |_, _| {});
     let reference = bundle::read_rgb_exr_image(&dir.join("reference.exr")).unwrap();
     let reference = planar_reference(&reference, packed.width, packed.height).unwrap();

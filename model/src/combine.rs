@@ -103,25 +103,35 @@ pub fn combine_block(
 }
 
 /// The safeguard's inputs: the raw variances of the combined levels at the output pixels
-/// `[B, m, h, w]` (ỹ first, as the levels) and its strength κ.
+/// `[B, m, h, w]` (ỹ first, as the levels) and its two constants.
 pub struct Guard {
     /// Variance of the mean of each combined level, ỹ first.
     pub variances: Tensor<4>,
-    /// Strength κ (> 0).
+    /// Strength κ (> 0): how many times Eq. 6's own noise a departure must exceed to be kept.
     pub strength: f32,
+    /// Trust λ (≥ 0) in the smoothest level: how much of that level's own variance counts as a
+    /// reason to keep Eq. 6 (0: the smoothest level is taken as exact).
+    pub target_noise: f32,
 }
 
 /// [`combine_block`] followed, with a [`Guard`], by the safeguard of docs/method.md §5.4: with
-/// z̃ₛ the smoothest combined level at the pixel and Δ = ŷ − z̃ₛ, the output is
-/// z̃ₛ + Δ · Δ² / (Δ² + κ·V), V an estimate of Δ's variance:
+/// z̃ₛ the smoothest combined level at the pixel and Δ = ŷ − z̃ₛ, the output is z̃ₛ + k·Δ with
 ///
-///   V = Σ_j (Σ_i (w^j_i)² / W²) (v_ỹ + v_j) + Σ_j (W_j / W)² v_j + v_s,
+///   k = 1 / (1 + (κ·V / (Δ² + λ·v_s))²),
+///
+/// V an estimate of the variance of Eq. 6 itself,
+///
+///   V = Σ_j (Σ_i (w^j_i)² / W²) (v_ỹ + v_j) + Σ_j (W_j / W)² v_j,
 ///
 /// W_j = Σ_i w^j_i, W = Σ_j W_j, v the variances of the levels' means at the pixel itself
-/// (the window's pixels are taken to be as noisy as its centre, and the levels independent).
-/// Where the network's departure from the smoothest level is within its noise, the output
-/// stays near that level; where it is well beyond (a bias the network removes), it is kept.
-/// Any blend between two estimates that converge converges, so consistency holds.
+/// (the window's pixels are taken to be as noisy as its centre, and the levels independent),
+/// v_s the smoothest level's. Where Eq. 6 departs from a calm smoothest level by less than its
+/// own noise, the output stays near that level; where the departure is well beyond it (a bias
+/// the network removes), or where the smoothest level is itself noisy (a caustic photon caught
+/// by its wide kernel: v_s large), Eq. 6 is kept. The squared ratio makes the switch sharp: a
+/// departure of 8 standard deviations at κ = 16 keeps 94 % of Δ, not the 80 % of a plain
+/// Δ²/(Δ² + κV), so a real bias of the smoothest level is not half put back. Any blend
+/// between two estimates that converge converges, so consistency holds.
 pub fn combine_guarded_block(
     levels: Tensor<4>,
     weights: Tensor<4>,
@@ -187,14 +197,17 @@ pub fn combine_guarded_block(
     let window_noise = (squares * (v_z.clone() + v_y)).sum_dim(1) / total_squared.clone();
     let shares = weight_sums.clone() * weight_sums / total_squared;
     let centre_noise = (shares * v_z.clone()).sum_dim(1);
+    let noise = window_noise + centre_noise; // [B, 1, 1, 1, HW]
     let smoothest_noise = v_z.narrow(1, pairs - 1, 1);
-    let noise = window_noise + centre_noise + smoothest_noise; // [B, 1, 1, 1, HW]
     let smoothest = z.narrow(1, pairs - 1, 1); // [B, 1, 3, 1, HW]
     let delta = combined - smoothest.clone();
-    let delta_squared = delta.clone() * delta.clone();
-    let kept = delta_squared.clone()
-        / (delta_squared + noise.mul_scalar(guard.strength)).add_scalar(1e-30);
-    // A non-finite Eq. 6 (overflow: inf / inf) is kept as it is, for the caller to report.
+    let evidence = delta.clone() * delta.clone()
+        + smoothest_noise
+            .mul_scalar(guard.target_noise)
+            .add_scalar(1e-30);
+    let ratio = noise.mul_scalar(guard.strength) / evidence;
+    let kept = (ratio.clone() * ratio).add_scalar(1.0).recip();
+    // A non-finite Eq. 6 (overflow: Δ² = inf, or NaN) is kept as it is, for the caller to report.
     let kept = kept.clone().mask_fill(kept.is_nan(), 1.0);
     (smoothest + delta * kept).reshape([batch, 3, height, width])
 }
@@ -257,6 +270,7 @@ pub fn guard_of(config: &ModelConfig, features: &Tensor<4>) -> Option<Guard> {
         Guard {
             variances: variances_from_features(features.clone().narrow(1, 3 * m, m)),
             strength: config.guard,
+            target_noise: config.guard_target_noise,
         }
     })
 }
@@ -544,15 +558,16 @@ mod tests {
     }
 
     /// The safeguard by hand on one pixel (1×1 image, window 1, one pair of weight 1): ŷ = ỹ,
-    /// z̃ₛ = z̃, Δ = ỹ − z̃, V = (v_ỹ + v_z) + v_z + v_z; the output z̃ + Δ·Δ²/(Δ² + κV).
+    /// z̃ₛ = z̃, Δ = ỹ − z̃, V = (v_ỹ + v_z) + v_z; the output z̃ + Δ / (1 + (κV / (Δ² + λv_z))²).
     #[test]
     fn guard_by_hand_on_one_pixel() {
-        let (y, z, vy, vz, kappa) = (5.0f32, 3.0f32, 0.5f32, 0.25f32, 4.0f32);
+        let (y, z, vy, vz, kappa, lambda) = (5.0f32, 3.0f32, 0.5f32, 0.25f32, 4.0f32, 2.0f32);
         let mut levels = vec![y; 3];
         levels.extend([z; 3]);
         let guard = Guard {
             variances: tensor4(vec![vy, vz], [1, 2, 1, 1]),
             strength: kappa,
+            target_noise: lambda,
         };
         let out = values(combine_guarded_block(
             tensor4(levels, [1, 6, 1, 1]),
@@ -561,26 +576,34 @@ mod tests {
             1,
             [0; 4],
         ));
-        let (delta, noise) = (y - z, vy + 3.0 * vz);
-        let want = z + delta * delta * delta / (delta * delta + kappa * noise);
+        let (delta, noise) = (y - z, vy + 2.0 * vz);
+        // κV = 4, Δ² + λv_z = 4.5: the output keeps 1 / (1 + (8/9)²) of Δ.
+        let ratio = kappa * noise / (delta * delta + lambda * vz);
+        let want = z + delta / (1.0 + ratio * ratio);
+        assert!((want - (3.0 + 2.0 * 81.0 / 145.0)).abs() < 1e-6, "{want}");
         for o in out {
             assert!((o - want).abs() < 1e-6, "{o} vs {want}");
         }
     }
 
     /// The guarded output always lies between Eq. 6 and the smoothest level (a blend of two
-    /// estimates that converge converges), equals Eq. 6 with zero variances, and tends to the
-    /// smoothest level as the variances grow.
+    /// estimates that converge converges), equals Eq. 6 with zero variances, tends to the
+    /// smoothest level as Eq. 6's noise grows against a calm smoothest level, and keeps Eq. 6
+    /// where the smoothest level alone is noisy (λ > 0).
     #[test]
     fn guard_blends_between_eq6_and_the_smoothest_level() {
         let (h, w, window) = (5, 4, 3);
         let hw = h * w;
         let levels = noise(15 * hw, 21, 0.0, 2.0);
         let weights = noise(4 * window * window * hw, 22, 0.01, 1.0);
-        let run = |variance: f32| {
+        // `others` for ỹ, z̃1..z̃3 and `smoothest` for z̃4.
+        let run = |others: f32, smoothest: f32| {
+            let mut variances = vec![others; 4 * hw];
+            variances.extend(vec![smoothest; hw]);
             let guard = Guard {
-                variances: tensor4(vec![variance; 5 * hw], [1, 5, h, w]),
+                variances: tensor4(variances, [1, 5, h, w]),
                 strength: 4.0,
+                target_noise: 16.0,
             };
             values(combine_guarded_block(
                 tensor4(levels.clone(), [1, 15, h, w]),
@@ -596,11 +619,14 @@ mod tests {
             window,
         ));
         let smoothest = &levels[12 * hw..];
-        for (g, e) in run(0.0).iter().zip(&eq6) {
-            assert!((g - e).abs() < 1e-5, "{g} vs {e}");
-        }
-        for variance in [1e-3, 0.1, 10.0] {
-            for ((g, e), s) in run(variance).iter().zip(&eq6).zip(smoothest) {
+        let close = |a: &[f32], b: &[f32], tolerance: f32| {
+            for (x, y) in a.iter().zip(b) {
+                assert!((x - y).abs() < tolerance, "{x} vs {y}");
+            }
+        };
+        close(&run(0.0, 0.0), &eq6, 1e-5);
+        for (others, target) in [(1e-3, 1e-3), (0.1, 0.0), (10.0, 10.0), (0.0, 5.0)] {
+            for ((g, e), s) in run(others, target).iter().zip(&eq6).zip(smoothest) {
                 let (lo, hi) = (e.min(*s), e.max(*s));
                 assert!(
                     *g >= lo - 1e-5 && *g <= hi + 1e-5,
@@ -608,8 +634,10 @@ mod tests {
                 );
             }
         }
-        for (g, s) in run(1e6).iter().zip(smoothest) {
-            assert!((g - s).abs() < 1e-3, "{g} vs {s}");
+        close(&run(1e6, 1e-3), smoothest, 1e-3);
+        // A noisy smoothest level: at least 99 % of Eq. 6's departure from it is kept.
+        for ((g, e), s) in run(1e-3, 1e6).iter().zip(&eq6).zip(smoothest) {
+            assert!((g - e).abs() <= 1e-2 * (e - s).abs() + 1e-5, "{g} vs {e}");
         }
     }
 

@@ -174,6 +174,8 @@ pub struct NativeNetwork {
     pairs: usize,
     /// Safeguard strength κ ([`crate::combine::combine_guarded_block`]; 0: Eq. 6 alone).
     guard: f32,
+    /// The safeguard's trust λ in the smoothest level.
+    guard_target_noise: f32,
 }
 
 /// Planar colours of the whole image that the combination reads.
@@ -202,6 +204,7 @@ impl NativeNetwork {
             window: config.window,
             pairs: config.pairs(),
             guard: config.guard,
+            guard_target_noise: config.guard_target_noise,
         }
     }
 
@@ -383,19 +386,19 @@ impl NativeNetwork {
         if self.guard > 0.0 {
             let v = |level: usize| colours.variances[level * pixels + centre];
             let total_squared = total * total;
-            let mut noise = v(self.pairs);
+            let mut noise = 0.0f32;
             for j in 0..self.pairs {
                 noise += squares[j] / total_squared * (v(j + 1) + v(0))
                     + sums[j] * sums[j] / total_squared * v(j + 1);
             }
+            let target_noise = self.guard_target_noise * v(self.pairs) + 1e-30;
             let smoothest = &colours.levels[3 * self.pairs * pixels..];
             // A non-finite Eq. 6 (overflow) is left as it is, for the caller to report.
             for (c, out) in rgb.iter_mut().enumerate().filter(|(_, v)| v.is_finite()) {
                 let base = smoothest[c * pixels + centre];
                 let delta = *out - base;
-                let delta_squared = delta * delta;
-                *out =
-                    base + delta * (delta_squared / (delta_squared + self.guard * noise + 1e-30));
+                let ratio = self.guard * noise / (delta * delta + target_noise);
+                *out = base + delta * (1.0 / (1.0 + ratio * ratio));
             }
         }
         let rgb = rgb.map(|v| v.max(0.0));
@@ -437,6 +440,7 @@ mod tests {
             window,
             pairs,
             guard: 0.0,
+            guard_target_noise: 0.0,
         }
     }
 

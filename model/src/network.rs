@@ -83,17 +83,30 @@ pub struct ModelConfig {
     /// the paper's Eq. 6 alone. Absent from a model.json: [`DEFAULT_GUARD`].
     #[serde(default = "default_guard")]
     pub guard: f32,
+    /// The safeguard's trust λ in the smoothest level: λ times that level's own variance counts
+    /// as evidence for keeping Eq. 6, so a smoothest level made noisy by a caustic photon in its
+    /// wide kernel is not pulled towards. Absent from a model.json:
+    /// [`DEFAULT_GUARD_TARGET_NOISE`].
+    #[serde(default = "default_guard_target_noise")]
+    pub guard_target_noise: f32,
 }
 
-/// The safeguard strength of every preset and of model files that name none: off. κ = 16 won
-/// on the validation, stress and external scenes but lost up to 5× on held-out glass and metal
-/// scenes at ≈ 1 photon per pixel per pass, where the smoothest level is far from the truth
-/// (docs/results.md, "Never worse than its inputs").
-pub const DEFAULT_GUARD: f32 = 0.0;
+/// The safeguard strength κ of every preset and of model files that name none
+/// (docs/results.md, "Never worse than its inputs": chosen on validation scenes).
+pub const DEFAULT_GUARD: f32 = 16.0;
+
+/// The safeguard's trust λ in the smoothest level, for every preset and model files that name
+/// none (chosen with [`DEFAULT_GUARD`]).
+pub const DEFAULT_GUARD_TARGET_NOISE: f32 = 8.0;
 
 /// Serde default of [`ModelConfig::guard`].
 fn default_guard() -> f32 {
     DEFAULT_GUARD
+}
+
+/// Serde default of [`ModelConfig::guard_target_noise`].
+fn default_guard_target_noise() -> f32 {
+    DEFAULT_GUARD_TARGET_NOISE
 }
 
 impl ModelConfig {
@@ -115,6 +128,7 @@ impl ModelConfig {
             weighting: Weighting::Relu,
             levels: all_levels(),
             guard: DEFAULT_GUARD,
+            guard_target_noise: DEFAULT_GUARD_TARGET_NOISE,
         }
     }
 
@@ -172,6 +186,12 @@ impl ModelConfig {
             return Err(format!(
                 "guard must be a finite number ≥ 0, got {}",
                 self.guard
+            ));
+        }
+        if !(self.guard_target_noise.is_finite() && self.guard_target_noise >= 0.0) {
+            return Err(format!(
+                "guard_target_noise must be a finite number ≥ 0, got {}",
+                self.guard_target_noise
             ));
         }
         Ok(())

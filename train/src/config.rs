@@ -61,6 +61,10 @@ pub struct TrainConfig {
     /// (`model::network::DEFAULT_GUARD`).
     #[serde(default)]
     pub guard: Option<f32>,
+    /// The safeguard's trust λ in the smoothest level (docs/method.md §5.4). Absent: the
+    /// preset's (`model::network::DEFAULT_GUARD_TARGET_NOISE`).
+    #[serde(default)]
+    pub guard_target_noise: Option<f32>,
     /// Patch side in pixels.
     pub patch: usize,
     /// Patch stride in pixels.
@@ -137,6 +141,9 @@ impl TrainConfig {
         if let Some(guard) = self.guard {
             c.guard = guard;
         }
+        if let Some(lambda) = self.guard_target_noise {
+            c.guard_target_noise = lambda;
+        }
         match &self.levels {
             Some(levels) => c.with_levels(levels.clone()),
             None => c,
@@ -157,7 +164,7 @@ impl TrainConfig {
 
     /// What a checkpoint of network `model` trained with `settings` cannot continue as this
     /// config says, one `<key> <checkpoint's> (checkpoint) vs <config's> (config)` per differing
-    /// TOML key: the network (`preset`, `weighting`, `window`, `guard`, `levels`) and the optimisation
+    /// TOML key: the network (`preset`, `weighting`, `window`, `guard`, `guard_target_noise`, `levels`) and the optimisation
     /// (`batch`, `lr`, `lr_end`, `seed`, `loss`; `epochs` too under a decaying rate, whose
     /// schedule spans them). Empty: the checkpoint resumes with this config.
     pub fn checkpoint_differences(
@@ -183,6 +190,11 @@ impl TrainConfig {
         );
         differ("window", model.window.to_string(), net.window.to_string());
         differ("guard", model.guard.to_string(), net.guard.to_string());
+        differ(
+            "guard_target_noise",
+            model.guard_target_noise.to_string(),
+            net.guard_target_noise.to_string(),
+        );
         differ(
             "levels",
             format!("{:?}", model.levels),
