@@ -68,7 +68,7 @@ pub struct SplitConfig {
     pub test: f32,
 }
 
-/// The five families; an absent table means no scenes of that family.
+/// The generated families and the user's scenes; an absent table means no scenes of that family.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Families {
@@ -82,6 +82,14 @@ pub struct Families {
     pub metal: Option<MetalConfig>,
     /// Depth-of-field shelves.
     pub shelf: Option<ShelfConfig>,
+    /// Furnished rooms lit by small visible lamps with shades. (Like `external`, left out of
+    /// the serialised config when absent, so older configs keep their fingerprints.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lamp: Option<LampConfig>,
+    /// Glass and liquid objects on a table, optionally before a mirror. (Left out when
+    /// absent, like `lamp`.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tabletop: Option<TabletopConfig>,
     /// Scenes the user brings (Mitsuba 3 XML files), rendered like the generated ones.
     /// (Left out of the serialised config when absent, so the fingerprints of configs
     /// without it, and of the datasets made with them, are what they were.)
@@ -208,6 +216,30 @@ pub enum MetalObject {
     Mirror,
 }
 
+/// Lamps of the lamp family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LampKind {
+    /// A shade on a pole standing on the floor.
+    Floor,
+    /// A smaller shade on a side table.
+    Table,
+    /// A shade hanging from the ceiling on a cord.
+    Pendant,
+}
+
+/// Objects of the tabletop family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TabletopObject {
+    /// Analytic glass sphere.
+    Sphere,
+    /// Solid glass cylinder with rounded-off rims (PLY).
+    Cylinder,
+    /// Drinking glass with a thick bottom, possibly holding a liquid (PLY).
+    Tumbler,
+}
+
 /// Most scenes one dataset config may list (every scene's id and jobs are listed up front).
 pub const MAX_SCENES: u64 = 100_000;
 
@@ -215,7 +247,7 @@ pub const MAX_SCENES: u64 = 100_000;
 pub const MAX_SIDE: u32 = 8192;
 
 /// Most objects a scene may get from an object-count range (`objects`, `objects_per_shelf`,
-/// `shelves`, `waves`).
+/// `shelves`, `waves`, `lamps`, `light_count`).
 pub const MAX_OBJECTS: u64 = 1000;
 
 /// Checks every `[lo, hi]` range under `value` (the families' parameters, serialised; `path`
@@ -248,7 +280,14 @@ fn check_ranges(path: &str, value: &serde_json::Value) -> Result<(), String> {
             if lo > hi {
                 return Err(format!("{path}: the range [{lo}, {hi}] has lo > hi"));
             }
-            let counts = ["objects", "objects_per_shelf", "shelves", "waves"];
+            let counts = [
+                "objects",
+                "objects_per_shelf",
+                "shelves",
+                "waves",
+                "lamps",
+                "light_count",
+            ];
             if counts.iter().any(|c| path.ends_with(&format!(".{c}"))) && hi > MAX_OBJECTS as f64 {
                 return Err(format!("{path}: at most {MAX_OBJECTS} (got {hi})"));
             }
@@ -440,6 +479,121 @@ pub struct ShelfConfig {
     pub fov: [f32; 2],
 }
 
+/// Parameter ranges of the lamp family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LampConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Room width (x).
+    pub size_x: [f32; 2],
+    /// Room depth (z).
+    pub size_z: [f32; 2],
+    /// Ceiling height.
+    pub height: [f32; 2],
+    /// Per-channel wall albedo.
+    pub wall_albedo: [f32; 2],
+    /// Per-channel floor albedo (under a glossy coat).
+    pub floor_albedo: [f32; 2],
+    /// GGX alpha of the floor coat (below 0.01: smooth `plastic`).
+    pub floor_alpha: [f32; 2],
+    /// Number of lamps.
+    pub lamps: [u32; 2],
+    /// Lamp kinds, chosen uniformly per lamp.
+    pub kinds: Vec<LampKind>,
+    /// Emitted power (W) of each bulb.
+    pub lamp_power: [f32; 2],
+    /// Bulb (emitting sphere) radius.
+    pub bulb_radius: [f32; 2],
+    /// Warmth of the bulb colour: 0 is white, 1 drops green by half and blue to nothing.
+    pub bulb_warmth: [f32; 2],
+    /// Height of the bulb centre in the shade: 0 at the lower rim, 1 at the upper; negative
+    /// values hang the bulb below the shade, where it is seen from the side.
+    pub bulb_position: [f32; 2],
+    /// Radius of the shade's lower opening (pendant and table shades are scaled down).
+    pub shade_radius: [f32; 2],
+    /// Shade height as a multiple of its lower radius.
+    pub shade_height: [f32; 2],
+    /// Upper over lower shade radius (below 1: the usual tapered shade).
+    pub shade_taper: [f32; 2],
+    /// Per-channel shade albedo (opaque diffuse; light leaves through the openings only).
+    pub shade_albedo: [f32; 2],
+    /// Number of furniture objects (boxes and tables).
+    pub objects: [u32; 2],
+    /// Furniture size.
+    pub object_size: [f32; 2],
+    /// Probability that a piece of furniture is a table rather than a box.
+    pub table_probability: f32,
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
+/// Parameter ranges of the tabletop family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TabletopConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Table top half-width (x).
+    pub table_size_x: [f32; 2],
+    /// Table top half-depth (z).
+    pub table_size_z: [f32; 2],
+    /// Per-channel albedo of the table top.
+    pub table_albedo: [f32; 2],
+    /// Probability of a checkered table cloth (else plain diffuse or glossy).
+    pub checker_probability: f32,
+    /// Probability that a plain top is glossy (rough plastic) rather than diffuse.
+    pub plastic_probability: f32,
+    /// GGX alpha of a glossy top (below 0.01: smooth `plastic`).
+    pub table_alpha: [f32; 2],
+    /// Number of glass objects.
+    pub objects: [u32; 2],
+    /// Object kinds, chosen uniformly per object.
+    pub shapes: Vec<TabletopObject>,
+    /// Object size (sphere radius, cylinder and tumbler radius).
+    pub object_size: [f32; 2],
+    /// Height of cylinders and tumblers as a multiple of their radius.
+    pub object_height: [f32; 2],
+    /// Index of refraction of the glass.
+    pub ior: [f32; 2],
+    /// Probability that a tumbler holds a liquid.
+    pub liquid_probability: f32,
+    /// Liquid level as a fraction of the tumbler's inner height.
+    pub liquid_fill: [f32; 2],
+    /// Index of refraction of the liquid.
+    pub liquid_ior: [f32; 2],
+    /// Probability of a mirror standing behind the objects.
+    pub mirror_probability: f32,
+    /// Mirror half-width.
+    pub mirror_width: [f32; 2],
+    /// Mirror height.
+    pub mirror_height: [f32; 2],
+    /// Mirror yaw away from facing the camera side, degrees.
+    pub mirror_yaw: [f32; 2],
+    /// Named conductors of the mirror (Mitsuba `material`), chosen uniformly.
+    pub mirror_materials: Vec<String>,
+    /// Light kinds, chosen uniformly per light.
+    pub lights: Vec<SmallLight>,
+    /// Number of lights.
+    pub light_count: [u32; 2],
+    /// Half-size of area lights.
+    pub light_size: [f32; 2],
+    /// Emitted power (W) of each light.
+    pub light_power: [f32; 2],
+    /// Light elevation above the table plane, degrees.
+    pub light_elevation: [f32; 2],
+    /// Light distance from the table centre.
+    pub light_distance: [f32; 2],
+    /// Constant environment radiance (0 = none).
+    pub env_radiance: [f32; 2],
+    /// Camera elevation above the table plane, degrees.
+    pub camera_elevation: [f32; 2],
+    /// Camera distance from the table centre.
+    pub camera_distance: [f32; 2],
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
 /// Configuration errors; each names the file and the problem.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -555,6 +709,35 @@ impl Config {
             empty("metal.materials", c.materials.len())?;
             empty("metal.lights", c.lights.len())?;
         }
+        if let Some(c) = &f.lamp {
+            empty("lamp.kinds", c.kinds.len())?;
+            // A lamp scene is lit by its lamps alone, and a bulb needs a size to emit from.
+            if c.lamps[0] == 0 {
+                return Err("families.lamp.lamps: at least one lamp per scene".into());
+            }
+            if c.bulb_radius[0] <= 0.0 || c.shade_radius[0] <= 0.0 || c.shade_taper[0] <= 0.0 {
+                return Err(
+                    "families.lamp: bulb_radius, shade_radius and shade_taper must be positive"
+                        .into(),
+                );
+            }
+        }
+        if let Some(c) = &f.tabletop {
+            empty("tabletop.shapes", c.shapes.len())?;
+            empty("tabletop.lights", c.lights.len())?;
+            empty("tabletop.mirror_materials", c.mirror_materials.len())?;
+            if c.objects[0] == 0 || c.light_count[0] == 0 {
+                return Err("families.tabletop: objects and light_count must be at least 1".into());
+            }
+            if c.object_size[0] <= 0.0 || c.object_height[0] <= 0.0 {
+                return Err(
+                    "families.tabletop: object_size and object_height must be positive".into(),
+                );
+            }
+            if c.liquid_fill[0] < 0.0 || c.liquid_fill[1] > 1.0 {
+                return Err("families.tabletop.liquid_fill must lie in [0, 1]".into());
+            }
+        }
         if let Some(c) = &f.external {
             if c.scenes.is_empty() {
                 return Err("families.external.scenes must not be empty".into());
@@ -583,6 +766,8 @@ impl Config {
             f.water.as_ref().map_or(0, |c| c.count),
             f.metal.as_ref().map_or(0, |c| c.count),
             f.shelf.as_ref().map_or(0, |c| c.count),
+            f.lamp.as_ref().map_or(0, |c| c.count),
+            f.tabletop.as_ref().map_or(0, |c| c.count),
         ]
         .iter()
         .map(|&c| u64::from(c))
@@ -607,6 +792,8 @@ impl Config {
             + f.water.as_ref().map_or(0, |c| c.count)
             + f.metal.as_ref().map_or(0, |c| c.count)
             + f.shelf.as_ref().map_or(0, |c| c.count)
+            + f.lamp.as_ref().map_or(0, |c| c.count)
+            + f.tabletop.as_ref().map_or(0, |c| c.count)
             + f.external.as_ref().map_or(0, |c| c.scenes.len() as u32)
     }
 

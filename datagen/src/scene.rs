@@ -8,7 +8,7 @@ use glam::{Mat3, Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 use std::f32::consts::PI;
 
-/// The five scene families, in generation order.
+/// The scene families, in generation order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Family {
@@ -22,18 +22,24 @@ pub enum Family {
     Metal,
     /// Depth-of-field shelves.
     Shelf,
+    /// Furnished rooms lit by small visible lamps with shades.
+    Lamp,
+    /// Glass and liquid objects on a table, optionally before a mirror.
+    Tabletop,
     /// Scenes the user brings (`[families.external]`), not generated.
     External,
 }
 
 impl Family {
     /// All families in generation order.
-    pub const ALL: [Family; 6] = [
+    pub const ALL: [Family; 8] = [
         Family::Room,
         Family::Glass,
         Family::Water,
         Family::Metal,
         Family::Shelf,
+        Family::Lamp,
+        Family::Tabletop,
         Family::External,
     ];
 
@@ -45,6 +51,8 @@ impl Family {
             Family::Water => "water",
             Family::Metal => "metal",
             Family::Shelf => "shelf",
+            Family::Lamp => "lamp",
+            Family::Tabletop => "tabletop",
             Family::External => "external",
         }
     }
@@ -291,6 +299,23 @@ impl SceneBuilder {
                 .child(material.element()),
         );
         self.meshes.push((file, mesh));
+    }
+
+    /// A spherical area light (a bulb) of radius `radius` emitting `power` (W) in total, tinted
+    /// by `color` (scaled so that its green channel carries the power).
+    pub fn sphere_light(&mut self, center: Vec3, radius: f32, power: f32, color: [f32; 3]) {
+        // Lambertian emitter: power = π · radiance · area, with area 4πr².
+        let radiance = power / (PI * 4.0 * PI * radius * radius);
+        let scale = radiance / color[1].max(1e-3);
+        self.elements.push(
+            Element::plugin("shape", "sphere")
+                .point("center", center)
+                .float("radius", radius)
+                .child(Material::Diffuse([0.0; 3]).element())
+                .child(
+                    Element::plugin("emitter", "area").rgb("radiance", color.map(|c| c * scale)),
+                ),
+        );
     }
 
     /// A point light of total power `power` (W).

@@ -3,7 +3,10 @@
 //! exactly; splits are by scene and cover every family; scheduler variables map to shards;
 //! every generated scene of the `small` preset is deterministic, distinct, loads in the
 //! renderer's strict importer at the configured size, respects its family's configured ranges
-//! and has its family's defining feature (glass, water, metal, thin lens, hidden lights).
+//! and has its family's defining feature (glass, water, metal, thin lens, hidden lights); the
+//! `families` preset holds two scenes of every family, and its lamp and tabletop scenes are
+//! deterministic, load and build, with small emitting bulbs and glass respectively; configs
+//! without those tables keep their scene ids and fingerprints.
 
 mod common;
 
@@ -13,7 +16,7 @@ use datagen::families::{generate, scene_list};
 use datagen::plan::{Plan, Shard, Split};
 use datagen::scene::{write_scene_files, Family};
 use renderer::bsdf::Bsdf;
-use renderer::description::{EmitterDesc, FovAxis, SceneDescription};
+use renderer::description::{EmitterDesc, FovAxis, Geometry, SceneDescription};
 use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::path::PathBuf;
 
@@ -385,7 +388,9 @@ fn small_scenes_are_deterministic_distinct_loadable_and_true_to_family() {
                 assert!(d.camera.focus_distance > 0.0, "{id}");
                 Some(c.fov)
             }
-            Family::External => unreachable!("{id}: the small preset has no external scenes"),
+            Family::Lamp | Family::Tabletop | Family::External => {
+                unreachable!("{id}: the small preset has no {family:?} scenes")
+            }
         };
         assert!(within(d.camera.fov, fov), "{id}: fov {}", d.camera.fov);
         if family != Family::Shelf {
@@ -393,5 +398,201 @@ fn small_scenes_are_deterministic_distinct_loadable_and_true_to_family() {
         }
         renderer::scene::Scene::build(&d).unwrap_or_else(|e| panic!("{id}: {e}"));
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The `families` preset: two 64×64 scenes of every generated family, in `Family::ALL` order.
+#[test]
+fn families_preset_has_two_scenes_of_every_family() {
+    let config = preset("families");
+    assert_eq!((config.width, config.height), (64, 64));
+    let counts = per_family(&config);
+    let generated: Vec<Family> = Family::ALL
+        .into_iter()
+        .filter(|f| *f != Family::External)
+        .collect();
+    assert_eq!(counts.keys().copied().collect::<Vec<_>>(), generated);
+    assert!(counts.values().all(|&n| n == 2), "{counts:?}");
+    let ids: Vec<String> = scene_list(&config).into_iter().map(|(id, _)| id).collect();
+    assert_eq!(
+        ids[10..],
+        ["010-lamp", "011-lamp", "012-tabletop", "013-tabletop"]
+    );
+}
+
+/// The new tables are checked like the others: ranges, choice lists and their own domains,
+/// each error naming the field.
+#[test]
+fn lamp_and_tabletop_config_errors_name_the_field() {
+    let text = std::fs::read_to_string(preset_path("families")).unwrap();
+    for (from, to, needle) in [
+        ("lamps = [1, 3]", "lamps = [0, 3]", "families.lamp.lamps"),
+        (
+            "bulb_radius = [0.02, 0.05]",
+            "bulb_radius = [0.05, 0.02]",
+            "families.lamp.bulb_radius",
+        ),
+        (
+            "kinds = [\"floor\", \"table\", \"pendant\"]",
+            "kinds = []",
+            "families.lamp.kinds",
+        ),
+        (
+            "liquid_fill = [0.3, 0.8]",
+            "liquid_fill = [0.3, 1.5]",
+            "families.tabletop.liquid_fill",
+        ),
+        (
+            "light_count = [1, 2]",
+            "light_count = [0, 2]",
+            "families.tabletop",
+        ),
+        (
+            "mirror_materials = [\"Ag\", \"Al\"]",
+            "mirror_materials = []",
+            "mirror_materials",
+        ),
+        (
+            "shade_taper = [0.5, 0.9]",
+            "shade_tapper = [0.5, 0.9]",
+            "shade_tapper",
+        ),
+    ] {
+        let bad = text.replacen(from, to, 1);
+        assert_ne!(bad, text, "families.toml no longer has `{from}`");
+        let e = Config::parse(&bad, "bad.toml").unwrap_err().to_string();
+        assert!(e.contains("bad.toml") && e.contains(needle), "{to}: {e}");
+    }
+}
+
+/// The lamp and tabletop tables are new: configs without them must list the same scenes and
+/// serialise (fingerprint) exactly as before they existed.
+#[test]
+fn configs_without_the_new_families_keep_ids_and_fingerprints() {
+    let small = preset("small");
+    let ids: Vec<String> = scene_list(&small).into_iter().map(|(id, _)| id).collect();
+    let names = ["room", "glass", "water", "metal", "shelf"];
+    let expected: Vec<String> = (0..40)
+        .map(|i| format!("{i:03}-{}", names[i / 8]))
+        .collect();
+    assert_eq!(ids, expected);
+    let json = serde_json::to_string(&small).unwrap();
+    assert!(
+        !json.contains("lamp") && !json.contains("tabletop"),
+        "{json}"
+    );
+    // The fingerprint of `tiny` as the datagen before these families wrote it in a manifest.
+    assert_eq!(
+        datagen::manifest::config_fingerprint(&preset("tiny")),
+        TINY_FINGERPRINT
+    );
+}
+
+/// Fingerprint (`config_sha256`) of configs/datagen/tiny.toml, unchanged since before the lamp
+/// and tabletop families.
+const TINY_FINGERPRINT: &str = "eaff9951eb809cbaacd1b1b723e44bd09d096940daddecfb93386071206c8b49";
+
+/// Bounding-box diagonal of a shape's geometry.
+fn extent(g: &Geometry) -> f32 {
+    match g {
+        Geometry::Mesh(m) => {
+            let lo = m
+                .positions
+                .iter()
+                .fold(glam::Vec3::INFINITY, |a, p| a.min(*p));
+            let hi = m
+                .positions
+                .iter()
+                .fold(glam::Vec3::NEG_INFINITY, |a, p| a.max(*p));
+            (hi - lo).length()
+        }
+        Geometry::Sphere { radius, .. } => 2.0 * 3f32.sqrt() * radius,
+        other => panic!("unexpected geometry {other:?}"),
+    }
+}
+
+#[test]
+fn lamp_and_tabletop_scenes_are_deterministic_loadable_and_true_to_family() {
+    // The `families` preset's ranges with eight scenes of each, to meet every kind of lamp and
+    // object.
+    let mut config = preset("families");
+    config.families.lamp.as_mut().unwrap().count = 8;
+    config.families.tabletop.as_mut().unwrap().count = 8;
+    let dir = fresh_dir("new-families");
+    let (lamp, tabletop) = (
+        config.families.lamp.as_ref().unwrap(),
+        config.families.tabletop.as_ref().unwrap(),
+    );
+    let mut seen = 0;
+    for (index, (id, family)) in scene_list(&config).into_iter().enumerate() {
+        if !matches!(family, Family::Lamp | Family::Tabletop) {
+            continue;
+        }
+        seen += 1;
+        let scene = generate(&config, index).unwrap();
+        assert_eq!(scene.id, id);
+        assert_eq!(
+            scene.files(),
+            generate(&config, index).unwrap().files(),
+            "{id}"
+        );
+        // Another master seed gives another scene.
+        let mut other = config.clone();
+        other.seed += 1;
+        assert_ne!(generate(&other, index).unwrap().xml, scene.xml, "{id}");
+
+        let xml = write_scene_files(&scene, &dir.join(&id)).unwrap();
+        let d = renderer::xml::load_scene(&xml, &[], false).unwrap_or_else(|e| panic!("{id}: {e}"));
+        assert!(d.warnings.is_empty(), "{id}: {:?}", d.warnings);
+        assert_eq!((d.camera.width, d.camera.height), (64, 64), "{id}");
+        assert_eq!(d.camera.aperture_radius, 0.0, "{id}: pinhole expected");
+        let emitting: Vec<_> = d.shapes.iter().filter(|s| s.emission.is_some()).collect();
+        match family {
+            Family::Lamp => {
+                assert!(
+                    within(d.camera.fov, Some(lamp.fov)),
+                    "{id}: fov {}",
+                    d.camera.fov
+                );
+                // Lit by its bulbs alone: small spheres, tiny next to the room.
+                assert!(d.emitters.is_empty(), "{id}: {:?}", d.emitters);
+                let n = emitting.len() as u32;
+                assert!(n >= lamp.lamps[0] && n <= lamp.lamps[1], "{id}: {n} bulbs");
+                let room = d
+                    .shapes
+                    .iter()
+                    .map(|s| extent(&s.geometry))
+                    .fold(0.0, f32::max);
+                for s in &emitting {
+                    assert!(matches!(s.geometry, Geometry::Sphere { .. }), "{id}");
+                    let size = extent(&s.geometry);
+                    assert!(size < 0.05 * room, "{id}: bulb {size} in a room of {room}");
+                }
+            }
+            _ => {
+                assert!(
+                    within(d.camera.fov, Some(tabletop.fov)),
+                    "{id}: fov {}",
+                    d.camera.fov
+                );
+                assert!(
+                    has_bsdf(&d, |b| matches!(b, Bsdf::Dielectric(_))),
+                    "{id}: no glass"
+                );
+                let lights = emitting.len()
+                    + d.emitters
+                        .iter()
+                        .filter(|e| !matches!(e, EmitterDesc::Constant { .. }))
+                        .count();
+                let [lo, hi] = tabletop.light_count;
+                assert!(
+                    lights >= lo as usize && lights <= hi as usize,
+                    "{id}: {lights}"
+                );
+            }
+        }
+        renderer::scene::Scene::build(&d).unwrap_or_else(|e| panic!("{id}: {e}"));
+    }
+    assert_eq!(seen, 16);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -1,4 +1,4 @@
-//! Placement of the compact lights shared by the glass and metal families.
+//! Placement of the compact lights shared by the glass, metal and tabletop families.
 
 use crate::config::SmallLight;
 use crate::rng::Rng;
@@ -24,10 +24,24 @@ pub fn place_small_light(
     let dir = spherical(azimuth, rng.range(elevation));
     let pos = target + dir * rng.range(distance);
     let watts = rng.range(power);
+    add_small_light(b, rng, kind, pos, target, size, watts);
+    (kind, pos)
+}
+
+/// Adds one light of kind `kind` at `pos` aimed at `target` emitting `watts`; an area light
+/// gets a half-size from `size`, a spot a cutoff of 20°–35°.
+pub fn add_small_light(
+    b: &mut SceneBuilder,
+    rng: &mut Rng,
+    kind: SmallLight,
+    pos: Vec3,
+    target: Vec3,
+    size: [f32; 2],
+    watts: f32,
+) {
     match kind {
         SmallLight::Area => b.area_light(pos, target, rng.range(size), watts),
         SmallLight::Spot => b.spot_light(pos, target, watts, rng.range([20.0, 35.0])),
         SmallLight::Point => b.point_light(pos, watts),
     }
-    (kind, pos)
 }

@@ -2,10 +2,12 @@
 //! generated scene. Scenes are numbered over the families in [`Family::ALL`] order.
 
 mod glass;
+mod lamp;
 mod lights;
 mod metal;
 mod room;
 mod shelf;
+mod tabletop;
 mod water;
 
 use crate::config::Config;
@@ -21,6 +23,8 @@ pub fn scene_list(config: &Config) -> Vec<(String, Family)> {
         f.water.as_ref().map_or(0, |c| c.count),
         f.metal.as_ref().map_or(0, |c| c.count),
         f.shelf.as_ref().map_or(0, |c| c.count),
+        f.lamp.as_ref().map_or(0, |c| c.count),
+        f.tabletop.as_ref().map_or(0, |c| c.count),
     ];
     let mut out = Vec::new();
     for (family, count) in Family::ALL.into_iter().zip(counts) {
@@ -50,6 +54,8 @@ pub fn generate(config: &Config, index: usize) -> Option<GeneratedScene> {
         Family::Water => water::generate(config, f.water.as_ref().unwrap(), &mut rng, id),
         Family::Metal => metal::generate(config, f.metal.as_ref().unwrap(), &mut rng, id),
         Family::Shelf => shelf::generate(config, f.shelf.as_ref().unwrap(), &mut rng, id),
+        Family::Lamp => lamp::generate(config, f.lamp.as_ref().unwrap(), &mut rng, id),
+        Family::Tabletop => tabletop::generate(config, f.tabletop.as_ref().unwrap(), &mut rng, id),
         Family::External => return None,
     })
 }
