@@ -26,6 +26,10 @@ SPPM only, see its README) are listed but not compared.
     python3 scripts/validate_pt.py --scenes cbox,textured-diffuse --spp 1024
     python3 scripts/validate_pt.py --refs-only           # only build the Mitsuba cache
     python3 scripts/validate_pt.py --doc docs/validation.md
+    python3 scripts/validate_pt.py --scene-root /tmp/fam   # generated scenes: datagen scenes --out /tmp/fam
+
+With --scene-root DIR the scenes are DIR/*/scene.xml instead (group "generated": datagen's
+scenes, whose film has its dataset's size, so only the 4x4 divisibility is checked).
 """
 
 import argparse
@@ -116,10 +120,12 @@ class Scene:
         return {k: v for k, v in params.items() if k in self.defaults}
 
 
-def discover(selected):
-    """All validation and external scenes, optionally filtered by name."""
+def discover(selected, root=None):
+    """All validation and external scenes (or every DIR/*/scene.xml of `root`), optionally
+    filtered by name."""
     scenes = []
-    for group, base in (("validation", VALIDATION), ("external", EXTERNAL)):
+    groups = (("generated", root),) if root else (("validation", VALIDATION), ("external", EXTERNAL))
+    for group, base in groups:
         for xml in sorted(base.glob("*/scene.xml")):
             scenes.append(Scene(xml.parent.name, xml, group))
     if selected:
@@ -194,7 +200,8 @@ def mitsuba_reference(scene, spp, out_dir, force):
         # The film is $res wide; its height is the scene's (square unless the scene says so).
         # A film with a crop window renders the window, whose sides must still divide by DOWN.
         cropped = "crop_width" in scene.xml.read_text() or "crop_height" in scene.xml.read_text()
-        if (img.shape[1] != RES and not cropped) or img.shape[0] % DOWN or img.shape[1] % DOWN:
+        sized = "res" in scene.defaults  # generated scenes have their dataset's fixed film
+        if (sized and img.shape[1] != RES and not cropped) or img.shape[0] % DOWN or img.shape[1] % DOWN:
             sys.exit(f"{scene.name}: Mitsuba rendered {img.shape[1]}x{img.shape[0]}, expected "
                      f"width {RES} (or a crop window) and sides divisible by {DOWN} (no $res default?)")
         acc = img if acc is None else acc + img
@@ -309,6 +316,7 @@ def update_doc(doc, table, command):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", help="comma-separated scene names (default: all)")
+    ap.add_argument("--scene-root", type=Path, help="validate DIR/*/scene.xml (e.g. datagen scenes) instead")
     ap.add_argument("--spp", type=int, default=4096, help="our samples per pixel (default 4096)")
     ap.add_argument("--ref-spp", type=int, default=4096, help="Mitsuba samples per pixel (default 4096)")
     ap.add_argument("--seed", type=int, default=1)
@@ -322,7 +330,7 @@ def main():
     ap.add_argument("--doc", type=Path, help="write the table into this markdown file")
     args = ap.parse_args()
 
-    scenes = discover(args.scenes)
+    scenes = discover(args.scenes, args.scene_root)
     if not args.refs_only and not args.reuse_ours and not args.no_build:
         subprocess.run(["cargo", "build", "--release", "-p", "renderer", "--bin", "render"], cwd=ROOT, check=True)
     help_text = "" if args.refs_only or args.reuse_ours else render_help(args.bin)
