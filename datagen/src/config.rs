@@ -90,6 +90,14 @@ pub struct Families {
     /// absent, like `lamp`.)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tabletop: Option<TabletopConfig>,
+    /// Sun- and sky-lit exteriors with glass, a pool or a slab casting caustics on the ground.
+    /// (Left out when absent, like `lamp`.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exterior: Option<ExteriorConfig>,
+    /// Procedural meshes with random materials of every BSDF kind. (Left out when absent,
+    /// like `lamp`.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<MaterialConfig>,
     /// Scenes the user brings (Mitsuba 3 XML files), rendered like the generated ones.
     /// (Left out of the serialised config when absent, so the fingerprints of configs
     /// without it, and of the datasets made with them, are what they were.)
@@ -240,6 +248,56 @@ pub enum TabletopObject {
     Tumbler,
 }
 
+/// Caustic casters of the exterior family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExteriorGlass {
+    /// Analytic glass sphere lying on the ground.
+    Sphere,
+    /// Glass cube standing on the ground.
+    Block,
+    /// Thick glass slab on short legs, a little above the ground.
+    Slab,
+    /// Raised pool: low walls round a tiled bottom, with a wavy water surface (PLY).
+    Pool,
+}
+
+/// Object shapes of the material family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MaterialShape {
+    /// Closed vase-like surface of revolution (PLY).
+    Vase,
+    /// Displaced (noisy) sphere (PLY).
+    Blob,
+    /// Torus standing on its rim or lying flat (PLY).
+    Torus,
+    /// Analytic box.
+    Box,
+}
+
+/// BSDF kinds of the material family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MaterialKind {
+    /// `diffuse` (plain or checkered).
+    Diffuse,
+    /// Smooth `plastic`.
+    Plastic,
+    /// `roughplastic`.
+    RoughPlastic,
+    /// Smooth `conductor`.
+    Conductor,
+    /// `roughconductor`.
+    RoughConductor,
+    /// Smooth `dielectric`.
+    Dielectric,
+    /// `roughdielectric`.
+    RoughDielectric,
+    /// `principled` (plain or checkered base colour).
+    Principled,
+}
+
 /// Most scenes one dataset config may list (every scene's id and jobs are listed up front).
 pub const MAX_SCENES: u64 = 100_000;
 
@@ -287,6 +345,7 @@ fn check_ranges(path: &str, value: &serde_json::Value) -> Result<(), String> {
                 "waves",
                 "lamps",
                 "light_count",
+                "glass_objects",
             ];
             if counts.iter().any(|c| path.ends_with(&format!(".{c}"))) && hi > MAX_OBJECTS as f64 {
                 return Err(format!("{path}: at most {MAX_OBJECTS} (got {hi})"));
@@ -594,6 +653,99 @@ pub struct TabletopConfig {
     pub fov: [f32; 2],
 }
 
+/// Parameter ranges of the exterior family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExteriorConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Half-size of the (square) ground plane.
+    pub ground_size: [f32; 2],
+    /// Per-channel ground albedo.
+    pub ground_albedo: [f32; 2],
+    /// Probability of checkered paving rather than a plain ground.
+    pub checker_probability: f32,
+    /// Size of one paving check.
+    pub check_size: [f32; 2],
+    /// Constant sky radiance.
+    pub sky_radiance: [f32; 2],
+    /// Sun irradiance (directional emitter).
+    pub sun_irradiance: [f32; 2],
+    /// Sun elevation above the horizon, degrees.
+    pub sun_elevation: [f32; 2],
+    /// Number of caustic casters.
+    pub glass_objects: [u32; 2],
+    /// Caster kinds, chosen uniformly per caster.
+    pub glass_shapes: Vec<ExteriorGlass>,
+    /// Caster size (sphere radius, block and slab half-size).
+    pub glass_size: [f32; 2],
+    /// Index of refraction of the glass.
+    pub ior: [f32; 2],
+    /// Half-size of a pool.
+    pub pool_size: [f32; 2],
+    /// Amplitude of the pool's waves.
+    pub wave_amplitude: [f32; 2],
+    /// Number of diffuse or metal objects.
+    pub objects: [u32; 2],
+    /// Their size.
+    pub object_size: [f32; 2],
+    /// Probability that such an object is metal rather than diffuse.
+    pub metal_probability: f32,
+    /// Named conductors (Mitsuba `material`) of the metal objects, chosen uniformly.
+    pub metals: Vec<String>,
+    /// Eye height of the camera above the ground.
+    pub camera_height: [f32; 2],
+    /// Horizontal distance of the camera from the objects' centre.
+    pub camera_distance: [f32; 2],
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
+/// Parameter ranges of the material family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Number of objects.
+    pub objects: [u32; 2],
+    /// Object shapes, chosen uniformly per object.
+    pub shapes: Vec<MaterialShape>,
+    /// Object size (about its radius).
+    pub object_size: [f32; 2],
+    /// BSDF kinds, chosen uniformly per object.
+    pub kinds: Vec<MaterialKind>,
+    /// Per-channel albedo / base colour.
+    pub albedo: [f32; 2],
+    /// GGX alpha of the rough kinds (also the principled roughness).
+    pub alpha: [f32; 2],
+    /// Index of refraction of the dielectrics.
+    pub ior: [f32; 2],
+    /// Named conductors (Mitsuba `material`), chosen uniformly.
+    pub metals: Vec<String>,
+    /// Probability that a diffuse or principled object is checkered.
+    pub texture_probability: f32,
+    /// Per-channel floor albedo.
+    pub floor_albedo: [f32; 2],
+    /// Probability of a simple room (floor, three walls and a ceiling) rather than an open
+    /// floor under the environment.
+    pub room_probability: f32,
+    /// Emitted power (W) of the area light above the objects.
+    pub light_power: [f32; 2],
+    /// Half-size of the area light.
+    pub light_size: [f32; 2],
+    /// Height of the area light above the floor.
+    pub light_height: [f32; 2],
+    /// Constant environment radiance (0 = none).
+    pub env_radiance: [f32; 2],
+    /// Camera elevation above the floor plane, degrees.
+    pub camera_elevation: [f32; 2],
+    /// Camera distance from the objects' centre.
+    pub camera_distance: [f32; 2],
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
 /// Configuration errors; each names the file and the problem.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -738,6 +890,57 @@ impl Config {
                 return Err("families.tabletop.liquid_fill must lie in [0, 1]".into());
             }
         }
+        if let Some(c) = &f.exterior {
+            empty("exterior.glass_shapes", c.glass_shapes.len())?;
+            empty("exterior.metals", c.metals.len())?;
+            // The family's point: at least one caustic under a visible sun.
+            if c.glass_objects[0] == 0 {
+                return Err("families.exterior.glass_objects: at least one per scene".into());
+            }
+            if c.sun_irradiance[0] <= 0.0 {
+                return Err("families.exterior.sun_irradiance must be positive".into());
+            }
+            if c.sun_elevation[0] <= 0.0 || c.sun_elevation[1] > 90.0 {
+                return Err("families.exterior.sun_elevation must lie in (0, 90]".into());
+            }
+            for (name, r) in [
+                ("ground_size", c.ground_size),
+                ("check_size", c.check_size),
+                ("glass_size", c.glass_size),
+                ("pool_size", c.pool_size),
+                ("object_size", c.object_size),
+                ("camera_height", c.camera_height),
+                ("ior", c.ior),
+            ] {
+                if r[0] <= 0.0 {
+                    return Err(format!("families.exterior.{name} must be positive"));
+                }
+            }
+        }
+        if let Some(c) = &f.material {
+            empty("material.shapes", c.shapes.len())?;
+            empty("material.kinds", c.kinds.len())?;
+            empty("material.metals", c.metals.len())?;
+            if c.objects[0] == 0 {
+                return Err("families.material.objects: at least one per scene".into());
+            }
+            if c.alpha[0] < 0.0 || c.alpha[1] > 1.0 {
+                return Err("families.material.alpha must lie in [0, 1]".into());
+            }
+            if c.albedo[0] < 0.0 || c.albedo[1] > 1.0 {
+                return Err("families.material.albedo must lie in [0, 1]".into());
+            }
+            for (name, r) in [
+                ("object_size", c.object_size),
+                ("light_size", c.light_size),
+                ("light_power", c.light_power),
+                ("ior", c.ior),
+            ] {
+                if r[0] <= 0.0 {
+                    return Err(format!("families.material.{name} must be positive"));
+                }
+            }
+        }
         if let Some(c) = &f.external {
             if c.scenes.is_empty() {
                 return Err("families.external.scenes must not be empty".into());
@@ -768,6 +971,8 @@ impl Config {
             f.shelf.as_ref().map_or(0, |c| c.count),
             f.lamp.as_ref().map_or(0, |c| c.count),
             f.tabletop.as_ref().map_or(0, |c| c.count),
+            f.exterior.as_ref().map_or(0, |c| c.count),
+            f.material.as_ref().map_or(0, |c| c.count),
         ]
         .iter()
         .map(|&c| u64::from(c))
@@ -794,6 +999,8 @@ impl Config {
             + f.shelf.as_ref().map_or(0, |c| c.count)
             + f.lamp.as_ref().map_or(0, |c| c.count)
             + f.tabletop.as_ref().map_or(0, |c| c.count)
+            + f.exterior.as_ref().map_or(0, |c| c.count)
+            + f.material.as_ref().map_or(0, |c| c.count)
             + f.external.as_ref().map_or(0, |c| c.scenes.len() as u32)
     }
 

@@ -26,13 +26,17 @@ pub enum Family {
     Lamp,
     /// Glass and liquid objects on a table, optionally before a mirror.
     Tabletop,
+    /// Sun- and sky-lit exteriors with caustics on the ground.
+    Exterior,
+    /// Procedural meshes with random materials of every BSDF kind.
+    Material,
     /// Scenes the user brings (`[families.external]`), not generated.
     External,
 }
 
 impl Family {
     /// All families in generation order.
-    pub const ALL: [Family; 8] = [
+    pub const ALL: [Family; 10] = [
         Family::Room,
         Family::Glass,
         Family::Water,
@@ -40,6 +44,8 @@ impl Family {
         Family::Shelf,
         Family::Lamp,
         Family::Tabletop,
+        Family::Exterior,
+        Family::Material,
         Family::External,
     ];
 
@@ -53,6 +59,8 @@ impl Family {
             Family::Shelf => "shelf",
             Family::Lamp => "lamp",
             Family::Tabletop => "tabletop",
+            Family::Exterior => "exterior",
+            Family::Material => "material",
             Family::External => "external",
         }
     }
@@ -115,6 +123,42 @@ pub enum Material {
         /// Interior index of refraction (exterior is air).
         ior: f32,
     },
+    /// Frosted glass (`roughdielectric`, GGX).
+    RoughGlass {
+        /// Interior index of refraction (exterior is air).
+        ior: f32,
+        /// GGX roughness.
+        alpha: f32,
+    },
+    /// Mitsuba's `principled` BSDF; `checker` = (second colour, uv scale) makes the base colour
+    /// a checkerboard of `base` and that colour.
+    Principled {
+        /// Base colour.
+        base: [f32; 3],
+        /// Optional checkerboard partner of `base` and its uv scale.
+        checker: Option<([f32; 3], f32)>,
+        /// Roughness in [0, 1].
+        roughness: f32,
+        /// Metallic in [0, 1].
+        metallic: f32,
+        /// Clear coat in [0, 1].
+        clearcoat: f32,
+    },
+}
+
+/// A `checkerboard` texture named `name` of albedos `a` (`color0`) and `b` (`color1`).
+fn checkerboard(name: &str, a: [f32; 3], b: [f32; 3], uv_scale: f32) -> Element {
+    Element::plugin("texture", "checkerboard")
+        .attr("name", name)
+        .rgb("color0", a)
+        .rgb("color1", b)
+        .child(
+            Element::new("transform").attr("name", "to_uv").child(
+                Element::new("scale")
+                    .attr("x", fmt_f32(uv_scale))
+                    .attr("y", fmt_f32(uv_scale)),
+            ),
+        )
 }
 
 impl Material {
@@ -122,19 +166,8 @@ impl Material {
     pub fn element(&self) -> Element {
         match self {
             Material::Diffuse(c) => Element::plugin("bsdf", "diffuse").rgb("reflectance", *c),
-            Material::Checker { a, b, uv_scale } => Element::plugin("bsdf", "diffuse").child(
-                Element::plugin("texture", "checkerboard")
-                    .attr("name", "reflectance")
-                    .rgb("color0", *a)
-                    .rgb("color1", *b)
-                    .child(
-                        Element::new("transform").attr("name", "to_uv").child(
-                            Element::new("scale")
-                                .attr("x", fmt_f32(*uv_scale))
-                                .attr("y", fmt_f32(*uv_scale)),
-                        ),
-                    ),
-            ),
+            Material::Checker { a, b, uv_scale } => Element::plugin("bsdf", "diffuse")
+                .child(checkerboard("reflectance", *a, *b, *uv_scale)),
             Material::Plastic { albedo, alpha } if *alpha < 0.01 => {
                 Element::plugin("bsdf", "plastic")
                     .rgb("diffuse_reflectance", *albedo)
@@ -155,6 +188,29 @@ impl Material {
             Material::Glass { ior } => Element::plugin("bsdf", "dielectric")
                 .float("int_ior", *ior)
                 .float("ext_ior", 1.0),
+            Material::RoughGlass { ior, alpha } => Element::plugin("bsdf", "roughdielectric")
+                .string("distribution", "ggx")
+                .float("alpha", *alpha)
+                .float("int_ior", *ior)
+                .float("ext_ior", 1.0),
+            Material::Principled {
+                base,
+                checker,
+                roughness,
+                metallic,
+                clearcoat,
+            } => {
+                let e = Element::plugin("bsdf", "principled");
+                let e = match checker {
+                    Some((other, uv_scale)) => {
+                        e.child(checkerboard("base_color", *base, *other, *uv_scale))
+                    }
+                    None => e.rgb("base_color", *base),
+                };
+                e.float("roughness", *roughness)
+                    .float("metallic", *metallic)
+                    .float("clearcoat", *clearcoat)
+            }
         }
     }
 }

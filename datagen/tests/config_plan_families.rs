@@ -5,8 +5,9 @@
 //! renderer's strict importer at the configured size, respects its family's configured ranges
 //! and has its family's defining feature (glass, water, metal, thin lens, hidden lights); the
 //! `families` preset holds two scenes of every family, and its lamp and tabletop scenes are
-//! deterministic, load and build, with small emitting bulbs and glass respectively; configs
-//! without those tables keep their scene ids and fingerprints.
+//! deterministic, load and build, with small emitting bulbs and glass respectively, its
+//! exterior scenes have a sun, a sky and a dielectric, its material scenes span several BSDF
+//! kinds; configs without those tables keep their scene ids and fingerprints.
 
 mod common;
 
@@ -303,6 +304,33 @@ fn shard_arguments_and_scheduler_variables() {
     assert!(e.contains("SLURM_ARRAY_TASK_ID"), "{e}");
 }
 
+/// Scene `index` of `config` (id `id`), checked to be deterministic in the config and to
+/// change with its master seed, written under `dir` and loaded by the renderer's strict
+/// importer without warnings as a 64×64 pinhole view.
+fn deterministic_pinhole_scene(
+    config: &Config,
+    index: usize,
+    id: &str,
+    dir: &std::path::Path,
+) -> SceneDescription {
+    let scene = generate(config, index).unwrap();
+    assert_eq!(scene.id, id);
+    assert_eq!(
+        scene.files(),
+        generate(config, index).unwrap().files(),
+        "{id}"
+    );
+    let mut other = config.clone();
+    other.seed += 1;
+    assert_ne!(generate(&other, index).unwrap().xml, scene.xml, "{id}");
+    let xml = write_scene_files(&scene, &dir.join(id)).unwrap();
+    let d = renderer::xml::load_scene(&xml, &[], false).unwrap_or_else(|e| panic!("{id}: {e}"));
+    assert!(d.warnings.is_empty(), "{id}: {:?}", d.warnings);
+    assert_eq!((d.camera.width, d.camera.height), (64, 64), "{id}");
+    assert_eq!(d.camera.aperture_radius, 0.0, "{id}: pinhole expected");
+    d
+}
+
 fn has_bsdf(d: &SceneDescription, pred: impl Fn(&Bsdf) -> bool + Copy) -> bool {
     fn any(b: &Bsdf, pred: &dyn Fn(&Bsdf) -> bool) -> bool {
         match b {
@@ -388,7 +416,11 @@ fn small_scenes_are_deterministic_distinct_loadable_and_true_to_family() {
                 assert!(d.camera.focus_distance > 0.0, "{id}");
                 Some(c.fov)
             }
-            Family::Lamp | Family::Tabletop | Family::External => {
+            Family::Lamp
+            | Family::Tabletop
+            | Family::Exterior
+            | Family::Material
+            | Family::External => {
                 unreachable!("{id}: the small preset has no {family:?} scenes")
             }
         };
@@ -416,7 +448,16 @@ fn families_preset_has_two_scenes_of_every_family() {
     let ids: Vec<String> = scene_list(&config).into_iter().map(|(id, _)| id).collect();
     assert_eq!(
         ids[10..],
-        ["010-lamp", "011-lamp", "012-tabletop", "013-tabletop"]
+        [
+            "010-lamp",
+            "011-lamp",
+            "012-tabletop",
+            "013-tabletop",
+            "014-exterior",
+            "015-exterior",
+            "016-material",
+            "017-material"
+        ]
     );
 }
 
@@ -529,23 +570,7 @@ fn lamp_and_tabletop_scenes_are_deterministic_loadable_and_true_to_family() {
             continue;
         }
         seen += 1;
-        let scene = generate(&config, index).unwrap();
-        assert_eq!(scene.id, id);
-        assert_eq!(
-            scene.files(),
-            generate(&config, index).unwrap().files(),
-            "{id}"
-        );
-        // Another master seed gives another scene.
-        let mut other = config.clone();
-        other.seed += 1;
-        assert_ne!(generate(&other, index).unwrap().xml, scene.xml, "{id}");
-
-        let xml = write_scene_files(&scene, &dir.join(&id)).unwrap();
-        let d = renderer::xml::load_scene(&xml, &[], false).unwrap_or_else(|e| panic!("{id}: {e}"));
-        assert!(d.warnings.is_empty(), "{id}: {:?}", d.warnings);
-        assert_eq!((d.camera.width, d.camera.height), (64, 64), "{id}");
-        assert_eq!(d.camera.aperture_radius, 0.0, "{id}: pinhole expected");
+        let d = deterministic_pinhole_scene(&config, index, &id, &dir);
         let emitting: Vec<_> = d.shapes.iter().filter(|s| s.emission.is_some()).collect();
         match family {
             Family::Lamp => {
@@ -594,5 +619,135 @@ fn lamp_and_tabletop_scenes_are_deterministic_loadable_and_true_to_family() {
         renderer::scene::Scene::build(&d).unwrap_or_else(|e| panic!("{id}: {e}"));
     }
     assert_eq!(seen, 16);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The exterior and material tables are checked like the others, each error naming the field.
+#[test]
+fn exterior_and_material_config_errors_name_the_field() {
+    let text = std::fs::read_to_string(preset_path("families")).unwrap();
+    for (from, to, needle) in [
+        (
+            "glass_objects = [1, 3]",
+            "glass_objects = [0, 3]",
+            "families.exterior.glass_objects",
+        ),
+        (
+            "sun_irradiance = [6.0, 12.0]",
+            "sun_irradiance = [0.0, 12.0]",
+            "families.exterior.sun_irradiance",
+        ),
+        (
+            "sun_elevation = [30.0, 65.0]",
+            "sun_elevation = [30.0, 95.0]",
+            "families.exterior.sun_elevation",
+        ),
+        (
+            "glass_shapes = [\"sphere\", \"block\", \"slab\", \"pool\"]",
+            "glass_shapes = []",
+            "families.exterior.glass_shapes",
+        ),
+        (
+            "pool_size = [0.4, 0.7]",
+            "pool_size = [0.7, 0.4]",
+            "families.exterior.pool_size",
+        ),
+        (
+            "kinds = [\"diffuse\", \"plastic\"",
+            "kinds = [\"diffuse\", \"plastik\"",
+            "plastik",
+        ),
+        (
+            "alpha = [0.05, 0.4]",
+            "alpha = [0.05, 1.4]",
+            "families.material.alpha",
+        ),
+        (
+            "objects = [2, 5]\nshapes = [\"vase\"",
+            "objects = [0, 5]\nshapes = [\"vase\"",
+            "families.material.objects",
+        ),
+        (
+            "metals = [\"Au\", \"Cu\", \"Al\", \"Ag\", \"Cr\"]",
+            "metals = []",
+            "families.material.metals",
+        ),
+        (
+            "texture_probability = 0.4",
+            "texture_probabilty = 0.4",
+            "texture_probabilty",
+        ),
+    ] {
+        let bad = text.replacen(from, to, 1);
+        assert_ne!(bad, text, "families.toml no longer has `{from}`");
+        let e = Config::parse(&bad, "bad.toml").unwrap_err().to_string();
+        assert!(e.contains("bad.toml") && e.contains(needle), "{to}: {e}");
+    }
+    let small = serde_json::to_string(&preset("small")).unwrap();
+    assert!(
+        !small.contains("exterior") && !small.contains("\"material\""),
+        "{small}"
+    );
+}
+
+#[test]
+fn exterior_and_material_scenes_are_deterministic_loadable_and_true_to_family() {
+    // The `families` preset's ranges with eight scenes of each, to meet most shapes and kinds.
+    let mut config = preset("families");
+    config.families.exterior.as_mut().unwrap().count = 8;
+    config.families.material.as_mut().unwrap().count = 8;
+    let dir = fresh_dir("exterior-material");
+    let (exterior, material) = (
+        config.families.exterior.as_ref().unwrap(),
+        config.families.material.as_ref().unwrap(),
+    );
+    let mut seen = 0;
+    let mut material_kinds = BTreeSet::new();
+    for (index, (id, family)) in scene_list(&config).into_iter().enumerate() {
+        if !matches!(family, Family::Exterior | Family::Material) {
+            continue;
+        }
+        seen += 1;
+        let d = deterministic_pinhole_scene(&config, index, &id, &dir);
+        let constant = d
+            .emitters
+            .iter()
+            .any(|e| matches!(e, EmitterDesc::Constant { .. }));
+        match family {
+            Family::Exterior => {
+                assert!(within(d.camera.fov, Some(exterior.fov)), "{id}");
+                assert!(
+                    d.emitters
+                        .iter()
+                        .any(|e| matches!(e, EmitterDesc::Directional { .. })),
+                    "{id}: no sun"
+                );
+                assert!(constant, "{id}: no sky");
+                assert!(
+                    has_bsdf(&d, |b| matches!(b, Bsdf::Dielectric(_))),
+                    "{id}: no glass or water"
+                );
+            }
+            _ => {
+                assert!(within(d.camera.fov, Some(material.fov)), "{id}");
+                assert!(constant, "{id}: no environment");
+                assert_eq!(
+                    d.shapes.iter().filter(|s| s.emission.is_some()).count(),
+                    1,
+                    "{id}: one area light"
+                );
+                for s in d.shapes.iter().filter(|s| s.emission.is_none()) {
+                    let name = format!("{:?}", d.bsdfs[s.bsdf]);
+                    let kind = name.split(['(', ' ', '{']).next().unwrap().to_owned();
+                    material_kinds.insert(kind);
+                }
+            }
+        }
+        renderer::scene::Scene::build(&d).unwrap_or_else(|e| panic!("{id}: {e}"));
+    }
+    assert_eq!(seen, 16);
+    // Floors and walls are diffuse; the objects bring the other kinds.
+    material_kinds.remove("Diffuse");
+    assert!(material_kinds.len() >= 3, "{material_kinds:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -1,9 +1,11 @@
 //! The procedural scene families and the deterministic mapping from (config, scene index) to a
 //! generated scene. Scenes are numbered over the families in [`Family::ALL`] order.
 
+mod exterior;
 mod glass;
 mod lamp;
 mod lights;
+mod material;
 mod metal;
 mod room;
 mod shelf;
@@ -25,6 +27,8 @@ pub fn scene_list(config: &Config) -> Vec<(String, Family)> {
         f.shelf.as_ref().map_or(0, |c| c.count),
         f.lamp.as_ref().map_or(0, |c| c.count),
         f.tabletop.as_ref().map_or(0, |c| c.count),
+        f.exterior.as_ref().map_or(0, |c| c.count),
+        f.material.as_ref().map_or(0, |c| c.count),
     ];
     let mut out = Vec::new();
     for (family, count) in Family::ALL.into_iter().zip(counts) {
@@ -56,6 +60,8 @@ pub fn generate(config: &Config, index: usize) -> Option<GeneratedScene> {
         Family::Shelf => shelf::generate(config, f.shelf.as_ref().unwrap(), &mut rng, id),
         Family::Lamp => lamp::generate(config, f.lamp.as_ref().unwrap(), &mut rng, id),
         Family::Tabletop => tabletop::generate(config, f.tabletop.as_ref().unwrap(), &mut rng, id),
+        Family::Exterior => exterior::generate(config, f.exterior.as_ref().unwrap(), &mut rng, id),
+        Family::Material => material::generate(config, f.material.as_ref().unwrap(), &mut rng, id),
         Family::External => return None,
     })
 }
