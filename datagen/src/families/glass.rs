@@ -1,11 +1,12 @@
 //! Family 2: refractive caustics — glass spheres, blobs and wine glasses on a floor in front of
 //! a back wall, under one small light.
 
+use super::front_camera;
 use super::lights::place_small_light;
 use crate::config::{Config, GlassConfig, GlassShape};
 use crate::mesh::{blob, lathe, sharp, smooth, ProfilePoint};
 use crate::rng::Rng;
-use crate::scene::{spherical, Family, GeneratedScene, Material, SceneBuilder};
+use crate::scene::{Family, GeneratedScene, Material, SceneBuilder};
 use glam::Vec3;
 
 /// The profile of a wine glass of height `h` with wall thickness `t`: foot, stem, bowl outside,
@@ -117,9 +118,7 @@ pub fn generate(config: &Config, c: &GlassConfig, rng: &mut Rng, id: String) -> 
         None,
     );
     b.environment(rng.range(c.env_radiance));
-    let eye = target
-        + spherical(rng.range([60.0, 120.0]), rng.range([15.0, 40.0])) * rng.range([3.5, 5.0]);
-    b.camera(eye, target, rng.range(c.fov), None);
+    front_camera(&mut b, rng, target, [15.0, 40.0], [3.5, 5.0], c.fov);
     b.finish(
         id,
         Family::Glass,

@@ -4,11 +4,12 @@
 //! principled ones sometimes checkered), on a floor in a simple open-fronted room or in the
 //! open, under an area light and a constant environment.
 
+use super::front_camera;
 use crate::config::{Config, MaterialConfig, MaterialKind, MaterialShape};
 use crate::mesh::{blob, lathe, sharp, smooth, ProfilePoint};
 use crate::ply::Mesh;
 use crate::rng::Rng;
-use crate::scene::{spherical, Family, GeneratedScene, Material, SceneBuilder};
+use crate::scene::{Family, GeneratedScene, Material, SceneBuilder};
 use glam::{Vec2, Vec3};
 use std::f32::consts::TAU;
 
@@ -222,10 +223,14 @@ pub fn generate(config: &Config, c: &MaterialConfig, rng: &mut Rng, id: String) 
     b.environment(rng.range(c.env_radiance));
 
     let target = centre + Vec3::Y * 0.3;
-    let eye = target
-        + spherical(rng.range([60.0, 120.0]), rng.range(c.camera_elevation))
-            * rng.range(c.camera_distance);
-    b.camera(eye, target, rng.range(c.fov), None);
+    front_camera(
+        &mut b,
+        rng,
+        target,
+        c.camera_elevation,
+        c.camera_distance,
+        c.fov,
+    );
     b.finish(
         id,
         Family::Material,

@@ -1,11 +1,12 @@
 //! Family 4: reflective caustics — metal rings (the cardioid "coffee cup" caustic) and standing
 //! cylindrical mirrors on a diffuse floor, under one low small light.
 
+use super::front_camera;
 use super::lights::place_small_light;
 use crate::config::{Config, MetalConfig, MetalObject};
 use crate::mesh::{lathe, sharp};
 use crate::rng::Rng;
-use crate::scene::{spherical, Family, GeneratedScene, Material, SceneBuilder};
+use crate::scene::{Family, GeneratedScene, Material, SceneBuilder};
 use glam::Vec3;
 
 /// Generates one metal-caustics scene.
@@ -82,9 +83,7 @@ pub fn generate(config: &Config, c: &MetalConfig, rng: &mut Rng, id: String) -> 
             }
         }
     }
-    let eye = target
-        + spherical(rng.range([60.0, 120.0]), rng.range([40.0, 70.0])) * rng.range([2.5, 3.5]);
-    b.camera(eye, target, rng.range(c.fov), None);
+    front_camera(&mut b, rng, target, [40.0, 70.0], [2.5, 3.5], c.fov);
     b.finish(
         id,
         Family::Metal,

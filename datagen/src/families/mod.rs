@@ -14,7 +14,8 @@ mod water;
 
 use crate::config::Config;
 use crate::rng::{hash_seq, hash_str, Rng};
-use crate::scene::{Family, GeneratedScene};
+use crate::scene::{spherical, Family, GeneratedScene, SceneBuilder};
+use glam::Vec3;
 
 /// Every scene of the config as (scene id, family), in index order.
 pub fn scene_list(config: &Config) -> Vec<(String, Family)> {
@@ -64,4 +65,20 @@ pub fn generate(config: &Config, index: usize) -> Option<GeneratedScene> {
         Family::Material => material::generate(config, f.material.as_ref().unwrap(), &mut rng, id),
         Family::External => return None,
     })
+}
+
+/// A pinhole camera looking at `target` from in front (azimuth 60–120°, the +z side), at an
+/// elevation (degrees), distance and horizontal fov drawn from the ranges — in that order, so
+/// every family using it draws its camera the same way.
+pub(crate) fn front_camera(
+    b: &mut SceneBuilder,
+    rng: &mut Rng,
+    target: Vec3,
+    elevation: [f32; 2],
+    distance: [f32; 2],
+    fov: [f32; 2],
+) {
+    let eye =
+        target + spherical(rng.range([60.0, 120.0]), rng.range(elevation)) * rng.range(distance);
+    b.camera(eye, target, rng.range(fov), None);
 }

@@ -2,6 +2,7 @@
 //! cylinders and tumblers (some holding a liquid) on a table top under one or two small lights,
 //! in some scenes before a mirror standing at the back of the table.
 
+use super::front_camera;
 use super::lights::add_small_light;
 use crate::config::{Config, TabletopConfig, TabletopObject};
 use crate::mesh::{lathe, sharp};
@@ -215,10 +216,14 @@ pub fn generate(config: &Config, c: &TabletopConfig, rng: &mut Rng, id: String) 
     );
     b.environment(rng.range(c.env_radiance));
 
-    let eye = target
-        + spherical(rng.range([60.0, 120.0]), rng.range(c.camera_elevation))
-            * rng.range(c.camera_distance);
-    b.camera(eye, target, rng.range(c.fov), None);
+    front_camera(
+        &mut b,
+        rng,
+        target,
+        c.camera_elevation,
+        c.camera_distance,
+        c.fov,
+    );
     b.finish(
         id,
         Family::Tabletop,
