@@ -140,6 +140,31 @@ impl Image {
         &self.data[start..start + self.channels]
     }
 
+    /// Relative MSE against `reference` (docs/method.md §5.6): mean over pixels and the first
+    /// three channels of (x − r)² / (mean_RGB(r)² + 0.01), summed in f64. Both must be RGB
+    /// (or RGB-first) images of the same size.
+    pub fn relmse(&self, reference: &Image) -> f64 {
+        assert_eq!(
+            (self.width, self.height),
+            (reference.width, reference.height),
+            "image sizes differ"
+        );
+        let (a, b) = (self.channels, reference.channels);
+        assert!(a >= 3 && b >= 3, "relMSE needs RGB images");
+        let pixels = self.width * self.height;
+        let mut sum = 0.0f64;
+        for p in 0..pixels {
+            let r = &reference.data[p * b..p * b + 3];
+            let mean = r.iter().map(|&v| f64::from(v)).sum::<f64>() / 3.0;
+            let weight = 1.0 / (mean * mean + 0.01);
+            for (c, &rc) in r.iter().enumerate() {
+                let e = f64::from(self.data[p * a + c]) - f64::from(rc);
+                sum += e * e * weight;
+            }
+        }
+        sum / (3 * pixels.max(1)) as f64
+    }
+
     /// Copies channel `c` out as a row-major plane.
     fn plane(&self, c: usize) -> Vec<f32> {
         self.data
@@ -636,6 +661,20 @@ pub fn read_rgb_exr_image(path: &Path) -> Result<Image, BundleError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn relmse_of_an_image_is_the_method_metric() {
+        // Pixel 0: reference (1, 1, 1), image off by 0.5 in red: 0.25 / 1.01 / 3.
+        // Pixel 1: reference black, image (0, 0.2, 0): 0.04 / 0.01 / 3.
+        let mut reference = Image::new(2, 1, 3);
+        reference.data[..3].copy_from_slice(&[1.0, 1.0, 1.0]);
+        let mut image = reference.clone();
+        image.data[0] = 1.5;
+        image.data[4] = 0.2;
+        let expected = (0.25 / 1.01 + 0.04 / 0.01) / 6.0;
+        assert!((image.relmse(&reference) - expected).abs() < 1e-6);
+        assert_eq!(reference.relmse(&reference), 0.0);
+    }
 
     /// The value [`sample_bundle`] puts at interleaved index `i` of the layer with `salt`.
     fn sample_value(salt: f32, i: usize) -> f32 {

@@ -85,7 +85,7 @@ pub struct SampleEntry {
 }
 
 /// One scene of the dataset with its reference.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneEntry {
     /// Scene id.
@@ -115,6 +115,29 @@ pub struct SceneEntry {
     /// `<default>` overrides the scene is rendered with (scenes the user brings).
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub defines: std::collections::BTreeMap<String, String>,
+    /// The input regime the scene was rendered in (datasets with `[[render.regimes]]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub regime: Option<String>,
+    /// Image size `[width, height]` of the scene's reference and bundles, where it is not the
+    /// manifest's (a regime with its own side).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub size: Option<[u32; 2]>,
+    /// Independent runs averaged into the reference (absent: 1), each of `reference_passes` ×
+    /// `reference_photons`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_runs: Option<u32>,
+    /// The relMSE the reference carries from its own noise (docs/method.md §5.6 weights; from
+    /// the spread of its runs; needs `reference_runs` ≥ 2): Σ s²/R / (ref² + 0.01) / (3·pixels).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_noise: Option<f64>,
+}
+
+impl SceneEntry {
+    /// The scene's image size: its own, or the manifest's (`width`, `height`).
+    pub fn size_in<C>(&self, manifest: &Manifest<C>) -> (u32, u32) {
+        self.size
+            .map_or((manifest.width, manifest.height), |[w, h]| (w, h))
+    }
 }
 
 /// The whole dataset description (`manifest.json`).

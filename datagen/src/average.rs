@@ -255,6 +255,16 @@ pub fn average_references(
             options.split
         );
     };
+    if let Some(s) = scenes.iter().find(|s| s.reference_runs.is_some()) {
+        bail!(
+            "{}: scene {} has a reference averaged from {} runs already, its noise in the \
+             manifest (`reference_noise`); average-references is for datasets of one-run \
+             references",
+            root.join("manifest.json").display(),
+            s.id,
+            s.reference_runs.unwrap_or(1)
+        );
+    }
     let out_dir = root.join(&options.out);
     std::fs::create_dir_all(root.join(RUNS_DIR))
         .with_context(|| format!("creating {}", root.join(RUNS_DIR).display()))?;
@@ -321,12 +331,9 @@ pub fn average_references(
             .unwrap_or_default()
     };
     for scene in scenes {
+        let (width, height) = scene.size_in(manifest);
         let mut seeds = vec![scene.reference_seed];
-        let mut images = vec![read_checked(
-            &root.join(&scene.reference),
-            manifest.width,
-            manifest.height,
-        )?];
+        let mut images = vec![read_checked(&root.join(&scene.reference), width, height)?];
         for run in 1..options.runs {
             let seed = run_seed(scene.reference_seed, run);
             let path = root.join(run_path(scene, seed));
@@ -349,11 +356,11 @@ pub fn average_references(
                         interval: options.state_interval,
                     }),
                     defines: defines_of(&scene.id),
-                    size: (manifest.width, manifest.height),
+                    size: (width, height),
                 };
                 let image = renderer.reference(&root.join(&scene.xml), &spec, on_pass)?;
                 // The run is averaged as rendered (EXR float32 keeps it exactly), not read back.
-                let image = check_size(image, &path, manifest.width, manifest.height)?;
+                let image = check_size(image, &path, width, height)?;
                 write_rgb_exr_image(&path, &image)
                     .with_context(|| format!("writing {}", path.display()))?;
                 if let Some(state) = &spec.state {
@@ -361,7 +368,7 @@ pub fn average_references(
                 }
                 image
             } else {
-                read_checked(&path, manifest.width, manifest.height)?
+                read_checked(&path, width, height)?
             };
             images.push(image);
             seeds.push(seed);

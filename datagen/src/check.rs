@@ -47,7 +47,15 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
             "{MANIFEST_FILE}: config_sha256 does not match the embedded config"
         ));
     }
-    let (w, h) = (manifest.width as usize, manifest.height as usize);
+    // Each scene's size (a regime may give it its own), for its reference and bundles.
+    let sizes: std::collections::HashMap<&str, (usize, usize)> = manifest
+        .scenes
+        .iter()
+        .map(|s| {
+            let (w, h) = s.size_in(&manifest);
+            (s.id.as_str(), (w as usize, h as usize))
+        })
+        .collect();
     let total = manifest.scenes.len() * 2 + manifest.samples.len();
     let mut done = 0;
     let mut seen_scenes = std::collections::HashSet::new();
@@ -103,6 +111,7 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
                 match read_rgb_exr_image(&root.join(&s.reference)) {
                     Err(e) => reasons.push(format!("unreadable: {e}")),
                     Ok(img) => {
+                        let (w, h) = sizes[s.id.as_str()];
                         if (img.width, img.height) != (w, h) {
                             reasons.push(format!(
                                 "size {}x{}, manifest says {w}x{h}",
@@ -151,6 +160,10 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
                     Err(err) => reasons.push(format!("unreadable: {err}")),
                     Ok(b) => {
                         let m = &b.meta;
+                        let (w, h) = sizes
+                            .get(e.scene.as_str())
+                            .copied()
+                            .unwrap_or((manifest.width as usize, manifest.height as usize));
                         if (m.width as usize, m.height as usize) != (w, h) {
                             reasons.push(format!(
                                 "size {}x{}, reference/manifest size is {w}x{h}",

@@ -32,10 +32,13 @@ pub struct Config {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RenderConfig {
-    /// Photons per SPPM pass of the input bundles.
-    pub photons_per_pass: u64,
-    /// Pass counts at which one continuing input run writes a bundle (ascending).
-    pub passes: Vec<u32>,
+    /// Photons per SPPM pass of the input bundles (without regimes; a regime has its own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photons_per_pass: Option<u64>,
+    /// Pass counts at which one continuing input run writes a bundle, ascending (without
+    /// regimes; a regime has its own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub passes: Option<Vec<u32>>,
     /// Independent input runs (render seeds) per scene.
     pub seeds: u32,
     /// Passes of the reference run.
@@ -49,6 +52,48 @@ pub struct RenderConfig {
     /// fingerprint of a config without it is what it was before the option existed.
     #[serde(default, skip_serializing_if = "is_sppm")]
     pub schedule: RadiusSchedule,
+    /// Input regimes (`[[render.regimes]]`): each scene is rendered in one of them — its own
+    /// photon density, pass counts, seeds and image side — instead of `photons_per_pass`,
+    /// `passes`, `seeds` and the config's size. Absent: every scene as above. Every optional
+    /// key below is left out of the fingerprint when absent, so older configs keep theirs.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub regimes: Vec<Regime>,
+    /// Independent reference runs per scene, averaged (absent: 1). With two or more the
+    /// reference's own noise is measured and recorded in the manifest.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_runs: Option<u32>,
+    /// Photons of all reference runs together ÷ photons of one input run at its largest pass
+    /// count, for validation and test scenes: their reference photons per pass follow from it
+    /// (`reference_photons_per_pass` is then a lower bound). Absent: the fixed count alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_photon_factor: Option<f64>,
+    /// The same for training scenes (cheaper, noisier targets; absent: as validation/test).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_reference_photon_factor: Option<f64>,
+}
+
+/// One input regime of `[[render.regimes]]`: a photon density, pass counts and image side that
+/// a share of the scenes is rendered at.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Regime {
+    /// Name recorded with each scene (manifest `regime`).
+    pub name: String,
+    /// Relative share of the scenes (the shares are normalised over the regimes).
+    pub share: f64,
+    /// Square image side of its scenes (absent: the config's `width` × `height`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub side: Option<u32>,
+    /// Photons per pixel per pass, `[lo, hi]`, drawn log-uniformly per scene.
+    pub photons_per_pixel: [f64; 2],
+    /// Pass counts at which the input runs write bundles (ascending).
+    pub passes: Vec<u32>,
+    /// Input runs per scene (absent: `render.seeds`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seeds: Option<u32>,
+    /// Passes of each reference run of its scenes (absent: `render.reference_passes`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_passes: Option<u32>,
 }
 
 /// Whether `schedule` is the default, SPPM's.
@@ -98,6 +143,10 @@ pub struct Families {
     /// like `lamp`.)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub material: Option<MaterialConfig>,
+    /// Bitmap-textured, bump- and normal-mapped surfaces: room corners and table tops. (Left
+    /// out when absent, like `lamp`.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub textured: Option<TexturedConfig>,
     /// Scenes the user brings (Mitsuba 3 XML files), rendered like the generated ones.
     /// (Left out of the serialised config when absent, so the fingerprints of configs
     /// without it, and of the datasets made with them, are what they were.)
@@ -296,6 +345,32 @@ pub enum MaterialKind {
     RoughDielectric,
     /// `principled` (plain or checkered base colour).
     Principled,
+}
+
+/// Settings of the textured family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TexturedLayout {
+    /// A room corner: floor, back wall and one side wall.
+    Corner,
+    /// A table top before a wall, on legs over a plain floor.
+    Table,
+}
+
+/// Procedural texture patterns of the textured family (albedo and height field).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TexturePattern {
+    /// Square tiles with grout joints and bevelled edges.
+    Tiles,
+    /// Bricks in running bond with mortar joints.
+    Bricks,
+    /// Wooden planks with grain and butt joints.
+    Wood,
+    /// Veined stone.
+    Stone,
+    /// Rough plaster.
+    Plaster,
 }
 
 /// Most scenes one dataset config may list (every scene's id and jobs are listed up front).
@@ -746,6 +821,68 @@ pub struct MaterialConfig {
     pub fov: [f32; 2],
 }
 
+/// Parameter ranges of the textured family.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TexturedConfig {
+    /// Number of scenes.
+    pub count: u32,
+    /// Settings, chosen uniformly: `corner` or `table`.
+    pub layouts: Vec<TexturedLayout>,
+    /// Patterns of the floor or table top, chosen uniformly.
+    pub floor_patterns: Vec<TexturePattern>,
+    /// Patterns of the walls, chosen uniformly.
+    pub wall_patterns: Vec<TexturePattern>,
+    /// Patterns of textured objects, chosen uniformly.
+    pub object_patterns: Vec<TexturePattern>,
+    /// World size covered by one texture image (it repeats across a surface).
+    pub pattern_size: [f32; 2],
+    /// Side of each generated image in pixels.
+    pub texture_size: [u32; 2],
+    /// Per-channel albedo of the patterns and plain objects (wood and bricks tinted).
+    pub albedo: [f32; 2],
+    /// Relief depth in world units (height map 0 → 1).
+    pub bump_depth: [f32; 2],
+    /// Probability that a relief is a normal map rather than a bump map.
+    pub normalmap_probability: f32,
+    /// Probability of a glossy coat (rough plastic) on the floor or table top.
+    pub glossy_floor_probability: f32,
+    /// GGX alpha of coats and metals (below 0.01: smooth).
+    pub alpha: [f32; 2],
+    /// Number of objects (spheres and boxes).
+    pub objects: [u32; 2],
+    /// Object size (sphere radius, box half-width).
+    pub object_size: [f32; 2],
+    /// Probability that a non-metal object has a bitmap albedo.
+    pub texture_probability: f32,
+    /// Probability that a non-metal object is glossy (rough plastic).
+    pub glossy_probability: f32,
+    /// Probability that an object is metal.
+    pub metal_probability: f32,
+    /// Named conductors (Mitsuba `material`), chosen uniformly.
+    pub metals: Vec<String>,
+    /// Emitted power (W) of the area light above the objects.
+    pub light_power: [f32; 2],
+    /// Half-size of the area light.
+    pub light_size: [f32; 2],
+    /// Height of the area light above the floor or table top.
+    pub light_height: [f32; 2],
+    /// Probability of a second, small light.
+    pub small_light_probability: f32,
+    /// Kinds of that light, chosen uniformly.
+    pub small_lights: Vec<SmallLight>,
+    /// Its emitted power (W).
+    pub small_light_power: [f32; 2],
+    /// Constant environment radiance (0 = none).
+    pub env_radiance: [f32; 2],
+    /// Camera elevation, degrees.
+    pub camera_elevation: [f32; 2],
+    /// Camera distance from the objects' centre.
+    pub camera_distance: [f32; 2],
+    /// Horizontal field of view in degrees.
+    pub fov: [f32; 2],
+}
+
 /// Configuration errors; each names the file and the problem.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -815,17 +952,87 @@ impl Config {
             &serde_json::to_value(&self.families).map_err(|e| e.to_string())?,
         )?;
         let r = &self.render;
-        if r.passes.is_empty() || r.passes.contains(&0) {
-            return Err("render.passes must be a non-empty list of positive pass counts".into());
-        }
-        if r.passes.windows(2).any(|w| w[0] >= w[1]) {
-            return Err("render.passes must be strictly ascending".into());
+        match (&r.passes, r.photons_per_pass, r.regimes.is_empty()) {
+            (Some(passes), Some(photons), true) => {
+                if passes.is_empty() || passes.contains(&0) {
+                    return Err(
+                        "render.passes must be a non-empty list of positive pass counts".into(),
+                    );
+                }
+                if passes.windows(2).any(|w| w[0] >= w[1]) {
+                    return Err("render.passes must be strictly ascending".into());
+                }
+                if photons == 0 {
+                    return Err("photons per pass must be positive".into());
+                }
+            }
+            (_, _, true) => {
+                return Err(
+                    "render.passes and render.photons_per_pass are required (or give \
+                     [[render.regimes]])"
+                        .into(),
+                )
+            }
+            (None, None, false) => {}
+            (_, _, false) => {
+                return Err(
+                    "render.passes and render.photons_per_pass are not used with \
+                     [[render.regimes]] (each regime has its own): remove them"
+                        .into(),
+                )
+            }
         }
         if r.seeds == 0 || r.reference_passes == 0 {
             return Err("render.seeds and render.reference_passes must be positive".into());
         }
-        if r.photons_per_pass == 0 || r.reference_photons_per_pass == 0 {
+        if r.reference_photons_per_pass == 0 {
             return Err("photons per pass must be positive".into());
+        }
+        if r.reference_runs == Some(0) {
+            return Err("render.reference_runs must be at least 1".into());
+        }
+        for (key, factor) in [
+            ("reference_photon_factor", r.reference_photon_factor),
+            (
+                "train_reference_photon_factor",
+                r.train_reference_photon_factor,
+            ),
+        ] {
+            if factor.is_some_and(|f| !(f.is_finite() && f > 0.0)) {
+                return Err(format!("render.{key} must be a positive number"));
+            }
+        }
+        let mut names = std::collections::BTreeSet::new();
+        for (i, g) in r.regimes.iter().enumerate() {
+            let at = format!("render.regimes[{i}] (`{}`)", g.name);
+            if g.name.is_empty() || !names.insert(g.name.as_str()) {
+                return Err(format!("{at}: every regime needs a name of its own"));
+            }
+            if !(g.share.is_finite() && g.share > 0.0) {
+                return Err(format!("{at}.share must be a positive number"));
+            }
+            if g.side.is_some_and(|s| s == 0 || s > MAX_SIDE) {
+                return Err(format!("{at}.side must lie in 1..={MAX_SIDE}"));
+            }
+            let [lo, hi] = g.photons_per_pixel;
+            if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+                return Err(format!(
+                    "{at}.photons_per_pixel must be [lo, hi] with 0 < lo ≤ hi"
+                ));
+            }
+            if g.passes.is_empty() || g.passes.contains(&0) {
+                return Err(format!(
+                    "{at}.passes must be a non-empty list of positive counts"
+                ));
+            }
+            if g.passes.windows(2).any(|w| w[0] >= w[1]) {
+                return Err(format!("{at}.passes must be strictly ascending"));
+            }
+            if g.seeds == Some(0) || g.reference_passes == Some(0) {
+                return Err(format!(
+                    "{at}: seeds and reference_passes must be at least 1"
+                ));
+            }
         }
         let s = &self.split;
         if [s.train, s.val, s.test]
@@ -941,6 +1148,48 @@ impl Config {
                 }
             }
         }
+        if let Some(c) = &f.textured {
+            empty("textured.layouts", c.layouts.len())?;
+            empty("textured.floor_patterns", c.floor_patterns.len())?;
+            empty("textured.wall_patterns", c.wall_patterns.len())?;
+            empty("textured.object_patterns", c.object_patterns.len())?;
+            empty("textured.metals", c.metals.len())?;
+            empty("textured.small_lights", c.small_lights.len())?;
+            if c.texture_size[0] < 8 || c.texture_size[1] > 4096 {
+                return Err("families.textured.texture_size must lie in [8, 4096] pixels".into());
+            }
+            for (name, r) in [("albedo", c.albedo), ("alpha", c.alpha)] {
+                if r[0] < 0.0 || r[1] > 1.0 {
+                    return Err(format!("families.textured.{name} must lie in [0, 1]"));
+                }
+            }
+            for (name, p) in [
+                ("normalmap_probability", c.normalmap_probability),
+                ("glossy_floor_probability", c.glossy_floor_probability),
+                ("texture_probability", c.texture_probability),
+                ("glossy_probability", c.glossy_probability),
+                ("metal_probability", c.metal_probability),
+                ("small_light_probability", c.small_light_probability),
+            ] {
+                if !(0.0..=1.0).contains(&p) {
+                    return Err(format!("families.textured.{name} must lie in [0, 1]"));
+                }
+            }
+            // The family's point: visible relief on a surface of a measurable size.
+            for (name, r) in [
+                ("pattern_size", c.pattern_size),
+                ("bump_depth", c.bump_depth),
+                ("object_size", c.object_size),
+                ("light_size", c.light_size),
+                ("light_power", c.light_power),
+                ("light_height", c.light_height),
+                ("camera_distance", c.camera_distance),
+            ] {
+                if r[0] <= 0.0 {
+                    return Err(format!("families.textured.{name} must be positive"));
+                }
+            }
+        }
         if let Some(c) = &f.external {
             if c.scenes.is_empty() {
                 return Err("families.external.scenes must not be empty".into());
@@ -973,6 +1222,7 @@ impl Config {
             f.tabletop.as_ref().map_or(0, |c| c.count),
             f.exterior.as_ref().map_or(0, |c| c.count),
             f.material.as_ref().map_or(0, |c| c.count),
+            f.textured.as_ref().map_or(0, |c| c.count),
         ]
         .iter()
         .map(|&c| u64::from(c))
@@ -1001,6 +1251,7 @@ impl Config {
             + f.tabletop.as_ref().map_or(0, |c| c.count)
             + f.exterior.as_ref().map_or(0, |c| c.count)
             + f.material.as_ref().map_or(0, |c| c.count)
+            + f.textured.as_ref().map_or(0, |c| c.count)
             + f.external.as_ref().map_or(0, |c| c.scenes.len() as u32)
     }
 

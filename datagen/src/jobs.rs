@@ -3,6 +3,7 @@
 //! assemble the manifest when every job of every shard is done. Rendering itself is behind
 //! [`SampleRenderer`] so the bookkeeping is independent of the integrator.
 
+use crate::average::{mean_and_noise, run_seed};
 use crate::config::Config;
 use crate::families::generate;
 use crate::fsutil::{create_parent, remove_if_present, sha256_file, write_atomic};
@@ -13,7 +14,7 @@ use crate::manifest::{
 use crate::plan::{Job, Plan, Shard};
 use crate::scene::write_scene_files;
 use anyhow::{bail, Context, Result};
-use bundle::{read_bundle, write_bundle, write_rgb_exr_image, Bundle, Image};
+use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle, Image};
 use fileio::atomic::remove_stale_temps;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use renderer::integrators::sppm::{RadiusSchedule, SppmMode, SppmSettings};
@@ -120,24 +121,33 @@ pub struct RenderReport {
 }
 
 /// Relative amount of work of a job, for the overall progress bar's ETA.
-fn job_work(config: &Config, job: &Job) -> u64 {
-    let pixels = u64::from(config.width) * u64::from(config.height);
-    let r = &config.render;
+fn job_work(plan: &Plan, job: &Job) -> u64 {
+    let r = &plan.scenes[job.scene()].render;
+    let pixels = u64::from(r.width) * u64::from(r.height);
     match job {
         Job::Reference { .. } => {
-            u64::from(r.reference_passes) * (r.reference_photons_per_pass + 2 * pixels)
+            u64::from(r.reference_runs)
+                * u64::from(r.reference_passes)
+                * (r.reference_photons_per_pass + 2 * pixels)
         }
-        Job::Inputs { .. } => {
-            u64::from(*r.passes.last().unwrap_or(&0)) * (r.photons_per_pass + 2 * pixels)
-        }
+        Job::Inputs { .. } => u64::from(r.last_pass()) * (r.photons_per_pass + 2 * pixels),
     }
 }
 
 /// Output files of a job.
-fn job_files(config: &Config, job: &Job) -> usize {
+fn job_files(plan: &Plan, job: &Job) -> usize {
     match job {
         Job::Reference { .. } => 1,
-        Job::Inputs { .. } => config.render.passes.len(),
+        Job::Inputs { scene, .. } => plan.scenes[*scene].render.passes.len(),
+    }
+}
+
+/// Passes a job's bar counts: every run of a reference one after the other.
+fn job_passes(plan: &Plan, job: &Job) -> u32 {
+    let r = &plan.scenes[job.scene()].render;
+    match job {
+        Job::Reference { .. } => r.reference_runs * r.reference_passes,
+        Job::Inputs { .. } => r.last_pass(),
     }
 }
 
@@ -248,7 +258,7 @@ pub fn render_dataset_to(
             let _ = multi.println(line);
         }
     };
-    let total_work: u64 = mine.iter().map(|&j| job_work(config, &plan.jobs[j])).sum();
+    let total_work: u64 = mine.iter().map(|&j| job_work(&plan, &plan.jobs[j])).sum();
     let overall = ClearOnDrop(multi.add(ProgressBar::new(total_work.max(1))));
     let overall = &overall.0;
     overall.set_style(
@@ -259,7 +269,7 @@ pub fn render_dataset_to(
     );
     let shard = options.shard;
     overall.set_prefix(format!("shard {}/{}", shard.index, shard.count));
-    let total_files: usize = mine.iter().map(|&j| job_files(config, &plan.jobs[j])).sum();
+    let total_files: usize = mine.iter().map(|&j| job_files(&plan, &plan.jobs[j])).sum();
     let mut report = RenderReport {
         samples: total_files,
         ..Default::default()
@@ -285,7 +295,7 @@ pub fn render_dataset_to(
     let external = external_hashes(config, &plan, &mine)?;
     for &j in &mine {
         let job = plan.jobs[j];
-        let work = job_work(config, &job);
+        let work = job_work(&plan, &job);
         let existing = read_record(root, &plan, &job, &fingerprint);
         let scene_hash = external.get(&job.scene()).cloned();
         let scene_id = &plan.scenes[job.scene()].id;
@@ -299,10 +309,7 @@ pub fn render_dataset_to(
         if skip {
             report.skipped += 1;
         } else {
-            let passes = match job {
-                Job::Reference { .. } => config.render.reference_passes,
-                Job::Inputs { .. } => *config.render.passes.last().unwrap_or(&0),
-            };
+            let passes = job_passes(&plan, &job);
             let bar = ClearOnDrop(multi.add(ProgressBar::new(u64::from(passes))));
             // The rate of this session's passes: measured from the first pass this session
             // reports (a resumed run's earlier passes are not in it).
@@ -321,7 +328,17 @@ pub fn render_dataset_to(
             bar.0.set_message(label.clone());
             // A state of this job and config left by a killed session: the run resumes from
             // it (its first pass reported is the one after the saved pass).
-            let resuming = root.join(plan.state_path(&job, &fingerprint)).is_file();
+            let runs = match job {
+                Job::Reference { scene } => plan.scenes[scene].render.reference_runs,
+                Job::Inputs { .. } => 1,
+            };
+            let resuming = (0..runs).any(|run| {
+                root.join(plan.reference_run_state(&job, &fingerprint, run))
+                    .is_file()
+                    || root
+                        .join(plan.reference_run_image(&job, &fingerprint, run))
+                        .is_file()
+            });
             let mut first_pass = true;
             let start = Instant::now();
             let mut on_pass = |pass: u32| {
@@ -358,12 +375,14 @@ pub fn render_dataset_to(
             drop(bar);
             write_atomic(&root.join(plan.record_path(&job)), &to_json(&record))
                 .with_context(|| format!("writing {}", plan.record_path(&job)))?;
+            // Only now, with the record written, are the finished runs of no further use.
+            remove_run_files(root, &plan, &job, |_| true)?;
             // Wall-clock timing is useful but not reproducible: it lives outside the records.
             let timing = serde_json::json!({ "seconds": start.elapsed().as_secs_f64() });
             let _ = write_atomic(&root.join(plan.timing_path(&job)), &to_json(&timing));
             report.rendered += 1;
         }
-        files_done += job_files(config, &job);
+        files_done += job_files(&plan, &job);
         overall.set_message(format!("{files_done}/{total_files} files"));
         work_done += work;
         if skip {
@@ -383,7 +402,19 @@ pub fn render_dataset_to(
 /// Removes state files a killed run of this job left under another config (their names carry
 /// that config's fingerprint): they can never be resumed, and would only litter the dataset.
 fn remove_stale_states(root: &Path, plan: &Plan, job: &Job, fingerprint: &str) -> Result<()> {
-    let current = root.join(plan.state_path(job, fingerprint));
+    remove_run_files(root, plan, job, |tag| {
+        tag != &fingerprint[..fingerprint.len().min(16)]
+    })
+}
+
+/// Removes the job's run files (resumable states, finished reference runs) whose config tag
+/// `stale` accepts.
+fn remove_run_files(
+    root: &Path,
+    plan: &Plan,
+    job: &Job,
+    stale: impl Fn(&str) -> bool,
+) -> Result<()> {
     let record = root.join(plan.record_path(job));
     let (Some(dir), Some(stem)) = (record.parent(), record.file_stem()) else {
         return Ok(());
@@ -394,9 +425,12 @@ fn remove_stale_states(root: &Path, plan: &Plan, job: &Job, fingerprint: &str) -
     };
     for e in entries.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        let path = e.path();
-        if name.starts_with(&prefix) && name.ends_with(".state") && path != current {
-            remove_if_present(&path)?;
+        let Some(rest) = name.strip_prefix(&prefix) else {
+            continue;
+        };
+        let tag = rest.split('.').next().unwrap_or("");
+        if (name.ends_with(".state") || name.ends_with(".exr")) && stale(tag) {
+            remove_if_present(&e.path())?;
         }
     }
     Ok(())
@@ -530,7 +564,8 @@ fn run_job(
             ),
             (None, None) => bail!("scene {} is neither generated nor external", sp.id),
         };
-    let r = &config.render;
+    let r = &sp.render;
+    let size = (r.width, r.height);
     let seed = plan.render_seed(job);
     remove_stale_states(root, plan, job, fingerprint)?;
     let mut record = JobRecord {
@@ -545,34 +580,75 @@ fn run_job(
         path: root.join(plan.state_path(job, fingerprint)),
         interval: options.state_interval,
     };
+    let wrong_size = |image: &Image, what: &str| -> Result<()> {
+        if (image.width, image.height) != (size.0 as usize, size.1 as usize) {
+            bail!(
+                "{}: {what} is {}x{}, the scene's size is {}x{}",
+                xml.display(),
+                image.width,
+                image.height,
+                size.0,
+                size.1
+            );
+        }
+        Ok(())
+    };
     match *job {
         Job::Reference { .. } => {
-            let spec = RunSpec {
-                sppm: run_settings(
-                    &sp.id,
-                    seed,
-                    r.reference_photons_per_pass,
-                    r.max_depth,
-                    // References are SPPM's whatever the inputs' schedule.
-                    RadiusSchedule::Sppm,
-                    options.threads,
-                ),
-                passes: vec![r.reference_passes],
-                state: Some(state.clone()),
-                defines: defines.clone(),
-                size: (config.width, config.height),
-            };
-            let image = renderer.reference(&xml, &spec, on_pass)?;
-            if (image.width, image.height) != (config.width as usize, config.height as usize) {
-                bail!(
-                    "{}: reference is {}x{}, config says {}x{}",
-                    xml.display(),
-                    image.width,
-                    image.height,
-                    config.width,
-                    config.height
-                );
+            let runs = r.reference_runs;
+            let mut images = Vec::new();
+            for run in 0..runs {
+                // Run 0 is the dataset's own seed; more runs step from it as
+                // `average-references` does.
+                let run_seed = if run == 0 {
+                    seed
+                } else {
+                    run_seed(seed, run as usize)
+                };
+                let done = root.join(plan.reference_run_image(job, fingerprint, run));
+                if runs > 1 && done.is_file() {
+                    // Finished by a session that was stopped before the job's record.
+                    let image = read_rgb_exr_image(&done)?;
+                    wrong_size(&image, "a finished reference run")?;
+                    on_pass((run + 1) * r.reference_passes);
+                    images.push(image);
+                    continue;
+                }
+                let spec = RunSpec {
+                    sppm: run_settings(
+                        &sp.id,
+                        run_seed,
+                        r.reference_photons_per_pass,
+                        config.render.max_depth,
+                        // References are SPPM's whatever the inputs' schedule.
+                        RadiusSchedule::Sppm,
+                        options.threads,
+                    ),
+                    passes: vec![r.reference_passes],
+                    state: Some(StateSpec {
+                        path: root.join(plan.reference_run_state(job, fingerprint, run)),
+                        interval: options.state_interval,
+                    }),
+                    defines: defines.clone(),
+                    size,
+                };
+                let offset = run * r.reference_passes;
+                let image = renderer.reference(&xml, &spec, &mut |p| on_pass(offset + p))?;
+                wrong_size(&image, "the reference")?;
+                if runs > 1 {
+                    create_parent(&done)
+                        .with_context(|| format!("creating the folder of {}", done.display()))?;
+                    write_rgb_exr_image(&done, &image)?;
+                    remove_if_present(&root.join(plan.reference_run_state(job, fingerprint, run)))?;
+                }
+                images.push(image);
             }
+            let (image, noise) = if images.len() == 1 {
+                (images.remove(0), None)
+            } else {
+                let (mean, one_run) = mean_and_noise(&images);
+                (mean, Some(one_run / f64::from(runs)))
+            };
             let rel = sp.reference();
             let path = root.join(&rel);
             create_parent(&path)
@@ -590,6 +666,10 @@ fn run_job(
                 reference_photons: r.reference_photons_per_pass,
                 scene_sha256: scene_hash,
                 defines: defines.iter().cloned().collect(),
+                regime: r.regime.clone(),
+                size: (size != (config.width, config.height)).then_some([size.0, size.1]),
+                reference_runs: (runs > 1).then_some(runs),
+                reference_noise: noise,
             });
         }
         Job::Inputs { seed_index, .. } => {
@@ -598,14 +678,14 @@ fn run_job(
                     &sp.id,
                     seed,
                     r.photons_per_pass,
-                    r.max_depth,
-                    r.schedule,
+                    config.render.max_depth,
+                    config.render.schedule,
                     options.threads,
                 ),
                 passes: r.passes.clone(),
                 state: Some(state.clone()),
                 defines,
-                size: (config.width, config.height),
+                size,
             };
             // The manifest entry of the bundle of `passes` passes at `rel` (= `path`).
             let sample_entry = |rel: String, passes: u32, path: &Path| -> Result<SampleEntry> {

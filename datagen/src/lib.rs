@@ -13,6 +13,7 @@ pub mod manifest;
 pub mod mesh;
 pub mod plan;
 pub mod ply;
+pub mod reference_noise;
 pub mod rng;
 pub mod scene;
 pub mod sppm_backend;

@@ -14,7 +14,7 @@ use std::path::Path;
 pub type Manifest = bundle::manifest::Manifest<Config>;
 
 /// What a finished job produced (`records/<scene>/<job>.json`).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct JobRecord {
     /// [`MANIFEST_FORMAT`].

@@ -20,6 +20,39 @@ pub struct ScenePlan {
     pub family: Family,
     /// Split.
     pub split: Split,
+    /// How the scene is rendered (its regime's settings, or the config's).
+    pub render: SceneRender,
+}
+
+/// How one scene is rendered: image size, input runs and reference, from the config's render
+/// section and the scene's regime (`[[render.regimes]]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneRender {
+    /// Name of the scene's regime (`None` without regimes).
+    pub regime: Option<String>,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Photons per pass of the input runs.
+    pub photons_per_pass: u64,
+    /// Pass counts of the input bundles (ascending).
+    pub passes: Vec<u32>,
+    /// Input runs (seeds).
+    pub seeds: u32,
+    /// Passes of each reference run.
+    pub reference_passes: u32,
+    /// Photons per pass of each reference run.
+    pub reference_photons_per_pass: u64,
+    /// Independent reference runs averaged into the reference.
+    pub reference_runs: u32,
+}
+
+impl SceneRender {
+    /// The last (largest) input pass count.
+    pub fn last_pass(&self) -> u32 {
+        *self.passes.last().unwrap_or(&0)
+    }
 }
 
 impl ScenePlan {
@@ -81,6 +114,7 @@ impl Plan {
     pub fn new(config: &Config) -> Self {
         let list = scene_list(config);
         let splits = assign_splits(config, &list);
+        let regimes = assign_regimes(config, &list);
         let scenes: Vec<ScenePlan> = list
             .into_iter()
             .enumerate()
@@ -89,12 +123,13 @@ impl Plan {
                 id,
                 family,
                 split: splits[index],
+                render: scene_render(config, index, splits[index], regimes[index]),
             })
             .collect();
         let mut jobs = Vec::new();
-        for s in 0..scenes.len() {
+        for (s, scene) in scenes.iter().enumerate() {
             jobs.push(Job::Reference { scene: s });
-            for seed_index in 0..config.render.seeds {
+            for seed_index in 0..scene.render.seeds {
                 jobs.push(Job::Inputs {
                     scene: s,
                     seed_index,
@@ -149,6 +184,24 @@ impl Plan {
             .replace(".json", &format!(".{tag}.state"))
     }
 
+    /// Path (relative) of the resumable state of run `run` of a reference averaged from
+    /// several runs (run 0's is [`Plan::state_path`]).
+    pub fn reference_run_state(&self, job: &Job, fingerprint: &str, run: u32) -> String {
+        let state = self.state_path(job, fingerprint);
+        if run == 0 {
+            state
+        } else {
+            state.replace(".state", &format!(".run{run}.state"))
+        }
+    }
+
+    /// Path (relative) of the finished image of run `run` of a reference averaged from several
+    /// runs, kept until the job's record is written so that a killed job loses no finished run.
+    pub fn reference_run_image(&self, job: &Job, fingerprint: &str, run: u32) -> String {
+        self.state_path(job, fingerprint)
+            .replace(".state", &format!(".run{run}.exr"))
+    }
+
     /// Path (relative) of a job's timing note (wall-clock; not part of the canonical data).
     pub fn timing_path(&self, job: &Job) -> String {
         self.record_path(job).replacen("records/", "timings/", 1)
@@ -160,6 +213,79 @@ impl Plan {
             .filter(|j| j % shard.count as usize == shard.index as usize)
             .collect()
     }
+}
+
+/// A Markdown table of what `plan` renders, one row per regime (one row without regimes):
+/// scenes (train/val/test), side, photons per pixel per pass (min–max), and the photons and eye
+/// passes (passes × pixels, in 128² units) of all input runs and of all reference runs.
+pub fn summary(plan: &Plan) -> String {
+    let mut names: Vec<Option<String>> = Vec::new();
+    for s in &plan.scenes {
+        if !names.contains(&s.render.regime) {
+            names.push(s.render.regime.clone());
+        }
+    }
+    let mut out = String::from(
+        "| regime | scenes (train/val/test) | side | photons/pixel/pass | input photons | \
+         reference photons | input eye passes | reference eye passes |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    let mut totals = [0.0f64; 4];
+    for name in &names {
+        let scenes: Vec<&ScenePlan> = plan
+            .scenes
+            .iter()
+            .filter(|s| &s.render.regime == name)
+            .collect();
+        let count = |split: Split| scenes.iter().filter(|s| s.split == split).count();
+        let mut sides: Vec<u32> = scenes.iter().map(|s| s.render.width).collect();
+        sides.dedup();
+        let density = |s: &&ScenePlan| {
+            s.render.photons_per_pass as f64 / f64::from(s.render.width * s.render.height)
+        };
+        let lo = scenes.iter().map(density).fold(f64::INFINITY, f64::min);
+        let hi = scenes.iter().map(density).fold(0.0, f64::max);
+        let mut row = [0.0f64; 4];
+        for s in &scenes {
+            let r = &s.render;
+            let pixels = f64::from(r.width * r.height) / 16384.0;
+            let seeds = f64::from(r.seeds);
+            let runs = f64::from(r.reference_runs * r.reference_passes);
+            row[0] += seeds * r.photons_per_pass as f64 * f64::from(r.last_pass());
+            row[1] += runs * r.reference_photons_per_pass as f64;
+            row[2] += seeds * f64::from(r.last_pass()) * pixels;
+            row[3] += runs * pixels;
+        }
+        for (t, v) in totals.iter_mut().zip(row) {
+            *t += v;
+        }
+        out.push_str(&format!(
+            "| {} | {} ({}/{}/{}) | {} | {lo:.2}–{hi:.2} | {:.3e} | {:.3e} | {:.3e} | {:.3e} |\n",
+            name.as_deref().unwrap_or("—"),
+            scenes.len(),
+            count(Split::Train),
+            count(Split::Val),
+            count(Split::Test),
+            sides
+                .iter()
+                .map(u32::to_string)
+                .collect::<Vec<_>>()
+                .join(", "),
+            row[0],
+            row[1],
+            row[2],
+            row[3]
+        ));
+    }
+    out.push_str(&format!(
+        "| all | {} | | | {:.3e} | {:.3e} | {:.3e} | {:.3e} |\n",
+        plan.scenes.len(),
+        totals[0],
+        totals[1],
+        totals[2],
+        totals[3]
+    ));
+    out
 }
 
 /// A shard: this process runs jobs `index`, `index + count`, ...
@@ -231,6 +357,120 @@ impl Shard {
         }
         Ok(None)
     }
+}
+
+/// The image size of scene `index`: its regime's side, or the config's size.
+pub fn scene_size(config: &Config, index: usize) -> (u32, u32) {
+    let regimes = assign_regimes(config, &scene_list(config));
+    scene_side(config, regimes[index])
+}
+
+fn scene_side(config: &Config, regime: Option<usize>) -> (u32, u32) {
+    match regime.and_then(|g| config.render.regimes[g].side) {
+        Some(side) => (side, side),
+        None => (config.width, config.height),
+    }
+}
+
+/// The render settings of scene `index` (split `split`, regime `regime`). The photon density
+/// of a regime is drawn log-uniformly per scene (its own stream: scenes and splits are not
+/// touched); the reference's photons per pass follow from the photon factor of the split.
+fn scene_render(config: &Config, index: usize, split: Split, regime: Option<usize>) -> SceneRender {
+    let r = &config.render;
+    let (width, height) = scene_side(config, regime);
+    // Validation guarantees the render section's counts where there are no regimes.
+    let (name, photons_per_pass, passes, seeds, reference_passes) =
+        match regime.map(|g| &r.regimes[g]) {
+            None => (
+                None,
+                r.photons_per_pass.unwrap_or(1),
+                r.passes.clone().unwrap_or_default(),
+                r.seeds,
+                r.reference_passes,
+            ),
+            Some(g) => {
+                let mut rng = Rng::new(hash_seq(&[config.seed, hash_str("photons"), index as u64]));
+                let [lo, hi] = g.photons_per_pixel;
+                let per_pixel = (lo.ln() + rng.uniform() * (hi / lo).ln()).exp();
+                let photons = (per_pixel * f64::from(width) * f64::from(height)).round() as u64;
+                (
+                    Some(g.name.clone()),
+                    photons.max(1),
+                    g.passes.clone(),
+                    g.seeds.unwrap_or(r.seeds),
+                    g.reference_passes.unwrap_or(r.reference_passes),
+                )
+            }
+        };
+    let runs = r.reference_runs.unwrap_or(1);
+    let factor = match split {
+        Split::Train => r
+            .train_reference_photon_factor
+            .or(r.reference_photon_factor),
+        Split::Val | Split::Test => r.reference_photon_factor,
+    };
+    let reference_photons_per_pass = match factor {
+        None => r.reference_photons_per_pass,
+        Some(f) => {
+            let input = photons_per_pass as f64 * f64::from(*passes.last().unwrap_or(&1));
+            let per_pass = (f * input / f64::from(reference_passes * runs)).ceil() as u64;
+            per_pass.max(r.reference_photons_per_pass)
+        }
+    };
+    SceneRender {
+        regime: name,
+        width,
+        height,
+        photons_per_pass,
+        passes,
+        seeds,
+        reference_passes,
+        reference_photons_per_pass,
+        reference_runs: runs,
+    }
+}
+
+/// The regime of every scene (`None` everywhere without regimes): within each family the
+/// scenes are split over the regimes by their shares (largest remainders), in a seeded order,
+/// so that every family is rendered in every regime as far as its count allows.
+fn assign_regimes(config: &Config, list: &[(String, Family)]) -> Vec<Option<usize>> {
+    let regimes = &config.render.regimes;
+    let mut out = vec![None; list.len()];
+    if regimes.is_empty() {
+        return out;
+    }
+    let total: f64 = regimes.iter().map(|g| g.share).sum();
+    for family in Family::ALL {
+        let mut members: Vec<usize> = (0..list.len()).filter(|&i| list[i].1 == family).collect();
+        let n = members.len();
+        if n == 0 {
+            continue;
+        }
+        let exact: Vec<f64> = regimes.iter().map(|g| g.share / total * n as f64).collect();
+        let mut counts: Vec<usize> = exact.iter().map(|e| e.floor() as usize).collect();
+        let mut by_remainder: Vec<usize> = (0..regimes.len()).collect();
+        by_remainder.sort_by(|&a, &b| {
+            let (ra, rb) = (exact[a] - exact[a].floor(), exact[b] - exact[b].floor());
+            rb.total_cmp(&ra).then(a.cmp(&b))
+        });
+        let missing = n - counts.iter().sum::<usize>();
+        for &g in by_remainder.iter().take(missing) {
+            counts[g] += 1;
+        }
+        let mut rng = Rng::new(hash_seq(&[
+            config.seed,
+            hash_str("regime"),
+            hash_str(family.name()),
+        ]));
+        rng.shuffle(&mut members);
+        let mut next = members.into_iter();
+        for (g, &count) in counts.iter().enumerate() {
+            for i in next.by_ref().take(count) {
+                out[i] = Some(g);
+            }
+        }
+    }
+    out
 }
 
 /// Assigns splits by scene: within each family the scenes are shuffled (seeded), then test and

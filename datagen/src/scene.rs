@@ -1,5 +1,6 @@
-//! One generated scene: its id, family and Mitsuba 3 XML with PLY meshes, plus the builder the
-//! family generators use to assemble shapes, materials, lights and the camera.
+//! One generated scene: its id, family and Mitsuba 3 XML with PLY meshes and image files
+//! (textures), plus the builder the family generators use to assemble shapes, materials, lights
+//! and the camera.
 
 use crate::config::Config;
 use crate::ply::{encode_ply, Mesh};
@@ -30,13 +31,15 @@ pub enum Family {
     Exterior,
     /// Procedural meshes with random materials of every BSDF kind.
     Material,
+    /// Bitmap-textured, bump- and normal-mapped surfaces (room corners, table tops).
+    Textured,
     /// Scenes the user brings (`[families.external]`), not generated.
     External,
 }
 
 impl Family {
     /// All families in generation order.
-    pub const ALL: [Family; 10] = [
+    pub const ALL: [Family; 11] = [
         Family::Room,
         Family::Glass,
         Family::Water,
@@ -46,6 +49,7 @@ impl Family {
         Family::Tabletop,
         Family::Exterior,
         Family::Material,
+        Family::Textured,
         Family::External,
     ];
 
@@ -61,12 +65,13 @@ impl Family {
             Family::Tabletop => "tabletop",
             Family::Exterior => "exterior",
             Family::Material => "material",
+            Family::Textured => "textured",
             Family::External => "external",
         }
     }
 }
 
-/// A generated scene ready to be written: `scene.xml` plus its PLY files.
+/// A generated scene ready to be written: `scene.xml` plus its PLY and image files.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GeneratedScene {
     /// Scene id, e.g. `007-glass`.
@@ -77,15 +82,20 @@ pub struct GeneratedScene {
     pub xml: String,
     /// PLY meshes as (file name relative to the XML, mesh).
     pub meshes: Vec<(String, Mesh)>,
+    /// Image files (encoded, e.g. PNG textures) as (file name relative to the XML, bytes); a
+    /// deterministic function of the scene like everything else.
+    pub images: Vec<(String, Vec<u8>)>,
 }
 
 impl GeneratedScene {
-    /// All files of the scene as (file name, bytes), `scene.xml` first.
+    /// All files of the scene as (file name, bytes), `scene.xml` first, then the meshes and
+    /// the images.
     pub fn files(&self) -> Vec<(String, Vec<u8>)> {
         let mut out = vec![("scene.xml".to_owned(), self.xml.clone().into_bytes())];
         for (name, mesh) in &self.meshes {
             out.push((name.clone(), encode_ply(mesh)));
         }
+        out.extend(self.images.iter().cloned());
         out
     }
 }
@@ -144,6 +154,9 @@ pub enum Material {
         /// Clear coat in [0, 1].
         clearcoat: f32,
     },
+    /// A `<bsdf>` element the family built itself (textured, bump- or normal-mapped models,
+    /// whose images the scene carries: [`SceneBuilder::image`]).
+    Xml(Element),
 }
 
 /// A `checkerboard` texture named `name` of albedos `a` (`color0`) and `b` (`color1`).
@@ -211,6 +224,7 @@ impl Material {
                     .float("metallic", *metallic)
                     .float("clearcoat", *clearcoat)
             }
+            Material::Xml(e) => e.clone(),
         }
     }
 }
@@ -246,6 +260,7 @@ pub fn spherical(azimuth_deg: f32, elevation_deg: f32) -> Vec3 {
 pub struct SceneBuilder {
     elements: Vec<Element>,
     meshes: Vec<(String, Mesh)>,
+    images: Vec<(String, Vec<u8>)>,
     width: u32,
     height: u32,
     max_depth: u32,
@@ -259,6 +274,7 @@ impl SceneBuilder {
         Self {
             elements: vec![integrator],
             meshes: Vec::new(),
+            images: Vec::new(),
             width: config.width,
             height: config.height,
             max_depth: config.render.max_depth,
@@ -357,6 +373,12 @@ impl SceneBuilder {
         self.meshes.push((file, mesh));
     }
 
+    /// An image file written next to the XML as `name` (a path relative to it, e.g.
+    /// `textures/floor.png`), which the scene's textures read.
+    pub fn image(&mut self, name: &str, bytes: Vec<u8>) {
+        self.images.push((name.to_owned(), bytes));
+    }
+
     /// A spherical area light (a bulb) of radius `radius` emitting `power` (W) in total, tinted
     /// by `color` (scaled so that its green channel carries the power).
     pub fn sphere_light(&mut self, center: Vec3, radius: f32, power: f32, color: [f32; 3]) {
@@ -441,6 +463,7 @@ impl SceneBuilder {
             id,
             family,
             meshes: self.meshes,
+            images: self.images,
         }
     }
 }

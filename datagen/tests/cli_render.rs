@@ -18,7 +18,7 @@ const BIN: &str = env!("CARGO_BIN_EXE_datagen");
 /// Writes the test config (16×16, passes 2 and 4, two seeds, 24 reference passes).
 fn write_config(dir: &Path) -> PathBuf {
     let mut config = test_config(16, &[2, 4], 2, 24);
-    config.render.photons_per_pass = 500;
+    config.render.photons_per_pass = Some(500);
     config.render.reference_photons_per_pass = 1000;
     let path = dir.join("config.toml");
     std::fs::write(&path, toml::to_string(&config).unwrap()).unwrap();
@@ -274,7 +274,7 @@ fn average_references_with_the_real_renderer() {
     std::fs::copy(&config, &old_config).unwrap();
     let mut changed: datagen::config::Config =
         toml::from_str(&std::fs::read_to_string(&config).unwrap()).unwrap();
-    changed.render.photons_per_pass += 100;
+    changed.render.photons_per_pass = changed.render.photons_per_pass.map(|p| p + 100);
     std::fs::write(&config, toml::to_string(&changed).unwrap()).unwrap();
     let out = ok(render(&config, &data, &[]).output().unwrap());
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -384,7 +384,7 @@ fn run_states(dir: &Path, prefix: &str) -> Vec<(PathBuf, u64)> {
 fn a_reference_job_killed_mid_run_resumes_from_its_state() {
     let work = fresh_dir("cli-reference-state");
     let mut config = test_config(16, &[2], 1, 300);
-    config.render.photons_per_pass = 500;
+    config.render.photons_per_pass = Some(500);
     config.render.reference_photons_per_pass = 2000;
     let (config_path, reference) = render_uninterrupted(&work, &config);
     assert!(reference.keys().all(|k| !k.ends_with(".state")));
@@ -499,7 +499,7 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
     let floor = user_scene(&work.join("mine/floor"), 20.0);
     let lamp = user_scene(&work.join("mine/lamp"), 40.0);
     let mut config = test_config(16, &[2], 1, 16);
-    config.render.photons_per_pass = 500;
+    config.render.photons_per_pass = Some(500);
     config.render.reference_photons_per_pass = 1000;
     let at_16 = |xml: &Path, split: Option<Split>, name: Option<&str>| ExternalScene {
         xml: xml.to_owned(),
@@ -704,7 +704,7 @@ fn external_scenes_are_rendered_checked_and_redone_when_edited() {
 fn an_input_job_killed_between_its_bundles_resumes_from_its_state() {
     let work = fresh_dir("cli-input-state");
     let mut config = test_config(16, &[2, 60], 1, 4);
-    config.render.photons_per_pass = 2000;
+    config.render.photons_per_pass = Some(2000);
     config.render.reference_photons_per_pass = 500;
     let (config_path, reference) = render_uninterrupted(&work, &config);
 

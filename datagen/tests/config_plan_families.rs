@@ -7,7 +7,9 @@
 //! `families` preset holds two scenes of every family, and its lamp and tabletop scenes are
 //! deterministic, load and build, with small emitting bulbs and glass respectively, its
 //! exterior scenes have a sun, a sky and a dielectric, its material scenes span several BSDF
-//! kinds; configs without those tables keep their scene ids and fingerprints.
+//! kinds, its textured scenes carry their own images (bitmap albedos, bump and normal maps,
+//! byte-identical on every generation); configs without those tables keep their scene ids and
+//! fingerprints.
 
 mod common;
 
@@ -72,14 +74,14 @@ fn presets_parse_with_intended_sizes() {
     let counts = per_family(&small);
     assert_eq!(counts.len(), 5);
     assert!(counts.values().all(|&n| n >= 5), "{counts:?}");
-    assert_eq!(small.render.passes.len(), 3);
+    assert_eq!(small.render.passes.as_ref().map(Vec::len), Some(3));
 
     let paper = preset("paper");
     assert_eq!((paper.width, paper.height), (1280, 720));
     assert_eq!(paper.scene_count(), 60);
-    assert_eq!(paper.render.passes, [100, 200, 400]);
+    assert_eq!(paper.render.passes.as_deref(), Some(&[100, 200, 400][..]));
     assert_eq!(paper.render.seeds, 10);
-    assert_eq!(paper.render.photons_per_pass, 100_000);
+    assert_eq!(paper.render.photons_per_pass, Some(100_000));
 }
 
 /// Config errors name the file, the field or table (and the line, for TOML errors that have
@@ -420,6 +422,7 @@ fn small_scenes_are_deterministic_distinct_loadable_and_true_to_family() {
             | Family::Tabletop
             | Family::Exterior
             | Family::Material
+            | Family::Textured
             | Family::External => {
                 unreachable!("{id}: the small preset has no {family:?} scenes")
             }
@@ -456,7 +459,9 @@ fn families_preset_has_two_scenes_of_every_family() {
             "014-exterior",
             "015-exterior",
             "016-material",
-            "017-material"
+            "017-material",
+            "018-textured",
+            "019-textured"
         ]
     );
 }
@@ -749,5 +754,212 @@ fn exterior_and_material_scenes_are_deterministic_loadable_and_true_to_family() 
     // Floors and walls are diffuse; the objects bring the other kinds.
     material_kinds.remove("Diffuse");
     assert!(material_kinds.len() >= 3, "{material_kinds:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The textured table is checked like the others, each error naming the field; configs without
+/// it serialise (fingerprint) without it.
+#[test]
+fn textured_config_errors_name_the_field() {
+    let text = std::fs::read_to_string(preset_path("families")).unwrap();
+    let (head, table) = text.split_at(
+        text.find("[families.textured]")
+            .expect("families.toml has a textured table"),
+    );
+    for (from, to, needle) in [
+        (
+            "layouts = [\"corner\", \"table\"]",
+            "layouts = []",
+            "families.textured.layouts",
+        ),
+        (
+            "wall_patterns = [\"plaster\"",
+            "wall_patterns = [\"marble\"",
+            "marble",
+        ),
+        (
+            "bump_depth = [0.002, 0.006]",
+            "bump_depth = [0.0, 0.006]",
+            "families.textured.bump_depth",
+        ),
+        (
+            "pattern_size = [0.4, 1.0]",
+            "pattern_size = [1.0, 0.4]",
+            "families.textured.pattern_size",
+        ),
+        (
+            "texture_size = [128, 256]",
+            "texture_size = [4, 256]",
+            "families.textured.texture_size",
+        ),
+        (
+            "normalmap_probability = 0.5",
+            "normalmap_probability = 1.5",
+            "families.textured.normalmap_probability",
+        ),
+        (
+            "alpha = [0.05, 0.3]",
+            "alpha = [0.05, 1.3]",
+            "families.textured.alpha",
+        ),
+        (
+            "small_lights = [\"spot\", \"point\"]",
+            "small_lights = []",
+            "families.textured.small_lights",
+        ),
+        (
+            "bump_depth = [0.002, 0.006]",
+            "bump_dept = [0.002, 0.006]",
+            "bump_dept",
+        ),
+    ] {
+        let bad = format!("{head}{}", table.replacen(from, to, 1));
+        assert_ne!(bad, text, "the textured table no longer has `{from}`");
+        let e = Config::parse(&bad, "bad.toml").unwrap_err().to_string();
+        assert!(e.contains("bad.toml") && e.contains(needle), "{to}: {e}");
+    }
+    for name in ["small", "tiny", "mixed", "paper"] {
+        let json = serde_json::to_string(&preset(name)).unwrap();
+        assert!(!json.contains("textured"), "{name}: {json}");
+    }
+}
+
+/// The surface's albedo under any bump or normal map, if it is a bitmap.
+fn bitmap_albedo(b: &Bsdf) -> bool {
+    use renderer::texture::Texture;
+    match b {
+        Bsdf::BumpMap(m) => bitmap_albedo(&m.nested),
+        Bsdf::NormalMap(m) => bitmap_albedo(&m.nested),
+        Bsdf::TwoSided { front, .. } => bitmap_albedo(front),
+        Bsdf::Diffuse(d) => matches!(d.reflectance, Texture::Bitmap { .. }),
+        Bsdf::Plastic(p) => matches!(p.diffuse_reflectance, Texture::Bitmap { .. }),
+        Bsdf::RoughPlastic(p) => matches!(p.diffuse_reflectance, Texture::Bitmap { .. }),
+        _ => false,
+    }
+}
+
+/// Every `value="textures/…"` file name in a scene's XML.
+fn texture_files(xml: &str) -> BTreeSet<String> {
+    xml.split("value=\"")
+        .skip(1)
+        .filter_map(|rest| rest.split('"').next())
+        .filter(|v| v.starts_with("textures/"))
+        .map(str::to_owned)
+        .collect()
+}
+
+#[test]
+fn textured_scenes_carry_their_images_load_and_are_true_to_family() {
+    use renderer::texture::Texture;
+    // The `families` preset's ranges with eight scenes, on smaller images (a debug build
+    // generates them).
+    let mut config = preset("families");
+    let c = config.families.textured.as_mut().unwrap();
+    c.count = 8;
+    c.texture_size = [48, 96];
+    let textured = c.clone();
+    let dir = fresh_dir("textured");
+    let (mut seen, mut bumps, mut normals, mut metals, mut glossy, mut small) = (0, 0, 0, 0, 0, 0);
+    for (index, (id, family)) in scene_list(&config).into_iter().enumerate() {
+        if family != Family::Textured {
+            continue;
+        }
+        seen += 1;
+        // Deterministic to the byte, images included.
+        let d = deterministic_pinhole_scene(&config, index, &id, &dir);
+        let scene = generate(&config, index).unwrap();
+        assert!(within(d.camera.fov, Some(textured.fov)), "{id}");
+
+        // The images: PNGs, named exactly by the XML, written next to it, each a square of a
+        // configured size; a height map is 16-bit grey, albedo and normal maps 8-bit RGB.
+        let names: BTreeSet<String> = scene.images.iter().map(|(n, _)| n.clone()).collect();
+        assert_eq!(names, texture_files(&scene.xml), "{id}");
+        assert_eq!(names.len(), scene.images.len(), "{id}: a name twice");
+        for (name, bytes) in &scene.images {
+            assert_eq!(
+                &std::fs::read(dir.join(&id).join(name)).unwrap(),
+                bytes,
+                "{id}/{name}"
+            );
+            let img = image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
+                .unwrap_or_else(|e| panic!("{id}/{name}: {e}"));
+            let [lo, hi] = textured.texture_size;
+            assert!(
+                img.width() == img.height() && (lo..=hi).contains(&img.width()),
+                "{id}/{name}: {}x{}",
+                img.width(),
+                img.height()
+            );
+            let want = if name.ends_with("_height.png") {
+                image::ColorType::L16
+            } else {
+                image::ColorType::Rgb8
+            };
+            assert_eq!(img.color(), want, "{id}/{name}");
+        }
+
+        // The family's point: bitmap albedos under bump or normal maps of bitmaps.
+        let shape_bsdfs: Vec<&Bsdf> = d.shapes.iter().map(|s| &d.bsdfs[s.bsdf]).collect();
+        assert!(
+            shape_bsdfs.iter().any(|b| bitmap_albedo(b)),
+            "{id}: no bitmap albedo"
+        );
+        let mut relief = false;
+        for b in &shape_bsdfs {
+            match b {
+                Bsdf::BumpMap(m) => {
+                    assert!(matches!(m.height, Texture::Bitmap { .. }), "{id}");
+                    assert!(
+                        m.scale > 0.0 && m.scale <= textured.bump_depth[1] + 1e-6,
+                        "{id}: scale {}",
+                        m.scale
+                    );
+                    bumps += 1;
+                    relief = true;
+                }
+                Bsdf::NormalMap(m) => {
+                    assert!(matches!(m.normalmap, Texture::Bitmap { .. }), "{id}");
+                    normals += 1;
+                    relief = true;
+                }
+                _ => {}
+            }
+        }
+        assert!(relief, "{id}: neither a bump map nor a normal map");
+        let under = |pred: fn(&Bsdf) -> bool| {
+            shape_bsdfs.iter().any(|b| match b {
+                Bsdf::BumpMap(m) => pred(&m.nested),
+                Bsdf::NormalMap(m) => pred(&m.nested),
+                other => pred(other),
+            })
+        };
+        metals += usize::from(under(|b| {
+            matches!(b, Bsdf::Conductor(_) | Bsdf::RoughConductor(_))
+        }));
+        glossy += usize::from(under(|b| {
+            matches!(b, Bsdf::Plastic(_) | Bsdf::RoughPlastic(_))
+        }));
+
+        // One area light above, and at most one small spot or point light.
+        assert_eq!(
+            d.shapes.iter().filter(|s| s.emission.is_some()).count(),
+            1,
+            "{id}: one area light"
+        );
+        let compact = d
+            .emitters
+            .iter()
+            .filter(|e| matches!(e, EmitterDesc::Spot { .. } | EmitterDesc::Point { .. }))
+            .count();
+        assert!(compact <= 1, "{id}: {compact} small lights");
+        small += compact;
+        renderer::scene::Scene::build(&d).unwrap_or_else(|e| panic!("{id}: {e}"));
+    }
+    assert_eq!(seen, 8);
+    // Across the scenes every kind of relief, glossy and metal objects and a small light.
+    assert!(
+        bumps > 0 && normals > 0 && metals > 0 && glossy > 0 && small > 0,
+        "bump maps {bumps}, normal maps {normals}, metal {metals}, glossy {glossy}, small lights {small}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::data::FamilyFilter;
 use crate::training::{toml_name, TrainSettings};
 use anyhow::{bail, Context, Result};
 use model::loss::Loss;
@@ -93,6 +94,15 @@ pub struct TrainConfig {
     /// Ignored by `--resume`.
     #[serde(default)]
     pub init: Option<PathBuf>,
+    /// Scene families read (training, validation and `--evaluate`), e.g. `["room", "glass"]`.
+    /// Absent: every family of the dataset.
+    #[serde(default)]
+    pub families: Option<Vec<String>>,
+    /// Scene families left out (training, validation and `--evaluate`): `["lamp"]` trains a
+    /// network that never saw a lamp (leave-one-family-out; `--evaluate-families lamp` then
+    /// measures it on them).
+    #[serde(default)]
+    pub exclude_families: Vec<String>,
     /// Seed of the weights and the patch order.
     pub seed: u64,
     /// Images held in memory at once.
@@ -127,6 +137,14 @@ impl TrainConfig {
             .validate()
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         Ok(cfg)
+    }
+
+    /// The families this config reads.
+    pub fn family_filter(&self) -> FamilyFilter {
+        FamilyFilter {
+            only: self.families.clone(),
+            exclude: self.exclude_families.clone(),
+        }
     }
 
     /// The network architecture.

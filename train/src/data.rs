@@ -133,6 +133,37 @@ pub fn patch_positions(size: usize, patch: usize, stride: usize) -> Vec<usize> {
     positions
 }
 
+/// Which scene families of a dataset a run reads (by the manifest's `family`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct FamilyFilter {
+    /// Only these (absent: all).
+    pub only: Option<Vec<String>>,
+    /// Not these.
+    pub exclude: Vec<String>,
+}
+
+impl FamilyFilter {
+    /// Whether samples of `family` are read.
+    pub fn accepts(&self, family: &str) -> bool {
+        self.only
+            .as_ref()
+            .is_none_or(|only| only.iter().any(|f| f == family))
+            && !self.exclude.iter().any(|f| f == family)
+    }
+
+    /// The names the filter gives that are no family of the dataset (a misspelt name would
+    /// otherwise silently read everything or nothing).
+    fn unknown<'a>(&'a self, families: &[&str]) -> Vec<&'a str> {
+        self.only
+            .iter()
+            .flatten()
+            .chain(&self.exclude)
+            .map(String::as_str)
+            .filter(|f| !families.contains(f))
+            .collect()
+    }
+}
+
 /// A split of a dataset, cut into patches, with a bounded cache of loaded images.
 pub struct PatchDataset {
     /// Usable images.
@@ -155,6 +186,7 @@ impl PatchDataset {
     /// data (NaN/Inf, missing reference, mismatched sizes or channels, smaller than a patch).
     /// `references`: a directory inside `root` whose `<scene id>.exr` replaces the manifest's
     /// reference of every sample (e.g. the averaged runs of `datagen average-references`).
+    /// Only samples of the families `families` accepts are read.
     pub fn open(
         root: &Path,
         split: &str,
@@ -162,8 +194,21 @@ impl PatchDataset {
         stride: usize,
         cache_images: usize,
         references: Option<&Path>,
+        families: &FamilyFilter,
     ) -> Result<Self, String> {
         let manifest: Manifest = Manifest::load(root).map_err(|e| e.to_string())?;
+        let mut known: Vec<&str> = manifest.samples.iter().map(|s| s.family.as_str()).collect();
+        known.sort_unstable();
+        known.dedup();
+        let unknown = families.unknown(&known);
+        if !unknown.is_empty() {
+            return Err(format!(
+                "{}: no family {} in the dataset (its families: {})",
+                root.join("manifest.json").display(),
+                unknown.join(", "),
+                known.join(", ")
+            ));
+        }
         // A misspelt split would otherwise read as an empty one (e.g. training without
         // validation, silently).
         if !manifest.samples.iter().any(|s| s.split.name() == split) {
@@ -176,9 +221,20 @@ impl PatchDataset {
                 splits.join(", ")
             ));
         }
+        let read: Vec<_> = manifest
+            .samples
+            .iter()
+            .filter(|s| s.split.name() == split && families.accepts(&s.family))
+            .collect();
+        if read.is_empty() {
+            return Err(format!(
+                "{}: split `{split}` has no sample of the families read ({families:?})",
+                root.join("manifest.json").display()
+            ));
+        }
         let mut images = Vec::new();
         let mut bad = Vec::new();
-        for entry in manifest.samples.iter().filter(|s| s.split.name() == split) {
+        for entry in read {
             let bundle = root.join(&entry.bundle);
             let reference = match references {
                 Some(dir) => bundle::scene_reference_path(&root.join(dir), &entry.scene),

@@ -10,7 +10,7 @@ use burn::module::Module;
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use model::weights::load_burnpack;
-use train::data::PatchDataset;
+use train::data::{FamilyFilter, PatchDataset};
 use train::training::{validate, EpochReport, Trainer};
 use train::{config, curves};
 
@@ -30,6 +30,16 @@ struct Cli {
     /// `model.json`) on whole images of this split (e.g. `test`) and write `eval_<split>.json`.
     #[arg(long, value_name = "SPLIT", conflicts_with = "resume")]
     evaluate: Option<String>,
+    /// With `--evaluate`: read these families only (comma-separated, e.g. `lamp`), instead of
+    /// the config's `families` / `exclude_families` — a network trained without a family,
+    /// measured on it.
+    #[arg(
+        long,
+        value_name = "FAMILIES",
+        value_delimiter = ',',
+        requires = "evaluate"
+    )]
+    evaluate_families: Option<Vec<String>>,
     /// Instead of training, redraw `curves.png` in the output directory from its
     /// `metrics.json` (e.g. for a run made before the picture existed).
     #[arg(long, conflicts_with_all = ["resume", "evaluate"])]
@@ -129,7 +139,12 @@ fn level_list(levels: &[usize]) -> String {
 
 /// `--evaluate SPLIT`: relMSE of the trained output and of every input level over whole images
 /// of `split`, pooled over all pixels; printed and written to `<output>/eval_<split>.json`.
-fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Result<()> {
+fn evaluate(
+    cfg: &TrainConfig,
+    split: &str,
+    families: &FamilyFilter,
+    device: &burn::tensor::Device,
+) -> Result<()> {
     let model_json = cfg.output.join("model.json");
     let text = std::fs::read_to_string(&model_json)
         .with_context(|| format!("{} (train first)", model_json.display()))?;
@@ -149,6 +164,7 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
         1,
         cfg.cache_images,
         cfg.references.as_deref(),
+        families,
     )
     .map_err(anyhow::Error::msg)?;
     report_bad(split, &ds, &cfg.output)?;
@@ -183,6 +199,8 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
     )?;
     let json = serde_json::json!({
         "split": split,
+        "families": families.only,
+        "exclude_families": families.exclude,
         "images": ds.images.len(),
         "bad": ds.bad.len(),
         "image_side": side,
@@ -201,8 +219,13 @@ fn evaluate(cfg: &TrainConfig, split: &str, device: &burn::tensor::Device) -> Re
         "best_level_relmse": best_value,
         "ratio_to_best_level": v.output / best_value,
     });
+    // A family-restricted evaluation has a file of its own: `eval_test_lamp.json`.
+    let name = match &families.only {
+        Some(only) => format!("eval_{split}_{}.json", only.join("+")),
+        None => format!("eval_{split}.json"),
+    };
     write_text(
-        &cfg.output.join(format!("eval_{split}.json")),
+        &cfg.output.join(name),
         &serde_json::to_string_pretty(&json)?,
     )
 }
@@ -392,7 +415,14 @@ fn run(cli: &Cli) -> Result<()> {
         eprintln!("{note}");
     }
     if let Some(split) = &cli.evaluate {
-        return evaluate(&cfg, split, &device);
+        let families = match &cli.evaluate_families {
+            Some(only) => FamilyFilter {
+                only: Some(only.clone()),
+                exclude: Vec::new(),
+            },
+            None => cfg.family_filter(),
+        };
+        return evaluate(&cfg, split, &families, &device);
     }
     // Everything that can refuse the run is checked before anything is written into `output`.
     check_output(&cfg, cli.resume)?;
@@ -407,6 +437,7 @@ fn run(cli: &Cli) -> Result<()> {
         cfg.stride,
         cfg.cache_images,
         cfg.references.as_deref(),
+        &cfg.family_filter(),
     )
     .map_err(anyhow::Error::msg)?;
     report_bad(&cfg.train_split, &train, &cfg.output)?;
@@ -424,6 +455,7 @@ fn run(cli: &Cli) -> Result<()> {
             cfg.patch,
             cfg.cache_images,
             cfg.references.as_deref(),
+            &cfg.family_filter(),
         )
         .map_err(anyhow::Error::msg)?
     };

@@ -601,3 +601,72 @@ fn a_time_budget_stops_between_epochs_and_resume_finishes_the_same_run() {
         assert!(stderr.contains("--time"), "--time {bad}: {stderr}");
     }
 }
+
+#[test]
+fn a_family_left_out_of_training_is_evaluated_on_its_own() {
+    let (dir, data) = dir_with_data("families");
+    let mut samples = Vec::new();
+    for (i, (family, split)) in [
+        ("room", "train"),
+        ("room", "train"),
+        ("lamp", "train"),
+        ("room", "val"),
+        ("lamp", "val"),
+        ("lamp", "val"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let (b, reference) = synthetic_bundle(24, 24, 0.3, i as u64 + 1);
+        let name = format!("s{i}");
+        bundle::write_bundle(&data.join(format!("{name}.exr")), &b).unwrap();
+        bundle::write_rgb_exr_image(&data.join(format!("{name}_ref.exr")), &reference).unwrap();
+        samples.push(serde_json::json!({
+            "bundle": format!("{name}.exr"), "scene": name, "family": family, "split": split,
+            "seed": i, "seed_index": 0, "passes": 16, "photons": 1000,
+            "reference": format!("{name}_ref.exr"), "sha256": ""
+        }));
+    }
+    let manifest = serde_json::json!({
+        "format": bundle::manifest::MANIFEST_FORMAT, "name": "test", "config_sha256": "",
+        "width": 24, "height": 24, "reference_level": "y", "scenes": [], "samples": samples,
+        "config": {}
+    });
+    std::fs::write(data.join("manifest.json"), manifest.to_string()).unwrap();
+
+    let config = tiny_config(&dir, "no-lamp", &data, "exclude_families = [\"lamp\"]\n");
+    let run = train(&config, &[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("2 train images") && stderr.contains("1 val images"),
+        "{stderr}"
+    );
+    let eval = train(
+        &config,
+        &["--evaluate", "val", "--evaluate-families", "lamp"],
+    );
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&eval.stdout);
+    assert!(stdout.contains("2 images of 24x24"), "{stdout}");
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("no-lamp-out").join("eval_val_lamp.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(report["families"], serde_json::json!(["lamp"]));
+    assert_eq!(report["images"], 2);
+
+    // A misspelt family is an error naming it and the dataset's families.
+    let typo = tiny_config(&dir, "typo", &data, "families = [\"lmap\"]\n");
+    let run = train(&typo, &[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("no family lmap") && stderr.contains("lamp, room"),
+        "{stderr}"
+    );
+}

@@ -11,6 +11,7 @@ use datagen::families::{generate, scene_list};
 use datagen::jobs::{check_external_scenes, render_dataset, RenderOptions};
 use datagen::manifest::{assemble_manifest, Manifest};
 use datagen::plan::{Plan, Shard, Split};
+use datagen::reference_noise::{markdown, noise_table, TABLE_FILE};
 use datagen::scene::write_scene_files;
 use datagen::sppm_backend::SppmBackend;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -36,6 +37,14 @@ enum Command {
         /// Output directory.
         #[arg(long)]
         out: PathBuf,
+    },
+    /// Print what a config renders, per regime: scenes per split, image side, photons per
+    /// pixel per pass, and the photons and eye passes of its inputs and references (the work
+    /// that sizes a cluster job or a session).
+    Plan {
+        /// Dataset config (TOML).
+        #[arg(long)]
+        config: PathBuf,
     },
     /// Render references and input bundles into OUT (resumable; shards share OUT).
     #[command(allow_negative_numbers = true)]
@@ -108,6 +117,17 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Measure how noisy each reference is against the error of the inputs it judges (datasets
+    /// with `render.reference_runs` ≥ 2): prints a per-family Markdown table, flags scenes whose
+    /// reference noise exceeds 1/10 of the best input level's error at their largest pass
+    /// count, and writes DIR/reference-noise.json.
+    ReferenceNoise {
+        /// Dataset directory (with manifest.json).
+        dir: PathBuf,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Write a PNG grid of a dataset's reference images.
     #[command(allow_negative_numbers = true)]
     ContactSheet {
@@ -175,6 +195,11 @@ fn run(cli: Cli) -> Result<i32> {
                     list.len() - written
                 );
             }
+            Ok(0)
+        }
+        Command::Plan { config } => {
+            let config = Config::load(&config)?;
+            print!("{}", datagen::plan::summary(&Plan::new(&config)));
             Ok(0)
         }
         Command::Render {
@@ -281,6 +306,29 @@ fn run(cli: Cli) -> Result<i32> {
                 );
                 Ok(1)
             }
+        }
+        Command::ReferenceNoise { dir, quiet } => {
+            let manifest = Manifest::load(&dir)?;
+            let bar = ProgressBar::with_draw_target(
+                Some(manifest.scenes.len() as u64),
+                if quiet {
+                    ProgressDrawTarget::hidden()
+                } else {
+                    ProgressDrawTarget::stderr()
+                },
+            );
+            bar.set_style(
+                ProgressStyle::with_template("reference noise {bar:40} {pos}/{len} scenes")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            let table = noise_table(&dir, &manifest, |done, _| bar.set_position(done as u64))?;
+            bar.finish_and_clear();
+            let path = dir.join(TABLE_FILE);
+            datagen::fsutil::write_atomic(&path, &datagen::manifest::to_json(&table))
+                .with_context(|| format!("writing {}", path.display()))?;
+            print!("{}", markdown(&table));
+            eprintln!("wrote {}", path.display());
+            Ok(0)
         }
         Command::AverageReferences {
             dir,

@@ -10,6 +10,7 @@ mod metal;
 mod room;
 mod shelf;
 mod tabletop;
+mod textured;
 mod water;
 
 use crate::config::Config;
@@ -30,6 +31,7 @@ pub fn scene_list(config: &Config) -> Vec<(String, Family)> {
         f.tabletop.as_ref().map_or(0, |c| c.count),
         f.exterior.as_ref().map_or(0, |c| c.count),
         f.material.as_ref().map_or(0, |c| c.count),
+        f.textured.as_ref().map_or(0, |c| c.count),
     ];
     let mut out = Vec::new();
     for (family, count) in Family::ALL.into_iter().zip(counts) {
@@ -50,6 +52,19 @@ pub fn scene_list(config: &Config) -> Vec<(String, Family)> {
 /// `None` for an external scene (the user's file is rendered as it is).
 pub fn generate(config: &Config, index: usize) -> Option<GeneratedScene> {
     let (id, family) = scene_list(config)[index].clone();
+    // A scene of a regime with its own side is generated at that size (only the film changes).
+    let (width, height) = crate::plan::scene_size(config, index);
+    let resized;
+    let config = if (width, height) == (config.width, config.height) {
+        config
+    } else {
+        resized = Config {
+            width,
+            height,
+            ..config.clone()
+        };
+        &resized
+    };
     let mut rng = Rng::new(hash_seq(&[config.seed, hash_str("scene"), index as u64]));
     let f = &config.families;
     // The family tables exist for every listed family (scene_list only lists those).
@@ -63,6 +78,7 @@ pub fn generate(config: &Config, index: usize) -> Option<GeneratedScene> {
         Family::Tabletop => tabletop::generate(config, f.tabletop.as_ref().unwrap(), &mut rng, id),
         Family::Exterior => exterior::generate(config, f.exterior.as_ref().unwrap(), &mut rng, id),
         Family::Material => material::generate(config, f.material.as_ref().unwrap(), &mut rng, id),
+        Family::Textured => textured::generate(config, f.textured.as_ref().unwrap(), &mut rng, id),
         Family::External => return None,
     })
 }

@@ -10,6 +10,12 @@ use crate::rng::Rng;
 use crate::scene::{spherical, Family, GeneratedScene, Material, SceneBuilder};
 use glam::{Mat3, Vec3};
 
+/// How far the objects stand above the table top: a glass base lying in the top's plane would
+/// leave every ray reaching it two surfaces at the same distance, which renderers resolve by
+/// rounding, each its own way (Mitsuba picks the table ≈ 3 % more often than ours: 2.7 % of
+/// the light through the glasses). Well above both renderers' ray offsets (≈ 2.5e-4 here).
+const LIFT: f32 = 1e-3;
+
 /// Height of the table top above the floor (the top is the plane y = 0).
 const TABLE_HEIGHT: f32 = 0.75;
 
@@ -109,7 +115,7 @@ pub fn generate(config: &Config, c: &TabletopConfig, rng: &mut Rng, id: String) 
         let z_max = (tz - radius - 0.05).max(z_min);
         let mut pos = Vec3::ZERO;
         for _ in 0..32 {
-            pos = Vec3::new(rng.range([-x_max, x_max]), 0.0, rng.range([z_min, z_max]));
+            pos = Vec3::new(rng.range([-x_max, x_max]), LIFT, rng.range([z_min, z_max]));
             if placed
                 .iter()
                 .all(|(p, r)| p.distance(pos) > r + radius + 0.03)

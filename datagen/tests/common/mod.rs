@@ -17,7 +17,7 @@ pub fn test_config(width: u32, passes: &[u32], seeds: u32, reference_passes: u32
     let mut c = Config::load(&root).expect("tiny config parses");
     c.width = width;
     c.height = width;
-    c.render.passes = passes.to_vec();
+    c.render.passes = Some(passes.to_vec());
     c.render.seeds = seeds;
     c.render.reference_passes = reference_passes;
     c
