@@ -12,6 +12,7 @@ pub mod plot;
 pub mod resume;
 pub mod runs;
 pub mod scene;
+pub mod schedules;
 pub mod summary;
 
 use std::path::{Path, PathBuf};
@@ -343,6 +344,7 @@ fn evaluate_one(
             &config.output.join(&plot),
             &format!("{} — relMSE (log-log)", s.name),
             &eval,
+            &settings.schedule.name().to_uppercase(),
         )?;
         let pixels = eval.width * eval.height;
         let err_std = relative_error_map(&imgs.standard, &imgs.reference, pixels);

@@ -14,7 +14,7 @@ use evaluate::config::EvalConfig;
 #[command(version, allow_negative_numbers = true)]
 struct Cli {
     /// Evaluation config (TOML), e.g. `configs/eval/small.toml`.
-    #[arg(long, required_unless_present = "combine")]
+    #[arg(long, required_unless_present_any = ["combine", "schedules"])]
     config: Option<PathBuf>,
     /// Instead of evaluating, summarise finished evaluations together: the output directories
     /// of earlier runs (each holding results.json), e.g. a dataset's test split and the
@@ -22,6 +22,13 @@ struct Cli {
     /// largest pass count they share.
     #[arg(long, num_args = 1.., value_name = "DIR", conflicts_with_all = ["config", "model", "limit", "resume"])]
     combine: Vec<PathBuf>,
+    /// Instead of evaluating, compare two finished evaluations of the same scenes, one with
+    /// `schedule = "sppm"` and one with `"cppm"` (the paper's Fig. 8 and Table 2): writes
+    /// `<scene>_schedules.png` (SPPM, CPPM, ours + SPPM, ours + CPPM, log-log) and
+    /// `schedules.json` into `--output` (default: the CPPM directory) and prints the table.
+    #[arg(long, num_args = 2, value_names = ["SPPM_DIR", "CPPM_DIR"],
+          conflicts_with_all = ["config", "model", "limit", "resume", "combine"])]
+    schedules: Vec<PathBuf>,
     /// Override the config's model directory.
     #[arg(long)]
     model: Option<PathBuf>,
@@ -54,6 +61,15 @@ fn main() -> ExitCode {
 
 /// Returns whether every scene was evaluated.
 fn run(cli: &Cli) -> Result<bool> {
+    if let [sppm, cppm] = &cli.schedules[..] {
+        let out = cli.output.clone().unwrap_or_else(|| cppm.clone());
+        let rows = evaluate::schedules::compare_schedules(sppm, cppm, &out)?;
+        print!("{}", evaluate::schedules::markdown(&rows));
+        let json = out.join("schedules.json");
+        evaluate::schedules::write_json(&rows, &json)?;
+        println!("wrote {} and the figures beside it", json.display());
+        return Ok(true);
+    }
     let Some(config_path) = &cli.config else {
         return combine(cli);
     };

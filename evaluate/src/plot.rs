@@ -19,11 +19,12 @@ fn loggable(points: impl IntoIterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
 }
 
 /// The curves of one panel; `by_time` picks the x axis (seconds, else passes). The input
-/// levels are dashed (they are the bar, not a result).
-fn curves(eval: &SceneEval, by_time: bool) -> Vec<Series> {
+/// levels are dashed (they are the bar, not a result). `method`: the progressive method,
+/// `SPPM` or `CPPM`.
+fn curves(eval: &SceneEval, by_time: bool, method: &str) -> Vec<Series> {
     let x = |seconds: f64, passes: u32| if by_time { seconds } else { passes as f64 };
     let mut out = vec![Series {
-        label: "standard SPPM".into(),
+        label: format!("standard {method}"),
         colour: STANDARD,
         points: loggable(
             eval.standard
@@ -61,9 +62,77 @@ fn curves(eval: &SceneEval, by_time: bool) -> Vec<Series> {
     out
 }
 
-/// Writes the two-panel plot (relMSE vs seconds | relMSE vs passes) as a PNG, atomically.
-pub fn write_convergence_plot(path: &Path, title: &str, eval: &SceneEval) -> Result<()> {
-    plots::write_atomically(path, |tmp| draw(tmp, title, eval)).map_err(|e| anyhow!(e))
+/// Writes the two-panel plot (relMSE vs seconds | relMSE vs passes) as a PNG, atomically;
+/// `method` (`SPPM` or `CPPM`) names the standard curve.
+pub fn write_convergence_plot(
+    path: &Path,
+    title: &str,
+    eval: &SceneEval,
+    method: &str,
+) -> Result<()> {
+    plots::write_atomically(path, |tmp| {
+        draw(tmp, title, |by_time| curves(eval, by_time, method))
+    })
+    .map_err(|e| anyhow!(e))
+}
+
+/// The curves of the paper's SPPM-against-CPPM figure (its Fig. 8): standard SPPM and CPPM
+/// (single level), ours on each (render + inference against seconds); CPPM's dashed.
+fn schedule_curves(sppm: &SceneEval, cppm: &SceneEval, by_time: bool) -> Vec<Series> {
+    let x = |seconds: f64, passes: u32| if by_time { seconds } else { passes as f64 };
+    let standard = |eval: &SceneEval| {
+        loggable(
+            eval.standard
+                .iter()
+                .map(|p| (x(p.seconds, p.passes), p.relmse)),
+        )
+    };
+    let ours = |eval: &SceneEval| {
+        loggable(
+            eval.checkpoints
+                .iter()
+                .map(|c| (x(c.total_seconds, c.passes), c.ours_relmse)),
+        )
+    };
+    vec![
+        Series {
+            label: "SPPM".into(),
+            colour: STANDARD,
+            points: standard(sppm),
+            dashed: false,
+        },
+        Series {
+            label: "CPPM".into(),
+            colour: STANDARD,
+            points: standard(cppm),
+            dashed: true,
+        },
+        Series {
+            label: "ours + SPPM".into(),
+            colour: OURS,
+            points: ours(sppm),
+            dashed: false,
+        },
+        Series {
+            label: "ours + CPPM".into(),
+            colour: OURS,
+            points: ours(cppm),
+            dashed: true,
+        },
+    ]
+}
+
+/// Writes the SPPM-against-CPPM plot of one scene (relMSE vs seconds | vs passes), atomically.
+pub fn write_schedules_plot(
+    path: &Path,
+    title: &str,
+    sppm: &SceneEval,
+    cppm: &SceneEval,
+) -> Result<()> {
+    plots::write_atomically(path, |tmp| {
+        draw(tmp, title, |by_time| schedule_curves(sppm, cppm, by_time))
+    })
+    .map_err(|e| anyhow!(e))
 }
 
 /// The log axes of one panel holding `points`: x (seconds, decimal ticks; or passes, powers
@@ -90,14 +159,19 @@ fn axes(points: &[(f64, f64)], by_time: bool) -> Option<(LogAxis, LogAxis)> {
     ))
 }
 
-fn draw(path: &Path, title: &str, eval: &SceneEval) -> Result<(), Box<dyn std::error::Error>> {
+/// Draws the two panels of the curves `panel(by_time)` gives.
+fn draw(
+    path: &Path,
+    title: &str,
+    panel: impl Fn(bool) -> Vec<Series>,
+) -> Result<(), Box<dyn std::error::Error>> {
     let root = BitMapBackend::new(path, (1120, 460)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, body) = root.split_vertically(30);
     top.titled(title, ("sans-serif", 20))?;
     let areas = body.split_evenly((1, 2));
     for (area, by_time) in areas.iter().zip([true, false]) {
-        let cs = curves(eval, by_time);
+        let cs = panel(by_time);
         let all: Vec<(f64, f64)> = cs.iter().flat_map(|c| c.points.iter().copied()).collect();
         let Some((x_axis, y_axis)) = axes(&all, by_time) else {
             continue;
