@@ -269,6 +269,9 @@ mod tests {
         assert_eq!(default.settings().loss, Loss::RelativeLogL1);
         let relmse: TrainConfig = toml::from_str(&format!("{BASE}loss = \"relmse\"\n")).unwrap();
         assert_eq!(relmse.settings().loss, Loss::Relmse);
+        let noisy: TrainConfig =
+            toml::from_str(&format!("{BASE}loss = \"noisy-relmse\"\n")).unwrap();
+        assert_eq!(noisy.settings().loss, Loss::NoisyRelmse);
         let eq8: TrainConfig =
             toml::from_str(&format!("{BASE}loss = \"relative-log-l1\"\n")).unwrap();
         assert_eq!(eq8.settings().loss, Loss::RelativeLogL1);
