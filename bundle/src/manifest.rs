@@ -130,6 +130,40 @@ pub struct SceneEntry {
     /// the spread of its runs; needs `reference_runs` ≥ 2): Σ s²/R / (ref² + 0.01) / (3·pixels).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_noise: Option<f64>,
+    /// The converged reference that evaluation and validation measure against, where `datagen
+    /// evaluation-references` made one (the training `reference` above stays the target).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub evaluation_reference: Option<EvaluationReference>,
+}
+
+/// A reference converged well beyond the scene's inputs (`datagen evaluation-references`): the
+/// mean of independent SPPM runs with many more passes than the inputs, grown until its own
+/// noise is a small fraction of the best input's error.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EvaluationReference {
+    /// EXR path relative to the dataset root.
+    pub path: String,
+    /// Lower-case hex SHA-256 of the file.
+    pub sha256: String,
+    /// Passes of each run.
+    pub passes: u32,
+    /// Photons per pass of each run.
+    pub photons: u64,
+    /// Render seeds of the runs averaged.
+    pub seeds: Vec<u64>,
+    /// The relMSE the mean carries from its own noise (docs/method.md §5.6 weights; from the
+    /// spread of the runs): Σ s²/R / (ref² + 0.01) / (3·pixels).
+    pub noise: f64,
+    /// The best input level's relMSE at the scene's largest pass count against this reference
+    /// (mean over input seeds), less `noise`: the error the reference is there to measure.
+    pub input_relmse: f64,
+    /// The noise limit it was rendered for, as a fraction of `input_relmse`.
+    pub target: f64,
+    /// `noise ≤ target · input_relmse`; false: the pass limit was reached first (flagged).
+    pub converged: bool,
+    /// Seconds of rendering spent on the runs (all passes, all runs).
+    pub seconds: f64,
 }
 
 impl SceneEntry {

@@ -154,6 +154,43 @@ pub fn summary_lines(report: &NoiseReport, split: Split, noise_path: &Path) -> V
     lines
 }
 
+/// The run settings of an extra run of `scene`'s reference (photons per pass, depth, the SPPM
+/// radius schedule, the scene's size and `-D` overrides) with its own `seed` and `passes`,
+/// keeping its state in `state`.
+pub fn extra_reference_run(
+    manifest: &Manifest,
+    scene: &SceneEntry,
+    seed: u64,
+    passes: u32,
+    state: StateSpec,
+    threads: usize,
+) -> RunSpec {
+    // The `-D` overrides of a scene the user brought (the plan numbers the scenes by id).
+    let plan = crate::plan::Plan::new(&manifest.config);
+    let defines = plan
+        .scenes
+        .iter()
+        .find(|s| s.id == scene.id)
+        .and_then(|s| manifest.config.external_scene(s.index))
+        .map(|e| e.define_pairs())
+        .unwrap_or_default();
+    RunSpec {
+        sppm: run_settings(
+            &scene.id,
+            seed,
+            scene.reference_photons,
+            manifest.config.render.max_depth,
+            // References are SPPM's whatever the inputs' schedule.
+            RadiusSchedule::Sppm,
+            threads,
+        ),
+        passes: vec![passes],
+        state: Some(state),
+        defines,
+        size: scene.size_in(manifest),
+    }
+}
+
 /// Where extra run `seed` of `scene` lives (relative to the dataset root): the settings are in
 /// the name, so runs of another reference configuration are never mixed in.
 fn run_path(scene: &SceneEntry, seed: u64) -> PathBuf {
@@ -320,16 +357,6 @@ pub fn average_references(
             scenes: BTreeMap::new(),
         },
     };
-    // The `-D` overrides of scenes the user brought, by scene id (the plan numbers them).
-    let plan = crate::plan::Plan::new(&manifest.config);
-    let defines_of = |id: &str| -> Vec<(String, String)> {
-        plan.scenes
-            .iter()
-            .find(|s| s.id == id)
-            .and_then(|s| manifest.config.external_scene(s.index))
-            .map(|e| e.define_pairs())
-            .unwrap_or_default()
-    };
     for scene in scenes {
         let (width, height) = scene.size_in(manifest);
         let mut seeds = vec![scene.reference_seed];
@@ -339,25 +366,19 @@ pub fn average_references(
             let path = root.join(run_path(scene, seed));
             let rendered = !path.exists();
             let image = if rendered {
-                let spec = RunSpec {
-                    sppm: run_settings(
-                        &scene.id,
-                        seed,
-                        scene.reference_photons,
-                        manifest.config.render.max_depth,
-                        // References are SPPM's whatever the inputs' schedule.
-                        RadiusSchedule::Sppm,
-                        options.threads,
-                    ),
-                    passes: vec![scene.reference_passes],
-                    // A killed run continues from its state; removed once the image is written.
-                    state: Some(StateSpec {
-                        path: path.with_extension("state"),
-                        interval: options.state_interval,
-                    }),
-                    defines: defines_of(&scene.id),
-                    size: (width, height),
+                // A killed run continues from its state; removed once the image is written.
+                let state = StateSpec {
+                    path: path.with_extension("state"),
+                    interval: options.state_interval,
                 };
+                let spec = extra_reference_run(
+                    manifest,
+                    scene,
+                    seed,
+                    scene.reference_passes,
+                    state,
+                    options.threads,
+                );
                 let image = renderer.reference(&root.join(&scene.xml), &spec, on_pass)?;
                 // The run is averaged as rendered (EXR float32 keeps it exactly), not read back.
                 let image = check_size(image, &path, width, height)?;

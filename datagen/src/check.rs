@@ -102,40 +102,18 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
         }
         done += 1;
         on_file(done, total);
-        // Every problem of the reference on one line (a truncated file is both unreadable and
-        // of another checksum: one broken file, one line).
-        let mut reasons = Vec::new();
-        match file_state(root, &s.reference, &s.reference_sha256) {
-            FileState::Missing(why) => reasons.push(why),
-            state => {
-                match read_rgb_exr_image(&root.join(&s.reference)) {
-                    Err(e) => reasons.push(format!("unreadable: {e}")),
-                    Ok(img) => {
-                        let (w, h) = sizes[s.id.as_str()];
-                        if (img.width, img.height) != (w, h) {
-                            reasons.push(format!(
-                                "size {}x{}, manifest says {w}x{h}",
-                                img.width, img.height
-                            ));
-                        }
-                        if let Some(i) = img.data.iter().position(|v| !v.is_finite()) {
-                            let p = i / 3;
-                            reasons.push(format!(
-                                "non-finite value {} (NaN/Inf) in channel {} at pixel ({}, {})",
-                                img.data[i],
-                                ["R", "G", "B"][i % 3],
-                                p % img.width.max(1),
-                                p / img.width.max(1)
-                            ));
-                        }
-                    }
-                }
-                if let FileState::Mismatch(why) = state {
-                    reasons.push(why);
-                }
-            }
+        let size = sizes[s.id.as_str()];
+        report.problems.extend(file_problem(
+            &s.reference,
+            reference_problems(root, &s.reference, &s.reference_sha256, size),
+        ));
+        if let Some(e) = &s.evaluation_reference {
+            report.files += 1;
+            report.problems.extend(file_problem(
+                &e.path,
+                reference_problems(root, &e.path, &e.sha256, size),
+            ));
         }
-        report.problems.extend(file_problem(&s.reference, reasons));
         done += 1;
         on_file(done, total);
     }
@@ -204,6 +182,42 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
         on_file(done, total);
     }
     report
+}
+
+/// Every problem of a reference image on one line's worth of reasons (a truncated file is both
+/// unreadable and of another checksum: one broken file, one line).
+fn reference_problems(root: &Path, rel: &str, sha: &str, (w, h): (usize, usize)) -> Vec<String> {
+    let mut reasons = Vec::new();
+    match file_state(root, rel, sha) {
+        FileState::Missing(why) => reasons.push(why),
+        state => {
+            match read_rgb_exr_image(&root.join(rel)) {
+                Err(e) => reasons.push(format!("unreadable: {e}")),
+                Ok(img) => {
+                    if (img.width, img.height) != (w, h) {
+                        reasons.push(format!(
+                            "size {}x{}, manifest says {w}x{h}",
+                            img.width, img.height
+                        ));
+                    }
+                    if let Some(i) = img.data.iter().position(|v| !v.is_finite()) {
+                        let p = i / 3;
+                        reasons.push(format!(
+                            "non-finite value {} (NaN/Inf) in channel {} at pixel ({}, {})",
+                            img.data[i],
+                            ["R", "G", "B"][i % 3],
+                            p % img.width.max(1),
+                            p / img.width.max(1)
+                        ));
+                    }
+                }
+            }
+            if let FileState::Mismatch(why) = state {
+                reasons.push(why);
+            }
+        }
+    }
+    reasons
 }
 
 /// What the checksum says about a file of the dataset.

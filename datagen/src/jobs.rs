@@ -670,6 +670,7 @@ fn run_job(
                 size: (size != (config.width, config.height)).then_some([size.0, size.1]),
                 reference_runs: (runs > 1).then_some(runs),
                 reference_noise: noise,
+                evaluation_reference: None,
             });
         }
         Job::Inputs { seed_index, .. } => {

@@ -6,6 +6,7 @@ pub mod average;
 pub mod check;
 pub mod config;
 pub mod contact_sheet;
+pub mod evaluation_reference;
 pub mod families;
 pub mod fsutil;
 pub mod jobs;

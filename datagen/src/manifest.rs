@@ -1,7 +1,8 @@
 //! Writing the dataset manifest (`manifest.json`; its types are `bundle::manifest`'s, shared
 //! with the readers) and the per-job completion records (`records/<scene>/<job>.json`) it is assembled from. A record is written
 //! last, after all of its job's outputs, so its presence means the job finished; the manifest
-//! is the sorted union of all records and is identical however the jobs were sharded.
+//! is the sorted union of all records (with each scene's evaluation record, where
+//! `datagen evaluation-references` wrote one) and is identical however the jobs were sharded.
 
 use crate::config::Config;
 use crate::fsutil::{sha256_bytes, sha256_file, write_if_changed};
@@ -110,6 +111,12 @@ pub fn assemble_manifest(
         };
         scenes.extend(record.scene);
         samples.extend(record.samples);
+    }
+    // Converged evaluation references are made later, by their own command, with records of
+    // their own (`datagen evaluation-references`).
+    for scene in &mut scenes {
+        scene.evaluation_reference =
+            crate::evaluation_reference::read_record(root, &scene.id, &fingerprint);
     }
     scenes.sort_by(|a, b| a.id.cmp(&b.id));
     samples.sort_by(|a, b| {

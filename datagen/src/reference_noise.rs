@@ -4,9 +4,10 @@
 //! largest pass count, per family the median and worst ratio, and the scenes whose reference is
 //! too noisy to judge that input (ratio above [`LIMIT`]) flagged.
 
+use crate::evaluation_reference::best_input_relmse;
 use crate::manifest::Manifest;
 use anyhow::{Context, Result};
-use bundle::{read_bundle, read_rgb_exr_image};
+use bundle::read_rgb_exr_image;
 use serde::Serialize;
 use std::path::Path;
 
@@ -66,6 +67,65 @@ pub struct NoiseTable {
     pub families: Vec<FamilyRow>,
     /// Scenes whose reference is a single run (no noise measured).
     pub unmeasured: Vec<String>,
+    /// The scenes with a converged evaluation reference (`datagen evaluation-references`).
+    pub evaluation: Vec<EvaluationRow>,
+    /// Per family, of `evaluation`.
+    pub evaluation_families: Vec<FamilyRow>,
+}
+
+/// One scene's evaluation reference.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EvaluationRow {
+    /// Scene id.
+    pub id: String,
+    /// Family name.
+    pub family: String,
+    /// Split name.
+    pub split: String,
+    /// Passes of each of its runs.
+    pub passes: u32,
+    /// The scene's (training) reference passes, the inputs' largest count.
+    pub reference_passes: u32,
+    /// relMSE the evaluation reference carries from its own noise.
+    pub noise: f64,
+    /// The best input level's error at the largest pass count, its noise subtracted.
+    pub input_relmse: f64,
+    /// `noise / input_relmse`.
+    pub ratio: Option<f64>,
+    /// Not converged (a limit reached) or above [`LIMIT`].
+    pub flagged: bool,
+}
+
+/// Per family (in order of first appearance): scene count, median and worst ratio, scenes above
+/// [`LIMIT`]; a missing ratio counts as infinite.
+fn family_rows<'a>(rows: impl Iterator<Item = (&'a str, Option<f64>)>) -> Vec<FamilyRow> {
+    let rows: Vec<(&str, Option<f64>)> = rows.collect();
+    let mut families: Vec<FamilyRow> = Vec::new();
+    for &(family, _) in &rows {
+        if families.iter().any(|f| f.family == family) {
+            continue;
+        }
+        let mut ratios: Vec<f64> = rows
+            .iter()
+            .filter(|(f, _)| *f == family)
+            .map(|(_, r)| r.unwrap_or(f64::INFINITY))
+            .collect();
+        ratios.sort_by(f64::total_cmp);
+        let n = ratios.len();
+        let median = if n % 2 == 1 {
+            ratios[n / 2]
+        } else {
+            0.5 * (ratios[n / 2 - 1] + ratios[n / 2])
+        };
+        families.push(FamilyRow {
+            family: family.to_owned(),
+            scenes: n,
+            median,
+            worst: ratios[n - 1],
+            flagged: ratios.iter().filter(|&&r| r > LIMIT).count(),
+        });
+    }
+    families
 }
 
 /// Measures the table of the dataset at `root`; `on_scene(done, total)` reports progress.
@@ -84,26 +144,10 @@ pub fn noise_table(
         };
         let reference = read_rgb_exr_image(&root.join(&s.reference))
             .with_context(|| format!("reference of scene {}", s.id))?;
-        let samples: Vec<_> = manifest
-            .samples
-            .iter()
-            .filter(|e| e.scene == s.id)
-            .collect();
-        let Some(passes) = samples.iter().map(|e| e.passes).max() else {
+        let Some((passes, measured)) = best_input_relmse(root, manifest, s, &reference)? else {
             unmeasured.push(s.id.clone());
             continue;
         };
-        let mut best = Vec::new();
-        for e in samples.iter().filter(|e| e.passes == passes) {
-            let bundle = read_bundle(&root.join(&e.bundle))?;
-            let level = bundle
-                .levels
-                .iter()
-                .map(|l| l.relmse(&reference))
-                .fold(f64::INFINITY, f64::min);
-            best.push(level);
-        }
-        let measured = best.iter().sum::<f64>() / best.len() as f64;
         let input = measured - noise;
         let ratio = (input > 0.0).then(|| noise / input);
         scenes.push(SceneRow {
@@ -119,36 +163,35 @@ pub fn noise_table(
         });
     }
     on_scene(manifest.scenes.len(), manifest.scenes.len());
-    let mut families: Vec<FamilyRow> = Vec::new();
-    for row in &scenes {
-        if families.iter().any(|f| f.family == row.family) {
-            continue;
-        }
-        let mut ratios: Vec<f64> = scenes
-            .iter()
-            .filter(|r| r.family == row.family)
-            .map(|r| r.ratio.unwrap_or(f64::INFINITY))
-            .collect();
-        ratios.sort_by(f64::total_cmp);
-        let n = ratios.len();
-        let median = if n % 2 == 1 {
-            ratios[n / 2]
-        } else {
-            0.5 * (ratios[n / 2 - 1] + ratios[n / 2])
-        };
-        families.push(FamilyRow {
-            family: row.family.clone(),
-            scenes: n,
-            median,
-            worst: ratios[n - 1],
-            flagged: ratios.iter().filter(|&&r| r > LIMIT).count(),
-        });
-    }
+    let families = family_rows(scenes.iter().map(|r| (r.family.as_str(), r.ratio)));
+    // The converged evaluation references, from their manifest entries.
+    let evaluation: Vec<EvaluationRow> = manifest
+        .scenes
+        .iter()
+        .filter_map(|s| {
+            let e = s.evaluation_reference.as_ref()?;
+            let ratio = (e.input_relmse > 0.0).then(|| e.noise / e.input_relmse);
+            Some(EvaluationRow {
+                id: s.id.clone(),
+                family: s.family.clone(),
+                split: s.split.name().to_owned(),
+                passes: e.passes,
+                reference_passes: s.reference_passes,
+                noise: e.noise,
+                input_relmse: e.input_relmse,
+                ratio,
+                flagged: !e.converged || ratio.is_none_or(|r| r > LIMIT),
+            })
+        })
+        .collect();
+    let evaluation_families = family_rows(evaluation.iter().map(|r| (r.family.as_str(), r.ratio)));
     Ok(NoiseTable {
         limit: LIMIT,
         scenes,
         families,
         unmeasured,
+        evaluation,
+        evaluation_families,
     })
 }
 
@@ -168,6 +211,30 @@ pub fn markdown(table: &NoiseTable) -> String {
             "\nflagged: {} ({}, {} passes): reference noise {:.3e}, input error {:.3e}",
             s.id, s.split, s.passes, s.reference_noise, s.input_relmse
         ));
+    }
+    if !table.evaluation.is_empty() {
+        out.push_str(
+            "\n\nEvaluation references (`datagen evaluation-references`):\n\n| family | scenes | \
+             median noise ÷ input error | worst | above 1/10 |\n|---|---|---|---|---|\n",
+        );
+        for f in &table.evaluation_families {
+            out.push_str(&format!(
+                "| {} | {} | {:.3} | {:.3} | {} |\n",
+                f.family, f.scenes, f.median, f.worst, f.flagged
+            ));
+        }
+        for s in table.evaluation.iter().filter(|s| s.flagged) {
+            out.push_str(&format!(
+                "\nflagged: {} ({}): evaluation reference at {} passes ({}x the inputs') noise \
+                 {:.3e}, input error {:.3e}",
+                s.id,
+                s.split,
+                s.passes,
+                s.passes / s.reference_passes.max(1),
+                s.noise,
+                s.input_relmse
+            ));
+        }
     }
     if !table.unmeasured.is_empty() {
         out.push_str(&format!(

@@ -120,7 +120,9 @@ pub struct DatasetSource {
     #[serde(default)]
     pub limit: Option<usize>,
     /// Directory inside the dataset holding `<scene id>.exr` references that replace the
-    /// manifest's (e.g. the averaged runs of `datagen average-references`).
+    /// manifest's (e.g. the averaged runs of `datagen average-references`; `references` for the
+    /// training references). Absent: each scene's converged evaluation reference where the
+    /// manifest lists one (`datagen evaluation-references`), else its training reference.
     #[serde(default)]
     pub references: Option<PathBuf>,
 }
@@ -237,14 +239,58 @@ impl EvalConfig {
             let manifest: Manifest = Manifest::load(&d.dir)
                 .with_context(|| format!("[dataset] dir = {}", d.dir.display()))?;
             let all_splits: Vec<&str> = manifest.scenes.iter().map(|s| s.split.name()).collect();
-            let mut chosen: Vec<EvalScene> = manifest
+            let mut split_scenes: Vec<_> = manifest
                 .scenes
                 .into_iter()
                 .filter(|s| s.split.name() == d.split)
+                .collect();
+            if let Some(n) = d.limit {
+                split_scenes.truncate(n);
+            }
+            // Converged evaluation references (`datagen evaluation-references`) are measured
+            // against where the manifest has them; a split where only some scenes have one
+            // would mix two kinds of reference in one table, so it is refused.
+            let converged = split_scenes
+                .iter()
+                .filter(|s| s.evaluation_reference.is_some())
+                .count();
+            if d.references.is_none() && converged > 0 && converged < split_scenes.len() {
+                let missing: Vec<&str> = split_scenes
+                    .iter()
+                    .filter(|s| s.evaluation_reference.is_none())
+                    .map(|s| s.id.as_str())
+                    .collect();
+                bail!(
+                    "{}: {} of {} scenes of split \"{}\" have a converged evaluation reference, \
+                     {} do not ({}): finish `datagen evaluation-references`, or measure against \
+                     the training references with `references = \"references\"`",
+                    path.display(),
+                    converged,
+                    split_scenes.len(),
+                    d.split,
+                    missing.len(),
+                    missing.join(", ")
+                );
+            }
+            for s in &split_scenes {
+                if let Some(e) = s.evaluation_reference.as_ref().filter(|e| !e.converged) {
+                    eprintln!(
+                        "warning: scene {}: its evaluation reference did not reach its noise \
+                         target (noise {:.2e} = {:.2} x the best input's error): differences \
+                         below that are not measured",
+                        s.id,
+                        e.noise,
+                        e.noise / e.input_relmse
+                    );
+                }
+            }
+            let chosen: Vec<EvalScene> = split_scenes
+                .into_iter()
                 .map(|s| EvalScene {
-                    reference: match &d.references {
-                        Some(dir) => bundle::scene_reference_path(&d.dir.join(dir), &s.id),
-                        None => d.dir.join(s.reference),
+                    reference: match (&d.references, &s.evaluation_reference) {
+                        (Some(dir), _) => bundle::scene_reference_path(&d.dir.join(dir), &s.id),
+                        (None, Some(e)) => d.dir.join(&e.path),
+                        (None, None) => d.dir.join(s.reference),
                     },
                     name: s.id,
                     xml: d.dir.join(s.xml),
@@ -261,9 +307,6 @@ impl EvalConfig {
                     d.split,
                     splits.join(", ")
                 );
-            }
-            if let Some(n) = d.limit {
-                chosen.truncate(n);
             }
             out.extend(chosen);
         }
@@ -431,6 +474,77 @@ mod tests {
             .to_string();
         assert!(
             err.contains("a.exr") && err.contains("does not exist"),
+            "{err}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn converged_evaluation_references_are_used_and_a_partial_split_is_refused() {
+        let dir = std::env::temp_dir().join(format!("eval-config-conv-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        for p in [
+            "scenes/a",
+            "scenes/b",
+            "references",
+            "evaluation-references",
+        ] {
+            std::fs::create_dir_all(dir.join(p)).unwrap();
+        }
+        for f in [
+            "scenes/a/scene.xml",
+            "scenes/b/scene.xml",
+            "references/a.exr",
+            "references/b.exr",
+            "evaluation-references/b.exr",
+        ] {
+            std::fs::write(dir.join(f), "x").unwrap();
+        }
+        let scene = |id: &str, converged: bool| {
+            let mut s = serde_json::json!({
+                "id": id, "family": "room", "split": "test",
+                "xml": format!("scenes/{id}/scene.xml"),
+                "reference": format!("references/{id}.exr"), "reference_sha256": "",
+                "reference_seed": 1, "reference_passes": 64, "reference_photons": 1000
+            });
+            if converged {
+                s["evaluation_reference"] = serde_json::json!({
+                    "path": format!("evaluation-references/{id}.exr"), "sha256": "",
+                    "passes": 1024, "photons": 1000, "seeds": [1, 2], "noise": 1e-4,
+                    "input_relmse": 1e-2, "target": 0.1, "converged": true, "seconds": 1.0
+                });
+            }
+            s
+        };
+        let write = |scenes: serde_json::Value| {
+            let manifest = serde_json::json!({
+                "format": bundle::manifest::MANIFEST_FORMAT, "name": "t", "config_sha256": "",
+                "width": 16, "height": 16, "reference_level": "y",
+                "scenes": scenes, "samples": [], "config": {}
+            });
+            std::fs::write(dir.join("manifest.json"), manifest.to_string()).unwrap();
+        };
+        let config = |extra: &str| -> EvalConfig {
+            toml::from_str(&format!(
+                "model = \"m\"\noutput = \"o\"\nphotons_per_pass = 10\npasses = [2]\nseed = 1\n\
+                 [dataset]\ndir = \"{}\"\n{extra}",
+                dir.display()
+            ))
+            .unwrap()
+        };
+        write(serde_json::json!([scene("b", true)]));
+        let scenes = config("").resolve_scenes().unwrap();
+        assert_eq!(scenes[0].reference, dir.join("evaluation-references/b.exr"));
+        // The training references on request.
+        let scenes = config("references = \"references\"\n")
+            .resolve_scenes()
+            .unwrap();
+        assert_eq!(scenes[0].reference, dir.join("references").join("b.exr"));
+        // One scene with, one without: refused, naming the one without.
+        write(serde_json::json!([scene("a", false), scene("b", true)]));
+        let err = config("").resolve_scenes().unwrap_err().to_string();
+        assert!(
+            err.contains("1 of 2") && err.contains("(a)") && err.contains("evaluation-references"),
             "{err}"
         );
         let _ = std::fs::remove_dir_all(&dir);

@@ -20,6 +20,11 @@
 //! Two engines run this plan: Burn's tensor operations on any backend (bands as above), and the
 //! native CPU engine of `native.rs` (same tiles and regions, the last layer and the combination
 //! fused per chunk of pixels, so no bands are needed).
+//!
+//! A U-Net (`model::unet`) follows the same rule at every scale: each step is computed on the
+//! rectangle of its grid that the later steps need, so a tile's halo is the U-Net's reach
+//! (`ModelConfig::conv_reach`, 43 px for the `unet` preset) and the pooling grid stays anchored
+//! at the image's corner whatever the tile (no alignment of tiles is needed).
 
 use std::borrow::Cow;
 
@@ -236,20 +241,21 @@ pub fn reconstruct_native(
     let (width, height) = (packed.width, packed.height);
     let pixels = width * height;
     let network = NativeNetwork::new(&model.network, &model.config);
-    let layers = model.config.hidden_layers + 1;
     let share_planes = share_planes(chosen);
     let (levels, added) = packed.combination_inputs();
     let variances = guard_variances(model, packed);
+    let differences = model::native::level_differences(&levels, pixels);
     let colours = CombinationInputs {
         width,
         height,
         levels: &levels,
+        differences: &differences,
         share_planes: &share_planes,
         variances: &variances,
     };
     let mut image = vec![0.0f32; 3 * pixels];
     let mut shares = vec![0.0f32; (LEVELS - 1) * pixels];
-    let tiles = plan_tiles(width, height, tile, layers * (model.config.kernel / 2));
+    let tiles = plan_tiles(width, height, tile, model.config.conv_reach());
     for (done, t) in tiles.iter().enumerate() {
         let (x, region) =
             network.hidden_layers(&packed.features, width, height, t.region, t.interior);
@@ -287,12 +293,15 @@ pub fn reconstruct_banded(
     let pixels = width * height;
     let network = &model.network;
     let kernel_reach = model.config.kernel / 2;
+    // The output layer's reach: the band it computes needs the last hidden activation on the
+    // band grown by it (1×1 for a U-Net: none).
+    let output_reach = network.output.kernel_size[0] / 2;
     let layers = network.hidden.len() + 1;
     let window = model.config.window;
     let window_reach = window / 2;
     let mut image = vec![0.0f32; 3 * pixels];
     let mut shares = vec![0.0f32; (LEVELS - 1) * pixels];
-    let tiles = plan_tiles(width, height, tile, layers * kernel_reach);
+    let tiles = plan_tiles(width, height, tile, model.config.conv_reach());
     for (done, t) in tiles.iter().enumerate() {
         let interior = t.interior;
         // Hidden layer l (0-based) is exact on the interior grown by the reach of the layers
@@ -304,17 +313,25 @@ pub fn reconstruct_banded(
             TensorData::new(features, [1, feature_channels, ry1 - ry0, rx1 - rx0]),
             device,
         );
-        for (l, conv) in network.hidden.iter().enumerate() {
-            let out = grow(interior, (layers - 1 - l) * kernel_reach, width, height);
-            x = burn::tensor::activation::relu(conv_block(conv, x, region, out));
+        if let Some(unet) = &network.unet {
+            // Every step of the U-Net's plan on the rectangle the later ones need
+            // (model::unet, exact for the same reason as the layers below).
+            let out = grow(interior, output_reach, width, height);
+            x = model::unet::forward_region(unet, &network.hidden, x, region, out, width, height);
             region = out;
+        } else {
+            for (l, conv) in network.hidden.iter().enumerate() {
+                let out = grow(interior, (layers - 1 - l) * kernel_reach, width, height);
+                x = burn::tensor::activation::relu(conv_block(conv, x, region, out));
+                region = out;
+            }
         }
         let [ix0, iy0, ix1, iy1] = interior;
         let band_rows = (band_pixels / (ix1 - ix0)).max(1);
         for by0 in (iy0..iy1).step_by(band_rows) {
             let band = [ix0, by0, ix1, by0.saturating_add(band_rows).min(iy1)];
             let (bw, bh) = (band[2] - band[0], band[3] - band[1]);
-            let input = grow(band, kernel_reach, width, height);
+            let input = grow(band, output_reach, width, height);
             let raw = conv_block(&network.output, crop(x.clone(), region, input), input, band);
             let weights = positive_weights(raw, network.weighting);
             let reach = grow(band, window_reach, width, height);

@@ -83,6 +83,8 @@ fn tiled_equals_untiled_on_an_odd_sized_image() {
         (Preset::Tiny, Weighting::Softmax, Engine::Burn),
         (Preset::Small, Weighting::Relu, Engine::Native),
         (Preset::Tiny, Weighting::Softmax, Engine::Native),
+        (Preset::UNet, Weighting::Relu, Engine::Burn),
+        (Preset::UNet, Weighting::Relu, Engine::Native),
     ] {
         let m = model(preset, weighting, 11);
         assert_distinct_non_zero_biases(&format!("{preset:?}"), &m.network);
@@ -134,6 +136,8 @@ fn native_engine_equals_burn() {
         ("small softmax", model(Preset::Small, Weighting::Softmax, 2)),
         ("tiny", model(Preset::Tiny, Weighting::Relu, 3)),
         ("tiny softmax", model(Preset::Tiny, Weighting::Softmax, 3)),
+        ("unet", model(Preset::UNet, Weighting::Relu, 7)),
+        ("unet softmax", model(Preset::UNet, Weighting::Softmax, 7)),
         ("dual", dual),
     ] {
         assert_distinct_non_zero_biases(name, &m.network);
@@ -242,41 +246,75 @@ fn max_abs_difference(a: &[f32], b: &[f32]) -> f32 {
 
 #[test]
 fn native_engine_is_bit_identical_on_any_thread_count() {
+    // 45×38 whole, and the U-Net also on 24-px tiles (a tile's steps at every scale).
     let (bundle, _) = synthetic_bundle(45, 38, 0.3, 2);
     let packed = pack(&bundle).unwrap();
     let device = Device::flex();
-    let m = model(Preset::Small, Weighting::Relu, 8);
-    let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| reconstruct_tiled(&m, &packed, 0, Engine::Native, &device, |_, _| {}))
-    };
-    let one = run(1);
-    assert_eq!(one, run(2));
-    assert_eq!(one, run(3));
+    for (preset, tile) in [(Preset::Small, 0), (Preset::UNet, 0), (Preset::UNet, 24)] {
+        let m = model(preset, Weighting::Relu, 8);
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| {
+                    reconstruct_tiled(&m, &packed, tile, Engine::Native, &device, |_, _| {})
+                })
+        };
+        let one = run(1);
+        assert!(one == run(2), "{preset:?} tile {tile}: 1 vs 2 threads");
+        assert!(one == run(3), "{preset:?} tile {tile}: 1 vs 3 threads");
+    }
+}
+
+/// The U-Net's pooling grid is anchored at the image's corner, not at the tile's: on an image
+/// whose sides are not multiples of 8 (101×67: grids 101×67, 51×34, 26×17, 13×9, every one with
+/// a cut 2×2 block at the border) cut into 20-px tiles (tile corners at odd positions of the
+/// coarser grids), tiled reconstruction equals the whole image on both engines, and a tile
+/// smaller than the U-Net's 43-px reach still sees all it needs.
+#[test]
+fn unet_tiles_equal_the_whole_image_on_sides_not_multiple_of_8() {
+    let (bundle, _) = synthetic_bundle(101, 67, 0.3, 13);
+    let packed = pack(&bundle).unwrap();
+    let device = Device::flex();
+    let m = model(Preset::UNet, Weighting::Relu, 21);
+    assert_eq!(m.config.conv_reach(), 43);
+    for engine in [Engine::Native, Engine::Burn] {
+        let whole = reconstruct_tiled(&m, &packed, 0, engine, &device, |_, _| {});
+        for tile in [20, 37] {
+            let tiled = reconstruct_tiled(&m, &packed, tile, engine, &device, |_, _| {});
+            let d = max_relative_difference(&tiled.image, &whole.image);
+            assert!(d <= 1e-5, "{engine:?} tile {tile}: differs by {d:e}");
+            let d = max_abs_difference(&tiled.shares, &whole.shares);
+            assert!(d <= 1e-5, "{engine:?} tile {tile}: shares differ by {d:e}");
+        }
+    }
 }
 
 #[test]
 fn saved_model_directory_reloads_to_identical_output() {
-    let dir = temp_dir("roundtrip");
-    let m = model(Preset::Tiny, Weighting::Relu, 5);
-    save_burnpack(&m.network, &dir.join("model.bpk")).unwrap();
-    std::fs::write(
-        dir.join("model.json"),
-        serde_json::to_string(&m.config).unwrap(),
-    )
-    .unwrap();
-    let device = Device::flex();
-    let loaded = TrainedModel::open(&dir, &device).unwrap();
-    assert_eq!(loaded.config, m.config);
-    let (bundle, _) = synthetic_bundle(19, 13, 0.2, 3);
-    let packed = pack(&bundle).unwrap();
-    let a = reconstruct_tiled(&m, &packed, 0, Engine::Burn, &device, |_, _| {});
-    let b = reconstruct_tiled(&loaded, &packed, 0, Engine::Burn, &device, |_, _| {});
-    assert_eq!(a, b);
-    let _ = std::fs::remove_dir_all(&dir);
+    for preset in [Preset::Tiny, Preset::UNet] {
+        let dir = temp_dir(&format!("roundtrip-{preset:?}"));
+        let m = model(preset, Weighting::Relu, 5);
+        save_burnpack(&m.network, &dir.join("model.bpk")).unwrap();
+        std::fs::write(
+            dir.join("model.json"),
+            serde_json::to_string(&m.config).unwrap(),
+        )
+        .unwrap();
+        let device = Device::flex();
+        let loaded = TrainedModel::open(&dir, &device).unwrap();
+        assert_eq!(loaded.config, m.config);
+        assert_eq!(loaded.network.unet, m.config.unet);
+        let (bundle, _) = synthetic_bundle(19, 13, 0.2, 3);
+        let packed = pack(&bundle).unwrap();
+        for engine in [Engine::Burn, Engine::Native] {
+            let a = reconstruct_tiled(&m, &packed, 0, engine, &device, |_, _| {});
+            let b = reconstruct_tiled(&loaded, &packed, 0, engine, &device, |_, _| {});
+            assert!(a == b, "{preset:?} {engine:?}: reloaded output differs");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
 
 #[test]

@@ -1,8 +1,8 @@
 //! The network library (docs/method.md, "The network"): the kernel-predicting combiner
-//! ([`network`]), the multi-level combination of paper Eq. 6 ([`combine`]), its loss and metrics,
-//! the input features of a bundle ([`features`], [`sample`]), weight files ([`weights`]), a
-//! trained-model folder ([`model_dir`]) and the native CPU engine ([`native`]), a second
-//! implementation of the network's forward pass. Data loading and the training loop belong to
+//! ([`network`]; its multi-scale layout in [`unet`]), the multi-level combination of paper
+//! Eq. 6 ([`combine`]), its loss and metrics, the input features of a bundle ([`features`],
+//! [`sample`]), weight files ([`weights`]), a trained-model folder ([`model_dir`]) and the
+//! native CPU engine ([`native`]), a second implementation of the network's forward pass. Data loading and the training loop belong to
 //! the `train` crate, reconstruction of images to `infer`.
 
 pub mod backend;
@@ -14,7 +14,9 @@ pub mod model_dir;
 pub mod native;
 pub mod network;
 pub mod sample;
+pub mod screen_filter;
 pub mod synthetic;
+pub mod unet;
 pub mod weights;
 
 pub use combine::{combine, level_weight_shares};

@@ -12,15 +12,31 @@
 //!
 //! Determinism: rows are cut into fixed chunks (independent of the thread count) and each
 //! chunk's product runs single-threaded, so the result is bit-identical on any thread count.
+//!
+//! A U-Net ([`crate::unet`]) runs the same plan as the Burn path, each step on the rectangle
+//! the later steps need: a convolution reads its inputs' channels concatenated straight out of
+//! their buffers (no concatenated copy), pooling and upsampling are plain loops over rows.
 
 use crate::network::{ModelConfig, Network, Weighting, LEVELS};
+use crate::unet::{last_uses, needed_rects, pool_input, scale_sizes, upsample_input, Op, Step};
 use rayon::prelude::*;
 
-/// A pixel rectangle `[x0, y0, x1, y1)` in image coordinates.
-pub type Rect = [usize; 4];
+/// A pixel rectangle `[x0, y0, x1, y1)` in image coordinates (or a coarser scale's grid).
+pub type Rect = crate::unet::Rect;
+
+/// Channels-last activations `x` of `channels` channels laid out on `rect`.
+#[derive(Clone, Copy)]
+struct Source<'a> {
+    x: &'a [f32],
+    rect: Rect,
+    channels: usize,
+}
 
 /// Output pixels per chunk: im2col buffer and product of one chunk stay a few MB.
 const CHUNK_PIXELS: usize = 1024;
+
+/// Pixels of one row combined together by [`NativeNetwork::combine_lanes`].
+const LANES: usize = 8;
 
 /// One convolution as a matrix: `matrix[(ky·k + kx)·cin + ci][cout]` (the im2col order) and
 /// the bias.
@@ -108,6 +124,68 @@ impl ConvMatrix {
         }
     }
 
+    /// Rearranges a Burn `Conv2d` whose input is the concatenation of sources of `splits`
+    /// channels into source-major rows, `matrix[offset_s + (ky·k + kx)·c_s + ci][cout]` with
+    /// offset_s the rows of the sources before s: each source's taps of one kernel row are then
+    /// one contiguous run of the im2col row ([`ConvMatrix::im2col_sources`]).
+    fn from_concat_conv(conv: &burn::nn::conv::Conv2d, splits: &[usize]) -> Self {
+        let plain = Self::from_conv(conv);
+        let (k2, cin, cout) = (plain.kernel * plain.kernel, plain.cin, plain.cout);
+        assert_eq!(
+            splits.iter().sum::<usize>(),
+            cin,
+            "sources must cover the input"
+        );
+        let mut matrix = vec![0.0f32; plain.matrix.len()];
+        let (mut offset, mut first) = (0, 0);
+        for &c in splits {
+            for tap in 0..k2 {
+                for ci in 0..c {
+                    let from = (tap * cin + first + ci) * cout;
+                    let to = (offset + tap * c + ci) * cout;
+                    matrix[to..to + cout].copy_from_slice(&plain.matrix[from..from + cout]);
+                }
+            }
+            offset += k2 * c;
+            first += c;
+        }
+        Self { matrix, ..plain }
+    }
+
+    /// The im2col rows of [`ConvMatrix::from_concat_conv`]'s order for the output pixels
+    /// `first..first + pixels` of `out`, reading each source on its own rectangle (taps outside
+    /// it are zero: they lie outside the grid).
+    fn im2col_sources(&self, sources: &[Source], out: Rect, first: usize, columns: &mut [f32]) {
+        let k = self.kernel;
+        let r = k / 2;
+        let out_w = out[2] - out[0];
+        for (p, row) in columns.chunks_exact_mut(self.depth()).enumerate() {
+            let (oy, ox) = (out[1] + (first + p) / out_w, out[0] + (first + p) % out_w);
+            let mut offset = 0;
+            for source in sources {
+                let (input, c) = (source.rect, source.channels);
+                let in_w = input[2] - input[0];
+                // Taps kx read column ox + kx − r; those inside the rectangle are one run.
+                let kx_lo = (input[0] + r).saturating_sub(ox).min(k);
+                let kx_hi = (input[2] + r).saturating_sub(ox).min(k).max(kx_lo);
+                for ky in 0..k {
+                    let taps = &mut row[offset + ky * k * c..offset + (ky + 1) * k * c];
+                    let iy = (oy + ky).wrapping_sub(r);
+                    if iy < input[1] || iy >= input[3] {
+                        taps.fill(0.0);
+                        continue;
+                    }
+                    taps[..kx_lo * c].fill(0.0);
+                    let src = ((iy - input[1]) * in_w + (ox + kx_lo - r - input[0])) * c;
+                    let len = (kx_hi - kx_lo) * c;
+                    taps[kx_lo * c..kx_hi * c].copy_from_slice(&source.x[src..src + len]);
+                    taps[kx_hi * c..].fill(0.0);
+                }
+                offset += k * k * c;
+            }
+        }
+    }
+
     /// `dst` (`pixels × cout`) = bias + columns · matrix.
     fn product(&self, columns: &[f32], pixels: usize, dst: &mut [f32]) {
         let (depth, cout) = (self.depth(), self.cout);
@@ -162,6 +240,88 @@ impl ConvMatrix {
             });
         y
     }
+
+    /// [`ConvMatrix::forward_relu`] reading the channels of `sources` concatenated.
+    fn forward_relu_sources(&self, sources: &[Source], out: Rect) -> Vec<f32> {
+        if let [single] = sources {
+            return self.forward_relu(single.x, single.rect, out);
+        }
+        let pixels = (out[2] - out[0]) * (out[3] - out[1]);
+        let mut y = vec![0.0f32; pixels * self.cout];
+        y.par_chunks_mut(CHUNK_PIXELS * self.cout)
+            .enumerate()
+            .for_each_init(Vec::new, |columns, (chunk, dst)| {
+                let n = dst.len() / self.cout;
+                columns.resize(n * self.depth(), 0.0);
+                self.im2col_sources(sources, out, chunk * CHUNK_PIXELS, columns);
+                self.product(columns, n, dst);
+                for v in dst.iter_mut() {
+                    *v = v.max(0.0);
+                }
+            });
+        y
+    }
+}
+
+/// 2×2 average pooling onto `out` (a rectangle of the coarser grid) of `source` (the finer
+/// grid's values; pixels past its rectangle lie past the grid's border and count as 0).
+fn pool(source: Source, out: Rect) -> Vec<f32> {
+    let c = source.channels;
+    let (rect, x) = (source.rect, source.x);
+    let in_w = rect[2] - rect[0];
+    let out_w = out[2] - out[0];
+    let mut y = vec![0.0f32; out_w * (out[3] - out[1]) * c];
+    let value = |iy: usize, ix: usize, ch: usize| {
+        if iy < rect[3] && ix < rect[2] {
+            x[((iy - rect[1]) * in_w + ix - rect[0]) * c + ch]
+        } else {
+            0.0
+        }
+    };
+    y.par_chunks_mut(out_w * c)
+        .enumerate()
+        .for_each(|(row, dst)| {
+            let iy = 2 * (out[1] + row);
+            for (i, px) in dst.chunks_exact_mut(c).enumerate() {
+                let ix = 2 * (out[0] + i);
+                for (ch, v) in px.iter_mut().enumerate() {
+                    // The Burn path's order: each row's pair, then the two rows.
+                    let top = value(iy, ix, ch) + value(iy, ix + 1, ch);
+                    let bottom = value(iy + 1, ix, ch) + value(iy + 1, ix + 1, ch);
+                    *v = (top + bottom) * 0.25;
+                }
+            }
+        });
+    y
+}
+
+/// Nearest-neighbour ×2 upsampling onto `out` (a rectangle of the finer grid) of `source`.
+fn upsample(source: Source, out: Rect) -> Vec<f32> {
+    let c = source.channels;
+    let (rect, x) = (source.rect, source.x);
+    let in_w = rect[2] - rect[0];
+    let out_w = out[2] - out[0];
+    let mut y = vec![0.0f32; out_w * (out[3] - out[1]) * c];
+    y.par_chunks_mut(out_w * c)
+        .enumerate()
+        .for_each(|(row, dst)| {
+            let iy = (out[1] + row) / 2 - rect[1];
+            for (i, px) in dst.chunks_exact_mut(c).enumerate() {
+                let ix = (out[0] + i) / 2 - rect[0];
+                px.copy_from_slice(&x[(iy * in_w + ix) * c..][..c]);
+            }
+        });
+    y
+}
+
+/// ỹ − z̃ʲ for every correlated level j of planar `levels` (`[3·m][pixels]`), planar
+/// `[(m − 1)·3][pixels]` (what [`CombinationInputs::differences`] holds).
+pub fn level_differences(levels: &[f32], pixels: usize) -> Vec<f32> {
+    let y = &levels[..3 * pixels];
+    levels[3 * pixels..]
+        .chunks_exact(3 * pixels)
+        .flat_map(|z| y.iter().zip(z).map(|(y, z)| y - z))
+        .collect()
 }
 
 /// A trained network rearranged for the native engine.
@@ -176,6 +336,8 @@ pub struct NativeNetwork {
     guard: f32,
     /// The safeguard's trust λ in the smoothest level.
     guard_target_noise: f32,
+    /// A U-Net's plan ([`crate::unet::UNet::plan`]); `None`: the hidden layers run in order.
+    plan: Option<Vec<Step>>,
 }
 
 /// Planar colours of the whole image that the combination reads.
@@ -186,6 +348,10 @@ pub struct CombinationInputs<'a> {
     pub height: usize,
     /// Planar colours `[3·m][pixels]`: ỹ RGB, then each correlated level's RGB.
     pub levels: &'a [f32],
+    /// ỹ − z̃ʲ of every correlated level j, planar `[(m − 1)·3][pixels]`
+    /// ([`level_differences`]): the window sums read these, once per pixel instead of once per
+    /// window entry.
+    pub differences: &'a [f32],
     /// The output plane of each correlated level's weight share (level j of the network →
     /// plane `share_planes[j]`).
     pub share_planes: &'a [usize],
@@ -197,14 +363,32 @@ pub struct CombinationInputs<'a> {
 impl NativeNetwork {
     /// Copies the weights of `network` (architecture `config`) into matrix form.
     pub fn new(network: &Network, config: &ModelConfig) -> Self {
+        let plan = config.unet.as_ref().map(|u| u.plan(config.in_channels));
+        // A U-Net's convolutions of concatenated inputs take their rows source by source.
+        let mut splits: Vec<Vec<usize>> = vec![Vec::new(); network.hidden.len()];
+        for step in plan.iter().flatten() {
+            if let Op::Conv { layer, inputs } = &step.op {
+                let plan = plan.as_ref().expect("steps come from a plan");
+                splits[*layer] = inputs.iter().map(|&i| plan[i].channels).collect();
+            }
+        }
         Self {
-            hidden: network.hidden.iter().map(ConvMatrix::from_conv).collect(),
+            hidden: network
+                .hidden
+                .iter()
+                .zip(&splits)
+                .map(|(conv, split)| match split.len() {
+                    0 | 1 => ConvMatrix::from_conv(conv),
+                    _ => ConvMatrix::from_concat_conv(conv, split),
+                })
+                .collect(),
             output: ConvMatrix::from_conv(&network.output),
             weighting: network.weighting,
             window: config.window,
             pairs: config.pairs(),
             guard: config.guard,
             guard_target_noise: config.guard_target_noise,
+            plan,
         }
     }
 
@@ -222,13 +406,21 @@ impl NativeNetwork {
         let channels = features.len() / (width * height).max(1);
         let (rw, rh) = (region[2] - region[0], region[3] - region[1]);
         let mut x = vec![0.0f32; rw * rh * channels];
-        for (c, plane) in features.chunks_exact(width * height).enumerate() {
-            for y in 0..rh {
-                let src = &plane[(region[1] + y) * width + region[0]..][..rw];
-                for (i, v) in src.iter().enumerate() {
-                    x[(y * rw + i) * channels + c] = *v;
+        // Row by row, every channel of a pixel written together (sequential writes; one read
+        // stream per plane).
+        let planes: Vec<&[f32]> = features.chunks_exact(width * height).collect();
+        x.par_chunks_mut(rw * channels)
+            .enumerate()
+            .for_each(|(y, dst)| {
+                let at = (region[1] + y) * width + region[0];
+                for (i, px) in dst.chunks_exact_mut(channels).enumerate() {
+                    for (v, plane) in px.iter_mut().zip(&planes) {
+                        *v = plane[at + i];
+                    }
                 }
-            }
+            });
+        if let Some(plan) = &self.plan {
+            return self.unet_layers(plan, x, width, height, region, interior);
         }
         let reach = self.output.kernel / 2;
         let layers = self.hidden.len() + 1;
@@ -239,6 +431,76 @@ impl NativeNetwork {
             region = out;
         }
         (x, region)
+    }
+
+    /// The U-Net's hidden steps from the channels-last features `x` on `region`: each step on
+    /// the rectangle the later ones need for the output layer to be exact on `interior`.
+    /// Returns the last step's activation and its rectangle.
+    fn unet_layers(
+        &self,
+        plan: &[Step],
+        x: Vec<f32>,
+        width: usize,
+        height: usize,
+        region: Rect,
+        interior: Rect,
+    ) -> (Vec<f32>, Rect) {
+        let kernel = self.hidden[0].kernel;
+        let scales = plan.iter().map(|s| s.scale).max().unwrap_or(0) + 1;
+        let sizes = scale_sizes(width, height, scales);
+        let out = grow(interior, self.output.kernel / 2, width, height);
+        let need = needed_rects(plan, kernel, out, &sizes);
+        let last_use = last_uses(plan);
+        let mut values: Vec<Option<(Vec<f32>, Rect)>> = vec![None; plan.len()];
+        let mut features = Some(x);
+        for (i, step) in plan.iter().enumerate() {
+            let Some(r) = need[i] else { continue };
+            let source = |j: usize| {
+                let (x, rect) = values[j].as_ref().expect("inputs come first");
+                Source {
+                    x,
+                    rect: *rect,
+                    channels: plan[j].channels,
+                }
+            };
+            let value = match &step.op {
+                Op::Input => {
+                    assert!(
+                        region[0] <= r[0]
+                            && region[1] <= r[1]
+                            && region[2] >= r[2]
+                            && region[3] >= r[3],
+                        "features on {region:?} do not cover the needed {r:?}"
+                    );
+                    (features.take().expect("one input step"), region)
+                }
+                Op::Conv { layer, inputs } => {
+                    let sources: Vec<Source> = inputs.iter().map(|&j| source(j)).collect();
+                    (self.hidden[*layer].forward_relu_sources(&sources, r), r)
+                }
+                Op::Pool(j) => {
+                    debug_assert!(contains(
+                        values[*j].as_ref().map(|v| v.1),
+                        pool_input(r, sizes[step.scale - 1])
+                    ));
+                    (pool(source(*j), r), r)
+                }
+                Op::Upsample(j) => {
+                    debug_assert!(contains(
+                        values[*j].as_ref().map(|v| v.1),
+                        upsample_input(r)
+                    ));
+                    (upsample(source(*j), r), r)
+                }
+            };
+            values[i] = Some(value);
+            for (j, v) in values.iter_mut().enumerate().take(i) {
+                if last_use[j] == i {
+                    *v = None;
+                }
+            }
+        }
+        values.pop().flatten().expect("the plan has steps")
     }
 
     /// Last layer, positive weights and Eq. 6 for the pixels of `out` (inside `region`, which
@@ -274,15 +536,35 @@ impl NativeNetwork {
                     conv.product(columns, n, raw);
                     let mut colour = vec![0.0f32; 3 * n];
                     let mut share = vec![0.0f32; self.pairs * n];
-                    for (p, weights) in raw.chunks_exact_mut(conv.cout).enumerate() {
-                        let q = first + p;
-                        let (py, px) = (out[1] + q / out_w, out[0] + q % out_w);
-                        let (rgb, sums) = self.combine_pixel(weights, px, py, colours);
+                    let mut store = |p: usize, (rgb, sums): ([f32; 3], [f32; LEVELS - 1])| {
                         for c in 0..3 {
                             colour[c * n + p] = rgb[c];
                         }
                         for j in 0..self.pairs {
                             share[j * n + p] = sums[j];
+                        }
+                    };
+                    let cout = conv.cout;
+                    let mut p = 0;
+                    while p < n {
+                        let q = first + p;
+                        let (py, px) = (out[1] + q / out_w, out[0] + q % out_w);
+                        // LANES pixels of one row whose windows lie inside the image together;
+                        // the rest (image borders, row ends) one by one. Same results.
+                        if p + LANES <= n
+                            && px + LANES <= out[2]
+                            && self.window_inside(px, py, LANES, colours)
+                        {
+                            let raw_lanes = &mut raw[p * cout..(p + LANES) * cout];
+                            let results = self.combine_lanes(raw_lanes, px, py, colours);
+                            for (l, result) in results.into_iter().enumerate() {
+                                store(p + l, result);
+                            }
+                            p += LANES;
+                        } else {
+                            let weights = &mut raw[p * cout..(p + 1) * cout];
+                            store(p, self.combine_pixel(weights, px, py, colours));
+                            p += 1;
                         }
                     }
                     (colour, share)
@@ -300,6 +582,178 @@ impl NativeNetwork {
                 }
                 for (j, &plane) in colours.share_planes.iter().enumerate() {
                     shares[plane * pixels + at] = share[j * n + p];
+                }
+            }
+        }
+    }
+
+    /// Whether the windows of the `lanes` pixels (px.., py) of one row lie wholly inside the image.
+    fn window_inside(
+        &self,
+        px: usize,
+        py: usize,
+        lanes: usize,
+        colours: &CombinationInputs,
+    ) -> bool {
+        let r = self.window / 2;
+        px >= r && py >= r && px + lanes - 1 + r < colours.width && py + r < colours.height
+    }
+
+    /// [`NativeNetwork::combine_pixel`] for the [`LANES`] pixels (px + l, py) of one row whose
+    /// windows lie inside the image, from their raw outputs `raw` (`[lane][entry]`, overwritten
+    /// with the positive weights). Each lane does the scalar function's arithmetic in its order
+    /// (bit-identical, `tests::lanes_equal_single_pixels`); the lanes only let the compiler use
+    /// vector instructions, which the scalar window sums (sequential float additions) cannot.
+    fn combine_lanes(
+        &self,
+        raw: &mut [f32],
+        px: usize,
+        py: usize,
+        colours: &CombinationInputs,
+    ) -> [([f32; 3], [f32; LEVELS - 1]); LANES] {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.combine_lanes_avx2(raw, px, py, colours) };
+        }
+        self.combine_lanes_portable(raw, px, py, colours)
+    }
+
+    /// [`NativeNetwork::combine_lanes`] compiled for AVX2: all eight lanes in one vector. The
+    /// same operations in the same order (Rust never fuses a multiply and an add), so the same
+    /// bits as the portable build.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn combine_lanes_avx2(
+        &self,
+        raw: &mut [f32],
+        px: usize,
+        py: usize,
+        colours: &CombinationInputs,
+    ) -> [([f32; 3], [f32; LEVELS - 1]); LANES] {
+        self.combine_lanes_portable(raw, px, py, colours)
+    }
+
+    /// [`NativeNetwork::combine_lanes`] for any CPU (inlined into the AVX2 build).
+    #[inline(always)]
+    fn combine_lanes_portable(
+        &self,
+        raw: &mut [f32],
+        px: usize,
+        py: usize,
+        colours: &CombinationInputs,
+    ) -> [([f32; 3], [f32; LEVELS - 1]); LANES] {
+        let pixels = colours.width * colours.height;
+        let width = colours.width;
+        let window = self.window;
+        let r = window / 2;
+        let area = window * window;
+        let entries = raw.len() / LANES;
+        // Positive weights, transposed to `[entry][lane]` so a window entry of every lane is
+        // one vector.
+        for weights in raw.chunks_exact_mut(entries) {
+            self.positive(weights, (0, window, 0, window));
+        }
+        let mut lanes = vec![[0.0f32; LANES]; entries];
+        for (l, weights) in raw.chunks_exact(entries).enumerate() {
+            for (e, &w) in weights.iter().enumerate() {
+                lanes[e][l] = w;
+            }
+        }
+        let centre = py * width + px;
+        let mut numerator = [[0.0f32; LANES]; 3];
+        let mut sums = [[0.0f32; LANES]; LEVELS - 1];
+        let mut squares = [[0.0f32; LANES]; LEVELS - 1];
+        for j in 0..self.pairs {
+            let z_planes = &colours.levels[3 * (j + 1) * pixels..3 * (j + 2) * pixels];
+            let d_planes = &colours.differences[3 * j * pixels..3 * (j + 1) * pixels];
+            let w_j = &lanes[j * area..(j + 1) * area];
+            let mut sum = [0.0f32; LANES];
+            let mut square = [0.0f32; LANES];
+            let mut acc = [[0.0f32; LANES]; 3];
+            for ky in 0..window {
+                let start = (py + ky - r) * width + px - r;
+                let w_row = &w_j[ky * window..(ky + 1) * window];
+                let mut row_sum = [0.0f32; LANES];
+                for w in w_row {
+                    for l in 0..LANES {
+                        row_sum[l] += w[l];
+                    }
+                }
+                for l in 0..LANES {
+                    sum[l] += row_sum[l];
+                }
+                if self.guard > 0.0 {
+                    let mut row_square = [0.0f32; LANES];
+                    for w in w_row {
+                        for l in 0..LANES {
+                            row_square[l] += w[l] * w[l];
+                        }
+                    }
+                    for l in 0..LANES {
+                        square[l] += row_square[l];
+                    }
+                }
+                for c in 0..3 {
+                    let dc = &d_planes[c * pixels + start..][..window + LANES - 1];
+                    let mut row_acc = [0.0f32; LANES];
+                    for (kx, w) in w_row.iter().enumerate() {
+                        let d = &dc[kx..kx + LANES];
+                        for l in 0..LANES {
+                            row_acc[l] += w[l] * d[l];
+                        }
+                    }
+                    for l in 0..LANES {
+                        acc[c][l] += row_acc[l];
+                    }
+                }
+            }
+            for c in 0..3 {
+                let zc = &z_planes[c * pixels + centre..][..LANES];
+                for l in 0..LANES {
+                    numerator[c][l] += acc[c][l] + sum[l] * zc[l];
+                }
+            }
+            sums[j] = sum;
+            squares[j] = square;
+        }
+        std::array::from_fn(|l| {
+            self.finish_pixel(
+                numerator.map(|n| n[l]),
+                sums.map(|s| s[l]),
+                squares.map(|s| s[l]),
+                centre + l,
+                colours,
+            )
+        })
+    }
+
+    /// The positive transform of one pixel's raw outputs, in place; `inside` = (ky0, ky1, kx0,
+    /// kx1), the window rows and columns inside the image (the softmax's maximum is taken over
+    /// them).
+    fn positive(&self, weights: &mut [f32], inside: (usize, usize, usize, usize)) {
+        let (ky0, ky1, kx0, kx1) = inside;
+        let window = self.window;
+        let area = window * window;
+        match self.weighting {
+            Weighting::Relu => {
+                for w in weights.iter_mut() {
+                    *w = w.max(0.0) + 1e-4;
+                }
+            }
+            Weighting::Softmax => {
+                // The maximum cancels in the normalisation; subtracting it keeps exp() finite.
+                // Taken over the entries inside the image (Burn's path takes it over all), so
+                // the largest kept weight is exactly 1 and the sum can never underflow to 0.
+                let mut max = f32::NEG_INFINITY;
+                for j in 0..self.pairs {
+                    for ky in ky0..ky1 {
+                        let row = &weights[j * area + ky * window..][kx0..kx1];
+                        max = row.iter().copied().fold(max, f32::max);
+                    }
+                }
+                for w in weights.iter_mut() {
+                    *w = (*w - max).exp();
                 }
             }
         }
@@ -323,35 +777,14 @@ impl NativeNetwork {
         // Window rows and columns that lie inside the image: the others get zero weight.
         let (ky0, ky1) = (r.saturating_sub(py), (height + r - py).min(window));
         let (kx0, kx1) = (r.saturating_sub(px), (width + r - px).min(window));
-        match self.weighting {
-            Weighting::Relu => {
-                for w in weights.iter_mut() {
-                    *w = w.max(0.0) + 1e-4;
-                }
-            }
-            Weighting::Softmax => {
-                // The maximum cancels in the normalisation; subtracting it keeps exp() finite.
-                // Taken over the entries inside the image (Burn's path takes it over all), so
-                // the largest kept weight is exactly 1 and the sum can never underflow to 0.
-                let mut max = f32::NEG_INFINITY;
-                for j in 0..self.pairs {
-                    for ky in ky0..ky1 {
-                        let row = &weights[j * area + ky * window..][kx0..kx1];
-                        max = row.iter().copied().fold(max, f32::max);
-                    }
-                }
-                for w in weights.iter_mut() {
-                    *w = (*w - max).exp();
-                }
-            }
-        }
+        self.positive(weights, (ky0, ky1, kx0, kx1));
         let centre = py * width + px;
-        let y_planes = &colours.levels[..3 * pixels];
         let mut numerator = [0.0f32; 3];
         let mut sums = [0.0f32; LEVELS - 1];
         let mut squares = [0.0f32; LEVELS - 1];
         for j in 0..self.pairs {
             let z_planes = &colours.levels[3 * (j + 1) * pixels..3 * (j + 2) * pixels];
+            let d_planes = &colours.differences[3 * j * pixels..3 * (j + 1) * pixels];
             let w_j = &weights[j * area..(j + 1) * area];
             let mut sum = 0.0f32;
             let mut square = 0.0f32;
@@ -366,13 +799,8 @@ impl NativeNetwork {
                     square += w_row.iter().map(|w| w * w).sum::<f32>();
                 }
                 for c in 0..3 {
-                    let yc = &y_planes[c * pixels + start..][..len];
-                    let zc = &z_planes[c * pixels + start..][..len];
-                    acc[c] += w_row
-                        .iter()
-                        .zip(yc.iter().zip(zc))
-                        .map(|(w, (y, z))| w * (y - z))
-                        .sum::<f32>();
+                    let dc = &d_planes[c * pixels + start..][..len];
+                    acc[c] += w_row.iter().zip(dc).map(|(w, d)| w * d).sum::<f32>();
                 }
             }
             for c in 0..3 {
@@ -381,6 +809,20 @@ impl NativeNetwork {
             sums[j] = sum;
             squares[j] = square;
         }
+        self.finish_pixel(numerator, sums, squares, centre, colours)
+    }
+
+    /// Eq. 6's normalisation, the safeguard and the clamp at pixel `centre` from its window
+    /// sums: Σ_j numerators, the weight sums W_j and (with the guard) Σ_i (w^j_i)².
+    fn finish_pixel(
+        &self,
+        numerator: [f32; 3],
+        mut sums: [f32; LEVELS - 1],
+        squares: [f32; LEVELS - 1],
+        centre: usize,
+        colours: &CombinationInputs,
+    ) -> ([f32; 3], [f32; LEVELS - 1]) {
+        let pixels = colours.width * colours.height;
         let total: f32 = sums.iter().sum();
         let mut rgb = numerator.map(|v| v / total);
         if self.guard > 0.0 {
@@ -409,14 +851,13 @@ impl NativeNetwork {
     }
 }
 
-/// `r` grown by `by` pixels on every side, clipped to the `width`×`height` image.
-pub fn grow(r: Rect, by: usize, width: usize, height: usize) -> Rect {
-    [
-        r[0].saturating_sub(by),
-        r[1].saturating_sub(by),
-        (r[2] + by).min(width),
-        (r[3] + by).min(height),
-    ]
+pub use crate::unet::grow;
+
+/// Whether rectangle `outer` (absent: no) holds `inner`.
+fn contains(outer: Option<Rect>, inner: Rect) -> bool {
+    outer.is_some_and(|o| {
+        o[0] <= inner[0] && o[1] <= inner[1] && o[2] >= inner[2] && o[3] >= inner[3]
+    })
 }
 
 #[cfg(test)]
@@ -441,6 +882,73 @@ mod tests {
             pairs,
             guard: 0.0,
             guard_target_noise: 0.0,
+            plan: None,
+        }
+    }
+
+    /// The lane-parallel combination computes every pixel's result bit for bit as the
+    /// one-pixel function does (both weightings, guard on and off, raw outputs and colours with
+    /// zeros, negative values and a wide range of magnitudes).
+    #[test]
+    fn lanes_equal_single_pixels() {
+        let (width, height, window, pairs) = (LANES + 9, 9, 7, 4);
+        let pixels = width * height;
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut draw = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let u = (state >> 40) as f32 / (1u64 << 24) as f32;
+            match state % 7 {
+                0 => 0.0,
+                1 => -u,
+                2 => 300.0 * u,
+                _ => u,
+            }
+        };
+        let levels: Vec<f32> = (0..3 * (pairs + 1) * pixels).map(|_| draw()).collect();
+        let variances: Vec<f32> = (0..(pairs + 1) * pixels).map(|_| draw().abs()).collect();
+        let differences = level_differences(&levels, pixels);
+        let colours = CombinationInputs {
+            width,
+            height,
+            levels: &levels,
+            differences: &differences,
+            share_planes: &[0, 1, 2, 3],
+            variances: &variances,
+        };
+        let entries = pairs * window * window;
+        let raw: Vec<f32> = (0..LANES * entries).map(|_| 4.0 * draw() - 1.0).collect();
+        let r = window / 2;
+        for weighting in [Weighting::Relu, Weighting::Softmax] {
+            for guard in [0.0, 16.0] {
+                let net = NativeNetwork {
+                    guard,
+                    guard_target_noise: 8.0,
+                    ..combiner(weighting, window, pairs)
+                };
+                for (px, py) in [(r, r), (width - r - LANES, height - r - 1), (r + 3, 5)] {
+                    assert!(net.window_inside(px, py, LANES, &colours));
+                    let mut lanes = raw.clone();
+                    let together = net.combine_lanes(&mut lanes, px, py, &colours);
+                    let mut portable = raw.clone();
+                    let again = net.combine_lanes_portable(&mut portable, px, py, &colours);
+                    assert!(
+                        together == again,
+                        "{weighting:?} {guard}: the AVX2 build differs"
+                    );
+                    for (l, (rgb, shares)) in together.iter().enumerate() {
+                        let mut weights = raw[l * entries..(l + 1) * entries].to_vec();
+                        let (one_rgb, one_shares) =
+                            net.combine_pixel(&mut weights, px + l, py, &colours);
+                        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(rgb), bits(&one_rgb), "{weighting:?} {guard} lane {l}");
+                        assert_eq!(bits(shares), bits(&one_shares), "{weighting:?} {guard}");
+                    }
+                }
+                assert!(!net.window_inside(r - 1, r, LANES, &colours));
+                assert!(!net.window_inside(width - r - LANES + 1, r, LANES, &colours));
+            }
         }
     }
 
@@ -454,10 +962,12 @@ mod tests {
             .into_iter()
             .chain([1.0; 12])
             .collect();
+        let differences = level_differences(&levels, 4);
         let colours = CombinationInputs {
             width: 2,
             height: 2,
             levels: &levels,
+            differences: &differences,
             share_planes: &[0],
             variances: &[],
         };
@@ -481,8 +991,10 @@ mod tests {
         for c in 0..3 {
             negative[12 + c * 4..12 + c * 4 + 4].copy_from_slice(&[0.0, 0.0, 0.0, 14.0]);
         }
+        let differences = level_differences(&negative, 4);
         let colours = CombinationInputs {
             levels: &negative,
+            differences: &differences,
             ..colours
         };
         let mut w = raw;

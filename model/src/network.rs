@@ -9,6 +9,8 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
+use crate::unet::{forward_region, UNet};
+
 /// Number of network input channels with every level: 5×3 colours + 5 variances + 7 G-buffer
 /// (paper §4.3).
 pub const INPUT_CHANNELS: usize = 27;
@@ -44,6 +46,11 @@ pub enum Preset {
     Medium,
     /// 3 layers of 3×3, 12 filters, 5×5 window: for tests.
     Tiny,
+    /// A U-Net ([`crate::unet`]): 3×3 convolutions at full, 1/2, 1/4 and 1/8 resolution (16,
+    /// 32, 48, 64 filters), a 1×1 output layer, 11×11 window: a 43-px receptive radius for
+    /// ≈ 34 k multiply-adds per pixel, a fifteenth of `small`'s.
+    #[serde(rename = "unet")]
+    UNet,
 }
 
 /// How raw network outputs become positive combination weights.
@@ -89,6 +96,12 @@ pub struct ModelConfig {
     /// [`DEFAULT_GUARD_TARGET_NOISE`].
     #[serde(default = "default_guard_target_noise")]
     pub guard_target_noise: f32,
+    /// The convolutions' layout when it is a U-Net (`hidden_layers` then counts all its hidden
+    /// convolutions, `filters` is its full-resolution width, `kernel` its kernel, and the output
+    /// layer is 1×1). Absent (every model.json written before it existed): the paper's stack of
+    /// `hidden_layers` convolutions at full resolution and an output layer of `kernel`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unet: Option<UNet>,
 }
 
 /// The safeguard strength κ of every preset and of model files that name none. With
@@ -115,11 +128,14 @@ fn default_guard_target_noise() -> f32 {
 impl ModelConfig {
     /// The configuration of a preset.
     pub fn preset(preset: Preset) -> Self {
-        let (hidden_layers, filters, kernel, window) = match preset {
-            Preset::Paper => (9, 50, 5, 19),
-            Preset::Small => (5, 32, 5, 11),
-            Preset::Medium => (7, 48, 5, 11),
-            Preset::Tiny => (2, 12, 3, 5),
+        let unet = (preset == Preset::UNet).then(UNet::preset);
+        let (hidden_layers, filters, kernel, window) = match (preset, &unet) {
+            (Preset::Paper, _) => (9, 50, 5, 19),
+            (Preset::Small, _) => (5, 32, 5, 11),
+            (Preset::Medium, _) => (7, 48, 5, 11),
+            (Preset::Tiny, _) => (2, 12, 3, 5),
+            (Preset::UNet, Some(u)) => (u.hidden_layers(), u.widths[0], 3, 11),
+            (Preset::UNet, None) => unreachable!("the unet preset has a layout"),
         };
         Self {
             preset,
@@ -132,6 +148,7 @@ impl ModelConfig {
             levels: all_levels(),
             guard: DEFAULT_GUARD,
             guard_target_noise: DEFAULT_GUARD_TARGET_NOISE,
+            unet,
         }
     }
 
@@ -158,11 +175,28 @@ impl ModelConfig {
         self.pairs() * self.window_area()
     }
 
+    /// Kernel side of the output layer: `kernel` for the paper's stack, 1 for a U-Net.
+    pub fn output_kernel(&self) -> usize {
+        if self.unet.is_some() {
+            1
+        } else {
+            self.kernel
+        }
+    }
+
+    /// Pixels of context (features) one pixel's raw network output depends on: the halo of
+    /// features an image tile needs for its network output to be exact.
+    pub fn conv_reach(&self) -> usize {
+        match &self.unet {
+            Some(unet) => unet.reach(self.kernel, self.output_kernel()),
+            None => (self.hidden_layers + 1) * (self.kernel / 2),
+        }
+    }
+
     /// Pixels of context one output pixel depends on (convolutions or window, whichever is
-    /// wider): the halo an image tile needs to be reconstructed exactly.
+    /// wider).
     pub fn receptive_radius(&self) -> usize {
-        let conv = (self.hidden_layers + 1) * (self.kernel / 2);
-        conv.max(self.window / 2)
+        self.conv_reach().max(self.window / 2)
     }
 
     /// Checks the configuration for values the network cannot be built with.
@@ -185,6 +219,21 @@ impl ModelConfig {
         if self.hidden_layers == 0 || self.filters == 0 {
             return Err("hidden_layers and filters must be positive".into());
         }
+        if let Some(unet) = &self.unet {
+            unet.validate()?;
+            if self.hidden_layers != unet.hidden_layers() || self.filters != unet.widths[0] {
+                return Err(format!(
+                    "a U-Net of widths {:?} and convs {:?} has {} hidden layers and {} filters at \
+                     full resolution, the config says {} and {}",
+                    unet.widths,
+                    unet.convs,
+                    unet.hidden_layers(),
+                    unet.widths[0],
+                    self.hidden_layers,
+                    self.filters
+                ));
+            }
+        }
         if !(self.guard.is_finite() && self.guard >= 0.0) {
             return Err(format!(
                 "guard must be a finite number ≥ 0, got {}",
@@ -206,6 +255,27 @@ impl ModelConfig {
     /// from bit-identical parameters.
     pub fn init(&self, seed: u64, device: &Device) -> Network {
         let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        if let Some(unet) = &self.unet {
+            let hidden = unet
+                .conv_shapes(self.in_channels)
+                .into_iter()
+                .map(|(cin, cout)| glorot_conv(cin, cout, self.kernel, &mut rng, device))
+                .collect();
+            let output = glorot_conv(
+                unet.widths[0],
+                self.out_channels(),
+                self.output_kernel(),
+                &mut rng,
+                device,
+            );
+            return Network {
+                hidden,
+                output,
+                weighting: self.weighting,
+                unet: Some(unet.clone()),
+            }
+            .with_stable_ids();
+        }
         let mut hidden = Vec::with_capacity(self.hidden_layers);
         let mut cin = self.in_channels;
         for _ in 0..self.hidden_layers {
@@ -223,6 +293,7 @@ impl ModelConfig {
             hidden,
             output,
             weighting: self.weighting,
+            unet: None,
         }
         .with_stable_ids()
     }
@@ -233,6 +304,19 @@ impl ModelConfig {
     /// Growing needs the same inputs, kernel and weighting, no fewer hidden layers or filters,
     /// and the same window or (ReLU weighting) a wider one.
     pub fn growth_obstacle(&self, from: &ModelConfig) -> Option<String> {
+        if self.unet.is_some() || from.unet.is_some() {
+            // Growing adds filters and identity layers to a single-resolution stack; a U-Net's
+            // skips and scales have no such function-preserving embedding here.
+            return Some(format!(
+                "growing is defined for the single-resolution convolution stack only, and {} a \
+                 U-Net (preset unet): fine-tune a U-Net from weights of the same architecture",
+                match (from.unet.is_some(), self.unet.is_some()) {
+                    (true, true) => "both are",
+                    (true, false) => "the trained network is",
+                    _ => "this network is",
+                }
+            ));
+        }
         let same = |what: &str, a: String, b: String| {
             (a != b).then(|| format!("{what} differs (the trained network's {b}, this {a})"))
         };
@@ -375,6 +459,7 @@ impl ModelConfig {
             hidden,
             output,
             weighting: self.weighting,
+            unet: None,
         }
         .with_stable_ids())
     }
@@ -498,18 +583,28 @@ fn conv_from_values(
 /// The convolution stack: features `[B, 27, H, W]` → raw weights `[B, (m−1)·|Ω|, H, W]`.
 #[derive(Module, Debug)]
 pub struct Network {
-    /// Hidden convolutions, each followed by ReLU.
+    /// Hidden convolutions, each followed by ReLU (a U-Net's in the order of its plan).
     pub hidden: Vec<Conv2d>,
     /// Last convolution producing one raw weight per level pair and window entry.
     pub output: Conv2d,
     /// Positive-weight transform applied by [`Network::weights`].
     #[module(skip)]
     pub weighting: Weighting,
+    /// How the hidden convolutions connect when they form a U-Net ([`crate::unet`]); `None`:
+    /// one after the other at full resolution. Not a parameter: it comes from the config.
+    #[module(skip)]
+    pub unet: Option<UNet>,
 }
 
 impl Network {
     /// Raw (unconstrained) network output.
     pub fn forward(&self, features: Tensor<4>) -> Tensor<4> {
+        if let Some(unet) = &self.unet {
+            let [_, _, height, width] = features.dims();
+            let whole = [0, 0, width, height];
+            let x = forward_region(unet, &self.hidden, features, whole, whole, width, height);
+            return self.output.forward(x);
+        }
         let mut x = features;
         for conv in &self.hidden {
             x = relu(conv.forward(x));
@@ -601,6 +696,106 @@ mod tests {
         let dual = ModelConfig::preset(Preset::Small).with_levels(vec![0, 3]);
         let text = serde_json::to_string(&dual).unwrap();
         assert_eq!(serde_json::from_str::<ModelConfig>(&text).unwrap(), dual);
+    }
+
+    /// The shipped model.json (no `unet` key) loads as the `small` preset, a plain stack, and is
+    /// written back without the key; a U-Net's config round-trips, and a misspelt key inside
+    /// `unet` is refused like one outside it.
+    #[test]
+    fn model_json_files_without_unet_load_as_before() {
+        let shipped = include_str!("../../models/default/model.json");
+        let config: ModelConfig = serde_json::from_str(shipped).unwrap();
+        assert_eq!(config, ModelConfig::preset(Preset::Small));
+        assert!(config.unet.is_none());
+        config.validate().unwrap();
+        let written = serde_json::to_value(&config).unwrap();
+        assert_eq!(
+            written,
+            serde_json::from_str::<serde_json::Value>(shipped).unwrap()
+        );
+
+        let unet = ModelConfig::preset(Preset::UNet);
+        unet.validate().unwrap();
+        let text = serde_json::to_string(&unet).unwrap();
+        assert!(text.contains(r#""preset":"unet""#), "{text}");
+        assert!(
+            text.contains(r#""unet":{"widths":[16,32,48,64],"convs":[1,2,2,2]}"#),
+            "{text}"
+        );
+        assert_eq!(serde_json::from_str::<ModelConfig>(&text).unwrap(), unet);
+        let misspelt = text.replace(r#""convs""#, r#""conv""#);
+        assert!(serde_json::from_str::<ModelConfig>(&misspelt).is_err());
+        // The counts that describe the U-Net must agree with its layout.
+        let wrong = ModelConfig {
+            hidden_layers: 9,
+            ..unet.clone()
+        };
+        assert!(wrong.validate().unwrap_err().contains("hidden layers"));
+    }
+
+    #[test]
+    fn unet_preset_costs_a_fifteenth_of_small_and_sees_further() {
+        // Multiply-adds per full-resolution pixel of the hidden convolutions and output layer.
+        let macs = |c: &ModelConfig| -> usize {
+            let k2 = c.kernel * c.kernel;
+            let out = c.out_channels() * c.output_kernel().pow(2);
+            match &c.unet {
+                None => {
+                    let first = c.in_channels * c.filters * k2;
+                    first + (c.hidden_layers - 1) * c.filters * c.filters * k2 + c.filters * out
+                }
+                Some(u) => {
+                    let steps = u.plan(c.in_channels);
+                    let hidden: usize = steps
+                        .iter()
+                        .filter_map(|s| match &s.op {
+                            crate::unet::Op::Conv { inputs, .. } => {
+                                let cin: usize = inputs.iter().map(|&i| steps[i].channels).sum();
+                                Some(cin * s.channels * k2 / 4usize.pow(s.scale as u32))
+                            }
+                            _ => None,
+                        })
+                        .sum();
+                    hidden + c.filters * out
+                }
+            }
+        };
+        let small = ModelConfig::preset(Preset::Small);
+        let unet = ModelConfig::preset(Preset::UNet);
+        assert_eq!(macs(&small), 511_200);
+        assert_eq!(macs(&unet), 33_952);
+        assert_eq!(unet.out_channels(), small.out_channels());
+        assert_eq!(
+            (small.receptive_radius(), unet.receptive_radius()),
+            (12, 43)
+        );
+    }
+
+    #[test]
+    fn unet_is_not_grown() {
+        let device = Device::flex();
+        let small = ModelConfig::preset(Preset::Small);
+        let unet = ModelConfig::preset(Preset::UNet);
+        let tiny_unet = ModelConfig::preset(Preset::Tiny);
+        let why = unet.growth_obstacle(&small).unwrap();
+        assert!(
+            why.contains("U-Net") && why.contains("this network is"),
+            "{why}"
+        );
+        let why = small.growth_obstacle(&unet).unwrap();
+        assert!(why.contains("the trained network is"), "{why}");
+        let err = unet
+            .grow(&unet, &unet.init(1, &device), 2, &device)
+            .unwrap_err();
+        assert!(
+            err.starts_with("cannot grow the network") && err.contains("both"),
+            "{err}"
+        );
+        // Plain stacks still grow.
+        assert!(small.growth_obstacle(&tiny_unet).is_some()); // (other kernel)
+        assert!(ModelConfig::preset(Preset::Medium)
+            .growth_obstacle(&small)
+            .is_none());
     }
 
     #[test]

@@ -35,7 +35,9 @@ pub struct TrainConfig {
     pub dataset: PathBuf,
     /// Directory inside the dataset whose `<scene id>.exr` replaces every sample's reference
     /// (training, validation and `--evaluate`), e.g. the averaged runs written by
-    /// `datagen average-references` (`references-avg8`). Absent: the manifest's references.
+    /// `datagen average-references` (`references-avg8`). Absent: the manifest's references —
+    /// for validation and `--evaluate` each scene's converged evaluation reference where the
+    /// manifest lists one (`datagen evaluation-references`), for training its training one.
     #[serde(default)]
     pub references: Option<PathBuf>,
     /// Split trained on.

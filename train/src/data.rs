@@ -186,7 +186,11 @@ impl PatchDataset {
     /// data (NaN/Inf, missing reference, mismatched sizes or channels, smaller than a patch).
     /// `references`: a directory inside `root` whose `<scene id>.exr` replaces the manifest's
     /// reference of every sample (e.g. the averaged runs of `datagen average-references`).
-    /// Only samples of the families `families` accepts are read.
+    /// Only samples of the families `families` accepts are read. `measure`: the split is
+    /// measured, not trained on (validation, `--evaluate`): without `references`, each scene's
+    /// converged evaluation reference is used where the manifest lists one (all of the split's
+    /// scenes or none: a partial set is refused).
+    #[allow(clippy::too_many_arguments)]
     pub fn open(
         root: &Path,
         split: &str,
@@ -195,6 +199,7 @@ impl PatchDataset {
         cache_images: usize,
         references: Option<&Path>,
         families: &FamilyFilter,
+        measure: bool,
     ) -> Result<Self, String> {
         let manifest: Manifest = Manifest::load(root).map_err(|e| e.to_string())?;
         let mut known: Vec<&str> = manifest.samples.iter().map(|s| s.family.as_str()).collect();
@@ -232,13 +237,42 @@ impl PatchDataset {
                 root.join("manifest.json").display()
             ));
         }
+        // The converged evaluation reference of each scene read, where measuring.
+        let mut evaluation = std::collections::HashMap::new();
+        if measure && references.is_none() {
+            let mut without = Vec::new();
+            for scene in manifest
+                .scenes
+                .iter()
+                .filter(|s| s.split.name() == split && read.iter().any(|e| e.scene == s.id))
+            {
+                match &scene.evaluation_reference {
+                    Some(e) => {
+                        evaluation.insert(scene.id.as_str(), root.join(&e.path));
+                    }
+                    None => without.push(scene.id.as_str()),
+                }
+            }
+            if !evaluation.is_empty() && !without.is_empty() {
+                return Err(format!(
+                    "{}: {} scene(s) of split `{split}` have a converged evaluation reference, {} \
+                     do not ({}): finish `datagen evaluation-references`, or measure against the \
+                     training references with `references = \"references\"`",
+                    root.join("manifest.json").display(),
+                    evaluation.len(),
+                    without.len(),
+                    without.join(", ")
+                ));
+            }
+        }
         let mut images = Vec::new();
         let mut bad = Vec::new();
         for entry in read {
             let bundle = root.join(&entry.bundle);
-            let reference = match references {
-                Some(dir) => bundle::scene_reference_path(&root.join(dir), &entry.scene),
-                None => root.join(&entry.reference),
+            let reference = match (references, evaluation.get(entry.scene.as_str())) {
+                (Some(dir), _) => bundle::scene_reference_path(&root.join(dir), &entry.scene),
+                (None, Some(path)) => path.clone(),
+                (None, None) => root.join(&entry.reference),
             };
             match load_sample(&bundle, &reference) {
                 Ok(sample) => {

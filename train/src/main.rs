@@ -165,6 +165,7 @@ fn evaluate(
         cfg.cache_images,
         cfg.references.as_deref(),
         families,
+        true,
     )
     .map_err(anyhow::Error::msg)?;
     report_bad(split, &ds, &cfg.output)?;
@@ -438,6 +439,7 @@ fn run(cli: &Cli) -> Result<()> {
         cfg.cache_images,
         cfg.references.as_deref(),
         &cfg.family_filter(),
+        false,
     )
     .map_err(anyhow::Error::msg)?;
     report_bad(&cfg.train_split, &train, &cfg.output)?;
@@ -456,6 +458,7 @@ fn run(cli: &Cli) -> Result<()> {
             cfg.cache_images,
             cfg.references.as_deref(),
             &cfg.family_filter(),
+            true,
         )
         .map_err(anyhow::Error::msg)?
     };

@@ -670,3 +670,88 @@ fn a_family_left_out_of_training_is_evaluated_on_its_own() {
         "{stderr}"
     );
 }
+
+#[test]
+fn validation_measures_against_converged_evaluation_references() {
+    let (dir, data) = dir_with_data("evaluation-references");
+    std::fs::create_dir_all(data.join("evaluation-references")).unwrap();
+    let mut samples = Vec::new();
+    let mut scenes = Vec::new();
+    for (i, split) in ["train", "train", "val", "val"].into_iter().enumerate() {
+        let (b, reference) = synthetic_bundle(24, 24, 0.3, i as u64 + 1);
+        let name = format!("s{i}");
+        bundle::write_bundle(&data.join(format!("{name}.exr")), &b).unwrap();
+        bundle::write_rgb_exr_image(&data.join(format!("{name}_ref.exr")), &reference).unwrap();
+        samples.push(serde_json::json!({
+            "bundle": format!("{name}.exr"), "scene": name, "family": "room", "split": split,
+            "seed": i, "seed_index": 0, "passes": 16, "photons": 1000,
+            "reference": format!("{name}_ref.exr"), "sha256": ""
+        }));
+        let mut scene = serde_json::json!({
+            "id": name, "family": "room", "split": split, "xml": "x.xml",
+            "reference": format!("{name}_ref.exr"), "reference_sha256": "",
+            "reference_seed": 1, "reference_passes": 16, "reference_photons": 1000
+        });
+        if split == "val" {
+            let path = format!("evaluation-references/{name}.exr");
+            // s2's evaluation reference exists, s3's file is missing: a bad sample naming it.
+            if i == 2 {
+                bundle::write_rgb_exr_image(&data.join(&path), &reference).unwrap();
+            }
+            scene["evaluation_reference"] = serde_json::json!({
+                "path": path, "sha256": "", "passes": 256, "photons": 1000, "seeds": [7, 8],
+                "noise": 1e-5, "input_relmse": 1e-2, "target": 0.1, "converged": true,
+                "seconds": 1.0
+            });
+        }
+        scenes.push(scene);
+    }
+    let write = |scenes: &serde_json::Value| {
+        let manifest = serde_json::json!({
+            "format": bundle::manifest::MANIFEST_FORMAT, "name": "test", "config_sha256": "",
+            "width": 24, "height": 24, "reference_level": "y", "scenes": scenes,
+            "samples": samples, "config": {}
+        });
+        std::fs::write(data.join("manifest.json"), manifest.to_string()).unwrap();
+    };
+    write(&serde_json::Value::from(scenes.clone()));
+    let config = tiny_config(&dir, "conv", &data, "");
+    let run = train(&config, &[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    // Training read its two training references; validation read the evaluation ones.
+    assert!(
+        stderr.contains("2 train images") && stderr.contains("1 val images"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("evaluation-references/s3.exr"), "{stderr}");
+    // With the training references named, both validation samples are read.
+    let named = tiny_config(&dir, "named", &data, "references = \"references\"\n");
+    std::fs::create_dir_all(data.join("references")).unwrap();
+    for i in 0..4 {
+        std::fs::copy(
+            data.join(format!("s{i}_ref.exr")),
+            data.join(format!("references/s{i}.exr")),
+        )
+        .unwrap();
+    }
+    let run = train(&named, &[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(stderr.contains("2 val images"), "{stderr}");
+    // One validation scene with an evaluation reference, one without: refused, naming it.
+    scenes[3]
+        .as_object_mut()
+        .unwrap()
+        .remove("evaluation_reference");
+    write(&serde_json::Value::from(scenes));
+    let partial = tiny_config(&dir, "partial", &data, "");
+    let run = train(&partial, &[]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("1 scene(s) of split `val` have a converged evaluation reference")
+            && stderr.contains("(s3)"),
+        "{stderr}"
+    );
+}

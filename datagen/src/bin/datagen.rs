@@ -7,6 +7,7 @@ use datagen::average::{average_references, summary_lines, AverageOptions, NOISE_
 use datagen::check::check_dataset;
 use datagen::config::Config;
 use datagen::contact_sheet::{write_contact_sheet, SheetLayout};
+use datagen::evaluation_reference::{evaluation_references, EvaluationOptions};
 use datagen::families::{generate, scene_list};
 use datagen::jobs::{check_external_scenes, render_dataset, RenderOptions};
 use datagen::manifest::{assemble_manifest, Manifest};
@@ -111,6 +112,42 @@ enum Command {
         threads: usize,
         /// Seconds of rendering between saves of a run's state: a killed run resumes from its
         /// last save instead of starting over.
+        #[arg(long, value_name = "SECONDS", default_value_t = 60.0)]
+        state_interval: f64,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Render converged references for evaluation: per scene of the splits, two independent
+    /// SPPM runs continued far past the inputs' pass count until the noise of their mean is at
+    /// most TARGET × the best input level's error at the scene's largest pass count (or a
+    /// limit flags the scene). Writes DIR/evaluation-references/<scene id>.exr and a record per
+    /// scene, and lists them in the manifest (`evaluation_reference`), which evaluation and
+    /// validation then use. Resumable: a later call continues the runs.
+    #[command(allow_negative_numbers = true)]
+    EvaluationReferences {
+        /// Dataset directory (with manifest.json).
+        dir: PathBuf,
+        /// Splits whose scenes get one, comma-separated.
+        #[arg(long, value_delimiter = ',', default_value = "val,test")]
+        splits: Vec<Split>,
+        /// Only these scene ids (comma-separated); default: every scene of the splits.
+        #[arg(long, value_delimiter = ',')]
+        scenes: Vec<String>,
+        /// Noise limit as a fraction of the best input level's error.
+        #[arg(long, default_value_t = datagen::evaluation_reference::DEFAULT_TARGET)]
+        target: f64,
+        /// Most passes per run, as a multiple of the scene's reference passes.
+        #[arg(long, default_value_t = 64)]
+        max_factor: u32,
+        /// Most seconds of rendering per scene (both runs); a scene that would need more is
+        /// flagged (`converged: false`) and can be continued by a later call with a higher limit.
+        #[arg(long, value_name = "SECONDS")]
+        max_seconds: Option<f64>,
+        /// Worker threads per render (0 = all cores; output does not depend on it).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Seconds of rendering between saves of a run's state.
         #[arg(long, value_name = "SECONDS", default_value_t = 60.0)]
         state_interval: f64,
         /// No progress bar.
@@ -328,6 +365,84 @@ fn run(cli: Cli) -> Result<i32> {
                 .with_context(|| format!("writing {}", path.display()))?;
             print!("{}", markdown(&table));
             eprintln!("wrote {}", path.display());
+            Ok(0)
+        }
+        Command::EvaluationReferences {
+            dir,
+            splits,
+            scenes,
+            target,
+            max_factor,
+            max_seconds,
+            threads,
+            state_interval,
+            quiet,
+        } => {
+            let manifest = Manifest::load(&dir)?;
+            let options = EvaluationOptions {
+                splits,
+                scenes,
+                target,
+                max_factor,
+                max_seconds,
+                threads,
+                state_interval: positive_interval(state_interval)?,
+            };
+            let bar = ProgressBar::with_draw_target(
+                Some(1),
+                if quiet {
+                    ProgressDrawTarget::hidden()
+                } else {
+                    ProgressDrawTarget::stderr()
+                },
+            );
+            bar.set_style(
+                ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} passes ETA {eta}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            let started = std::time::Instant::now();
+            let outcomes = evaluation_references(
+                &dir,
+                &manifest,
+                &SppmBackend,
+                &options,
+                |o| {
+                    let r = &o.reference;
+                    let line = format!(
+                        "{}: {} passes x {} photons x {} runs, noise {:.2e} = {:.3} x input                          error {:.2e}{}{}",
+                        o.id,
+                        r.passes,
+                        r.photons,
+                        r.seeds.len(),
+                        r.noise,
+                        r.noise / r.input_relmse,
+                        r.input_relmse,
+                        if r.converged { "" } else { " FLAGGED (limit reached)" },
+                        if o.rendered { "" } else { " (kept)" },
+                    );
+                    // Printed with or without the bar (`--quiet` hides the bar only).
+                    bar.suspend(|| println!("{line}"));
+                },
+                &mut |id, run, pass, target| {
+                    if pass <= 1 || bar.length() != Some(u64::from(target)) {
+                        bar.set_length(u64::from(target));
+                        bar.set_message(format!("{id} run {run}"));
+                    }
+                    bar.set_position(u64::from(pass));
+                },
+            )?;
+            bar.finish_and_clear();
+            // The manifest lists the records (all of them, of earlier calls too).
+            let plan = datagen::plan::Plan::new(&manifest.config);
+            datagen::manifest::assemble_manifest(&dir, &manifest.config, &plan)?;
+            let flagged = outcomes.iter().filter(|o| !o.reference.converged).count();
+            println!(
+                "{} scene(s), {} converged, {flagged} flagged; {} of rendering in this call; \
+                 manifest updated",
+                outcomes.len(),
+                outcomes.len() - flagged,
+                hms(started.elapsed())
+            );
             Ok(0)
         }
         Command::AverageReferences {

@@ -1,14 +1,19 @@
-//! `bench_infer`: speed and memory of tiled inference (issue 6 "Speed"): a randomly
-//! initialised network of a preset reconstructs a synthetic bundle of the given size through
-//! `infer`'s tiled path, on the native engine and on Burn in the same run (or on the one named
-//! by `--engine`); the PyTorch peer (`bench/peer.py`) does the same forward + combination on the
-//! whole image. Prints a table and optionally JSON.
+//! `bench_infer`: speed and memory of tiled inference (issue 6 "Speed", issue 40 item 5): a
+//! randomly initialised network of each preset named reconstructs a synthetic bundle of the
+//! given size through `infer`'s tiled path, on the native engine and on Burn in the same run (or
+//! on the one named by `--engine`). Peers on the same image, in the same run: the PyTorch peer
+//! (`bench/peer.py`, the paper preset's forward + combination on the whole image) and Intel Open
+//! Image Denoise 2.5 (`--oidn scripts/oidn_denoise.py`: HDR colour ỹ + albedo + normal, quality
+//! `high`, through Python `pyoidn`; a development-side peer, never linked). With `--rounds R`
+//! every measurement is repeated R times, interleaved (ours, then OIDN, R times), so that a
+//! machine shared with other work loads both alike; the ratios are taken within each round.
+//! Prints a table and optionally JSON.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Parser;
 use infer::{reconstruct_tiled, Engine};
 use model::backend::Backend;
@@ -18,11 +23,11 @@ use model::synthetic::synthetic_bundle;
 use model::{ModelConfig, Preset};
 use serde_json::{json, Value};
 
-/// Benchmark tiled inference of a network preset against the PyTorch peer.
+/// Benchmark tiled inference of network presets against PyTorch and Open Image Denoise.
 #[derive(Debug, Parser)]
 #[command(version, allow_negative_numbers = true)]
 struct Cli {
-    /// Network preset: paper, medium, small or tiny.
+    /// Network presets, comma-separated: paper, medium, small, tiny, unet (e.g. `unet,small`).
     #[arg(long, default_value = "paper")]
     preset: String,
     /// Image width in pixels (and height, unless `--height` is given).
@@ -34,9 +39,16 @@ struct Cli {
     /// Tile side (0 = whole image); `infer`'s default.
     #[arg(long, default_value_t = 512)]
     tile: usize,
-    /// Timed repetitions after one warm-up; the median is reported.
+    /// Timed repetitions per round (after one warm-up in the first round); the median is
+    /// reported.
     #[arg(long, default_value_t = 2)]
     repeats: usize,
+    /// Rounds of the whole measurement (every preset, then OIDN), interleaved.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    rounds: u32,
+    /// Worker threads of our reconstruction (0 = every core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
     /// Tensor backend.
     #[arg(long, default_value = "flex", value_parser = Backend::parse)]
     backend: Backend,
@@ -47,7 +59,10 @@ struct Cli {
     /// PyTorch peer script, or `none`.
     #[arg(long, default_value = "bench/peer.py")]
     peer: String,
-    /// Python interpreter for the peer.
+    /// Open Image Denoise peer script (`scripts/oidn_denoise.py`), or `none`.
+    #[arg(long, default_value = "none")]
+    oidn: String,
+    /// Python interpreter for the peers.
     #[arg(long, default_value = "python3")]
     python: String,
     /// Write all numbers as JSON here.
@@ -63,9 +78,18 @@ fn peak_rss_mib() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+/// The median of `values` (the upper one of an even count).
+fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
 fn main() -> ExitCode {
     cli_output::install();
-    match run(&Cli::parse()) {
+    let cli = Cli::parse();
+    let result = renderer::threads::with_threads(cli.threads, || run(&cli)).and_then(|r| r);
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -74,58 +98,159 @@ fn main() -> ExitCode {
     }
 }
 
+/// One preset and engine's timings.
+struct Timed {
+    preset: Preset,
+    engine: Engine,
+    /// Median seconds of each round.
+    rounds: Vec<f64>,
+    /// Every timed run.
+    all: Vec<f64>,
+    /// Peak RSS after its last run.
+    rss: Option<f64>,
+}
+
+/// Writes an interleaved image's samples as raw little-endian f32 (`oidn_denoise.py`'s format).
+fn write_raw(path: &Path, data: &[f32]) -> Result<()> {
+    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
+    std::fs::write(path, bytes).with_context(|| path.display().to_string())
+}
+
+/// Runs the OIDN script on the files in `dir` once; returns its JSON report.
+fn run_oidn(cli: &Cli, dir: &Path, width: usize, height: usize) -> Result<Value> {
+    let out = Command::new(&cli.python)
+        .arg(&cli.oidn)
+        .args([
+            "--width",
+            &width.to_string(),
+            "--height",
+            &height.to_string(),
+        ])
+        .arg("--color")
+        .arg(dir.join("color.f32"))
+        .arg("--albedo")
+        .arg(dir.join("albedo.f32"))
+        .arg("--normal")
+        .arg(dir.join("normal.f32"))
+        .arg("--output")
+        .arg(dir.join("out.f32"))
+        .args(["--repeats", &cli.repeats.max(1).to_string()])
+        .output()
+        .with_context(|| format!("running {} {}", cli.python, cli.oidn))?;
+    if !out.status.success() {
+        bail!(
+            "{}: {}",
+            cli.oidn,
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    serde_json::from_slice(&out.stdout).with_context(|| format!("{}: its output", cli.oidn))
+}
+
 fn run(cli: &Cli) -> Result<()> {
-    let preset: Preset =
-        serde_json::from_value(Value::String(cli.preset.clone())).with_context(|| {
-            format!(
-                "unknown preset `{}` (paper, medium, small, tiny)",
-                cli.preset
+    let presets = cli
+        .preset
+        .split(',')
+        .map(|name| {
+            serde_json::from_value::<Preset>(Value::String(name.trim().to_string())).with_context(
+                || format!("unknown preset `{name}` (paper, medium, small, tiny, unet)"),
             )
-        })?;
+        })
+        .collect::<Result<Vec<_>>>()?;
     let device = cli.backend.device().map_err(anyhow::Error::msg)?;
     if let Some(note) = cli.backend.adapter_note(&device) {
         eprintln!("{note}");
     }
-    let config = ModelConfig::preset(preset);
-    let network = config.init(0, &device);
-    let model = TrainedModel {
-        dir: PathBuf::new(),
-        config,
-        network,
-    };
+    let models: Vec<TrainedModel> = presets
+        .iter()
+        .map(|&preset| {
+            let config = ModelConfig::preset(preset);
+            TrainedModel {
+                dir: PathBuf::new(),
+                network: config.init(0, &device),
+                config,
+            }
+        })
+        .collect();
     let (n, h) = (cli.size as usize, cli.height.unwrap_or(cli.size) as usize);
     let (bundle, _) = synthetic_bundle(n, h, 0.3, 1);
     let packed = pack(&bundle)?;
+    // OIDN's inputs: the same bundle's sharpest level ỹ as the noisy HDR colour, its albedo and
+    // normal (interleaved RGB, as the bundle holds them).
+    let oidn_dir = (cli.oidn != "none")
+        .then(|| -> Result<PathBuf> {
+            let dir = std::env::temp_dir().join(format!("bench-infer-oidn-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
+            write_raw(&dir.join("color.f32"), &bundle.levels[0].data)?;
+            write_raw(&dir.join("albedo.f32"), &bundle.albedo.data)?;
+            write_raw(&dir.join("normal.f32"), &bundle.normal.data)?;
+            Ok(dir)
+        })
+        .transpose()?;
     drop(bundle);
     let rss_before = peak_rss_mib();
     let engines = match cli.engine {
         Some(e) => vec![e],
         None => vec![Engine::Native, Engine::Burn],
     };
-    // (engine, median seconds, all timed runs, peak RSS after it)
-    let mut timed = Vec::new();
-    for &engine in &engines {
-        let mut times = Vec::new();
-        for k in 0..=cli.repeats.max(1) {
-            let t = Instant::now();
-            let r = reconstruct_tiled(&model, &packed, cli.tile, engine, &device, |_, _| {});
-            let s = t.elapsed().as_secs_f64();
-            assert!(r.image.iter().all(|v| v.is_finite()));
-            eprintln!(
-                "{engine:?} run {k}: {s:.3} s{}",
-                if k == 0 { " (warm-up)" } else { "" }
-            );
-            if k > 0 {
-                times.push(s);
+    let mut timed: Vec<Timed> = models
+        .iter()
+        .flat_map(|m| {
+            engines.iter().map(|&engine| Timed {
+                preset: m.config.preset,
+                engine,
+                rounds: Vec::new(),
+                all: Vec::new(),
+                rss: None,
+            })
+        })
+        .collect();
+    let mut oidn_rounds: Vec<f64> = Vec::new();
+    let mut oidn_reports: Vec<Value> = Vec::new();
+    let threads = match cli.threads {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        n => n,
+    };
+    for round in 0..cli.rounds as usize {
+        for t in timed.iter_mut() {
+            let model = &models[presets.iter().position(|&p| p == t.preset).expect("built")];
+            let mut times = Vec::new();
+            let first = if round == 0 { 0 } else { 1 };
+            for k in first..=cli.repeats.max(1) {
+                let start = Instant::now();
+                let r = reconstruct_tiled(model, &packed, cli.tile, t.engine, &device, |_, _| {});
+                let s = start.elapsed().as_secs_f64();
+                assert!(r.image.iter().all(|v| v.is_finite()));
+                eprintln!(
+                    "round {round}: {:?} {:?} run {k}: {s:.3} s{}",
+                    t.preset,
+                    t.engine,
+                    if k == 0 { " (warm-up)" } else { "" }
+                );
+                if k > 0 {
+                    times.push(s);
+                }
             }
+            t.rounds.push(median(&times));
+            t.all.extend(times);
+            t.rss = peak_rss_mib();
         }
-        times.sort_by(|a, b| a.total_cmp(b));
-        timed.push((engine, times[times.len() / 2], times, peak_rss_mib()));
+        if let Some(dir) = &oidn_dir {
+            let report = run_oidn(cli, dir, n, h)?;
+            let s = report["seconds"]
+                .as_f64()
+                .with_context(|| format!("{}: no `seconds` in {report}", cli.oidn))?;
+            eprintln!("round {round}: OIDN {s:.3} s");
+            oidn_rounds.push(s);
+            oidn_reports.push(report);
+        }
     }
-    let ours = timed[0].1;
+    if let Some(dir) = &oidn_dir {
+        let _ = std::fs::remove_dir_all(dir);
+    }
 
-    // The peer reconstructs square images only.
-    let peer = if cli.peer == "none" || preset != Preset::Paper || n != h {
+    // The PyTorch peer implements the paper preset, on square images only.
+    let peer = if cli.peer == "none" || !presets.contains(&Preset::Paper) || n != h {
         Value::Null
     } else {
         eprintln!("running the PyTorch peer {} on {n}x{n} ...", cli.peer);
@@ -153,43 +278,112 @@ fn run(cli: &Cli) -> Result<()> {
     };
 
     println!(
-        "{:?} preset, {n}x{h}, tile {} (+{} px halo), backend {:?}",
-        preset,
+        "{n}x{h}, tile {}, backend {:?}, {threads} threads, {} round(s) of {} timed run(s)",
         cli.tile,
-        model.config.receptive_radius(),
-        cli.backend
+        cli.backend,
+        cli.rounds,
+        cli.repeats.max(1)
     );
-    for (engine, median, _, rss) in &timed {
+    for (m, preset) in models.iter().zip(&presets) {
         println!(
-            "  {engine:?} engine (infer, tiled): {median:.3} s   peak RSS so far {:.0} MiB (before: {:.0} MiB)",
-            rss.unwrap_or(f64::NAN),
+            "  {preset:?} preset: +{} px halo per tile",
+            m.config.conv_reach()
+        );
+    }
+    let list = |v: &[f64]| {
+        v.iter()
+            .map(|s| format!("{s:.3}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    for t in &timed {
+        println!(
+            "  {:?} {:?} engine (infer, tiled): {:.3} s (rounds: {})   peak RSS so far {:.0} MiB (before: {:.0} MiB)",
+            t.preset,
+            t.engine,
+            median(&t.rounds),
+            list(&t.rounds),
+            t.rss.unwrap_or(f64::NAN),
             rss_before.unwrap_or(f64::NAN)
         );
     }
-    if let [(_, native, ..), (_, burn, ..)] = timed.as_slice() {
-        println!("  native / burn: {:.2}", native / burn);
+    for pair in timed.chunks(engines.len()) {
+        if let [native, burn] = pair {
+            println!(
+                "  {:?} native / burn: {:.2}",
+                native.preset,
+                median(&native.rounds) / median(&burn.rounds)
+            );
+        }
     }
+    // Ours ÷ OIDN per round, then the median over rounds.
+    let oidn_ratios: Vec<(String, Vec<f64>)> = timed
+        .iter()
+        .filter(|_| !oidn_rounds.is_empty())
+        .map(|t| {
+            let ratios = t
+                .rounds
+                .iter()
+                .zip(&oidn_rounds)
+                .map(|(ours, oidn)| ours / oidn)
+                .collect();
+            (format!("{:?} {:?}", t.preset, t.engine), ratios)
+        })
+        .collect();
+    if !oidn_rounds.is_empty() {
+        let version = oidn_reports[0]["oidn"].as_str().unwrap_or("?");
+        println!(
+            "  OIDN {version} (quality high, colour + albedo + normal): {:.3} s (rounds: {})",
+            median(&oidn_rounds),
+            list(&oidn_rounds)
+        );
+        for (name, ratios) in &oidn_ratios {
+            println!(
+                "  ours ({name}) / OIDN: {:.2} (rounds: {})",
+                median(ratios),
+                list(ratios)
+            );
+        }
+    }
+    let ours = median(&timed[0].rounds);
     if let Some(p) = peer["infer_s"].as_f64() {
+        let paper = timed
+            .iter()
+            .find(|t| t.preset == Preset::Paper)
+            .expect("the peer runs only with the paper preset");
         println!(
             "  {} (whole image): {p:.3} s",
             peer["framework"].as_str().unwrap_or("pytorch")
         );
-        println!("  ours ({:?}) / pytorch: {:.2}", timed[0].0, ours / p);
+        println!(
+            "  ours (paper, {:?}) / pytorch: {:.2}",
+            paper.engine,
+            median(&paper.rounds) / p
+        );
     } else if !peer.is_null() {
         println!("  peer failed: {}", peer["error"]);
     } else if cli.peer != "none" && n != h {
         println!("  (no PyTorch peer: it reconstructs square images only)");
     } else if cli.peer != "none" {
         // Said, not silently left out: the peer implements the paper preset only.
-        println!("  (no PyTorch peer: it implements the paper preset only; this is {preset:?})");
+        println!("  (no PyTorch peer: it implements the paper preset only)");
     }
     if let Some(path) = &cli.output {
         let all = json!({
-            "preset": cli.preset, "width": n, "height": h, "tile": cli.tile, "backend": format!("{:?}", cli.backend),
+            "preset": cli.preset, "width": n, "height": h, "tile": cli.tile,
+            "backend": format!("{:?}", cli.backend), "threads": threads, "rounds": cli.rounds,
             "infer_s": ours,
-            "engines": timed.iter().map(|(e, median, all, rss)| json!({
-                "engine": format!("{e:?}"), "infer_s": median, "all_s": all, "peak_rss_mib": rss,
+            "engines": timed.iter().map(|t| json!({
+                "preset": format!("{:?}", t.preset), "engine": format!("{:?}", t.engine),
+                "infer_s": median(&t.rounds), "rounds_s": t.rounds, "all_s": t.all,
+                "peak_rss_mib": t.rss,
             })).collect::<Vec<_>>(),
+            "oidn": if oidn_rounds.is_empty() { Value::Null } else { json!({
+                "seconds": median(&oidn_rounds), "rounds_s": oidn_rounds, "reports": oidn_reports,
+                "ratios": oidn_ratios.iter().map(|(name, r)| json!({
+                    "ours": name, "median": median(r), "rounds": r,
+                })).collect::<Vec<_>>(),
+            })},
             "pytorch": peer,
         });
         std::fs::write(path, serde_json::to_string_pretty(&all)?)
