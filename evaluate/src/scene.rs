@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use bundle::read_rgb_exr_image;
-use model::features::{pack, planar_reference};
+use model::features::{pack, pack_with, planar_reference};
 use model::metrics::relmse_planar;
 use renderer::integrators::sppm::{SppmMode, StopCondition};
 use serde::{Deserialize, Serialize};
@@ -147,20 +147,25 @@ pub fn evaluate_scene(
     let mut last_ours = Vec::new();
     let mut last_levels = Vec::new();
     for tb in &bundles {
+        let what = || format!("{}: bundle at {} passes", scene.name, tb.bundle.meta.passes);
         let t = Instant::now();
-        let packed = pack(&tb.bundle).with_context(|| {
-            format!("{}: bundle at {} passes", scene.name, tb.bundle.meta.passes)
-        })?;
-        let rec = inference.reconstruct(model, &packed);
+        // The model's input, its screen levels (if any) filtered: part of its time.
+        let input = pack_with(&tb.bundle, &model.config.screen_levels).with_context(what)?;
+        let rec = inference.reconstruct(model, &input);
         let inference_seconds = t.elapsed().as_secs_f64() + tb.assembly_seconds;
+        // The levels as rendered, for the report's per-level errors.
+        let packed = if model.config.screen_levels.is_empty() {
+            input
+        } else {
+            pack(&tb.bundle).with_context(what)?
+        };
         let report = ErrorReport::new(&packed, &rec.image, &reference);
-        let variant_relmse = variants
-            .iter()
-            .map(|v| {
-                let image = inference.reconstruct(v, &packed).image;
-                relmse_planar(&image, &reference)
-            })
-            .collect();
+        let mut variant_relmse = Vec::with_capacity(variants.len());
+        for v in variants {
+            let input = pack_with(&tb.bundle, &v.config.screen_levels).with_context(what)?;
+            let image = inference.reconstruct(v, &input).image;
+            variant_relmse.push(relmse_planar(&image, &reference));
+        }
         checkpoints.push(Checkpoint {
             passes: tb.bundle.meta.passes,
             render_seconds: tb.render_seconds,

@@ -18,7 +18,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use infer::preview::{write_side_by_side, write_weight_map, Panel};
 use infer::{reconstruct_tiled, Engine, ErrorReport};
 use model::backend::Backend;
-use model::features::{interleaved, pack, planar_reference};
+use model::features::{interleaved, pack, pack_with, planar_reference};
 use model::model_dir::TrainedModel;
 use renderer::integrators::sppm::RadiusSchedule;
 
@@ -389,9 +389,19 @@ fn run(cli: &Cli) -> Result<()> {
         }
         (None, None) => bail!("give --input bundle.exr or --scene scene.xml"),
     };
+    // The levels as rendered (the report's and the pictures'), and the network's input: the
+    // same, or with the model's screen-space levels in place.
     let mut packed = pack(&bundle).with_context(|| format!("bundle {}", source.display()))?;
+    let mut input = if model.config.screen_levels.is_empty() {
+        None
+    } else {
+        Some(pack_with(&bundle, &model.config.screen_levels)?)
+    };
     if cli.whole_levels {
         packed.direct = None;
+        if let Some(i) = &mut input {
+            i.direct = None;
+        }
     }
     let reference = match reference_image {
         Some((path, image)) => Some(
@@ -409,10 +419,17 @@ fn run(cli: &Cli) -> Result<()> {
             .progress_chars("=> "),
     );
     let engine = cli.engine.unwrap_or(Engine::default_for(cli.backend));
-    let result = reconstruct_tiled(&model, &packed, cli.tile, engine, &device, |done, total| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-    });
+    let result = reconstruct_tiled(
+        &model,
+        input.as_ref().unwrap_or(&packed),
+        cli.tile,
+        engine,
+        &device,
+        |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        },
+    );
     bar.finish_and_clear();
     let seconds = t.elapsed().as_secs_f64();
     eprintln!(

@@ -204,13 +204,26 @@ pub fn combine_guarded_block(
     let evidence = delta.clone() * delta.clone()
         + smoothest_noise
             .mul_scalar(guard.target_noise)
-            .add_scalar(1e-30);
-    let ratio = noise.mul_scalar(guard.strength) / evidence;
+            .add_scalar(GUARD_EVIDENCE_FLOOR);
+    // Capped before squaring: where the evidence is all but zero (a calm, noise-free smoothest
+    // level that Eq. 6 matches) the ratio reaches 1e28 and its square overflows; the kept share
+    // is then 0 either way, but the gradient of 1/(1 + inf) is NaN and poisons training (water
+    // and metal scenes of data/small, 2026-11-28). At the cap the kept share is 1e-12.
+    let ratio = (noise.mul_scalar(guard.strength) / evidence).clamp_max(GUARD_RATIO_CAP);
     let kept = (ratio.clone() * ratio).add_scalar(1.0).recip();
     // A non-finite Eq. 6 (overflow: Δ² = inf, or NaN) is kept as it is, for the caller to report.
     let kept = kept.clone().mask_fill(kept.is_nan(), 1.0);
     (smoothest + delta * kept).reshape([batch, 3, height, width])
 }
+
+/// Added to the guard's evidence Δ² + λvₛ, so that it is never zero (a noise-free smoothest
+/// level that Eq. 6 matches) and its square, in the ratio's gradient, does not underflow to
+/// zero in f32 (1e-30² does: the gradient became −∞ · 0 = NaN).
+pub const GUARD_EVIDENCE_FLOOR: f32 = 1e-18;
+
+/// Largest guard ratio κV/(Δ² + λvₛ) used: its square (1e12) stays finite in f32, and so does
+/// the gradient of the kept share 1/(1 + ratio²).
+pub const GUARD_RATIO_CAP: f32 = 1e6;
 
 /// Raw variances from the network features' log(1 + v) planes (docs/method.md §5.1), exact to
 /// float precision also where v is tiny (exp(x) − 1 alone would round those to zero).
@@ -554,6 +567,46 @@ mod tests {
                 "weights[{i}]: fd {fd} vs {}",
                 g_weights[i]
             );
+        }
+    }
+
+    /// Where Eq. 6 matches a noise-free smoothest level (Δ = 0, v = 0: a black background, a
+    /// converged region) the guard's evidence is its floor and its ratio huge: the output and
+    /// the gradients with respect to levels and weights must stay finite (they were NaN with a
+    /// 1e-30 floor, whose square underflows, and an uncapped ratio, whose square overflows).
+    #[test]
+    fn guard_gradients_stay_finite_where_the_evidence_vanishes() {
+        let ad = device().autodiff();
+        for (vy, vz) in [(1e-3f32, 0.0f32), (0.0, 0.0), (1e-3, 1e-30)] {
+            let levels =
+                Tensor::<4>::from_data(TensorData::new(vec![0.5f32; 6], [1, 6, 1, 1]), &ad)
+                    .require_grad();
+            let weights = Tensor::<4>::from_data(TensorData::new(vec![1.0f32], [1, 1, 1, 1]), &ad)
+                .require_grad();
+            let guard = Guard {
+                variances: Tensor::<4>::from_data(TensorData::new(vec![vy, vz], [1, 2, 1, 1]), &ad),
+                strength: 16.0,
+                target_noise: 8.0,
+            };
+            let out =
+                combine_guarded_block(levels.clone(), weights.clone(), Some(guard), 1, [0; 4]);
+            let grads = out.sum().backward();
+            for g in [
+                levels
+                    .grad(&grads)
+                    .unwrap()
+                    .into_data()
+                    .try_to_vec::<f32>()
+                    .unwrap(),
+                weights
+                    .grad(&grads)
+                    .unwrap()
+                    .into_data()
+                    .try_to_vec::<f32>()
+                    .unwrap(),
+            ] {
+                assert!(g.iter().all(|v| v.is_finite()), "v = ({vy}, {vz}): {g:?}");
+            }
         }
     }
 

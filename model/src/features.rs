@@ -230,6 +230,20 @@ fn log_transform(v: f32) -> f32 {
     v.max(0.0).ln_1p()
 }
 
+/// Packs a bundle for a network whose configuration puts `screen` levels in the place of some of
+/// the bundle's ([`crate::screen_filter`]), after checking the bundle as [`pack`] does.
+pub fn pack_with(
+    bundle: &Bundle,
+    screen: &[crate::screen_filter::ScreenLevel],
+) -> Result<PackedImage, FeatureError> {
+    if screen.is_empty() {
+        return pack(bundle);
+    }
+    // Shapes and values first: the filter reads the layers as the packing would.
+    pack(bundle)?;
+    pack(&crate::screen_filter::apply(bundle, screen))
+}
+
 /// Packs a bundle into network features and raw colours, rejecting bad shapes and NaN/Inf.
 pub fn pack(bundle: &Bundle) -> Result<PackedImage, FeatureError> {
     let width = bundle.meta.width as usize;

@@ -17,6 +17,7 @@
 //! the later steps need: a convolution reads its inputs' channels concatenated straight out of
 //! their buffers (no concatenated copy), pooling and upsampling are plain loops over rows.
 
+use crate::combine::{GUARD_EVIDENCE_FLOOR, GUARD_RATIO_CAP};
 use crate::network::{ModelConfig, Network, Weighting, LEVELS};
 use crate::unet::{last_uses, needed_rects, pool_input, scale_sizes, upsample_input, Op, Step};
 use rayon::prelude::*;
@@ -833,13 +834,19 @@ impl NativeNetwork {
                 noise += squares[j] / total_squared * (v(j + 1) + v(0))
                     + sums[j] * sums[j] / total_squared * v(j + 1);
             }
-            let target_noise = self.guard_target_noise * v(self.pairs) + 1e-30;
+            let target_noise = self.guard_target_noise * v(self.pairs) + GUARD_EVIDENCE_FLOOR;
             let smoothest = &colours.levels[3 * self.pairs * pixels..];
             // A non-finite Eq. 6 (overflow) is left as it is, for the caller to report.
             for (c, out) in rgb.iter_mut().enumerate().filter(|(_, v)| v.is_finite()) {
                 let base = smoothest[c * pixels + centre];
                 let delta = *out - base;
                 let ratio = self.guard * noise / (delta * delta + target_noise);
+                // As the Burn path caps it (a NaN stays NaN, as there).
+                let ratio = if ratio > GUARD_RATIO_CAP {
+                    GUARD_RATIO_CAP
+                } else {
+                    ratio
+                };
                 *out = base + delta * (1.0 / (1.0 + ratio * ratio));
             }
         }

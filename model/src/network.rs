@@ -9,6 +9,8 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
+use crate::screen_filter::ScreenLevel;
+
 use crate::unet::{forward_region, UNet};
 
 /// Number of network input channels with every level: 5×3 colours + 5 variances + 7 G-buffer
@@ -102,6 +104,11 @@ pub struct ModelConfig {
     /// `hidden_layers` convolutions at full resolution and an output layer of `kernel`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unet: Option<UNet>,
+    /// Screen-space filtered levels put in the place of some of the bundle's levels before
+    /// packing ([`crate::screen_filter`]; docs/method.md §9). Absent or empty: the bundle's
+    /// levels as rendered (every model.json written before it existed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub screen_levels: Vec<ScreenLevel>,
 }
 
 /// The safeguard strength κ of every preset and of model files that name none. With
@@ -149,6 +156,7 @@ impl ModelConfig {
             guard: DEFAULT_GUARD,
             guard_target_noise: DEFAULT_GUARD_TARGET_NOISE,
             unet,
+            screen_levels: Vec::new(),
         }
     }
 
@@ -208,6 +216,7 @@ impl ModelConfig {
             return Err(format!("window must be odd, got {}", self.window));
         }
         validate_levels(&self.levels)?;
+        crate::screen_filter::validate(&self.screen_levels)?;
         let expected = input_channels(self.levels.len());
         if self.in_channels != expected {
             return Err(format!(

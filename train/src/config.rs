@@ -68,6 +68,12 @@ pub struct TrainConfig {
     /// preset's (`model::network::DEFAULT_GUARD_TARGET_NOISE`).
     #[serde(default)]
     pub guard_target_noise: Option<f32>,
+    /// Screen-space filtered levels in the place of some bundle levels (docs/method.md §9):
+    /// `[{ slot = 4, source = 4, sigma = 2.0 }]` reads z̃4 filtered across pixels (guided by the
+    /// G-buffer and, with `range`, default 2, by the level's own noise) in z̃4's place. Absent:
+    /// the bundle's levels.
+    #[serde(default)]
+    pub screen_levels: Vec<model::screen_filter::ScreenLevel>,
     /// Patch side in pixels.
     pub patch: usize,
     /// Patch stride in pixels.
@@ -164,6 +170,7 @@ impl TrainConfig {
         if let Some(lambda) = self.guard_target_noise {
             c.guard_target_noise = lambda;
         }
+        c.screen_levels = self.screen_levels.clone();
         match &self.levels {
             Some(levels) => c.with_levels(levels.clone()),
             None => c,
@@ -219,6 +226,11 @@ impl TrainConfig {
             "levels",
             format!("{:?}", model.levels),
             format!("{:?}", net.levels),
+        );
+        differ(
+            "screen_levels",
+            format!("{:?}", model.screen_levels),
+            format!("{:?}", net.screen_levels),
         );
         out.extend(crate::training::settings_differences(settings, &ours));
         // Same keys, different network: a preset whose sizes changed since the checkpoint.

@@ -23,6 +23,7 @@ use model::features::{
 };
 use model::network::all_levels;
 use model::sample::{load_sample, BadSample, Sample};
+use model::screen_filter::ScreenLevel;
 
 /// Where a sample's pixels come from: files, or memory (tests, synthetic data).
 #[derive(Clone, Debug)]
@@ -177,6 +178,9 @@ pub struct PatchDataset {
     /// Levels batches feed to the network and the combination (indices into ỹ, z̃1..z̃4; all
     /// five unless set with [`PatchDataset::with_levels`]).
     pub levels: Vec<usize>,
+    /// Screen-space levels the network reads in the place of some bundle levels (a model's
+    /// [`model::ModelConfig::screen_levels`]); applied as images load from files.
+    screen: Vec<ScreenLevel>,
     cache_images: usize,
     cache: Vec<(usize, Arc<Sample>)>,
 }
@@ -274,7 +278,9 @@ impl PatchDataset {
                 (None, Some(path)) => path.clone(),
                 (None, None) => root.join(&entry.reference),
             };
-            match load_sample(&bundle, &reference) {
+            // Screening reads the bundle as rendered (the screen levels only replace planes of
+            // a bundle that passed these checks).
+            match load_sample(&bundle, &reference, &[]) {
                 Ok(sample) => {
                     let (width, height) = (sample.packed.width, sample.packed.height);
                     if width < patch || height < patch {
@@ -327,8 +333,19 @@ impl PatchDataset {
             patch,
             stride,
             levels: all_levels(),
+            screen: Vec::new(),
             cache_images: cache_images.max(1),
             cache: Vec::new(),
+        }
+    }
+
+    /// Loads images from now on with `screen` levels in place (a model's
+    /// [`model::ModelConfig::screen_levels`]); cached images of other settings are dropped.
+    /// In-memory samples are already packed and stay as they are.
+    pub fn set_screen_levels(&mut self, screen: &[ScreenLevel]) {
+        if self.screen != screen {
+            self.screen = screen.to_vec();
+            self.cache.clear();
         }
     }
 
@@ -398,7 +415,9 @@ impl PatchDataset {
         }
         let sample = match &self.images[index].source {
             SampleSource::Memory(s) => s.clone(),
-            SampleSource::Files { bundle, reference } => Arc::new(load_sample(bundle, reference)?),
+            SampleSource::Files { bundle, reference } => {
+                Arc::new(load_sample(bundle, reference, &self.screen)?)
+            }
         };
         if self.cache.len() >= self.cache_images {
             self.cache.remove(0);

@@ -182,6 +182,7 @@ pub fn validate(
     let mut levels = [0.0f64; LEVELS];
     let mut count = 0usize;
     dataset.levels = config.levels.clone();
+    dataset.set_screen_levels(&config.screen_levels);
     let refs: Vec<_> = (0..dataset.images.len())
         .flat_map(|i| dataset.image_patches(i, dataset.patch))
         .collect();
@@ -247,7 +248,10 @@ impl Trainer {
         device: &Device,
     ) -> Result<Self, String> {
         let device = device.clone().autodiff();
-        let trained = TrainedModel::open(dir, &device).map_err(|e| e.to_string())?;
+        let mut trained = TrainedModel::open(dir, &device).map_err(|e| e.to_string())?;
+        // Screen levels change what the network reads, not its weights' shapes: weights trained
+        // on the bundle's levels start the fine-tuning to filtered ones (and back).
+        trained.config.screen_levels = config.screen_levels.clone();
         if trained.config == config {
             return Ok(Self::fresh(trained.network, config, settings, device));
         }
@@ -295,6 +299,7 @@ impl Trainer {
         let start = Instant::now();
         let epoch = self.epochs_done;
         train.levels = self.config.levels.clone();
+        train.set_screen_levels(&self.config.screen_levels);
         let plan = train.epoch_plan(self.settings.seed, epoch);
         let total = plan.len();
         let batch_size = self.settings.batch.max(1);
