@@ -170,6 +170,8 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
     let denoiser = peers::Denoiser {
         python: config.oidn_python.clone(),
         script: config.oidn_script.clone(),
+        // The script's own default: the median of three calls after the warm-up.
+        repeats: 3,
     };
     if !config.peers.is_empty() {
         let version = denoiser.check()?;

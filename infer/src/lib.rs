@@ -3,6 +3,7 @@
 //! error reports against a reference ([`report`]) and PNG previews ([`preview`]). The `infer`
 //! binary also renders the bundle first when given a scene (`--scene`).
 
+pub mod oidn;
 pub mod preview;
 pub mod report;
 pub mod tiling;

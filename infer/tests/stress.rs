@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use infer::{reconstruct_tiled, Engine, ErrorReport};
-use model::features::{pack, planar_reference};
+use model::features::{pack, pack_with, planar_reference};
 use model::model_dir::TrainedModel;
 use renderer::integrators::sppm::{render_sppm, SppmMode, SppmSettings, StopCondition};
 
@@ -49,10 +49,14 @@ fn stress_report(name: &str, passes: u32, photons: u64) -> ErrorReport {
         |_| {},
     )
     .unwrap();
-    let packed = pack(&bundle.expect("one bundle")).unwrap();
+    let bundle = bundle.expect("one bundle");
+    let packed = pack(&bundle).unwrap();
     let device = Device::flex();
     let model = TrainedModel::open(&repository().join("models/default"), &device).unwrap();
-    let out = reconstruct_tiled(&model, &packed, 0, Engine::Native, &device, |_, _| {});
+    // The model's input: its screen levels (if any) in place; the report is on the levels as
+    // rendered.
+    let input = pack_with(&bundle, &model.config.screen_levels).unwrap();
+    let out = reconstruct_tiled(&model, &input, 0, Engine::Native, &device, |_, _| {});
     let reference = bundle::read_rgb_exr_image(&dir.join("reference.exr")).unwrap();
     let reference = planar_reference(&reference, packed.width, packed.height).unwrap();
     ErrorReport::new(&packed, &out.image, &reference)

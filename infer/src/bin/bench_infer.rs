@@ -9,15 +9,16 @@
 //! machine shared with other work loads both alike; the ratios are taken within each round.
 //! Prints a table and optionally JSON.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Command, ExitCode};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Parser;
+use infer::oidn::{Denoiser, Guides};
 use infer::{reconstruct_tiled, Engine};
 use model::backend::Backend;
-use model::features::pack;
+use model::features::{pack, planar_reference};
 use model::model_dir::TrainedModel;
 use model::synthetic::synthetic_bundle;
 use model::{ModelConfig, Preset};
@@ -110,43 +111,6 @@ struct Timed {
     rss: Option<f64>,
 }
 
-/// Writes an interleaved image's samples as raw little-endian f32 (`oidn_denoise.py`'s format).
-fn write_raw(path: &Path, data: &[f32]) -> Result<()> {
-    let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
-    std::fs::write(path, bytes).with_context(|| path.display().to_string())
-}
-
-/// Runs the OIDN script on the files in `dir` once; returns its JSON report.
-fn run_oidn(cli: &Cli, dir: &Path, width: usize, height: usize) -> Result<Value> {
-    let out = Command::new(&cli.python)
-        .arg(&cli.oidn)
-        .args([
-            "--width",
-            &width.to_string(),
-            "--height",
-            &height.to_string(),
-        ])
-        .arg("--color")
-        .arg(dir.join("color.f32"))
-        .arg("--albedo")
-        .arg(dir.join("albedo.f32"))
-        .arg("--normal")
-        .arg(dir.join("normal.f32"))
-        .arg("--output")
-        .arg(dir.join("out.f32"))
-        .args(["--repeats", &cli.repeats.max(1).to_string()])
-        .output()
-        .with_context(|| format!("running {} {}", cli.python, cli.oidn))?;
-    if !out.status.success() {
-        bail!(
-            "{}: {}",
-            cli.oidn,
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
-    }
-    serde_json::from_slice(&out.stdout).with_context(|| format!("{}: its output", cli.oidn))
-}
-
 fn run(cli: &Cli) -> Result<()> {
     let presets = cli
         .preset
@@ -176,17 +140,18 @@ fn run(cli: &Cli) -> Result<()> {
     let (bundle, _) = synthetic_bundle(n, h, 0.3, 1);
     let packed = pack(&bundle)?;
     // OIDN's inputs: the same bundle's sharpest level ỹ as the noisy HDR colour, its albedo and
-    // normal (interleaved RGB, as the bundle holds them).
-    let oidn_dir = (cli.oidn != "none")
-        .then(|| -> Result<PathBuf> {
-            let dir = std::env::temp_dir().join(format!("bench-infer-oidn-{}", std::process::id()));
-            std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
-            write_raw(&dir.join("color.f32"), &bundle.levels[0].data)?;
-            write_raw(&dir.join("albedo.f32"), &bundle.albedo.data)?;
-            write_raw(&dir.join("normal.f32"), &bundle.normal.data)?;
-            Ok(dir)
-        })
-        .transpose()?;
+    // normal (planar RGB).
+    let denoiser = (cli.oidn != "none").then(|| Denoiser {
+        python: cli.python.clone(),
+        script: PathBuf::from(&cli.oidn),
+        repeats: cli.repeats.max(1) as u32,
+    });
+    let planar = |image: &bundle::Image| planar_reference(image, n, h);
+    let oidn_inputs = (
+        planar(&bundle.levels[0])?,
+        planar(&bundle.albedo)?,
+        planar(&bundle.normal)?,
+    );
     drop(bundle);
     let rss_before = peak_rss_mib();
     let engines = match cli.engine {
@@ -235,8 +200,10 @@ fn run(cli: &Cli) -> Result<()> {
             t.all.extend(times);
             t.rss = peak_rss_mib();
         }
-        if let Some(dir) = &oidn_dir {
-            let report = run_oidn(cli, dir, n, h)?;
+        if let Some(denoiser) = &denoiser {
+            let (color, albedo, normal) = &oidn_inputs;
+            let guides = Guides { albedo, normal };
+            let (_, report) = denoiser.denoise_with_report(n, h, color, &guides)?;
             let s = report["seconds"]
                 .as_f64()
                 .with_context(|| format!("{}: no `seconds` in {report}", cli.oidn))?;
@@ -244,9 +211,6 @@ fn run(cli: &Cli) -> Result<()> {
             oidn_rounds.push(s);
             oidn_reports.push(report);
         }
-    }
-    if let Some(dir) = &oidn_dir {
-        let _ = std::fs::remove_dir_all(dir);
     }
 
     // The PyTorch peer implements the paper preset, on square images only.
