@@ -707,20 +707,38 @@ mod tests {
         assert_eq!(serde_json::from_str::<ModelConfig>(&text).unwrap(), dual);
     }
 
-    /// The shipped model.json (no `unet` key) loads as the `small` preset, a plain stack, and is
-    /// written back without the key; a U-Net's config round-trips, and a misspelt key inside
-    /// `unet` is refused like one outside it.
+    /// The shipped model.json (no `unet` key) loads as the `small` preset with its screen
+    /// levels, a plain stack, and is written back as it is; a model.json written before screen
+    /// levels existed loads without them and is written back without the key; a U-Net's config
+    /// round-trips, and a misspelt key inside `unet` is refused like one outside it.
     #[test]
     fn model_json_files_without_unet_load_as_before() {
         let shipped = include_str!("../../models/default/model.json");
         let config: ModelConfig = serde_json::from_str(shipped).unwrap();
-        assert_eq!(config, ModelConfig::preset(Preset::Small));
+        assert_eq!(
+            ModelConfig {
+                screen_levels: Vec::new(),
+                ..config.clone()
+            },
+            ModelConfig::preset(Preset::Small)
+        );
         assert!(config.unet.is_none());
+        assert_eq!(config.screen_levels.len(), 1);
         config.validate().unwrap();
         let written = serde_json::to_value(&config).unwrap();
         assert_eq!(
             written,
             serde_json::from_str::<serde_json::Value>(shipped).unwrap()
+        );
+        // The weights shipped until 2026-11-28 had this model.json.
+        let older = r#"{"preset": "small", "in_channels": 27, "hidden_layers": 5, "filters": 32,
+            "kernel": 5, "window": 11, "weighting": "relu", "levels": [0, 1, 2, 3, 4],
+            "guard": 16.0, "guard_target_noise": 8.0}"#;
+        let config: ModelConfig = serde_json::from_str(older).unwrap();
+        assert_eq!(config, ModelConfig::preset(Preset::Small));
+        assert_eq!(
+            serde_json::to_value(&config).unwrap(),
+            serde_json::from_str::<serde_json::Value>(older).unwrap()
         );
 
         let unet = ModelConfig::preset(Preset::UNet);
