@@ -236,8 +236,13 @@ pub fn evaluation_references(
     let fingerprint = &manifest.config_sha256;
     let mut outcomes = Vec::new();
     for scene in scenes {
-        let max_passes = u64::from(scene.reference_passes) * u64::from(options.max_factor);
-        let earlier = read_record(root, &scene.id, fingerprint)
+        let max_passes = (u64::from(scene.reference_passes) * u64::from(options.max_factor))
+            .min(u64::from(u32::MAX));
+        // An earlier call's record; kept only with its image intact, but its runs' states are at
+        // its passes either way, so a redo never asks them for fewer.
+        let recorded = read_record(root, &scene.id, fingerprint);
+        let earlier = recorded
+            .clone()
             .filter(|r| sha256_file(&root.join(&r.path)).is_ok_and(|sha| sha == r.sha256));
         if let Some(r) = &earlier {
             let meets = r.noise <= options.target * r.input_relmse;
@@ -266,10 +271,10 @@ pub fn evaluation_references(
         let progress: Option<Progress> = std::fs::read(&progress_file)
             .ok()
             .and_then(|b| serde_json::from_slice(&b).ok());
-        let (mut passes, mut seconds): (u64, f64) = match (&progress, &earlier) {
+        let (mut passes, mut seconds): (u64, f64) = match (&progress, &recorded) {
             // The runs' states may be anywhere up to the round's target: never ask for less.
             (Some(p), _) => (p.passes, p.seconds),
-            (None, Some(r)) => (u64::from(r.passes).min(max_passes), r.seconds),
+            (None, Some(r)) => (u64::from(r.passes), r.seconds),
             (None, None) => {
                 let start = match scene.reference_noise {
                     Some(noise) => {
@@ -298,7 +303,7 @@ pub fn evaluation_references(
         };
         // Passes the runs hold before the round (for the rate of a round: it renders only the
         // passes it adds). A resumed round's states are somewhere in between: the rate is a guess.
-        let mut before: u64 = earlier
+        let mut before: u64 = recorded
             .as_ref()
             .map_or(0, |r| u64::from(r.passes))
             .min(passes);

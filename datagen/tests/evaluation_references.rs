@@ -88,8 +88,21 @@ impl SampleRenderer for StandIn {
             passes,
             spec.state.as_ref().map(|s| s.path.clone()),
         ));
+        // Like the renderer: a run resumes from its state and refuses to go backwards.
+        if let Some(state) = &spec.state {
+            if let Ok(text) = std::fs::read_to_string(&state.path) {
+                let saved: u32 = text.trim().parse().unwrap();
+                if saved > passes {
+                    bail!("the saved run is at pass {saved}, past the last requested {passes}");
+                }
+            }
+        }
         if self.fail_at == Some(passes) {
             bail!("killed");
+        }
+        if let Some(state) = &spec.state {
+            std::fs::create_dir_all(state.path.parent().unwrap()).unwrap();
+            std::fs::write(&state.path, passes.to_string()).unwrap();
         }
         on_pass(passes);
         Ok(run_image(spec.sppm.seed, passes))
@@ -120,6 +133,14 @@ fn dataset(name: &str) -> (PathBuf, Manifest) {
     };
     render_dataset(&config, &dir, options, &StandIn::default()).unwrap();
     (dir.clone(), Manifest::load(&dir).unwrap())
+}
+
+/// Re-assembles the manifest from the records (as the command does after its scenes).
+fn assign_manifest(dir: &Path, manifest: &Manifest) {
+    let plan = Plan::new(&manifest.config);
+    assemble_manifest(dir, &manifest.config, &plan)
+        .unwrap()
+        .unwrap();
 }
 
 fn options(manifest: &Manifest, target: f64, max_factor: u32) -> EvaluationOptions {
@@ -221,7 +242,8 @@ fn runs_grow_until_the_noise_meets_the_target_and_the_manifest_lists_them() {
     assert!(dir.join(record_path(&scene.id)).is_file());
     let report = datagen::check::check_dataset(&dir, |_, _| {});
     assert!(report.ok(), "{:?}", report.problems);
-    // A damaged evaluation reference is a problem naming it.
+    // A damaged evaluation reference is a problem naming it; a repeated call redoes it from the
+    // runs' states (never asking them for fewer passes) and check passes again.
     std::fs::write(dir.join(&r.path), b"broken").unwrap();
     let report = datagen::check::check_dataset(&dir, |_, _| {});
     assert!(
@@ -229,6 +251,17 @@ fn runs_grow_until_the_noise_meets_the_target_and_the_manifest_lists_them() {
         "{:?}",
         report.problems
     );
+    let redone = run(
+        &dir,
+        &manifest,
+        &options(&manifest, 0.1, 4096),
+        &StandIn::default(),
+    )
+    .unwrap();
+    assert_eq!(redone[0].reference.passes, r.passes);
+    assign_manifest(&dir, &manifest);
+    let report = datagen::check::check_dataset(&dir, |_, _| {});
+    assert!(report.ok(), "{:?}", report.problems);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
