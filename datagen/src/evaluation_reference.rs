@@ -110,15 +110,16 @@ pub struct SceneOutcome {
     pub rendered: bool,
 }
 
-/// The scene's largest input pass count and the best input level's relMSE there against
-/// `reference` (the mean over the input seeds of the smallest relMSE over the levels); `None`
-/// when the scene has no inputs. Errors name the file whose size differs.
-pub fn best_input_relmse(
+/// The levels of one input bundle, with the bundle's path (for errors).
+pub type InputLevels = (PathBuf, Vec<Image>);
+
+/// The scene's largest input pass count and its bundles' levels there (one per input seed);
+/// `None` when the scene has no inputs.
+pub fn largest_pass_inputs(
     root: &Path,
     manifest: &Manifest,
     scene: &SceneEntry,
-    reference: &Image,
-) -> Result<Option<(u32, f64)>> {
+) -> Result<Option<(u32, Vec<InputLevels>)>> {
     let samples: Vec<_> = manifest
         .samples
         .iter()
@@ -127,12 +128,26 @@ pub fn best_input_relmse(
     let Some(passes) = samples.iter().map(|e| e.passes).max() else {
         return Ok(None);
     };
-    let mut best = Vec::new();
+    let mut inputs = Vec::new();
     for e in samples.iter().filter(|e| e.passes == passes) {
         let path = root.join(&e.bundle);
         let bundle = read_bundle(&path)?;
+        inputs.push((path, bundle.levels));
+    }
+    Ok(Some((passes, inputs)))
+}
+
+/// The best input level's relMSE against `reference`: the mean over the input seeds of the
+/// smallest relMSE over the levels. Errors name the file whose size differs.
+pub fn best_level_relmse(
+    inputs: &[InputLevels],
+    scene: &SceneEntry,
+    reference: &Image,
+) -> Result<f64> {
+    let mut sum = 0.0;
+    for (path, levels) in inputs {
         let mut level_best = f64::INFINITY;
-        for level in &bundle.levels {
+        for level in levels {
             if (level.width, level.height) != (reference.width, reference.height) {
                 bail!(
                     "{}: {}x{}, the reference of scene {} is {}x{}",
@@ -146,9 +161,27 @@ pub fn best_input_relmse(
             }
             level_best = level_best.min(level.relmse(reference));
         }
-        best.push(level_best);
+        sum += level_best;
     }
-    Ok(Some((passes, best.iter().sum::<f64>() / best.len() as f64)))
+    Ok(sum / inputs.len() as f64)
+}
+
+/// The scene's largest input pass count and the best input level's relMSE there against
+/// `reference` ([`largest_pass_inputs`], [`best_level_relmse`]); `None` when the scene has no
+/// inputs.
+pub fn best_input_relmse(
+    root: &Path,
+    manifest: &Manifest,
+    scene: &SceneEntry,
+    reference: &Image,
+) -> Result<Option<(u32, f64)>> {
+    match largest_pass_inputs(root, manifest, scene)? {
+        Some((passes, inputs)) => Ok(Some((
+            passes,
+            best_level_relmse(&inputs, scene, reference)?,
+        ))),
+        None => Ok(None),
+    }
 }
 
 /// The pass count whose noise is predicted to meet `target`, from a measurement of `noise`
@@ -259,6 +292,14 @@ pub fn evaluation_references(
                 continue;
             }
         }
+        // The inputs are read once per scene; every round measures against its new mean.
+        let Some((_, inputs)) = largest_pass_inputs(root, manifest, scene)? else {
+            bail!(
+                "{}: scene {} has no input bundles to measure against",
+                manifest_path.display(),
+                scene.id
+            );
+        };
         let (width, height) = scene.size_in(manifest);
         let xml = root.join(&scene.xml);
         let seeds: Vec<u64> = (0..RUNS)
@@ -280,16 +321,14 @@ pub fn evaluation_references(
                     Some(noise) => {
                         let reference = read_rgb_exr_image(&root.join(&scene.reference))?;
                         let runs = f64::from(scene.reference_runs.unwrap_or(1));
-                        match best_input_relmse(root, manifest, scene, &reference)? {
-                            // The runs' mean here has RUNS runs, the training one `runs`.
-                            Some((_, measured)) => predicted_passes(
-                                scene.reference_passes,
-                                noise * runs / RUNS as f64,
-                                measured - noise,
-                                options.target,
-                            ),
-                            None => u64::from(scene.reference_passes) * 4,
-                        }
+                        let measured = best_level_relmse(&inputs, scene, &reference)?;
+                        // The runs' mean here has RUNS runs, the training one `runs`.
+                        predicted_passes(
+                            scene.reference_passes,
+                            noise * runs / RUNS as f64,
+                            measured - noise,
+                            options.target,
+                        )
                     }
                     None => u64::from(scene.reference_passes) * 4,
                 };
@@ -346,13 +385,7 @@ pub fn evaluation_references(
             seconds += round_seconds;
             let (mean, one_run) = mean_and_noise(&images);
             let noise = one_run / RUNS as f64;
-            let Some((_, measured)) = best_input_relmse(root, manifest, scene, &mean)? else {
-                bail!(
-                    "{}: scene {} has no input bundles to measure against",
-                    manifest_path.display(),
-                    scene.id
-                );
-            };
+            let measured = best_level_relmse(&inputs, scene, &mean)?;
             let input = measured - noise;
             let converged = input > 0.0 && noise <= options.target * input;
             let next =

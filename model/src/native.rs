@@ -467,10 +467,7 @@ impl NativeNetwork {
             let value = match &step.op {
                 Op::Input => {
                     assert!(
-                        region[0] <= r[0]
-                            && region[1] <= r[1]
-                            && region[2] >= r[2]
-                            && region[3] >= r[3],
+                        crate::unet::covers(region, r),
                         "features on {region:?} do not cover the needed {r:?}"
                     );
                     (features.take().expect("one input step"), region)

@@ -39,6 +39,11 @@ use serde::{Deserialize, Serialize};
 /// A pixel rectangle `[x0, y0, x1, y1)` in the coordinates of one scale's grid.
 pub type Rect = [usize; 4];
 
+/// True when `outer` covers `inner`.
+pub fn covers(outer: Rect, inner: Rect) -> bool {
+    outer[0] <= inner[0] && outer[1] <= inner[1] && outer[2] >= inner[2] && outer[3] >= inner[3]
+}
+
 /// The U-Net's layout; saved in `model.json` as `"unet": {"widths": [...], "convs": [...]}`.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -373,10 +378,7 @@ pub fn forward_region(
             Op::Input => {
                 let x = features.take().expect("one input step");
                 assert!(
-                    region[0] <= r[0]
-                        && region[1] <= r[1]
-                        && region[2] >= r[2]
-                        && region[3] >= r[3],
+                    covers(region, r),
                     "features on {region:?} do not cover the needed {r:?}"
                 );
                 crop(x, region, r)
