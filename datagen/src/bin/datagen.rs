@@ -207,6 +207,23 @@ fn hms(d: std::time::Duration) -> String {
     format!("{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
 }
 
+/// A progress bar on stderr (hidden with `--quiet`) of `len` steps (`None`: set later) in the
+/// given template.
+fn command_bar(len: Option<u64>, quiet: bool, template: &str) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(
+        len,
+        if quiet {
+            ProgressDrawTarget::hidden()
+        } else {
+            ProgressDrawTarget::stderr()
+        },
+    );
+    bar.set_style(
+        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
+}
+
 /// Runs a command; returns the exit status.
 fn run(cli: Cli) -> Result<i32> {
     match cli.command {
@@ -312,18 +329,7 @@ fn run(cli: Cli) -> Result<i32> {
             }
         }
         Command::Check { dir, quiet } => {
-            let bar = ProgressBar::with_draw_target(
-                None,
-                if quiet {
-                    ProgressDrawTarget::hidden()
-                } else {
-                    ProgressDrawTarget::stderr()
-                },
-            );
-            bar.set_style(
-                ProgressStyle::with_template("check {bar:40} {pos}/{len} files ETA {eta}")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
-            );
+            let bar = command_bar(None, quiet, "check {bar:40} {pos}/{len} files ETA {eta}");
             let report = check_dataset(&dir, |done, total| {
                 bar.set_length(total as u64);
                 bar.set_position(done as u64);
@@ -346,17 +352,10 @@ fn run(cli: Cli) -> Result<i32> {
         }
         Command::ReferenceNoise { dir, quiet } => {
             let manifest = Manifest::load(&dir)?;
-            let bar = ProgressBar::with_draw_target(
+            let bar = command_bar(
                 Some(manifest.scenes.len() as u64),
-                if quiet {
-                    ProgressDrawTarget::hidden()
-                } else {
-                    ProgressDrawTarget::stderr()
-                },
-            );
-            bar.set_style(
-                ProgressStyle::with_template("reference noise {bar:40} {pos}/{len} scenes")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                quiet,
+                "reference noise {bar:40} {pos}/{len} scenes",
             );
             let table = noise_table(&dir, &manifest, |done, _| bar.set_position(done as u64))?;
             bar.finish_and_clear();
@@ -388,17 +387,10 @@ fn run(cli: Cli) -> Result<i32> {
                 threads,
                 state_interval: positive_interval(state_interval)?,
             };
-            let bar = ProgressBar::with_draw_target(
+            let bar = command_bar(
                 Some(1),
-                if quiet {
-                    ProgressDrawTarget::hidden()
-                } else {
-                    ProgressDrawTarget::stderr()
-                },
-            );
-            bar.set_style(
-                ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} passes ETA {eta}")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                quiet,
+                "{msg} {bar:40} {pos}/{len} passes ETA {eta}",
             );
             let started = std::time::Instant::now();
             let outcomes = evaluation_references(
@@ -465,17 +457,10 @@ fn run(cli: Cli) -> Result<i32> {
                 .first()
                 .map_or(0, |s| u64::from(s.reference_passes));
             let scenes = manifest.scenes.iter().filter(|s| s.split == split).count();
-            let bar = ProgressBar::with_draw_target(
+            let bar = command_bar(
                 Some(per_run * (scenes * runs.saturating_sub(1)) as u64),
-                if quiet {
-                    ProgressDrawTarget::hidden()
-                } else {
-                    ProgressDrawTarget::stderr()
-                },
-            );
-            bar.set_style(
-                ProgressStyle::with_template("average {bar:40} {pos}/{len} passes ETA {eta}")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                quiet,
+                "average {bar:40} {pos}/{len} passes ETA {eta}",
             );
             let runs_done = AtomicU64::new(0);
             let options = AverageOptions {
