@@ -197,6 +197,33 @@ pub struct Manifest<C = serde_json::Value> {
     /// The configuration the dataset was made with (`datagen`'s config; readers that do not
     /// need it take it as plain JSON).
     pub config: C,
+    /// Present on the manifest of a dataset whose render has not finished (`datagen manifest
+    /// --partial`): it lists only the scenes whose every job is done. Absent when complete.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub partial: Option<PartialDataset>,
+}
+
+/// How much of a dataset a partial manifest lists.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PartialDataset {
+    /// Scenes of the config's plan (the manifest lists fewer).
+    pub planned_scenes: usize,
+}
+
+impl<C> Manifest<C> {
+    /// A line for users of a partial dataset (`None` when complete): how many of the planned
+    /// scenes it lists, so that nobody trains or reports on a part believing it the whole.
+    pub fn partial_note(&self, root: &Path) -> Option<String> {
+        self.partial.map(|p| {
+            format!(
+                "{}: a partial dataset, {} of {} scenes (its render has not finished;                  `datagen manifest --partial` lists the finished scenes)",
+                root.join(MANIFEST_FILE).display(),
+                self.scenes.len(),
+                p.planned_scenes
+            )
+        })
+    }
 }
 
 impl<C: DeserializeOwned> Manifest<C> {

@@ -17,6 +17,9 @@ pub struct CheckReport {
     /// Problems, one line per broken file (or manifest problem), starting with the file's path
     /// relative to the dataset root.
     pub problems: Vec<String>,
+    /// For a partial manifest (`datagen manifest --partial`): the scenes it lists and the
+    /// scenes planned.
+    pub partial: Option<(usize, usize)>,
 }
 
 impl CheckReport {
@@ -46,6 +49,27 @@ pub fn check_dataset(root: &Path, mut on_file: impl FnMut(usize, usize)) -> Chec
         report.problems.push(format!(
             "{MANIFEST_FILE}: config_sha256 does not match the embedded config"
         ));
+    }
+    // Every planned scene is listed, unless the manifest says it is partial (a scene listed
+    // twice is its own problem, below).
+    let planned = crate::plan::Plan::new(&manifest.config).scenes.len();
+    let listed = manifest
+        .scenes
+        .iter()
+        .map(|s| s.id.as_str())
+        .collect::<std::collections::HashSet<_>>()
+        .len();
+    match manifest.partial {
+        None if listed != planned => report.problems.push(format!(
+            "{MANIFEST_FILE}: lists {listed} scenes, its config plans {planned} (and it is not \
+             marked partial)"
+        )),
+        Some(p) if p.planned_scenes != planned => report.problems.push(format!(
+            "{MANIFEST_FILE}: partial, of {} planned scenes, its config plans {planned}",
+            p.planned_scenes
+        )),
+        Some(_) => report.partial = Some((listed, planned)),
+        None => {}
     }
     // Each scene's size (a regime may give it its own), for its reference and bundles.
     let sizes: std::collections::HashMap<&str, (usize, usize)> = manifest

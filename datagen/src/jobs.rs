@@ -394,7 +394,7 @@ pub fn render_dataset_to(
     }
     // Cleared, not left standing: the caller's summary line follows on a line of its own.
     overall.finish_and_clear();
-    report.manifest_complete = assemble_manifest(root, config, &plan)?.is_some();
+    report.manifest_complete = assemble_manifest(root, config, &plan, false)?.is_some();
     report.elapsed = started.elapsed();
     Ok(report)
 }

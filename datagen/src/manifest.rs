@@ -1,13 +1,17 @@
 //! Writing the dataset manifest (`manifest.json`; its types are `bundle::manifest`'s, shared
-//! with the readers) and the per-job completion records (`records/<scene>/<job>.json`) it is assembled from. A record is written
-//! last, after all of its job's outputs, so its presence means the job finished; the manifest
-//! is the sorted union of all records (with each scene's evaluation record, where
-//! `datagen evaluation-references` wrote one) and is identical however the jobs were sharded.
+//! with the readers) and the per-job completion records (`records/<scene>/<job>.json`) it is
+//! assembled from. A record is written last, after all of its job's outputs, so its presence
+//! means the job finished; the manifest is the sorted union of all records (with each scene's
+//! evaluation record, where `datagen evaluation-references` wrote one) and is identical however
+//! the jobs were sharded. A partial manifest (`datagen manifest --partial`) is the same union over
+//! the scenes whose every job is done.
 
 use crate::config::Config;
 use crate::fsutil::{sha256_bytes, sha256_file, write_if_changed};
 use crate::plan::{Job, Plan};
-pub use bundle::manifest::{SampleEntry, SceneEntry, MANIFEST_FILE, MANIFEST_FORMAT};
+pub use bundle::manifest::{
+    PartialDataset, SampleEntry, SceneEntry, MANIFEST_FILE, MANIFEST_FORMAT,
+};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -97,21 +101,41 @@ pub fn to_json<T: Serialize>(value: &T) -> Vec<u8> {
 /// Assembles `manifest.json` from the records if every job of the plan has a record of this
 /// config; writes it atomically (only when its bytes change) and returns it. Returns `None`
 /// (writing nothing) while jobs are missing. Concurrent callers write identical bytes.
+///
+/// With `partial`, a dataset still rendering gets a manifest of the scenes whose every job is
+/// done, marked [`PartialDataset`] (complete scenes only: a scene's inputs are never listed
+/// without their reference); `None` while no scene is done. A finished dataset's manifest is
+/// the complete one either way.
 pub fn assemble_manifest(
     root: &Path,
     config: &Config,
     plan: &Plan,
+    partial: bool,
 ) -> anyhow::Result<Option<Manifest>> {
     let fingerprint = config_fingerprint(config);
     let mut scenes = Vec::new();
     let mut samples = Vec::new();
+    let mut missing = vec![false; plan.scenes.len()];
+    let mut records = Vec::new();
     for job in &plan.jobs {
-        let Some(record) = read_record(root, plan, job, &fingerprint) else {
-            return Ok(None);
-        };
-        scenes.extend(record.scene);
-        samples.extend(record.samples);
+        match read_record(root, plan, job, &fingerprint) {
+            Some(record) => records.push((job.scene(), record)),
+            None if partial => missing[job.scene()] = true,
+            None => return Ok(None),
+        }
     }
+    for (scene, record) in records {
+        if !missing[scene] {
+            scenes.extend(record.scene);
+            samples.extend(record.samples);
+        }
+    }
+    if scenes.is_empty() {
+        return Ok(None);
+    }
+    let partial = missing.iter().any(|&m| m).then_some(PartialDataset {
+        planned_scenes: plan.scenes.len(),
+    });
     // Converged evaluation references are made later, by their own command, with records of
     // their own (`datagen evaluation-references`).
     for scene in &mut scenes {
@@ -132,6 +156,7 @@ pub fn assemble_manifest(
         scenes,
         samples,
         config: config.clone(),
+        partial,
     };
     let path = root.join(MANIFEST_FILE);
     write_if_changed(&path, &to_json(&manifest))

@@ -103,7 +103,7 @@ impl Job {
 pub struct Plan {
     /// Scenes in index order.
     pub scenes: Vec<ScenePlan>,
-    /// Jobs in canonical order: per scene, its reference then its input seeds.
+    /// Jobs in render order ([`render_order`]): per scene, its reference then its input seeds.
     pub jobs: Vec<Job>,
     /// Master seed.
     seed: u64,
@@ -127,7 +127,8 @@ impl Plan {
             })
             .collect();
         let mut jobs = Vec::new();
-        for (s, scene) in scenes.iter().enumerate() {
+        for s in render_order(&scenes) {
+            let scene = &scenes[s];
             jobs.push(Job::Reference { scene: s });
             for seed_index in 0..scene.render.seeds {
                 jobs.push(Job::Inputs {
@@ -213,6 +214,32 @@ impl Plan {
             .filter(|j| j % shard.count as usize == shard.index as usize)
             .collect()
     }
+}
+
+/// The order scenes are rendered in: the evaluation splits first (test, then validation), then
+/// training; within each, the families take turns (the first scene of each family, then the
+/// second, ...). A render stopped part-way — a long one spans sessions — then holds held-out
+/// scenes of every family and a training subset balanced across families, instead of the first
+/// families only. Seeds and paths depend on the scene index, not on this order.
+fn render_order(scenes: &[ScenePlan]) -> Vec<usize> {
+    let split_rank = |s: Split| match s {
+        Split::Test => 0,
+        Split::Val => 1,
+        Split::Train => 2,
+    };
+    // Each scene's place among the scenes of its family and split.
+    let mut counts: std::collections::HashMap<(Family, Split), usize> = Default::default();
+    let turn: Vec<usize> = scenes
+        .iter()
+        .map(|scene| {
+            let count = counts.entry((scene.family, scene.split)).or_default();
+            *count += 1;
+            *count
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..scenes.len()).collect();
+    order.sort_by_key(|&i| (split_rank(scenes[i].split), turn[i], scenes[i].family, i));
+    order
 }
 
 /// A Markdown table of what `plan` renders, one row per regime (one row without regimes):

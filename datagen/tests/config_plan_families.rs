@@ -1,6 +1,7 @@
 //! Configs, plans and scene families without rendering: every preset parses with the intended
 //! sizes; config errors name the file and the field or value; shards partition the jobs
-//! exactly; splits are by scene and cover every family; scheduler variables map to shards;
+//! exactly; the render order puts held-out scenes first and lets the families take turns; splits
+//! are by scene and cover every family; scheduler variables map to shards;
 //! every generated scene of the `small` preset is deterministic, distinct, loads in the
 //! renderer's strict importer at the configured size, respects its family's configured ranges
 //! and has its family's defining feature (glass, water, metal, thin lens, hidden lights); the
@@ -223,6 +224,70 @@ fn shards_partition_the_jobs() {
     let seeds: HashSet<u64> = plan.jobs.iter().map(|j| plan.render_seed(j)).collect();
     assert_eq!(seeds.len(), plan.jobs.len());
     assert!(seeds.iter().all(|&s| s <= u64::from(u32::MAX)));
+}
+
+#[test]
+fn render_order_puts_held_out_scenes_first_and_lets_families_take_turns() {
+    let plan = Plan::new(&preset("large"));
+    // Every scene once, its reference job first and then its input seeds.
+    let mut order: Vec<usize> = Vec::new();
+    for (j, job) in plan.jobs.iter().enumerate() {
+        if let datagen::plan::Job::Reference { scene } = *job {
+            order.push(scene);
+        } else {
+            assert_eq!(
+                Some(&job.scene()),
+                order.last(),
+                "job {j} before its reference"
+            );
+        }
+    }
+    let mut sorted = order.clone();
+    sorted.sort_unstable();
+    assert_eq!(sorted, (0..plan.scenes.len()).collect::<Vec<_>>());
+    // Test, then validation, then training scenes.
+    let rank = |s: Split| {
+        [Split::Test, Split::Val, Split::Train]
+            .iter()
+            .position(|&x| x == s)
+    };
+    let ranks: Vec<_> = order.iter().map(|&s| rank(plan.scenes[s].split)).collect();
+    assert!(ranks.windows(2).all(|w| w[0] <= w[1]), "splits interleaved");
+    // Within a split, the first ten training scenes are one of each family, and no family is
+    // ever two scenes ahead of another that still has scenes of that split left.
+    let train: Vec<usize> = order
+        .iter()
+        .copied()
+        .filter(|&s| plan.scenes[s].split == Split::Train)
+        .collect();
+    let first: BTreeSet<Family> = train[..10].iter().map(|&s| plan.scenes[s].family).collect();
+    assert_eq!(first.len(), 10, "{first:?}");
+    let total = per_family(&preset("large"));
+    assert_eq!(total.len(), 10);
+    let mut done: BTreeMap<Family, usize> = BTreeMap::new();
+    let left = |f: Family, done: &BTreeMap<Family, usize>| {
+        train
+            .iter()
+            .filter(|&&s| plan.scenes[s].family == f)
+            .count()
+            - done.get(&f).unwrap_or(&0)
+    };
+    for &s in &train {
+        let family = plan.scenes[s].family;
+        let mine = *done.get(&family).unwrap_or(&0);
+        for &other in total.keys() {
+            if other != family && left(other, &done) > 0 {
+                assert!(
+                    mine <= *done.get(&other).unwrap_or(&0),
+                    "{family:?} ahead of {other:?}"
+                );
+            }
+        }
+        *done.entry(family).or_default() += 1;
+    }
+    // Scene seeds follow the scene, not the order.
+    let seeds: HashSet<u64> = plan.jobs.iter().map(|j| plan.render_seed(j)).collect();
+    assert_eq!(seeds.len(), plan.jobs.len());
 }
 
 #[test]

@@ -138,7 +138,7 @@ fn dataset(name: &str) -> (PathBuf, Manifest) {
 /// Re-assembles the manifest from the records (as the command does after its scenes).
 fn assign_manifest(dir: &Path, manifest: &Manifest) {
     let plan = Plan::new(&manifest.config);
-    assemble_manifest(dir, &manifest.config, &plan)
+    assemble_manifest(dir, &manifest.config, &plan, false)
         .unwrap()
         .unwrap();
 }
@@ -233,7 +233,7 @@ fn runs_grow_until_the_noise_meets_the_target_and_the_manifest_lists_them() {
     );
     // The manifest, re-assembled, lists it; check verifies its file.
     let plan = Plan::new(&manifest.config);
-    let assembled = assemble_manifest(&dir, &manifest.config, &plan)
+    let assembled = assemble_manifest(&dir, &manifest.config, &plan, false)
         .unwrap()
         .unwrap();
     let listed = assembled.scenes.iter().find(|s| s.id == scene.id).unwrap();

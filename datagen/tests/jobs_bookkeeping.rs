@@ -1,6 +1,7 @@
 //! Dataset bookkeeping with a deterministic stand-in renderer (fast): sharding gives the same
 //! files as one process, reruns skip valid work and redo damaged work, the manifest is complete
-//! and `check` names truncated and non-finite files.
+//! (or, asked for while shards are missing, partial and saying so) and `check` names truncated
+//! and non-finite files and manifests missing scenes.
 
 mod common;
 
@@ -9,7 +10,7 @@ use bundle::{read_bundle, write_bundle, Bundle, Image};
 use common::{assert_same, fresh_dir, snapshot, stand_in_bundle, test_config};
 use datagen::check::check_dataset;
 use datagen::jobs::{render_dataset, RenderOptions, RunSpec, SampleRenderer};
-use datagen::manifest::Manifest;
+use datagen::manifest::{assemble_manifest, Manifest};
 use datagen::plan::Shard;
 use datagen::rng::hash_seq;
 use std::path::Path;
@@ -256,6 +257,71 @@ fn manifest_waits_for_all_shards() {
     .unwrap();
     assert!(report.manifest_complete);
     assert!(check_dataset(&dir, |_, _| {}).ok());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `datagen manifest --partial` while shards are missing: the scenes whose every job is done,
+/// marked partial, which `check` accepts and reports as partial; a manifest that lists fewer
+/// scenes than its config plans without saying so is named by `check`; the last shard writes
+/// the complete manifest, which a partial assembly then equals.
+#[test]
+fn partial_manifest_lists_finished_scenes_only() {
+    let config = test_config(16, &[2], 1, 4);
+    let plan = datagen::plan::Plan::new(&config);
+    let dir = fresh_dir("fake-partial-list");
+    let shard = |i| options(Shard::new(i, 3).unwrap());
+    render_dataset(&config, &dir, shard(0), &StandIn::default()).unwrap();
+    render_dataset(&config, &dir, shard(1), &StandIn::default()).unwrap();
+    assert!(!dir.join("manifest.json").exists());
+    assert!(assemble_manifest(&dir, &config, &plan, false)
+        .unwrap()
+        .is_none());
+    // Jobs (reference, input) per scene; shards 0 and 1 of 3 ran jobs 0, 1, 3, 4, 6, 7, 9: the
+    // scenes of jobs 0–1 and 6–7 are done.
+    let finished: Vec<String> = [0, 6]
+        .iter()
+        .map(|&j| plan.scenes[plan.jobs[j].scene()].id.clone())
+        .collect();
+    let partial = assemble_manifest(&dir, &config, &plan, true)
+        .unwrap()
+        .expect("two scenes are done");
+    let mut listed: Vec<String> = partial.scenes.iter().map(|s| s.id.clone()).collect();
+    listed.sort();
+    let mut expected = finished.clone();
+    expected.sort();
+    assert_eq!(listed, expected);
+    assert!(partial.samples.iter().all(|e| finished.contains(&e.scene)));
+    assert_eq!(partial.samples.len(), 2);
+    assert_eq!(partial.partial.map(|p| p.planned_scenes), Some(5));
+    assert_eq!(Manifest::load(&dir).unwrap(), partial);
+    let report = check_dataset(&dir, |_, _| {});
+    assert!(report.ok(), "{:?}", report.problems);
+    assert_eq!(report.partial, Some((2, 5)));
+
+    // The last shard writes the complete manifest; a partial assembly of a finished dataset is
+    // the complete one.
+    let report = render_dataset(&config, &dir, shard(2), &StandIn::default()).unwrap();
+    assert!(report.manifest_complete);
+    let complete = Manifest::load(&dir).unwrap();
+    assert_eq!((complete.scenes.len(), complete.partial), (5, None));
+    let bytes = std::fs::read(dir.join("manifest.json")).unwrap();
+    assert_eq!(
+        assemble_manifest(&dir, &config, &plan, true).unwrap(),
+        Some(complete.clone())
+    );
+    assert_eq!(std::fs::read(dir.join("manifest.json")).unwrap(), bytes);
+    assert_eq!(check_dataset(&dir, |_, _| {}).partial, None);
+
+    // A scene dropped from a complete manifest by hand is named.
+    let path = dir.join("manifest.json");
+    let mut json: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    json["scenes"].as_array_mut().unwrap().pop();
+    std::fs::write(&path, serde_json::to_string_pretty(&json).unwrap()).unwrap();
+    let text = check_dataset(&dir, |_, _| {}).problems.join("\n");
+    assert!(
+        text.contains("lists 4 scenes, its config plans 5"),
+        "{text}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -238,6 +238,9 @@ impl EvalConfig {
             let path = d.dir.join(bundle::manifest::MANIFEST_FILE);
             let manifest: Manifest = Manifest::load(&d.dir)
                 .with_context(|| format!("[dataset] dir = {}", d.dir.display()))?;
+            if let Some(note) = manifest.partial_note(&d.dir) {
+                eprintln!("note: {note}");
+            }
             let all_splits: Vec<&str> = manifest.scenes.iter().map(|s| s.split.name()).collect();
             let mut split_scenes: Vec<_> = manifest
                 .scenes

@@ -206,6 +206,9 @@ impl PatchDataset {
         measure: bool,
     ) -> Result<Self, String> {
         let manifest: Manifest = Manifest::load(root).map_err(|e| e.to_string())?;
+        if let Some(note) = manifest.partial_note(root) {
+            eprintln!("note: {note}");
+        }
         let mut known: Vec<&str> = manifest.samples.iter().map(|s| s.family.as_str()).collect();
         known.sort_unstable();
         known.dedup();

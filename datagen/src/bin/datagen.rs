@@ -72,6 +72,8 @@ enum Command {
         quiet: bool,
     },
     /// Assemble OUT/manifest.json from the job records (done automatically by the last shard).
+    /// With --partial, while the render goes on: a manifest of the scenes finished so far,
+    /// marked partial, for checking, evaluating or training on them early
     #[command(allow_negative_numbers = true)]
     Manifest {
         /// Dataset config (TOML).
@@ -80,6 +82,10 @@ enum Command {
         /// Dataset directory.
         #[arg(long)]
         out: PathBuf,
+        /// List the scenes whose every job is done, marked partial, when some are not (the
+        /// render's last shard replaces it with the complete manifest).
+        #[arg(long)]
+        partial: bool,
     },
     /// Verify a dataset against its manifest; exit status 1 on any problem.
     #[command(allow_negative_numbers = true)]
@@ -291,15 +297,26 @@ fn run(cli: Cli) -> Result<i32> {
             );
             Ok(0)
         }
-        Command::Manifest { config, out } => {
+        Command::Manifest {
+            config,
+            out,
+            partial,
+        } => {
             let config = Config::load(&config)?;
+            if !out.is_dir() {
+                bail!("{}: no such dataset directory", out.display());
+            }
             let plan = Plan::new(&config);
-            match assemble_manifest(&out, &config, &plan)? {
+            match assemble_manifest(&out, &config, &plan, partial)? {
                 Some(m) => {
                     eprintln!(
-                        "{}: {} scenes, {} samples",
+                        "{}: {} scenes{}, {} samples",
                         out.join("manifest.json").display(),
                         m.scenes.len(),
+                        m.partial.map_or(String::new(), |p| format!(
+                            " of {} (partial)",
+                            p.planned_scenes
+                        )),
                         m.samples.len()
                     );
                     Ok(0)
@@ -320,9 +337,15 @@ fn run(cli: Cli) -> Result<i32> {
                             all.len()
                         )
                     }
+                    if partial {
+                        bail!(
+                            "{}: no scene has finished yet (`datagen render` renders them)",
+                            out.display()
+                        )
+                    }
                     bail!(
                         "{}: not every job has finished (rerun `datagen render` for the missing \
-                         shards)",
+                         shards, or list the finished scenes with --partial)",
                         out.display()
                     )
                 }
@@ -337,6 +360,12 @@ fn run(cli: Cli) -> Result<i32> {
             bar.finish_and_clear();
             for p in &report.problems {
                 println!("BAD {p}");
+            }
+            if let Some((listed, planned)) = report.partial {
+                println!(
+                    "partial: the manifest lists {listed} of {planned} scenes (the render has not \
+                     finished)"
+                );
             }
             if report.ok() {
                 println!("ok: {} files checked, no problems", report.files);
@@ -426,7 +455,12 @@ fn run(cli: Cli) -> Result<i32> {
             bar.finish_and_clear();
             // The manifest lists the records (all of them, of earlier calls too).
             let plan = datagen::plan::Plan::new(&manifest.config);
-            datagen::manifest::assemble_manifest(&dir, &manifest.config, &plan)?;
+            datagen::manifest::assemble_manifest(
+                &dir,
+                &manifest.config,
+                &plan,
+                manifest.partial.is_some(),
+            )?;
             let flagged = outcomes.iter().filter(|o| !o.reference.converged).count();
             println!(
                 "{} scene(s), {} converged, {flagged} flagged; {} of rendering in this call; \
