@@ -150,6 +150,10 @@ pub struct EvalScene {
     pub reference: PathBuf,
     /// `<default>` overrides of the scene file (`-D name=value`).
     pub defines: Vec<(String, String)>,
+    /// The reference's own noise (relMSE of the image against its expectation) where the
+    /// dataset measured it: an evaluation reference's, or a training reference averaged from
+    /// several runs.
+    pub reference_noise: Option<f64>,
 }
 
 impl EvalConfig {
@@ -232,6 +236,7 @@ impl EvalConfig {
                 xml: s.xml.clone(),
                 reference: s.reference.clone(),
                 defines: s.defines.clone().into_iter().collect(),
+                reference_noise: None,
             });
         }
         if let Some(d) = &self.dataset {
@@ -290,6 +295,11 @@ impl EvalConfig {
             let chosen: Vec<EvalScene> = split_scenes
                 .into_iter()
                 .map(|s| EvalScene {
+                    reference_noise: match (&d.references, &s.evaluation_reference) {
+                        (Some(_), _) => None,
+                        (None, Some(e)) => Some(e.noise),
+                        (None, None) => s.reference_noise,
+                    },
                     reference: match (&d.references, &s.evaluation_reference) {
                         (Some(dir), _) => bundle::scene_reference_path(&d.dir.join(dir), &s.id),
                         (None, Some(e)) => d.dir.join(&e.path),
@@ -538,11 +548,14 @@ mod tests {
         write(serde_json::json!([scene("b", true)]));
         let scenes = config("").resolve_scenes().unwrap();
         assert_eq!(scenes[0].reference, dir.join("evaluation-references/b.exr"));
-        // The training references on request.
+        // Its recorded noise goes with it, to be weighed against the errors measured.
+        assert_eq!(scenes[0].reference_noise, Some(1e-4));
+        // The training references on request (their noise is not recorded here).
         let scenes = config("references = \"references\"\n")
             .resolve_scenes()
             .unwrap();
         assert_eq!(scenes[0].reference, dir.join("references").join("b.exr"));
+        assert_eq!(scenes[0].reference_noise, None);
         // One scene with, one without: refused, naming the one without.
         write(serde_json::json!([scene("a", false), scene("b", true)]));
         let err = config("").resolve_scenes().unwrap_err().to_string();

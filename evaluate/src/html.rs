@@ -211,6 +211,13 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
                 ""
             }
         );
+        if let Some(n) = r.reference_noise.as_ref().filter(|n| n.too_noisy()) {
+            let _ = writeln!(
+                h,
+                "<p class=\"fail\">Warning: {}.</p>",
+                escape(&n.warning())
+            );
+        }
         let Some(e) = &r.eval else {
             let _ = writeln!(
                 h,

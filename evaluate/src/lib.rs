@@ -66,6 +66,77 @@ pub struct SceneResult {
     /// run's.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub reused: bool,
+    /// The reference's own noise against the errors measured with it, where the dataset
+    /// measured that noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_noise: Option<ReferenceNoise>,
+}
+
+/// A reference's own noise next to the smallest error measured against it. A noisy reference
+/// adds its noise to every relMSE measured with it, which pulls every ratio toward 1: where the
+/// noise is more than [`ReferenceNoise::LIMIT`] of the smallest error, differences of that size
+/// are not measured (the dataset standard is a tenth, docs/datagen.md).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceNoise {
+    /// The reference's relMSE noise as the dataset recorded it.
+    pub noise: f64,
+    /// The smallest relMSE measured against it: any input level, ours, standard SPPM at equal
+    /// time or a peer, at any checkpoint.
+    pub smallest_error: f64,
+}
+
+impl ReferenceNoise {
+    /// The largest noise, as a fraction of the smallest error, that measures differences.
+    pub const LIMIT: f64 = 0.1;
+
+    /// From the recorded noise and the measurements; `None` without either.
+    pub fn measure(noise: Option<f64>, eval: &SceneEval) -> Option<Self> {
+        let noise = noise?;
+        let smallest = eval
+            .checkpoints
+            .iter()
+            .flat_map(|c| {
+                let peers = [c.sppm_oidn.as_ref(), c.pt_oidn.as_ref()]
+                    .into_iter()
+                    .flatten()
+                    .map(|p| p.relmse);
+                c.level_relmse
+                    .iter()
+                    .copied()
+                    .chain([c.ours_relmse, c.standard_equal_time.relmse])
+                    .chain(c.variant_relmse.iter().copied())
+                    .chain(peers)
+            })
+            .filter(|e| e.is_finite())
+            .fold(f64::INFINITY, f64::min);
+        smallest.is_finite().then_some(Self {
+            noise,
+            smallest_error: smallest,
+        })
+    }
+
+    /// Noise ÷ the smallest error.
+    pub fn fraction(&self) -> f64 {
+        self.noise / self.smallest_error
+    }
+
+    /// Whether the reference is too noisy for the smallest differences measured with it.
+    pub fn too_noisy(&self) -> bool {
+        !(self.fraction() <= Self::LIMIT)
+    }
+
+    /// The warning a report shows for a too noisy reference.
+    pub fn warning(&self) -> String {
+        format!(
+            "the reference's own noise ({:.2e}) is {:.2} x the smallest error measured against \
+             it ({:.2e}), more than {}: it adds to every error here and pulls the ratios toward \
+             1 (`datagen evaluation-references` with a smaller --target converges it further)",
+            self.noise,
+            self.fraction(),
+            self.smallest_error,
+            Self::LIMIT
+        )
+    }
 }
 
 impl SceneResult {
@@ -83,6 +154,7 @@ impl SceneResult {
             comparison_standard: None,
             error_scale: None,
             reused: false,
+            reference_noise: None,
         }
     }
 }
@@ -271,6 +343,9 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
                             );
                         }
                     }
+                    if let Some(n) = r.reference_noise.as_ref().filter(|n| n.too_noisy()) {
+                        eprintln!("  warning: {}", n.warning());
+                    }
                     for (v, e) in variants.iter().zip(&c.variant_relmse) {
                         eprintln!(
                             "  ablation {}: {e:.3e} (ours / it = {:.3})",
@@ -386,6 +461,7 @@ fn evaluate_one(
         r.inputs = Some(inputs);
         r.comparison_standard = Some(imgs.standard_at);
         r.error_scale = Some(scale);
+        r.reference_noise = ReferenceNoise::measure(s.reference_noise, &eval);
         r.eval = Some(eval);
         Ok(())
     })();
@@ -444,4 +520,52 @@ pub fn summarise(results: &[SceneResult], passes: u32) -> Summary {
 pub(crate) fn read_output_file(dir: &Path, name: &str) -> Result<Vec<u8>> {
     let p = dir.join(name);
     std::fs::read(&p).with_context(|| format!("reading {}", p.display()))
+}
+
+#[cfg(test)]
+mod reference_noise_tests {
+    use super::*;
+    use crate::peers::PeerResult;
+    use crate::scene::fixtures::{checkpoint, scene};
+
+    fn peer(relmse: f64) -> PeerResult {
+        PeerResult {
+            samples: 1,
+            render_seconds: 1.0,
+            render_budget_seconds: 1.0,
+            denoise_seconds: 0.1,
+            total_seconds: 1.1,
+            relmse,
+            ratio: 1.0,
+        }
+    }
+
+    #[test]
+    fn the_smallest_error_of_any_method_at_any_checkpoint_is_the_yardstick() {
+        // Levels 1.0 .. 4.0 (smallest 0.5), standard 1.0, ours 0.3 then 0.2.
+        let mut late = checkpoint(256, 0.2);
+        late.sppm_oidn = Some(peer(0.04));
+        let eval = scene("s", vec![checkpoint(64, 0.3), late]).eval.unwrap();
+        let n = ReferenceNoise::measure(Some(0.005), &eval).unwrap();
+        assert_eq!(n.smallest_error, 0.04);
+        assert!((n.fraction() - 0.125).abs() < 1e-12);
+        assert!(n.too_noisy());
+        assert!(n.warning().contains("0.12 x"), "{}", n.warning());
+        // A tenth exactly is converged enough; without the peer ours' 0.2 is the yardstick.
+        let eval = scene("s", vec![checkpoint(64, 0.3), checkpoint(256, 0.2)])
+            .eval
+            .unwrap();
+        let n = ReferenceNoise::measure(Some(0.02), &eval).unwrap();
+        assert_eq!(n.smallest_error, 0.2);
+        assert!(!n.too_noisy());
+        assert!(ReferenceNoise::measure(Some(0.021), &eval)
+            .unwrap()
+            .too_noisy());
+        // No recorded noise: nothing to say.
+        assert_eq!(ReferenceNoise::measure(None, &eval), None);
+        // A NaN noise is never taken for converged.
+        assert!(ReferenceNoise::measure(Some(f64::NAN), &eval)
+            .unwrap()
+            .too_noisy());
+    }
 }
