@@ -122,7 +122,8 @@ impl ReferenceNoise {
 
     /// Whether the reference is too noisy for the smallest differences measured with it.
     pub fn too_noisy(&self) -> bool {
-        !(self.fraction() <= Self::LIMIT)
+        // NaN (an unrecorded or broken noise) counts as too noisy.
+        self.fraction().is_nan() || self.fraction() > Self::LIMIT
     }
 
     /// The warning a report shows for a too noisy reference.
