@@ -40,6 +40,12 @@ struct Cli {
         requires = "evaluate"
     )]
     evaluate_families: Option<Vec<String>>,
+    /// With `--evaluate`: the model in this directory (`model.bpk` + `model.json`, e.g.
+    /// `models/default`) instead of the output directory's — the weights a run starts from,
+    /// measured on the config's dataset. Written to the output directory as
+    /// `eval_<split>[_<families>]_<DIR's name>.json`.
+    #[arg(long, value_name = "DIR", requires = "evaluate")]
+    weights: Option<PathBuf>,
     /// Instead of training, redraw `curves.png` in the output directory from its
     /// `metrics.json` (e.g. for a run made before the picture existed).
     #[arg(long, conflicts_with_all = ["resume", "evaluate"])]
@@ -143,9 +149,11 @@ fn evaluate(
     cfg: &TrainConfig,
     split: &str,
     families: &FamilyFilter,
+    weights: Option<&Path>,
     device: &burn::tensor::Device,
 ) -> Result<()> {
-    let model_json = cfg.output.join("model.json");
+    let model_dir = weights.unwrap_or(&cfg.output);
+    let model_json = model_dir.join("model.json");
     let text = std::fs::read_to_string(&model_json)
         .with_context(|| format!("{} (train first)", model_json.display()))?;
     let model_config: model::ModelConfig =
@@ -153,7 +161,7 @@ fn evaluate(
     model_config
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: {e}", model_json.display()))?;
-    let net = load_burnpack(&model_config, &cfg.output.join("model.bpk"), device)
+    let net = load_burnpack(&model_config, &model_dir.join("model.bpk"), device)
         .map_err(anyhow::Error::msg)?;
     // Screen with a 1-pixel patch, then evaluate each image as one patch of the smallest image
     // side (whole images when a split has one size, as datagen writes them).
@@ -199,6 +207,7 @@ fn evaluate(
         v.output / best_value
     )?;
     let json = serde_json::json!({
+        "weights": model_dir,
         "split": split,
         "families": families.only,
         "exclude_families": families.exclude,
@@ -221,10 +230,21 @@ fn evaluate(
         "ratio_to_best_level": v.output / best_value,
     });
     // A family-restricted evaluation has a file of its own: `eval_test_lamp.json`.
-    let name = match &families.only {
-        Some(only) => format!("eval_{split}_{}.json", only.join("+")),
-        None => format!("eval_{split}.json"),
+    // Other weights than the run's (`--weights`) are named too: `eval_test_lamp_default.json`.
+    let mut name = match &families.only {
+        Some(only) => format!("eval_{split}_{}", only.join("+")),
+        None => format!("eval_{split}"),
     };
+    if let Some(dir) = weights {
+        let stem = dir
+            .file_name()
+            .map_or_else(|| "weights".into(), |n| n.to_string_lossy().into_owned());
+        name = format!("{name}_{stem}");
+    }
+    let name = format!("{name}.json");
+    // With `--weights` the run may never have trained: its output folder may not exist yet.
+    std::fs::create_dir_all(&cfg.output)
+        .with_context(|| format!("creating {}", cfg.output.display()))?;
     write_text(
         &cfg.output.join(name),
         &serde_json::to_string_pretty(&json)?,
@@ -423,7 +443,7 @@ fn run(cli: &Cli) -> Result<()> {
             },
             None => cfg.family_filter(),
         };
-        return evaluate(&cfg, split, &families, &device);
+        return evaluate(&cfg, split, &families, cli.weights.as_deref(), &device);
     }
     // Everything that can refuse the run is checked before anything is written into `output`.
     check_output(&cfg, cli.resume)?;

@@ -660,6 +660,41 @@ fn a_family_left_out_of_training_is_evaluated_on_its_own() {
     assert_eq!(report["families"], serde_json::json!(["lamp"]));
     assert_eq!(report["images"], 2);
 
+    // `--weights`: another run's config measures these weights (copied elsewhere) on the same
+    // images alike, into its own output under a name that says whose weights they are.
+    let mine = dir.join("mine");
+    std::fs::create_dir_all(&mine).unwrap();
+    for f in ["model.json", "model.bpk"] {
+        std::fs::copy(dir.join("no-lamp-out").join(f), mine.join(f)).unwrap();
+    }
+    let other = tiny_config(&dir, "other", &data, "");
+    let untrained = train(&other, &["--evaluate", "val"]);
+    assert_eq!(untrained.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&untrained.stderr).contains("train first"));
+    let weights = mine.to_string_lossy().into_owned();
+    let eval = train(
+        &other,
+        &[
+            "--evaluate",
+            "val",
+            "--evaluate-families",
+            "lamp",
+            "--weights",
+            &weights,
+        ],
+    );
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let theirs: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("other-out").join("eval_val_lamp_mine.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(theirs["weights"], serde_json::json!(weights));
+    assert_eq!(theirs["relmse_output"], report["relmse_output"]);
+
     // A misspelt family is an error naming it and the dataset's families.
     let typo = tiny_config(&dir, "typo", &data, "families = [\"lmap\"]\n");
     let run = train(&typo, &[]);
