@@ -154,8 +154,13 @@ fn evaluate(
 ) -> Result<()> {
     let model_dir = weights.unwrap_or(&cfg.output);
     let model_json = model_dir.join("model.json");
+    let hint = if weights.is_some() {
+        "--weights names a model directory: model.json + model.bpk"
+    } else {
+        "train first"
+    };
     let text = std::fs::read_to_string(&model_json)
-        .with_context(|| format!("{} (train first)", model_json.display()))?;
+        .with_context(|| format!("{} ({hint})", model_json.display()))?;
     let model_config: model::ModelConfig =
         serde_json::from_str(&text).with_context(|| model_json.display().to_string())?;
     model_config
