@@ -50,6 +50,9 @@ pub struct ImageEntry {
     pub width: usize,
     /// Height in pixels.
     pub height: usize,
+    /// The reference's own noise (relMSE against its expectation) where the dataset recorded
+    /// it: a converged evaluation reference's, or a training reference averaged from runs.
+    pub reference_noise: Option<f64>,
 }
 
 /// One training patch: image, top-left corner, flips.
@@ -255,7 +258,7 @@ impl PatchDataset {
             {
                 match &scene.evaluation_reference {
                     Some(e) => {
-                        evaluation.insert(scene.id.as_str(), root.join(&e.path));
+                        evaluation.insert(scene.id.as_str(), (root.join(&e.path), e.noise));
                     }
                     None => without.push(scene.id.as_str()),
                 }
@@ -276,11 +279,22 @@ impl PatchDataset {
         let mut bad = Vec::new();
         for entry in read {
             let bundle = root.join(&entry.bundle);
-            let reference = match (references, evaluation.get(entry.scene.as_str())) {
-                (Some(dir), _) => bundle::scene_reference_path(&root.join(dir), &entry.scene),
-                (None, Some(path)) => path.clone(),
-                (None, None) => root.join(&entry.reference),
-            };
+            let (reference, reference_noise) =
+                match (references, evaluation.get(entry.scene.as_str())) {
+                    (Some(dir), _) => (
+                        bundle::scene_reference_path(&root.join(dir), &entry.scene),
+                        None,
+                    ),
+                    (None, Some((path, noise))) => (path.clone(), Some(*noise)),
+                    (None, None) => (
+                        root.join(&entry.reference),
+                        manifest
+                            .scenes
+                            .iter()
+                            .find(|s| s.id == entry.scene)
+                            .and_then(|s| s.reference_noise),
+                    ),
+                };
             // Screening reads the bundle as rendered (the screen levels only replace planes of
             // a bundle that passed these checks).
             match load_sample(&bundle, &reference, &[]) {
@@ -300,6 +314,7 @@ impl PatchDataset {
                         scene: entry.scene.clone(),
                         width,
                         height,
+                        reference_noise,
                     });
                 }
                 Err(b) => bad.push(b),
@@ -317,6 +332,7 @@ impl PatchDataset {
                 width: s.packed.width,
                 height: s.packed.height,
                 scene: format!("memory-{i}"),
+                reference_noise: None,
                 source: SampleSource::Memory(Arc::new(s)),
             })
             .collect();

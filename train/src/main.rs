@@ -211,6 +211,31 @@ fn evaluate(
         LEVEL_NAMES[best],
         v.output / best_value
     )?;
+    // The references' own noise, pooled like the errors (pixel-weighted), where the dataset
+    // recorded it for every image: it adds to every relMSE above and pulls the ratio toward 1.
+    let pixels: usize = ds.images.iter().map(|e| e.width * e.height).sum();
+    let reference_noise = ds
+        .images
+        .iter()
+        .map(|e| e.reference_noise.map(|n| n * (e.width * e.height) as f64))
+        .sum::<Option<f64>>()
+        .filter(|_| pixels > 0)
+        .map(|sum| sum / pixels as f64);
+    let smallest = v.output.min(best_value);
+    if let Some(noise) = reference_noise {
+        writeln!(
+            out,
+            "reference noise     {noise:.5e} = {:.3} x the smallest error above",
+            noise / smallest
+        )?;
+        if noise.is_nan() || noise > 0.1 * smallest {
+            eprintln!(
+                "warning: the references' own noise is more than a tenth of the smallest error \
+                 measured: the ratio is pulled toward 1 (`datagen evaluation-references` with a \
+                 larger --max-seconds or a smaller --target converges them further)"
+            );
+        }
+    }
     let json = serde_json::json!({
         "weights": model_dir,
         "split": split,
@@ -233,6 +258,7 @@ fn evaluate(
         "best_level": LEVEL_NAMES[best],
         "best_level_relmse": best_value,
         "ratio_to_best_level": v.output / best_value,
+        "reference_noise": reference_noise,
     });
     // A family-restricted evaluation has a file of its own: `eval_test_lamp.json`.
     // Other weights than the run's (`--weights`) are named too: `eval_test_lamp_default.json`.

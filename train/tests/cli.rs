@@ -760,6 +760,20 @@ fn validation_measures_against_converged_evaluation_references() {
         "{stderr}"
     );
     assert!(stderr.contains("evaluation-references/s3.exr"), "{stderr}");
+    // `--evaluate` reports the recorded noise of the references it measured against (the one
+    // usable image's), beside the errors.
+    let eval = train(&config, &["--evaluate", "val"]);
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    assert!(String::from_utf8_lossy(&eval.stdout).contains("reference noise     1.00000e-5"));
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("conv-out").join("eval_val.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(report["reference_noise"], serde_json::json!(1e-5));
     // With the training references named, both validation samples are read.
     let named = tiny_config(&dir, "named", &data, "references = \"references\"\n");
     std::fs::create_dir_all(data.join("references")).unwrap();
@@ -774,6 +788,14 @@ fn validation_measures_against_converged_evaluation_references() {
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "{stderr}");
     assert!(stderr.contains("2 val images"), "{stderr}");
+    // Their noise is not recorded: none reported.
+    let eval = train(&named, &["--evaluate", "val"]);
+    assert!(eval.status.success());
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("named-out").join("eval_val.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(report["reference_noise"], serde_json::Value::Null);
     // One validation scene with an evaluation reference, one without: refused, naming it.
     scenes[3]
         .as_object_mut()
