@@ -116,6 +116,10 @@ pub struct DatasetSource {
     /// Split to evaluate (`test` normally).
     #[serde(default = "default_split")]
     pub split: String,
+    /// Only the scenes of these families (the manifest's `family`), e.g. the families a model
+    /// never saw; absent: every family. A name the split does not have is an error.
+    #[serde(default)]
+    pub families: Option<Vec<String>>,
     /// Evaluate only the first N scenes of the split (in manifest order).
     #[serde(default)]
     pub limit: Option<usize>,
@@ -247,10 +251,35 @@ impl EvalConfig {
                 eprintln!("note: {note}");
             }
             let all_splits: Vec<&str> = manifest.scenes.iter().map(|s| s.split.name()).collect();
+            if let Some(families) = &d.families {
+                let mut known: Vec<&str> = manifest
+                    .scenes
+                    .iter()
+                    .filter(|s| s.split.name() == d.split)
+                    .map(|s| s.family.as_str())
+                    .collect();
+                known.sort_unstable();
+                known.dedup();
+                let unknown: Vec<&str> = families
+                    .iter()
+                    .map(String::as_str)
+                    .filter(|f| !known.contains(f))
+                    .collect();
+                if !unknown.is_empty() {
+                    bail!(
+                        "{}: split \"{}\" has no family {} (its families: {})",
+                        path.display(),
+                        d.split,
+                        unknown.join(", "),
+                        known.join(", ")
+                    );
+                }
+            }
             let mut split_scenes: Vec<_> = manifest
                 .scenes
                 .into_iter()
                 .filter(|s| s.split.name() == d.split)
+                .filter(|s| d.families.as_ref().is_none_or(|f| f.contains(&s.family)))
                 .collect();
             if let Some(n) = d.limit {
                 split_scenes.truncate(n);
@@ -550,6 +579,22 @@ mod tests {
         assert_eq!(scenes[0].reference, dir.join("evaluation-references/b.exr"));
         // Its recorded noise goes with it, to be weighed against the errors measured.
         assert_eq!(scenes[0].reference_noise, Some(1e-4));
+        // A family filter keeps its families; a family the split lacks is named.
+        assert_eq!(
+            config("families = [\"room\"]\n")
+                .resolve_scenes()
+                .unwrap()
+                .len(),
+            1
+        );
+        let err = config("families = [\"room\", \"lamp\"]\n")
+            .resolve_scenes()
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("no family lamp") && err.contains("its families: room"),
+            "{err}"
+        );
         // The training references on request (their noise is not recorded here).
         let scenes = config("references = \"references\"\n")
             .resolve_scenes()
