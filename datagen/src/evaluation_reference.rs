@@ -47,6 +47,13 @@ const FIRST_RUN: usize = 1000;
 /// paths) and passes^(-2/3) (photons, as the radius shrinks), the prediction assumes the former.
 const MARGIN: f64 = 1.25;
 
+/// Most growth of the runs' passes in one round (the first round: over the reference's passes).
+/// The time limit is checked between rounds, at the rate the last round measured; a prediction
+/// from a noisy first measurement could otherwise start one round that runs far past it
+/// (measured: a dense `lamp` scene's first round asked 14× the reference's passes, ≈ 35 min).
+/// Rounds continue the runs, so smaller steps cost only the noise measurement between them.
+const MAX_GROWTH: u64 = 4;
+
 /// Where the evaluation record of scene `id` lives, relative to the dataset root.
 pub fn record_path(id: &str) -> String {
     format!("records/{id}/evaluation.json")
@@ -332,9 +339,10 @@ pub fn evaluation_references(
                     }
                     None => u64::from(scene.reference_passes) * 4,
                 };
+                let reference_passes = u64::from(scene.reference_passes);
                 (
                     start
-                        .max(2 * u64::from(scene.reference_passes))
+                        .clamp(2 * reference_passes, MAX_GROWTH * reference_passes)
                         .min(max_passes),
                     0.0,
                 )
@@ -388,8 +396,9 @@ pub fn evaluation_references(
             let measured = best_level_relmse(&inputs, scene, &mean)?;
             let input = measured - noise;
             let converged = input > 0.0 && noise <= options.target * input;
-            let next =
-                predicted_passes(passes as u32, noise, input, options.target).min(max_passes);
+            let next = predicted_passes(passes as u32, noise, input, options.target)
+                .min(MAX_GROWTH * passes)
+                .min(max_passes);
             // The time a round of `next` passes would take, from this round's rate (a round
             // continues the runs, so it renders only the new passes).
             let rate = round_seconds / (passes - before).max(1) as f64;

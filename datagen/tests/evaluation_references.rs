@@ -195,6 +195,10 @@ fn runs_grow_until_the_noise_meets_the_target_and_the_manifest_lists_them() {
             .collect();
         assert!(passes.windows(2).all(|w| w[0] < w[1]), "{passes:?}");
         assert_eq!(*passes.last().unwrap(), r.passes);
+        // No round grows the runs more than 4×, the first not past 4× the reference's passes:
+        // a time limit is checked between rounds, so no round may run away with it.
+        assert!(passes.windows(2).all(|w| w[1] <= 4 * w[0]), "{passes:?}");
+        assert!(passes[0] <= 4 * REFERENCE_PASSES, "{passes:?}");
     }
     assert!(runs.iter().all(|(_, _, state)| state
         .as_ref()
