@@ -348,12 +348,6 @@ pub fn evaluation_references(
                 )
             }
         };
-        // Passes the runs hold before the round (for the rate of a round: it renders only the
-        // passes it adds). A resumed round's states are somewhere in between: the rate is a guess.
-        let mut before: u64 = recorded
-            .as_ref()
-            .map_or(0, |r| u64::from(r.passes))
-            .min(passes);
         let result = loop {
             create_parent(&progress_file)
                 .with_context(|| format!("creating the folder of {}", progress_file.display()))?;
@@ -361,6 +355,10 @@ pub fn evaluation_references(
                 .with_context(|| format!("writing {}", progress_file.display()))?;
             let round = Instant::now();
             let mut images = Vec::with_capacity(RUNS);
+            // Passes rendered in this round, over its runs: a run continues from its state, whose
+            // first reported pass is the one after the saved one (a resumed round's states may be
+            // anywhere below its target), so the round's rate counts only what it rendered.
+            let mut rendered: u64 = 0;
             for (run, &seed) in seeds.iter().enumerate() {
                 // The state is kept after the run: a later round or call continues from it.
                 let state = StateSpec {
@@ -377,8 +375,12 @@ pub fn evaluation_references(
                 );
                 let id = scene.id.as_str();
                 let target = passes as u32;
-                let image =
-                    renderer.reference(&xml, &spec, &mut |p| on_pass(id, run, p, target))?;
+                let mut first: Option<u32> = None;
+                let image = renderer.reference(&xml, &spec, &mut |p| {
+                    first.get_or_insert(p);
+                    on_pass(id, run, p, target)
+                })?;
+                rendered += first.map_or(0, |f| u64::from(target.saturating_sub(f) + 1));
                 if (image.width, image.height) != (width as usize, height as usize) {
                     bail!(
                         "{}: rendered {}x{}, the dataset's scene is {width}x{height}",
@@ -400,15 +402,15 @@ pub fn evaluation_references(
                 .min(MAX_GROWTH * passes)
                 .min(max_passes);
             // The time a round of `next` passes would take, from this round's rate (a round
-            // continues the runs, so it renders only the new passes).
-            let rate = round_seconds / (passes - before).max(1) as f64;
+            // continues the runs, so it renders only the new passes): seconds per pass of all
+            // runs.
+            let rate = round_seconds * RUNS as f64 / rendered.max(1) as f64;
             let out_of_time = options
                 .max_seconds
                 .is_some_and(|limit| seconds + rate * (next - passes) as f64 > limit);
             if converged || next <= passes || out_of_time {
                 break (mean, noise, input, converged);
             }
-            before = passes;
             passes = next;
         };
         let (mean, noise, input, converged) = result;
