@@ -217,7 +217,8 @@ impl<C> Manifest<C> {
     pub fn partial_note(&self, root: &Path) -> Option<String> {
         self.partial.map(|p| {
             format!(
-                "{}: a partial dataset, {} of {} scenes (its render has not finished;                  `datagen manifest --partial` lists the finished scenes)",
+                "{}: a partial dataset, {} of {} scenes (its render has not finished; \
+                 `datagen manifest --partial` lists the finished scenes)",
                 root.join(MANIFEST_FILE).display(),
                 self.scenes.len(),
                 p.planned_scenes
@@ -238,5 +239,38 @@ impl<C: DeserializeOwned> Manifest<C> {
             path,
             reason: e.to_string(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_partial_manifest_says_how_much_it_lists_and_a_complete_one_nothing() {
+        let mut manifest: Manifest = serde_json::from_value(serde_json::json!({
+            "format": MANIFEST_FORMAT, "name": "t", "config_sha256": "", "width": 8,
+            "height": 8, "reference_level": "y", "scenes": [], "samples": [], "config": {}
+        }))
+        .unwrap();
+        assert_eq!(manifest.partial_note(Path::new("d")), None);
+        manifest.partial = Some(PartialDataset { planned_scenes: 5 });
+        let note = manifest.partial_note(Path::new("d")).unwrap();
+        assert!(
+            note.starts_with(&format!(
+                "{}: a partial dataset, 0 of 5 scenes",
+                Path::new("d").join(MANIFEST_FILE).display()
+            )),
+            "{note}"
+        );
+        assert!(!note.contains("  "), "{note}");
+        // It round-trips; a complete manifest writes no `partial` key at all.
+        let json = serde_json::to_value(&manifest).unwrap();
+        assert_eq!(json["partial"]["planned_scenes"], 5);
+        manifest.partial = None;
+        assert!(serde_json::to_value(&manifest)
+            .unwrap()
+            .get("partial")
+            .is_none());
     }
 }
