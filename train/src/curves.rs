@@ -192,6 +192,7 @@ mod tests {
             validation: output.map(|o| Validation {
                 output: o,
                 levels: [0.4, 0.2, 0.1, f64::NAN, 0.0],
+                images: Vec::new(),
             }),
             patches: 10,
             seconds: 1.0,

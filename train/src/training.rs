@@ -103,20 +103,45 @@ pub struct Validation {
     pub output: f64,
     /// relMSE of ỹ, z̃1..z̃4.
     pub levels: [f64; LEVELS],
+    /// The same per image of the dataset, in its order (for `--evaluate`; not kept in the
+    /// training history).
+    #[serde(skip)]
+    pub images: Vec<ImageValidation>,
+}
+
+/// relMSE of the output and of every input level over one image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageValidation {
+    /// relMSE of the reconstruction.
+    pub output: f64,
+    /// relMSE of ỹ, z̃1..z̃4.
+    pub levels: [f64; LEVELS],
+}
+
+impl ImageValidation {
+    /// The best (lowest) single input level of this image as (index, relMSE).
+    pub fn best_level(&self) -> (usize, f64) {
+        best_of(&self.levels)
+    }
 }
 
 impl Validation {
     /// The best (lowest) single input level as (index, relMSE).
     pub fn best_level(&self) -> (usize, f64) {
-        self.levels
-            .iter()
-            .copied()
-            .enumerate()
-            .fold(
-                (0, f64::INFINITY),
-                |best, (i, v)| if v < best.1 { (i, v) } else { best },
-            )
+        best_of(&self.levels)
     }
+}
+
+/// The lowest of `levels` as (index, value).
+fn best_of(levels: &[f64; LEVELS]) -> (usize, f64) {
+    levels
+        .iter()
+        .copied()
+        .enumerate()
+        .fold(
+            (0, f64::INFINITY),
+            |best, (i, v)| if v < best.1 { (i, v) } else { best },
+        )
 }
 
 /// One row of `metrics.csv`.
@@ -178,9 +203,8 @@ pub fn validate(
     batch: usize,
     device: &Device,
 ) -> Result<Validation, BadSample> {
-    let mut output = 0.0f64;
-    let mut levels = [0.0f64; LEVELS];
-    let mut count = 0usize;
+    // Per image: squared-error sums of the output and the levels, and the values summed.
+    let mut sums = vec![(0.0f64, [0.0f64; LEVELS], 0usize); dataset.images.len()];
     dataset.levels = config.levels.clone();
     dataset.set_screen_levels(&config.screen_levels);
     let refs: Vec<_> = (0..dataset.images.len())
@@ -195,20 +219,36 @@ pub fn validate(
             .try_to_vec::<f32>()
             .expect("f32 output");
         let p2 = host.size * host.size;
-        for k in 0..host.len {
+        for (k, patch) in chunk.iter().enumerate().take(host.len) {
+            let (output, levels, count) = &mut sums[patch.image];
             let reference = &host.reference[k * 3 * p2..(k + 1) * 3 * p2];
-            output += relmse_sum_planar(&prediction[k * 3 * p2..(k + 1) * 3 * p2], reference);
+            *output += relmse_sum_planar(&prediction[k * 3 * p2..(k + 1) * 3 * p2], reference);
             let patch_levels = &host.levels[k * 3 * LEVELS * p2..(k + 1) * 3 * LEVELS * p2];
             for (l, sum) in levels.iter_mut().enumerate() {
                 *sum += relmse_sum_planar(&patch_levels[l * 3 * p2..(l + 1) * 3 * p2], reference);
             }
-            count += 3 * p2;
+            *count += 3 * p2;
         }
     }
+    // Pooled over all pixels, as the loss sees them.
+    let count: usize = sums.iter().map(|s| s.2).sum();
     let n = count.max(1) as f64;
+    let output = sums.iter().map(|s| s.0).sum::<f64>() / n;
+    let levels = std::array::from_fn(|l| sums.iter().map(|s| s.1[l]).sum::<f64>() / n);
+    let images = sums
+        .iter()
+        .map(|(output, levels, count)| {
+            let n = (*count).max(1) as f64;
+            ImageValidation {
+                output: output / n,
+                levels: levels.map(|s| s / n),
+            }
+        })
+        .collect();
     Ok(Validation {
-        output: output / n,
-        levels: levels.map(|s| s / n),
+        output,
+        levels,
+        images,
     })
 }
 

@@ -659,6 +659,22 @@ fn a_family_left_out_of_training_is_evaluated_on_its_own() {
     .unwrap();
     assert_eq!(report["families"], serde_json::json!(["lamp"]));
     assert_eq!(report["images"], 2);
+    // Per image, each against its own best level; the pooled figure is their pixel-weighted
+    // mean (equal sizes here: the plain mean).
+    let per_image = report["per_image"].as_array().unwrap();
+    assert_eq!(per_image.len(), 2);
+    let mean = per_image
+        .iter()
+        .map(|e| e["relmse_output"].as_f64().unwrap())
+        .sum::<f64>()
+        / 2.0;
+    let pooled = report["relmse_output"].as_f64().unwrap();
+    assert!((mean - pooled).abs() <= 1e-9 * pooled, "{mean} vs {pooled}");
+    for e in per_image {
+        let ratio = e["relmse_output"].as_f64().unwrap() / e["best_level_relmse"].as_f64().unwrap();
+        assert!((ratio - e["ratio_to_best_level"].as_f64().unwrap()).abs() < 1e-12);
+        assert!(e["bundle"].as_str().unwrap().ends_with(".exr"));
+    }
 
     // `--weights`: another run's config measures these weights (copied elsewhere) on the same
     // images alike, into its own output under a name that says whose weights they are.
