@@ -211,28 +211,7 @@ fn evaluate(
         LEVEL_NAMES[best],
         v.output / best_value
     )?;
-    // Per image, each against its own best level: pooled errors are dominated by the noisiest
-    // images (few photons, few passes), the geometric mean of the ratios weighs all alike.
-    let per_image: Vec<serde_json::Value> = ds
-        .images
-        .iter()
-        .zip(&v.images)
-        .map(|(entry, iv)| {
-            let (best, best_value) = iv.best_level();
-            let bundle = match &entry.source {
-                SampleSource::Files { bundle, .. } => bundle.display().to_string(),
-                SampleSource::Memory(_) => String::new(),
-            };
-            serde_json::json!({
-                "scene": entry.scene,
-                "bundle": bundle,
-                "relmse_output": iv.output,
-                "best_level": LEVEL_NAMES[best],
-                "best_level_relmse": best_value,
-                "ratio_to_best_level": iv.output / best_value,
-            })
-        })
-        .collect();
+    let per_image = per_image_scores(&ds.images, &v.images);
     let ratios: Vec<f64> = per_image
         .iter()
         .filter_map(|e| e["ratio_to_best_level"].as_f64())
@@ -246,16 +225,7 @@ fn evaluate(
          best level {geomean:.3}",
         ratios.len()
     )?;
-    // The references' own noise, pooled like the errors (pixel-weighted), where the dataset
-    // recorded it for every image: it adds to every relMSE above and pulls the ratio toward 1.
-    let pixels: usize = ds.images.iter().map(|e| e.width * e.height).sum();
-    let reference_noise = ds
-        .images
-        .iter()
-        .map(|e| e.reference_noise.map(|n| n * (e.width * e.height) as f64))
-        .sum::<Option<f64>>()
-        .filter(|_| pixels > 0)
-        .map(|sum| sum / pixels as f64);
+    let reference_noise = pooled_reference_noise(&ds.images);
     let smallest = v.output.min(best_value);
     if let Some(noise) = reference_noise {
         writeln!(
@@ -318,6 +288,45 @@ fn evaluate(
         &cfg.output.join(name),
         &serde_json::to_string_pretty(&json)?,
     )
+}
+
+/// Each image's scores against its own best level, as the eval JSON lists them. Pooled errors
+/// are dominated by the noisiest images (few photons, few passes); per image, all weigh alike.
+fn per_image_scores(
+    images: &[train::data::ImageEntry],
+    scores: &[train::training::ImageValidation],
+) -> Vec<serde_json::Value> {
+    images
+        .iter()
+        .zip(scores)
+        .map(|(entry, iv)| {
+            let (best, best_value) = iv.best_level();
+            let bundle = match &entry.source {
+                SampleSource::Files { bundle, .. } => bundle.display().to_string(),
+                SampleSource::Memory(_) => String::new(),
+            };
+            serde_json::json!({
+                "scene": entry.scene,
+                "bundle": bundle,
+                "relmse_output": iv.output,
+                "best_level": LEVEL_NAMES[best],
+                "best_level_relmse": best_value,
+                "ratio_to_best_level": iv.output / best_value,
+            })
+        })
+        .collect()
+}
+
+/// The references' own noise pooled like the errors (pixel-weighted), where the dataset recorded
+/// it for every image: it adds to every relMSE measured and pulls ratios toward 1.
+fn pooled_reference_noise(images: &[train::data::ImageEntry]) -> Option<f64> {
+    let pixels: usize = images.iter().map(|e| e.width * e.height).sum();
+    images
+        .iter()
+        .map(|e| e.reference_noise.map(|n| n * (e.width * e.height) as f64))
+        .sum::<Option<f64>>()
+        .filter(|_| pixels > 0)
+        .map(|sum| sum / pixels as f64)
 }
 
 /// Writes `text` to `path` atomically.
