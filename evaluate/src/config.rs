@@ -323,20 +323,23 @@ impl EvalConfig {
             }
             let chosen: Vec<EvalScene> = split_scenes
                 .into_iter()
-                .map(|s| EvalScene {
-                    reference_noise: match (&d.references, &s.evaluation_reference) {
-                        (Some(_), _) => None,
-                        (None, Some(e)) => Some(e.noise),
-                        (None, None) => s.reference_noise,
-                    },
-                    reference: match (&d.references, &s.evaluation_reference) {
-                        (Some(dir), _) => bundle::scene_reference_path(&d.dir.join(dir), &s.id),
-                        (None, Some(e)) => d.dir.join(&e.path),
-                        (None, None) => d.dir.join(s.reference),
-                    },
-                    name: s.id,
-                    xml: d.dir.join(s.xml),
-                    defines: s.defines.into_iter().collect(),
+                .map(|s| {
+                    // The reference measured against, with its recorded noise where known.
+                    let (reference, reference_noise) =
+                        match (&d.references, &s.evaluation_reference) {
+                            (Some(dir), _) => {
+                                (bundle::scene_reference_path(&d.dir.join(dir), &s.id), None)
+                            }
+                            (None, Some(e)) => (d.dir.join(&e.path), Some(e.noise)),
+                            (None, None) => (d.dir.join(&s.reference), s.reference_noise),
+                        };
+                    EvalScene {
+                        reference,
+                        reference_noise,
+                        name: s.id,
+                        xml: d.dir.join(s.xml),
+                        defines: s.defines.into_iter().collect(),
+                    }
                 })
                 .collect();
             if chosen.is_empty() {

@@ -275,6 +275,12 @@ impl PatchDataset {
                 ));
             }
         }
+        // The training references' measured noise per scene (datasets with several runs).
+        let training_noise: std::collections::HashMap<&str, f64> = manifest
+            .scenes
+            .iter()
+            .filter_map(|s| Some((s.id.as_str(), s.reference_noise?)))
+            .collect();
         let mut images = Vec::new();
         let mut bad = Vec::new();
         for entry in read {
@@ -288,11 +294,7 @@ impl PatchDataset {
                     (None, Some((path, noise))) => (path.clone(), Some(*noise)),
                     (None, None) => (
                         root.join(&entry.reference),
-                        manifest
-                            .scenes
-                            .iter()
-                            .find(|s| s.id == entry.scene)
-                            .and_then(|s| s.reference_noise),
+                        training_noise.get(entry.scene.as_str()).copied(),
                     ),
                 };
             // Screening reads the bundle as rendered (the screen levels only replace planes of
