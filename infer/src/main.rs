@@ -64,8 +64,9 @@ struct Cli {
     engine: Option<Engine>,
     /// Tile side in pixels (a halo covering the receptive field is added; the last layer and
     /// the combination run in bands of rows, so memory stays near 1 GB); 0 = whole image.
-    #[arg(long, default_value_t = 512)]
-    tile: usize,
+    /// Default: 512, or 1024 for a U-Net (its halo is wider, its activations narrower).
+    #[arg(long)]
+    tile: Option<usize>,
     /// Strength κ of the guard towards the smoothest level, replacing the model's (`guard` in
     /// model.json; docs/method.md §5.4); 0 = Eq. 6 alone.
     #[arg(long)]
@@ -419,10 +420,11 @@ fn run(cli: &Cli) -> Result<()> {
             .progress_chars("=> "),
     );
     let engine = cli.engine.unwrap_or(Engine::default_for(cli.backend));
+    let tile = cli.tile.unwrap_or(model.config.default_tile());
     let result = reconstruct_tiled(
         &model,
         input.as_ref().unwrap_or(&packed),
-        cli.tile,
+        tile,
         engine,
         &device,
         |done, total| {
@@ -434,7 +436,7 @@ fn run(cli: &Cli) -> Result<()> {
     let seconds = t.elapsed().as_secs_f64();
     eprintln!(
         "reconstructed {}×{} in {seconds:.2} s ({} px tiles)",
-        packed.width, packed.height, cli.tile
+        packed.width, packed.height, tile
     );
 
     // Finite inputs can still overflow float32 in Eq. 6 (values near f32::MAX): say so

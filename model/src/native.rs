@@ -8,7 +8,7 @@
 //! (`[y][x][channel]`), so an im2col row is a run of contiguous copies and a layer's output is
 //! the product's rows; the last layer's weights are consumed per pixel straight out of the
 //! product, never stored for the image. The arithmetic is the same as the Burn path, only
-//! summed in another order (equal within 1e-5, `tests::native_equals_burn`).
+//! summed in another order (equal within 1e-5: `native_engine_equals_burn` in infer/tests/tiling.rs).
 //!
 //! Determinism: rows are cut into fixed chunks (independent of the thread count) and each
 //! chunk's product runs single-threaded, so the result is bit-identical on any thread count.
@@ -36,8 +36,9 @@ struct Source<'a> {
 /// Output pixels per chunk: im2col buffer and product of one chunk stay a few MB.
 const CHUNK_PIXELS: usize = 1024;
 
-/// Pixels of one row combined together by [`NativeNetwork::combine_lanes`].
-const LANES: usize = 8;
+/// Pixels of one row combined together by [`NativeNetwork::combine_lanes`]: one AVX-512
+/// vector, two AVX2 vectors.
+const LANES: usize = 16;
 
 /// One convolution as a matrix: `matrix[(ky·k + kx)·cin + ci][cout]` (the im2col order) and
 /// the bias.
@@ -203,6 +204,42 @@ impl ConvMatrix {
                 dst.as_mut_ptr(),
                 1,
                 cout as isize,
+                true,
+                columns.as_ptr(),
+                1,
+                depth as isize,
+                self.matrix.as_ptr(),
+                1,
+                cout as isize,
+                1.0,
+                1.0,
+                false,
+                false,
+                false,
+                gemm::Parallelism::None,
+            );
+        }
+    }
+
+    /// `dst` (`cout × pixels`, output-channel-major) = bias + (columns · matrix)ᵀ: each output
+    /// channel's values of all pixels in one run, the layout the combination reads lanes of
+    /// neighbouring pixels from (and gemm's natural, column-major, destination).
+    fn product_transposed(&self, columns: &[f32], pixels: usize, dst: &mut [f32]) {
+        let (depth, cout) = (self.depth(), self.cout);
+        for (row, &b) in dst.chunks_exact_mut(pixels).zip(&self.bias) {
+            row.fill(b);
+        }
+        // SAFETY: columns holds pixels×depth values row-major, the matrix depth×cout row-major,
+        // dst cout×pixels row-major (element (pixel, channel) at channel·pixels + pixel), as the
+        // strides say; the buffers do not overlap.
+        unsafe {
+            gemm::gemm(
+                pixels,
+                cout,
+                depth,
+                dst.as_mut_ptr(),
+                pixels as isize,
+                1,
                 true,
                 columns.as_ptr(),
                 1,
@@ -523,15 +560,22 @@ impl NativeNetwork {
         let chunks: Vec<(Vec<f32>, Vec<f32>)> = (0..count.div_ceil(CHUNK_PIXELS))
             .into_par_iter()
             .map_init(
-                || (Vec::new(), Vec::new()),
-                |(columns, raw), chunk| {
+                || (Vec::new(), Vec::new(), Vec::new(), Vec::new()),
+                |(columns, raw, lanes, weights), chunk| {
                     let first = chunk * CHUNK_PIXELS;
                     let n = CHUNK_PIXELS.min(count - first);
-                    // Per-worker buffers, fully overwritten (im2col; bias then product).
-                    columns.resize(n * conv.depth(), 0.0);
-                    conv.im2col(x, region, out, first, columns);
+                    // Per-worker buffers, fully overwritten (im2col; bias then product). A 1×1
+                    // layer on its own input rectangle reads the activations as they lie: its
+                    // im2col rows would be a copy of them. `raw` is entry-major, `[entry][n]`.
                     raw.resize(n * conv.cout, 0.0);
-                    conv.product(columns, n, raw);
+                    if conv.kernel == 1 && region == out {
+                        let x = &x[first * conv.cin..(first + n) * conv.cin];
+                        conv.product_transposed(x, n, raw);
+                    } else {
+                        columns.resize(n * conv.depth(), 0.0);
+                        conv.im2col(x, region, out, first, columns);
+                        conv.product_transposed(columns, n, raw);
+                    }
                     let mut colour = vec![0.0f32; 3 * n];
                     let mut share = vec![0.0f32; self.pairs * n];
                     let mut store = |p: usize, (rgb, sums): ([f32; 3], [f32; LEVELS - 1])| {
@@ -553,14 +597,20 @@ impl NativeNetwork {
                             && px + LANES <= out[2]
                             && self.window_inside(px, py, LANES, colours)
                         {
-                            let raw_lanes = &mut raw[p * cout..(p + LANES) * cout];
-                            let results = self.combine_lanes(raw_lanes, px, py, colours);
+                            // Entry e of the LANES pixels: one run of `raw`, one vector.
+                            lanes.clear();
+                            lanes.extend((0..cout).map(|e| -> [f32; LANES] {
+                                let run = &raw[e * n + p..e * n + p + LANES];
+                                run.try_into().expect("LANES values")
+                            }));
+                            let results = self.combine_lanes(lanes, px, py, colours);
                             for (l, result) in results.into_iter().enumerate() {
                                 store(p + l, result);
                             }
                             p += LANES;
                         } else {
-                            let weights = &mut raw[p * cout..(p + 1) * cout];
+                            weights.clear();
+                            weights.extend((0..cout).map(|e| raw[e * n + p]));
                             store(p, self.combine_pixel(weights, px, py, colours));
                             p += 1;
                         }
@@ -598,45 +648,65 @@ impl NativeNetwork {
     }
 
     /// [`NativeNetwork::combine_pixel`] for the [`LANES`] pixels (px + l, py) of one row whose
-    /// windows lie inside the image, from their raw outputs `raw` (`[lane][entry]`, overwritten
-    /// with the positive weights). Each lane does the scalar function's arithmetic in its order
+    /// windows lie inside the image, from their raw outputs `lanes` (`[entry][lane]`,
+    /// overwritten with the positive weights). Each lane does the scalar function's arithmetic in its order
     /// (bit-identical, `tests::lanes_equal_single_pixels`); the lanes only let the compiler use
     /// vector instructions, which the scalar window sums (sequential float additions) cannot.
     fn combine_lanes(
         &self,
-        raw: &mut [f32],
+        lanes: &mut [[f32; LANES]],
         px: usize,
         py: usize,
         colours: &CombinationInputs,
     ) -> [([f32; 3], [f32; LEVELS - 1]); LANES] {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked just above).
-            return unsafe { self.combine_lanes_avx2(raw, px, py, colours) };
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU has AVX-512F (checked just above).
+                return unsafe { self.combine_lanes_avx512(lanes, px, py, colours) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2 (checked just above).
+                return unsafe { self.combine_lanes_avx2(lanes, px, py, colours) };
+            }
         }
-        self.combine_lanes_portable(raw, px, py, colours)
+        self.combine_lanes_portable(lanes, px, py, colours)
     }
 
-    /// [`NativeNetwork::combine_lanes`] compiled for AVX2: all eight lanes in one vector. The
-    /// same operations in the same order (Rust never fuses a multiply and an add), so the same
-    /// bits as the portable build.
+    /// [`NativeNetwork::combine_lanes`] compiled for AVX-512: all sixteen lanes in one vector.
+    /// The same operations in the same order (Rust never fuses a multiply and an add), so the
+    /// same bits as the portable build.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn combine_lanes_avx2(
+    #[target_feature(enable = "avx512f")]
+    fn combine_lanes_avx512(
         &self,
-        raw: &mut [f32],
+        lanes: &mut [[f32; LANES]],
         px: usize,
         py: usize,
         colours: &CombinationInputs,
     ) -> [([f32; 3], [f32; LEVELS - 1]); LANES] {
-        self.combine_lanes_portable(raw, px, py, colours)
+        self.combine_lanes_portable(lanes, px, py, colours)
+    }
+
+    /// [`NativeNetwork::combine_lanes`] compiled for AVX2 (two vectors of eight lanes), the
+    /// same bits as the portable build.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn combine_lanes_avx2(
+        &self,
+        lanes: &mut [[f32; LANES]],
+        px: usize,
+        py: usize,
+        colours: &CombinationInputs,
+    ) -> [([f32; 3], [f32; LEVELS - 1]); LANES] {
+        self.combine_lanes_portable(lanes, px, py, colours)
     }
 
     /// [`NativeNetwork::combine_lanes`] for any CPU (inlined into the AVX2 build).
     #[inline(always)]
     fn combine_lanes_portable(
         &self,
-        raw: &mut [f32],
+        lanes: &mut [[f32; LANES]],
         px: usize,
         py: usize,
         colours: &CombinationInputs,
@@ -646,18 +716,33 @@ impl NativeNetwork {
         let window = self.window;
         let r = window / 2;
         let area = window * window;
-        let entries = raw.len() / LANES;
-        // Positive weights, transposed to `[entry][lane]` so a window entry of every lane is
-        // one vector.
-        for weights in raw.chunks_exact_mut(entries) {
-            self.positive(weights, (0, window, 0, window));
-        }
-        let mut lanes = vec![[0.0f32; LANES]; entries];
-        for (l, weights) in raw.chunks_exact(entries).enumerate() {
-            for (e, &w) in weights.iter().enumerate() {
-                lanes[e][l] = w;
+        // Positive weights, lane by lane what [`NativeNetwork::positive`] does to one pixel
+        // (its whole window is inside the image).
+        match self.weighting {
+            Weighting::Relu => {
+                // Over the values as one slice: a flattened iterator or a loop over the lanes
+                // of each entry is compiled to scalar code or to gathers.
+                for w in lanes.as_flattened_mut() {
+                    *w = w.max(0.0) + 1e-4;
+                }
+            }
+            Weighting::Softmax => {
+                // The maximum of each lane over all entries (f32::max ignores NaN, so the
+                // order does not matter), as `positive` takes it.
+                let mut max = [f32::NEG_INFINITY; LANES];
+                for w in lanes.iter() {
+                    for l in 0..LANES {
+                        max[l] = max[l].max(w[l]);
+                    }
+                }
+                for w in lanes.iter_mut() {
+                    for l in 0..LANES {
+                        w[l] = (w[l] - max[l]).exp();
+                    }
+                }
             }
         }
+        let lanes = &*lanes;
         let centre = py * width + px;
         let mut numerator = [[0.0f32; LANES]; 3];
         let mut sums = [[0.0f32; LANES]; LEVELS - 1];
@@ -933,14 +1018,28 @@ mod tests {
                 };
                 for (px, py) in [(r, r), (width - r - LANES, height - r - 1), (r + 3, 5)] {
                     assert!(net.window_inside(px, py, LANES, &colours));
-                    let mut lanes = raw.clone();
+                    // The network's raw outputs of the LANES pixels, `[entry][lane]`.
+                    let transposed: Vec<[f32; LANES]> = (0..entries)
+                        .map(|e| std::array::from_fn(|l| raw[l * entries + e]))
+                        .collect();
+                    let mut lanes = transposed.clone();
                     let together = net.combine_lanes(&mut lanes, px, py, &colours);
-                    let mut portable = raw.clone();
+                    let mut portable = transposed.clone();
                     let again = net.combine_lanes_portable(&mut portable, px, py, &colours);
                     assert!(
                         together == again,
-                        "{weighting:?} {guard}: the AVX2 build differs"
+                        "{weighting:?} {guard}: the vector build differs"
                     );
+                    #[cfg(target_arch = "x86_64")]
+                    if std::arch::is_x86_feature_detected!("avx2") {
+                        let mut avx2 = transposed.clone();
+                        // SAFETY: the CPU has AVX2 (checked just above).
+                        let eight = unsafe { net.combine_lanes_avx2(&mut avx2, px, py, &colours) };
+                        assert!(
+                            eight == again,
+                            "{weighting:?} {guard}: the AVX2 build differs"
+                        );
+                    }
                     for (l, (rgb, shares)) in together.iter().enumerate() {
                         let mut weights = raw[l * entries..(l + 1) * entries].to_vec();
                         let (one_rgb, one_shares) =

@@ -37,9 +37,10 @@ struct Cli {
     /// Image height in pixels, e.g. `--size 1280 --height 720`; absent: square.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
     height: Option<u32>,
-    /// Tile side (0 = whole image); `infer`'s default.
-    #[arg(long, default_value_t = 512)]
-    tile: usize,
+    /// Tile side (0 = whole image); absent: `infer`'s default for each preset (512, a U-Net
+    /// 1024).
+    #[arg(long)]
+    tile: Option<usize>,
     /// Timed repetitions per round (after one warm-up in the first round); the median is
     /// reported.
     #[arg(long, default_value_t = 2)]
@@ -183,7 +184,8 @@ fn run(cli: &Cli) -> Result<()> {
             let first = if round == 0 { 0 } else { 1 };
             for k in first..=cli.repeats.max(1) {
                 let start = Instant::now();
-                let r = reconstruct_tiled(model, &packed, cli.tile, t.engine, &device, |_, _| {});
+                let tile = cli.tile.unwrap_or(model.config.default_tile());
+                let r = reconstruct_tiled(model, &packed, tile, t.engine, &device, |_, _| {});
                 let s = start.elapsed().as_secs_f64();
                 assert!(r.image.iter().all(|v| v.is_finite()));
                 eprintln!(
@@ -241,17 +243,20 @@ fn run(cli: &Cli) -> Result<()> {
         }
     };
 
+    let tile_name = cli
+        .tile
+        .map_or("infer's default".to_string(), |t| t.to_string());
     println!(
-        "{n}x{h}, tile {}, backend {:?}, {threads} threads, {} round(s) of {} timed run(s)",
-        cli.tile,
+        "{n}x{h}, tile {tile_name}, backend {:?}, {threads} threads, {} round(s) of {} timed run(s)",
         cli.backend,
         cli.rounds,
         cli.repeats.max(1)
     );
     for (m, preset) in models.iter().zip(&presets) {
         println!(
-            "  {preset:?} preset: +{} px halo per tile",
-            m.config.conv_reach()
+            "  {preset:?} preset: +{} px halo per tile of {}",
+            m.config.conv_reach(),
+            cli.tile.unwrap_or(m.config.default_tile())
         );
     }
     let list = |v: &[f64]| {
@@ -334,7 +339,7 @@ fn run(cli: &Cli) -> Result<()> {
     }
     if let Some(path) = &cli.output {
         let all = json!({
-            "preset": cli.preset, "width": n, "height": h, "tile": cli.tile,
+            "preset": cli.preset, "width": n, "height": h, "tile": cli.tile.map_or("default".into(), |t| json!(t)),
             "backend": format!("{:?}", cli.backend), "threads": threads, "rounds": cli.rounds,
             "infer_s": ours,
             "engines": timed.iter().map(|t| json!({
