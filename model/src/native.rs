@@ -33,8 +33,9 @@ struct Source<'a> {
     channels: usize,
 }
 
-/// Output pixels per chunk: im2col buffer and product of one chunk stay a few MB.
-const CHUNK_PIXELS: usize = 1024;
+/// Output pixels per chunk: the im2col buffer of one chunk stays in a core's L2 cache (256 px ×
+/// 432 columns of the U-Net's widest full-resolution layer = 432 KiB; 5–10 % faster than 1024 px).
+const CHUNK_PIXELS: usize = 256;
 
 /// Pixels of one row combined together by [`NativeNetwork::combine_lanes`]: one AVX-512
 /// vector, two AVX2 vectors.
