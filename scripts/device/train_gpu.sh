@@ -44,7 +44,13 @@ run options (defaults: the paper preset on the `small` dataset):
   --preset P         network preset to time and train (default paper)
   --datagen-config F dataset config rendered on the node (default configs/datagen/small.toml)
   --patch N --stride N --batch N --lr X   training patches and Adam (default 64, 32, 16, 1e-4)
-  --bench-batches "A B …"   batches timed (default "8 64 256")
+  --config-extra F   TOML lines appended to the training config the run writes (e.g.
+                     `screen_levels` to match --init weights trained with them); a key the run
+                     writes already (dataset, preset, patch, stride, batch, lr, epochs, seed,
+                     output, init, backend, cache_images) is a TOML error
+  --bench-batches "A B …"   batches timed (default "8 64 256 1024"; one out of memory is left out)
+  --bench-patch N    patch side of the timed steps (default 64, the paper's)
+  --no-infer-bench   skip the 1280×720 reconstruction timings (step 3; a continued run)
   --bench-steps N    timed steps per batch (default 5)
   --infer-size WxH   bundle size of the inference timings (default 1280x720)
   --reserve S        seconds kept after training for scoring and inference (default 75)
@@ -97,7 +103,8 @@ pack() {
     mkdir -p "$lists/partial"
     local o=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 "-oDir::State::Lists=$lists")
     apt-get "${o[@]}" update >/dev/null
-    (cd "$PACK/debs" && apt-get "${o[@]}" download libvulkan1 >/dev/null)
+    # GLVND + EGL too: headless, the NVIDIA Vulkan driver is reached through libEGL_nvidia.
+    (cd "$PACK/debs" && apt-get "${o[@]}" download libvulkan1 libglvnd0 libegl1 >/dev/null)
     rm -rf "$lists"
     if [ "$seed" != none ]; then
         # Scenes, references and their records: `datagen render` skips those jobs (their
@@ -112,8 +119,15 @@ pack() {
         done
     fi
     if [ -n "$init" ]; then
-        mkdir -p "$PACK/init"
-        cp "$init/model.json" "$init/model.bpk" "$PACK/init/"
+        if git ls-files --error-unmatch "$init/model.bpk" >/dev/null 2>&1 &&
+            git diff --quiet -- "$init/model.bpk" "$init/model.json"; then
+            # Committed weights (models/default, models/paper) travel with the working tree:
+            # name them instead of packing a second copy into the 64 MiB.
+            git ls-files --full-name "$init/model.bpk" | sed 's#/model.bpk$##' >"$PACK/init-path"
+        else
+            mkdir -p "$PACK/init"
+            cp "$init/model.json" "$init/model.bpk" "$PACK/init/"
+        fi
     fi
     local tree packed
     tree=$(git ls-files -z --cached --others --exclude-standard | du -cb --files0-from=- 2>/dev/null | tail -1 | cut -f1)
@@ -128,8 +142,8 @@ elapsed() { echo $(( $(date +%s) - START )); }
 
 run() {
     local budget=500 out="${OUT:-out/gpu-run}" preset=paper dgconfig=configs/datagen/small.toml
-    local patch=64 stride=32 batch=16 lr=1e-4 bench_batches="8 64 256" bench_steps=5
-    local infer_size=1280x720 reserve=75
+    local patch=64 stride=32 batch=16 lr=1e-4 bench_batches="8 64 256 1024" bench_steps=5
+    local bench_patch=64 infer_size=1280x720 reserve=75 extra="" infer_bench=1
     while [ $# -gt 0 ]; do
         case "$1" in
             --budget) budget="$2"; shift 2 ;;
@@ -142,12 +156,16 @@ run() {
             --lr) lr="$2"; shift 2 ;;
             --bench-batches) bench_batches="$2"; shift 2 ;;
             --bench-steps) bench_steps="$2"; shift 2 ;;
+            --bench-patch) bench_patch="$2"; shift 2 ;;
+            --config-extra) extra="$2"; shift 2 ;;
+            --no-infer-bench) infer_bench=0; shift ;;
             --infer-size) infer_size="$2"; shift 2 ;;
             --reserve) reserve="$2"; shift 2 ;;
             -h|--help) usage; exit 0 ;;
             *) die "run: unknown option $1 (see --help)" ;;
         esac
     done
+    [ -z "$extra" ] || [ -f "$extra" ] || die "run: --config-extra $extra: no such file"
     [ -f "$PACK/bin.tar.xz" ] || die "run: $PACK/bin.tar.xz missing: run \`$0 pack\` first and carry $PACK"
     local iw=${infer_size%x*} ih=${infer_size#*x}
     START=$(date +%s)
@@ -162,13 +180,21 @@ run() {
     mkdir -p "$work/bin"
     xz -dc "$PACK/bin.tar.xz" | tar xf - -C "$work/bin"
     local bin="$work/bin"
-    if ! ldconfig -p | grep 'libvulkan\.so\.1' >/dev/null; then
-        echo "no Vulkan loader installed: unpacking $(ls "$PACK"/debs)"
+    if ! ldconfig -p | grep -q 'libvulkan\.so\.1' || ! ldconfig -p | grep -q 'libGLdispatch\.so\.0'; then
+        echo "Vulkan loader or GLVND missing: unpacking $(ls "$PACK"/debs | tr '\n' ' ')"
         for f in "$PACK"/debs/*.deb; do dpkg -x "$f" /; done
         ldconfig
     fi
-    # Containers mount the NVIDIA driver without registering its Vulkan manifest.
-    if ! grep -qs nvidia /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json; then
+    # The driver's own manifest names its GLX library, whose vk_icdGetInstanceProcAddr returns
+    # no vkCreateInstance without an X display (seen on an H200 node, driver 580.159.04: "Found
+    # no drivers"); the same Vulkan driver is reachable headless through its EGL library.
+    if ldconfig -p | grep -q 'libEGL_nvidia\.so\.0'; then
+        local icd="$work/nvidia_egl_icd.json"
+        printf '{"file_format_version": "1.0.1", "ICD": {"library_path": "libEGL_nvidia.so.0", "api_version": "1.3.0"}}\n' >"$icd"
+        export VK_DRIVER_FILES="$icd" VK_ICD_FILENAMES="$icd"
+        echo "Vulkan driver manifest: $icd (libEGL_nvidia.so.0, headless)"
+    elif ! grep -qs nvidia /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json; then
+        # Containers may mount the NVIDIA driver without registering its Vulkan manifest.
         for icd in /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json /usr/share/vulkan/icd.d/nvidia_icd.json; do
             if [ -f "$icd" ]; then
                 export VK_DRIVER_FILES="$icd" VK_ICD_FILENAMES="$icd"
@@ -183,8 +209,8 @@ run() {
     local timings="$work/timings"
     mkdir -p "$timings"
     for b in $bench_batches; do
-        echo "== bench: $preset preset, training step at batch $b of ${patch}², forward at 256² ($(elapsed) s)"
-        "$bin/bench" --backend wgpu --preset "$preset" --batch "$b" --patch "$patch" \
+        echo "== bench: $preset preset, training step at batch $b of ${bench_patch}², forward at 256² ($(elapsed) s)"
+        "$bin/bench" --backend wgpu --preset "$preset" --batch "$b" --patch "$bench_patch" \
             --infer-size 256 --steps "$bench_steps" --peer none --output "$timings/step_b$b.json" ||
             echo "bench at batch $b failed (out of memory?): left out"
     done
@@ -192,7 +218,8 @@ run() {
     # 3. Reconstruction timings at the inference size: the preset and the shipped weights'.
     local ship_preset
     ship_preset=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["preset"])' models/default/model.json)
-    for p in "$preset" "$ship_preset"; do
+    [ "$infer_bench" = 1 ] || ship_preset=""
+    for p in ${ship_preset:+"$preset" "$ship_preset"}; do
         for tile in 0 512; do
             echo "== bench_infer: $p preset, ${iw}x${ih}, tile $tile ($(elapsed) s)"
             "$bin/bench_infer" --backend wgpu --engine burn --preset "$p" --size "$iw" \
@@ -215,7 +242,14 @@ run() {
 
     # 5. Train for the time left.
     local run_dir="$work/run" init_line="" train_s
-    [ -f "$PACK/init/model.bpk" ] && init_line="init = \"$(cd "$PACK/init" && pwd)\""
+    if [ -f "$PACK/init/model.bpk" ]; then
+        init_line="init = \"$(cd "$PACK/init" && pwd)\""
+    elif [ -f "$PACK/init-path" ]; then
+        local init_dir
+        init_dir=$(cat "$PACK/init-path")
+        [ -f "$init_dir/model.bpk" ] || die "run: the packed --init $init_dir is not in this working tree"
+        init_line="init = \"$(cd "$init_dir" && pwd)\""
+    fi
     cat >"$work/train.toml" <<EOF
 # written by scripts/device/train_gpu.sh run
 backend = "wgpu"
@@ -231,6 +265,11 @@ cache_images = 512
 output = "$run_dir"
 $init_line
 EOF
+    if [ -n "$extra" ]; then
+        echo "# from --config-extra $extra" >>"$work/train.toml"
+        cat "$extra" >>"$work/train.toml"
+    fi
+    echo "== training config:"; grep -v '^#' "$work/train.toml"
     train_s=$(( budget - $(elapsed) - reserve ))
     [ "$train_s" -ge 10 ] || train_s=10
     echo "== train: $train_s s ($(elapsed) s)"
