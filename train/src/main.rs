@@ -190,8 +190,7 @@ fn evaluate(
         .with_context(|| no_usable_samples(cfg, split, &ds))?;
     ds.patch = side;
     ds.stride = side;
-    let v = validate(&net, &model_config, &mut ds, 1, device)
-        .map_err(|b| anyhow::anyhow!("{}: {}", b.file.display(), b.reason))?;
+    let v = validate(&net, &model_config, &mut ds, 1, device).map_err(anyhow::Error::new)?;
     let (best, best_value) = v.best_level();
     let mut out = std::io::stdout().lock();
     writeln!(
@@ -644,7 +643,7 @@ fn run(cli: &Cli) -> Result<()> {
         };
         let report = trainer
             .run_epoch(&mut train, Some(&mut val), &mut on_batch)
-            .map_err(|b| anyhow::anyhow!("{}: {}", b.file.display(), b.reason))?;
+            .map_err(|e| anyhow::anyhow!("epoch {epoch}: {e}"))?;
         bar.finish_and_clear();
         let mut line = format!("epoch {epoch}: train loss {:.5}", report.train_loss);
         if let Some(v) = &report.validation {

@@ -176,7 +176,51 @@ pub fn adam() -> ModuleOptimizer {
     AdamConfig::new().with_epsilon(1e-8).init()
 }
 
-/// One optimisation step minimising `loss`; returns the updated model and the batch loss.
+/// Why an epoch stopped before its end.
+#[derive(Debug)]
+pub enum EpochError {
+    /// A sample failed to load mid-epoch (it changed after screening).
+    Sample(BadSample),
+    /// The device could not run a step: on a GPU, typically a buffer larger than it allows.
+    Device(String),
+}
+
+impl std::fmt::Display for EpochError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Sample(b) => write!(f, "{}: {}", b.file.display(), b.reason),
+            Self::Device(e) => f.write_str(e),
+        }
+    }
+}
+
+impl std::error::Error for EpochError {}
+
+impl From<BadSample> for EpochError {
+    fn from(b: BadSample) -> Self {
+        Self::Sample(b)
+    }
+}
+
+/// A device error on one line: Burn chains its causes over many lines ("Caused by:", backtrace
+/// notes), the innermost saying what failed ("can't allocate buffer of size: …").
+fn device_cause(e: impl std::fmt::Display) -> String {
+    e.to_string()
+        .lines()
+        .map(str::trim)
+        .filter(|l| {
+            !l.is_empty()
+                && !l.starts_with("Caused by")
+                && !l.starts_with("Asked at")
+                && !l.contains("backtrace")
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// One optimisation step minimising `loss`; returns the updated model and the batch loss, or
+/// why the device could not run it. Burn runs the step lazily, so a device failure (a GPU
+/// buffer above its limit) surfaces where the loss is read; the message names the batch.
 pub fn train_step(
     model: Network,
     optim: &mut ModuleOptimizer,
@@ -184,13 +228,20 @@ pub fn train_step(
     batch: Batch,
     lr: f64,
     loss: Loss,
-) -> (Network, f64) {
+) -> Result<(Network, f64), String> {
+    let [patches, _, height, width] = batch.features.dims();
     let prediction = reconstruct(&model, config, batch.features, batch.levels) + batch.direct;
     let loss = loss.evaluate(prediction, batch.reference);
     let grads = loss.backward();
-    let value: f32 = loss.into_scalar::<f32>();
+    let value: f32 = loss.try_into_scalar::<f32>().map_err(|e| {
+        format!(
+            "the device failed a training step of {patches} patches of {width}×{height}: {} \
+             (on a GPU: lower `batch` or `patch`, docs/performance.md \"On a GPU\")",
+            device_cause(e)
+        )
+    })?;
     let grads = GradientsParams::from_grads(grads, &model);
-    (optim.step(lr, model, grads), value as f64)
+    Ok((optim.step(lr, model, grads), value as f64))
 }
 
 /// Validates `model` (a validation copy on a plain device) on non-overlapping patches of
@@ -202,7 +253,7 @@ pub fn validate(
     dataset: &mut PatchDataset,
     batch: usize,
     device: &Device,
-) -> Result<Validation, BadSample> {
+) -> Result<Validation, EpochError> {
     // Per image: squared-error sums of the output and the levels, and the values summed.
     let mut sums = vec![(0.0f64, [0.0f64; LEVELS], 0usize); dataset.images.len()];
     dataset.levels = config.levels.clone();
@@ -213,9 +264,17 @@ pub fn validate(
     for chunk in refs.chunks(batch.max(1)) {
         let host = dataset.batch(chunk)?;
         let b = host.to_device(device);
+        let [patches, _, height, width] = b.features.dims();
         let prediction = reconstruct(model, config, b.features, b.levels) + b.direct;
         let prediction = prediction
-            .into_data()
+            .try_into_data()
+            .map_err(|e| {
+                EpochError::Device(format!(
+                    "the device failed to reconstruct {patches} patches of {width}×{height} \
+                     for validation: {}",
+                    device_cause(e)
+                ))
+            })?
             .try_to_vec::<f32>()
             .expect("f32 output");
         let p2 = host.size * host.size;
@@ -335,7 +394,7 @@ impl Trainer {
         train: &mut PatchDataset,
         val: Option<&mut PatchDataset>,
         on_batch: &mut dyn FnMut(BatchProgress),
-    ) -> Result<EpochReport, BadSample> {
+    ) -> Result<EpochReport, EpochError> {
         let start = Instant::now();
         let epoch = self.epochs_done;
         train.levels = self.config.levels.clone();
@@ -360,7 +419,8 @@ impl Trainer {
                 batch,
                 lr,
                 self.settings.loss,
-            );
+            )
+            .map_err(EpochError::Device)?;
             self.model = model;
             loss_sum += loss;
             batches += 1;
@@ -391,5 +451,23 @@ impl Trainer {
         };
         self.history.push(report.clone());
         Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::device_cause;
+
+    #[test]
+    fn a_device_error_reads_on_one_line_with_its_innermost_cause() {
+        // The chain Burn's wgpu backend reported on an H200 for a batch above the buffer limit.
+        let chain = "An error happened during execution\nCaused by:\n  Several failures at once\n\
+                     Caused by:\n  An IO error happened\nCaused by:\n  can't allocate buffer of \
+                     size: 4542431232\nNo backtrace available\nAsked at:\nNo backtrace available";
+        assert_eq!(
+            device_cause(chain),
+            "An error happened during execution; Several failures at once; An IO error \
+             happened; can't allocate buffer of size: 4542431232"
+        );
     }
 }

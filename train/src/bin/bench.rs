@@ -156,7 +156,11 @@ fn run(cli: &Cli) -> Result<()> {
             batch,
             1e-4,
             Loss::default(),
-        );
+        )
+        .unwrap_or_else(|e| {
+            eprintln!("error: {e}");
+            std::process::exit(1)
+        });
         net = next;
     });
     let rss_train = peak_rss_mib();
