@@ -23,9 +23,14 @@ fn repository() -> PathBuf {
 const SHIPPED_MODELS: [&str; 2] = ["models/default", "models/paper"];
 
 /// Renders stress scene `name` at 64×64 with multi-level SPPM and reconstructs it with each of
-/// the shipped weights: the error reports against the scene's reference, in
-/// [`SHIPPED_MODELS`]' order.
-fn stress_reports(name: &str, passes: u32, photons: u64) -> Vec<ErrorReport> {
+/// `models`: the error reports against the scene's reference, in their order.
+fn stress_reports(
+    name: &str,
+    passes: u32,
+    photons: u64,
+    models: &[TrainedModel],
+    device: &Device,
+) -> Vec<ErrorReport> {
     let dir = repository().join("scenes/stress").join(name);
     let loaded = renderer::scene_file::load_for_sppm(&dir.join("scene.xml"), &[], false).unwrap();
     let settings = SppmSettings {
@@ -55,17 +60,15 @@ fn stress_reports(name: &str, passes: u32, photons: u64) -> Vec<ErrorReport> {
     .unwrap();
     let bundle = bundle.expect("one bundle");
     let packed = pack(&bundle).unwrap();
-    let device = Device::flex();
     let reference = bundle::read_rgb_exr_image(&dir.join("reference.exr")).unwrap();
     let reference = planar_reference(&reference, packed.width, packed.height).unwrap();
-    SHIPPED_MODELS
+    models
         .iter()
-        .map(|m| {
-            let model = TrainedModel::open(&repository().join(m), &device).unwrap();
+        .map(|model| {
             // The model's input: its screen levels (if any) in place; the report is on the
             // levels as rendered.
             let input = pack_with(&bundle, &model.config.screen_levels).unwrap();
-            let out = reconstruct_tiled(&model, &input, 0, Engine::Native, &device, |_, _| {});
+            let out = reconstruct_tiled(model, &input, 0, Engine::Native, device, |_, _| {});
             ErrorReport::new(&packed, &out.image, &reference)
         })
         .collect()
@@ -75,6 +78,11 @@ fn stress_reports(name: &str, passes: u32, photons: u64) -> Vec<ErrorReport> {
 /// densities (≈ 5 and ≈ 0.5 photons per pixel per pass: the second one speckles ỹ).
 #[test]
 fn never_worse_than_the_best_input_level() {
+    let device = Device::flex();
+    let models: Vec<TrainedModel> = SHIPPED_MODELS
+        .iter()
+        .map(|m| TrainedModel::open(&repository().join(m), &device).unwrap())
+        .collect();
     let mut failures = Vec::new();
     for name in [
         "subpixel-light",
@@ -85,7 +93,7 @@ fn never_worse_than_the_best_input_level() {
         for (passes, photons) in [(32, 20_000), (32, 2_000)] {
             for (model, r) in SHIPPED_MODELS
                 .iter()
-                .zip(stress_reports(name, passes, photons))
+                .zip(stress_reports(name, passes, photons, &models, &device))
             {
                 eprintln!(
                     "{model}, {name} {passes} x {photons}: output {:.4e}, best input {} {:.4e}, \
