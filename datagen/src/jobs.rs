@@ -11,7 +11,7 @@ use crate::manifest::{
     assemble_manifest, config_fingerprint, jobs_of_other_config, outputs_intact, read_record,
     to_json, JobRecord, SampleEntry, SceneEntry, MANIFEST_FORMAT,
 };
-use crate::plan::{Job, Plan, Shard};
+use crate::plan::{Job, Plan, SceneSelection, Shard};
 use crate::scene::write_scene_files;
 use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle, Image};
@@ -90,10 +90,12 @@ pub trait SampleRenderer: Sync {
 }
 
 /// Options of a `datagen render` invocation.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RenderOptions {
-    /// Which jobs this process runs.
+    /// Which jobs this process runs: its shard of the selected scenes' jobs.
     pub shard: Shard,
+    /// Which scenes are rendered (default: all).
+    pub selection: SceneSelection,
     /// Worker threads per render (0 = all cores).
     pub threads: usize,
     /// Draw progress bars on stderr.
@@ -247,7 +249,11 @@ pub fn render_dataset_to(
     remove_stale_temps(root);
     let plan = Plan::new(config);
     let fingerprint = config_fingerprint(config);
-    let mine = plan.shard_jobs(options.shard);
+    let keep = options
+        .selection
+        .scenes_of(&plan)
+        .map_err(anyhow::Error::msg)?;
+    let mine = plan.shard_jobs(options.shard, &keep);
     let multi = MultiProgress::with_draw_target(target);
     // A line for the user: above the bars, or plainly on stderr where no bar is drawn (--quiet,
     // or stderr is not a terminal).
@@ -367,7 +373,7 @@ pub fn render_dataset_to(
                 &job,
                 &fingerprint,
                 scene_hash,
-                options,
+                &options,
                 renderer,
                 &mut on_pass,
             )
@@ -544,7 +550,7 @@ fn run_job(
     job: &Job,
     fingerprint: &str,
     scene_hash: Option<String>,
-    options: RenderOptions,
+    options: &RenderOptions,
     renderer: &dyn SampleRenderer,
     on_pass: &mut (dyn FnMut(u32) + Send),
 ) -> Result<JobRecord> {

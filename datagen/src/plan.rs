@@ -20,6 +20,9 @@ pub struct ScenePlan {
     pub family: Family,
     /// Split.
     pub split: Split,
+    /// Its place among the scenes of its family and split (1-based, in index order): the
+    /// render order takes the families in turns by it, and `--per-family` selects by it.
+    pub turn: usize,
     /// How the scene is rendered (its regime's settings, or the config's).
     pub render: SceneRender,
 }
@@ -115,6 +118,7 @@ impl Plan {
         let list = scene_list(config);
         let splits = assign_splits(config, &list);
         let regimes = assign_regimes(config, &list);
+        let turns = family_turns(&list, &splits);
         let scenes: Vec<ScenePlan> = list
             .into_iter()
             .enumerate()
@@ -123,6 +127,7 @@ impl Plan {
                 id,
                 family,
                 split: splits[index],
+                turn: turns[index],
                 render: scene_render(config, index, splits[index], regimes[index]),
             })
             .collect();
@@ -208,10 +213,14 @@ impl Plan {
         self.record_path(job).replacen("records/", "timings/", 1)
     }
 
-    /// Indices of the jobs shard `index` of `count` runs: every `count`-th job.
-    pub fn shard_jobs(&self, shard: Shard) -> Vec<usize> {
+    /// Indices of the jobs shard `index` of `count` runs: every `count`-th job of the scenes
+    /// `keep` marks ([`SceneSelection::scenes_of`]; all `true` for the whole dataset).
+    pub fn shard_jobs(&self, shard: Shard, keep: &[bool]) -> Vec<usize> {
         (0..self.jobs.len())
-            .filter(|j| j % shard.count as usize == shard.index as usize)
+            .filter(|&j| keep[self.jobs[j].scene()])
+            .enumerate()
+            .filter(|(k, _)| k % shard.count as usize == shard.index as usize)
+            .map(|(_, j)| j)
             .collect()
     }
 }
@@ -227,19 +236,29 @@ fn render_order(scenes: &[ScenePlan]) -> Vec<usize> {
         Split::Val => 1,
         Split::Train => 2,
     };
-    // Each scene's place among the scenes of its family and split.
+    let mut order: Vec<usize> = (0..scenes.len()).collect();
+    order.sort_by_key(|&i| {
+        (
+            split_rank(scenes[i].split),
+            scenes[i].turn,
+            scenes[i].family,
+            i,
+        )
+    });
+    order
+}
+
+/// Each scene's place among the scenes of its family and split (1-based, in index order).
+fn family_turns(list: &[(String, Family)], splits: &[Split]) -> Vec<usize> {
     let mut counts: std::collections::HashMap<(Family, Split), usize> = Default::default();
-    let turn: Vec<usize> = scenes
-        .iter()
-        .map(|scene| {
-            let count = counts.entry((scene.family, scene.split)).or_default();
+    list.iter()
+        .zip(splits)
+        .map(|((_, family), &split)| {
+            let count = counts.entry((*family, split)).or_default();
             *count += 1;
             *count
         })
-        .collect();
-    let mut order: Vec<usize> = (0..scenes.len()).collect();
-    order.sort_by_key(|&i| (split_rank(scenes[i].split), turn[i], scenes[i].family, i));
-    order
+        .collect()
 }
 
 /// A Markdown table of what `plan` renders, one row per regime (one row without regimes):
@@ -313,6 +332,85 @@ pub fn summary(plan: &Plan) -> String {
         totals[3]
     ));
     out
+}
+
+/// Which scenes a `datagen render` runs (all criteria must hold; an empty list allows all). A
+/// session that cannot render a whole dataset renders what it needs: the evaluation splits of
+/// some families, or a slice of the training split that takes every family in turn.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SceneSelection {
+    /// Only scenes of these splits.
+    pub splits: Vec<Split>,
+    /// Only scenes of these families (names as in the config, e.g. `lamp`).
+    pub families: Vec<String>,
+    /// Only these scene ids.
+    pub scenes: Vec<String>,
+    /// Only the scenes whose place in their family and split ([`ScenePlan::turn`]) lies in
+    /// this inclusive 1-based range.
+    pub per_family: Option<(usize, usize)>,
+}
+
+impl SceneSelection {
+    /// Parses `--per-family`'s `A-B` (or `A`, one place), 1-based and inclusive.
+    pub fn parse_range(s: &str) -> Result<(usize, usize), String> {
+        let (a, b) = s.split_once('-').unwrap_or((s, s));
+        let num = |t: &str| -> Result<usize, String> {
+            t.trim()
+                .parse::<usize>()
+                .ok()
+                .filter(|&n| n >= 1)
+                .ok_or_else(|| format!("`{s}`: expected A-B with 1 ≤ A ≤ B, e.g. 1-4"))
+        };
+        let (a, b) = (num(a)?, num(b)?);
+        if a > b {
+            return Err(format!(
+                "`{s}`: the first place ({a}) is after the last ({b})"
+            ));
+        }
+        Ok((a, b))
+    }
+
+    /// The scene indices of `plan` this selection keeps. Names that match no family or scene of
+    /// the config, and a selection that keeps no scene, are errors (a typo would otherwise
+    /// render nothing, or everything).
+    pub fn scenes_of(&self, plan: &Plan) -> Result<Vec<bool>, String> {
+        for name in &self.families {
+            if !plan.scenes.iter().any(|s| s.family.name() == name) {
+                let mut known: Vec<&str> = plan.scenes.iter().map(|s| s.family.name()).collect();
+                known.dedup();
+                return Err(format!(
+                    "family `{name}` is not in this config (its families: {})",
+                    known.join(", ")
+                ));
+            }
+        }
+        for id in &self.scenes {
+            if !plan.scenes.iter().any(|s| &s.id == id) {
+                return Err(format!("scene `{id}` is not in this config"));
+            }
+        }
+        let keep: Vec<bool> = plan
+            .scenes
+            .iter()
+            .map(|s| {
+                (self.splits.is_empty() || self.splits.contains(&s.split))
+                    && (self.families.is_empty()
+                        || self.families.iter().any(|f| f == s.family.name()))
+                    && (self.scenes.is_empty() || self.scenes.contains(&s.id))
+                    && self
+                        .per_family
+                        .is_none_or(|(a, b)| (a..=b).contains(&s.turn))
+            })
+            .collect();
+        if !keep.contains(&true) {
+            return Err(
+                "the selection (--splits, --families, --scenes, --per-family) keeps no \
+                        scene of this config"
+                    .into(),
+            );
+        }
+        Ok(keep)
+    }
 }
 
 /// A shard: this process runs jobs `index`, `index + count`, ...

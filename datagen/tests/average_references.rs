@@ -87,6 +87,7 @@ fn dataset(name: &str) -> (PathBuf, Manifest) {
     let config = test_config(SIDE as u32, &[2], 1, 4);
     let options = RenderOptions {
         shard: Shard::ALL,
+        selection: Default::default(),
         threads: 1,
         progress: false,
         state_interval: 60.0,

@@ -88,6 +88,7 @@ impl SampleRenderer for StandIn {
 fn options(shard: Shard) -> RenderOptions {
     RenderOptions {
         shard,
+        selection: Default::default(),
         threads: 1,
         progress: false,
         state_interval: 60.0,
@@ -435,4 +436,100 @@ fn pass_rates_have_three_significant_digits() {
     assert_eq!(format_pass_rate(0.08), "12.5 s/pass");
     assert_eq!(format_pass_rate(0.0), "\u{2014} passes/s");
     assert_eq!(format_pass_rate(f64::NAN), "\u{2014} passes/s");
+}
+
+/// `datagen render --families/--splits/--scenes/--per-family`: a selection renders exactly the
+/// jobs of its scenes; slices rendered one after another add up to the files of the whole
+/// dataset (the last one writes the complete manifest); names the config does not have, and a
+/// selection that keeps nothing, are errors that render nothing.
+#[test]
+fn scene_selections_render_their_scenes_and_add_up_to_the_whole() {
+    use datagen::plan::{Plan, SceneSelection};
+    let config = test_config(16, &[2], 1, 4);
+    let plan = Plan::new(&config);
+    let whole = fresh_dir("fake-select-whole");
+    render_dataset(&config, &whole, options(Shard::ALL), &StandIn::default()).unwrap();
+
+    let dir = fresh_dir("fake-select");
+    let with = |selection: SceneSelection| RenderOptions {
+        selection,
+        ..options(Shard::ALL)
+    };
+    // The first scene of the first scene's family and split: exactly that scene's two jobs.
+    let first = &plan.scenes[0];
+    let one = with(SceneSelection {
+        splits: vec![first.split],
+        families: vec![first.family.name().into()],
+        per_family: Some((1, 1)),
+        ..Default::default()
+    });
+    let r = StandIn::default();
+    let report = render_dataset(&config, &dir, one, &r).unwrap();
+    assert_eq!((report.rendered, report.skipped), (2, 0));
+    assert!(!report.manifest_complete);
+    assert!(dir
+        .join(format!("records/{}/reference.json", first.id))
+        .exists());
+    let records = std::fs::read_dir(dir.join("records")).unwrap().count();
+    assert_eq!(records, 1, "only the selected scene is rendered");
+
+    // Bad names and empty selections: errors, nothing rendered.
+    for (bad, says) in [
+        (
+            SceneSelection {
+                families: vec!["nope".into()],
+                ..Default::default()
+            },
+            "family `nope` is not in this config",
+        ),
+        (
+            SceneSelection {
+                scenes: vec!["999-room".into()],
+                ..Default::default()
+            },
+            "scene `999-room` is not in this config",
+        ),
+        (
+            SceneSelection {
+                per_family: Some((90, 99)),
+                ..Default::default()
+            },
+            "keeps no scene",
+        ),
+    ] {
+        let r = StandIn::default();
+        let e = render_dataset(&config, &dir, with(bad), &r).unwrap_err();
+        assert!(format!("{e:#}").contains(says), "{e:#}");
+        assert_eq!(r.runs.load(Ordering::SeqCst), 0);
+    }
+
+    // The rest, split by split and then by scene id: the whole dataset, byte for byte.
+    for split in [datagen::plan::Split::Test, datagen::plan::Split::Val] {
+        if plan.scenes.iter().any(|s| s.split == split) {
+            let selection = SceneSelection {
+                splits: vec![split],
+                ..Default::default()
+            };
+            render_dataset(&config, &dir, with(selection), &StandIn::default()).unwrap();
+        }
+    }
+    let rest = SceneSelection {
+        scenes: plan.scenes.iter().map(|s| s.id.clone()).collect(),
+        ..Default::default()
+    };
+    let report = render_dataset(&config, &dir, with(rest), &StandIn::default()).unwrap();
+    assert!(report.manifest_complete);
+    assert_same(&snapshot(&whole), &snapshot(&dir));
+    std::fs::remove_dir_all(&whole).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn per_family_ranges_parse_and_bad_ones_are_refused() {
+    use datagen::plan::SceneSelection;
+    assert_eq!(SceneSelection::parse_range("1-4"), Ok((1, 4)));
+    assert_eq!(SceneSelection::parse_range("3"), Ok((3, 3)));
+    for bad in ["0-2", "4-1", "a-b", "", "1-"] {
+        assert!(SceneSelection::parse_range(bad).is_err(), "{bad}");
+    }
 }

@@ -301,6 +301,7 @@ impl SampleRenderer for StandIn {
 fn options() -> RenderOptions {
     RenderOptions {
         shard: Shard::ALL,
+        selection: Default::default(),
         threads: 1,
         progress: false,
         state_interval: 60.0,

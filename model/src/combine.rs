@@ -4,7 +4,8 @@
 //!
 //! rewritten as Σ_j [Σ_i w^j_i (ỹ_i − z̃^j_i) + (Σ_i w^j_i) z̃^j_c] / W_c, so the window gather
 //! is needed only for the differences d^j = ỹ − z̃^j. The gather is `unfold4d` on an explicitly
-//! zero-padded input: with padding in the unfold options Burn would run a one-hot convolution.
+//! zero-padded input (with padding in the unfold options Burn would run a one-hot convolution),
+//! one window row at a time so that no buffer holds the whole window of every pixel.
 //! Window entries outside the image get zero weight and W_c is the sum of the remaining ones,
 //! so the weights are renormalised over the pixels that exist.
 //!
@@ -158,19 +159,12 @@ pub fn combine_guarded_block(
         [height + 2 * r - top - bottom, width + 2 * r - left - right],
         "levels must cover the weights' pixels grown by the window reach less the margins"
     );
-    let area = window * window;
     let pixels = height * width;
 
     let y = levels.clone().narrow(1, 0, 3);
     let z = levels.narrow(1, 3, 3 * pairs);
     let differences = y.repeat_dim(1, pairs) - z.clone();
     let padded = differences.pad([(top, bottom), (left, right)], PadMode::Constant(0.0));
-    let gathered = unfold4d(
-        padded,
-        [window, window],
-        UnfoldOptions::new([1, 1], [0, 0], [1, 1]),
-    )
-    .reshape([batch, pairs, 3, area, pixels]);
     // z̃ at the block's own pixels (the window centres).
     let z = if margins == [r; 4] {
         z
@@ -182,7 +176,25 @@ pub fn combine_guarded_block(
     let w = masked_weights(weights, window, pairs, margins);
     let weight_sums = w.clone().sum_dim(3); // [B, 4, 1, 1, HW]
     let squares = guard.as_ref().map(|_| (w.clone() * w.clone()).sum_dim(3));
-    let window_term = (gathered * w).sum_dim(3); // [B, 4, 3, 1, HW]
+    // Σ_i w^j_i d^j_i, gathered one window row at a time: the whole window at once is
+    // 3·(m−1)·|Ω| floats per pixel (4 332 for the 19×19 window) in one buffer, which exceeds
+    // a GPU's largest buffer (≈ 2 GB) at a training batch of 64 patches of 64²; a row is
+    // 1/window of that.
+    let mut window_term: Option<Tensor<5>> = None;
+    for row in 0..window {
+        let gathered = unfold4d(
+            padded.clone().narrow(2, row, height),
+            [1, window],
+            UnfoldOptions::new([1, 1], [0, 0], [1, 1]),
+        )
+        .reshape([batch, pairs, 3, window, pixels]);
+        let term = (gathered * w.clone().narrow(3, row * window, window)).sum_dim(3);
+        window_term = Some(match window_term {
+            None => term,
+            Some(sum) => sum + term,
+        });
+    }
+    let window_term = window_term.expect("the window has at least one row"); // [B, 4, 3, 1, HW]
     let centre_term = weight_sums.clone() * z.clone();
     let numerator = (window_term + centre_term).sum_dim(1); // [B, 1, 3, 1, HW]
     let normaliser = weight_sums.clone().sum_dim(1); // [B, 1, 1, 1, HW]

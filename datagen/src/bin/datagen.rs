@@ -11,7 +11,7 @@ use datagen::evaluation_reference::{evaluation_references, EvaluationOptions};
 use datagen::families::{generate, scene_list};
 use datagen::jobs::{check_external_scenes, render_dataset, RenderOptions};
 use datagen::manifest::{assemble_manifest, Manifest};
-use datagen::plan::{Plan, Shard, Split};
+use datagen::plan::{Plan, SceneSelection, Shard, Split};
 use datagen::reference_noise::{markdown, noise_table, TABLE_FILE};
 use datagen::scene::write_scene_files;
 use datagen::sppm_backend::SppmBackend;
@@ -60,6 +60,20 @@ enum Command {
         /// or JOB_COMPLETION_INDEX/DATAGEN_SHARD_COUNT when set, else the whole dataset.
         #[arg(long, value_parser = Shard::parse)]
         shard: Option<Shard>,
+        /// Only the scenes of these splits (comma-separated: train, val, test).
+        #[arg(long, value_delimiter = ',')]
+        splits: Vec<Split>,
+        /// Only the scenes of these families (comma-separated, e.g. lamp,tabletop).
+        #[arg(long, value_delimiter = ',')]
+        families: Vec<String>,
+        /// Only these scene ids (comma-separated, e.g. 007-room).
+        #[arg(long, value_delimiter = ',')]
+        scenes: Vec<String>,
+        /// Only the A-th to B-th scene of each family in each split (1-based, inclusive, e.g.
+        /// 1-4): a slice of a dataset balanced across its families. Slices render the same
+        /// files as the whole dataset, so later slices add to earlier ones.
+        #[arg(long, value_name = "A-B", value_parser = SceneSelection::parse_range)]
+        per_family: Option<(usize, usize)>,
         /// Worker threads per render (0 = all cores; output does not depend on it).
         #[arg(long, default_value_t = 0)]
         threads: usize,
@@ -266,6 +280,10 @@ fn run(cli: Cli) -> Result<i32> {
             config,
             out,
             shard,
+            splits,
+            families,
+            scenes,
+            per_family,
             threads,
             state_interval,
             quiet,
@@ -276,6 +294,12 @@ fn run(cli: Cli) -> Result<i32> {
             let shard = shard.or(env_shard).unwrap_or(Shard::ALL);
             let options = RenderOptions {
                 shard,
+                selection: SceneSelection {
+                    splits,
+                    families,
+                    scenes,
+                    per_family,
+                },
                 threads,
                 progress: !quiet,
                 state_interval: positive_interval(state_interval)?,
