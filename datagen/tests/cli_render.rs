@@ -267,6 +267,22 @@ fn average_references_with_the_real_renderer() {
     .output()
     .unwrap());
     assert!(image::open(&sheet).unwrap().width() > 16);
+    // `--evaluation` shows converged evaluation references where there are; this dataset has
+    // none, so the training references, the same sheet.
+    let evaluation_sheet = dir.join("sheet-evaluation.png");
+    ok(datagen(&[
+        "contact-sheet",
+        data.to_str().unwrap(),
+        "--out",
+        evaluation_sheet.to_str().unwrap(),
+        "--evaluation",
+    ])
+    .output()
+    .unwrap());
+    assert_eq!(
+        std::fs::read(&sheet).unwrap(),
+        std::fs::read(&evaluation_sheet).unwrap()
+    );
     // The same directory under a changed config: every job is redone, with a note saying so
     // before the work starts; afterwards the old config no longer matches the records, and
     // `manifest` says that rather than that jobs are unfinished.

@@ -105,6 +105,11 @@ pub struct ExplicitScene {
     /// `<default>` overrides of the scene file, as `render -D name=value`.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub defines: BTreeMap<String, String>,
+    /// The reference's own noise (relMSE of the image against its expectation) where it was
+    /// measured (`scenes/heldout` lists it): the report then warns where it is not small
+    /// against the errors measured with it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_noise: Option<f64>,
 }
 
 /// The scenes of one split of a dataset written by `datagen`.
@@ -202,6 +207,14 @@ impl EvalConfig {
         if self.limit == Some(0) {
             bail!("limit (--limit) must be at least 1");
         }
+        for s in &self.scenes {
+            if let Some(noise) = s.reference_noise.filter(|n| !(n.is_finite() && *n >= 0.0)) {
+                bail!(
+                    "[[scenes]] {}: reference_noise must be a finite relMSE ≥ 0, got {noise}",
+                    s.xml.display()
+                );
+            }
+        }
         if self.dataset.as_ref().is_some_and(|d| d.limit == Some(0)) {
             bail!("[dataset] limit must be at least 1");
         }
@@ -240,7 +253,7 @@ impl EvalConfig {
                 xml: s.xml.clone(),
                 reference: s.reference.clone(),
                 defines: s.defines.clone().into_iter().collect(),
-                reference_noise: None,
+                reference_noise: s.reference_noise,
             });
         }
         if let Some(d) = &self.dataset {
@@ -445,6 +458,22 @@ mod tests {
             .is_err());
         let typo = format!("{base}[ablation]\ndual_model = \"runs/d\"\n");
         assert!(toml::from_str::<EvalConfig>(&typo).is_err());
+        // A scene's recorded reference noise: taken, and refused unless a finite relMSE ≥ 0.
+        let noisy = |v: &str| format!("{base}reference_noise = {v}\n");
+        let c: EvalConfig = toml::from_str(&noisy("2.5e-4")).unwrap();
+        c.validate().unwrap();
+        assert_eq!(c.scenes[0].reference_noise, Some(2.5e-4));
+        for bad in ["-1.0", "nan", "inf"] {
+            let e = toml::from_str::<EvalConfig>(&noisy(bad))
+                .unwrap()
+                .validate()
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("a/b/scene.xml") && e.contains("reference_noise"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -43,6 +43,10 @@ run options (defaults: the paper preset on the `small` dataset):
   --out DIR          result folder (default $OUT, else out/gpu-run)
   --preset P         network preset to time and train (default paper)
   --datagen-config F dataset config rendered on the node (default configs/datagen/small.toml)
+  --datagen-args "…" more `datagen render` options, e.g. "--splits train --per-family 1-4": a
+                     slice of `large` (all ten families) rendered on the node's CPU cores, its
+                     references too (pack with --seed-data none; `--config-extra` a file with
+                     `val_split = ""`, as a slice has no validation scenes)
   --patch N --stride N --batch N --lr X   training patches and Adam (default 64, 32, 16, 1e-4)
   --config-extra F   TOML lines appended to the training config the run writes (e.g.
                      `screen_levels` to match --init weights trained with them); a key the run
@@ -145,13 +149,14 @@ elapsed() { echo $(( $(date +%s) - START )); }
 run() {
     local budget=500 out="${OUT:-out/gpu-run}" preset=paper dgconfig=configs/datagen/small.toml
     local patch=64 stride=32 batch=16 lr=1e-4 bench_batches="8 16 28" bench_steps=5
-    local bench_patch=64 infer_size=1280x720 reserve=75 extra="" infer_bench=1
+    local bench_patch=64 infer_size=1280x720 reserve=75 extra="" infer_bench=1 dgargs=""
     while [ $# -gt 0 ]; do
         case "$1" in
             --budget) budget="$2"; shift 2 ;;
             --out) out="$2"; shift 2 ;;
             --preset) preset="$2"; shift 2 ;;
             --datagen-config) dgconfig="$2"; shift 2 ;;
+            --datagen-args) dgargs="$2"; shift 2 ;;
             --patch) patch="$2"; shift 2 ;;
             --stride) stride="$2"; shift 2 ;;
             --batch) batch="$2"; shift 2 ;;
@@ -235,10 +240,11 @@ run() {
     local data="$work/data" datagen_s
     mkdir -p "$data"
     [ -d "$PACK/data" ] && cp -r "$PACK/data/." "$data/"
-    echo "== datagen render --config $dgconfig ($(elapsed) s)"
+    echo "== datagen render --config $dgconfig $dgargs ($(elapsed) s)"
     local t0
     t0=$(date +%s)
-    "$bin/datagen" render --config "$dgconfig" --out "$data" --quiet
+    # shellcheck disable=SC2086 # $dgargs is a list of options
+    "$bin/datagen" render --config "$dgconfig" --out "$data" --quiet $dgargs
     datagen_s=$(( $(date +%s) - t0 ))
     echo "datagen: ${datagen_s} s"
 

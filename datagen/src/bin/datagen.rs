@@ -199,6 +199,10 @@ enum Command {
         /// Tile width in pixels (at least 8).
         #[arg(long, default_value_t = 160, value_parser = clap::value_parser!(u16).range(8..))]
         tile: u16,
+        /// Show each scene's converged evaluation reference where the manifest lists one
+        /// (`datagen evaluation-references`) instead of its training reference.
+        #[arg(long)]
+        evaluation: bool,
     },
 }
 
@@ -292,6 +296,10 @@ fn run(cli: Cli) -> Result<i32> {
             let env_shard =
                 Shard::from_env(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?;
             let shard = shard.or(env_shard).unwrap_or(Shard::ALL);
+            let selected = !(splits.is_empty()
+                && families.is_empty()
+                && scenes.is_empty()
+                && per_family.is_none());
             let options = RenderOptions {
                 shard,
                 selection: SceneSelection {
@@ -315,6 +323,9 @@ fn run(cli: Cli) -> Result<i32> {
                 hms(report.elapsed),
                 if report.manifest_complete {
                     "complete"
+                } else if selected {
+                    "waiting for the rest of the dataset (`datagen manifest --partial` lists the \
+                     finished scenes)"
                 } else {
                     "waiting for other shards"
                 }
@@ -560,6 +571,7 @@ fn run(cli: Cli) -> Result<i32> {
             out,
             columns,
             tile,
+            evaluation,
         } => {
             let is_png = out
                 .extension()
@@ -574,7 +586,13 @@ fn run(cli: Cli) -> Result<i32> {
             let files: Vec<(String, PathBuf)> = manifest
                 .scenes
                 .iter()
-                .map(|s| (s.id.clone(), dir.join(&s.reference)))
+                .map(|s| {
+                    let path = match (&s.evaluation_reference, evaluation) {
+                        (Some(e), true) => &e.path,
+                        _ => &s.reference,
+                    };
+                    (s.id.clone(), dir.join(path))
+                })
                 .collect();
             let layout = SheetLayout {
                 columns: usize::from(columns),

@@ -1,0 +1,149 @@
+#!/usr/bin/env python3
+"""Freeze a dataset's evaluation scenes into a committed held-out set.
+
+Copies, for every scene of the given splits that has a converged evaluation reference
+(`datagen evaluation-references`), its generated scene folder (XML, PLY meshes, textures) and
+that reference into OUT/<scene id>/ (scene.xml, reference.exr), and writes OUT/scenes.json
+(provenance per scene) and the `[[scenes]]` tables of the evaluate configs named by --config.
+
+Why: the machines this project renders on are wiped between sessions, and converging these
+references takes hours; a frozen copy lets any checkout run the equal-time study on scenes no
+network was trained on in minutes. The copy is frozen on purpose: the XML beside each reference
+is the one it was rendered from, whatever later changes to the scene generators do.
+
+    python3 scripts/freeze_heldout.py data/large scenes/heldout --splits test \
+        --config configs/eval/heldout.toml \
+        --config configs/eval/heldout-families.toml=lamp,tabletop,exterior,material,textured
+
+A config is rewritten from the line `# --- scenes (scripts/freeze_heldout.py) ---` on; the lines
+above it (model, passes, peers, ...) are kept, so it must exist and hold that line.
+"""
+
+import argparse
+import hashlib
+import json
+import shutil
+import sys
+from pathlib import Path
+
+MARKER = "# --- scenes (scripts/freeze_heldout.py) ---"
+
+
+def sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def fail(message: str) -> None:
+    print(f"freeze_heldout: error: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("dataset", type=Path, help="dataset directory (with manifest.json)")
+    ap.add_argument("out", type=Path, help="folder of the frozen set, e.g. scenes/heldout")
+    ap.add_argument("--splits", default="test", help="comma-separated splits (default: test)")
+    ap.add_argument(
+        "--config",
+        action="append",
+        default=[],
+        help="evaluate config to write the scenes into: PATH or PATH=family,family",
+    )
+    args = ap.parse_args()
+
+    manifest_path = args.dataset / "manifest.json"
+    try:
+        manifest = json.loads(manifest_path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        fail(f"{manifest_path}: {e}")
+    splits = set(args.splits.split(","))
+    config_name = manifest.get("config_name", manifest.get("name", "?"))
+    frozen = []
+    for scene in manifest["scenes"]:
+        if scene["split"] not in splits:
+            continue
+        ev = scene.get("evaluation_reference")
+        if ev is None:
+            print(f"skipped {scene['id']}: no evaluation reference", file=sys.stderr)
+            continue
+        src_ref = args.dataset / ev["path"]
+        if sha256(src_ref) != ev["sha256"]:
+            fail(f"{src_ref}: checksum differs from the manifest's")
+        src_dir = (args.dataset / scene["xml"]).parent
+        dst = args.out / scene["id"]
+        if dst.exists():
+            shutil.rmtree(dst)
+        shutil.copytree(src_dir, dst)
+        shutil.copyfile(src_ref, dst / "reference.exr")
+        size = scene.get("size") or [manifest["width"], manifest["height"]]
+        frozen.append(
+            {
+                "id": scene["id"],
+                "family": scene["family"],
+                "split": scene["split"],
+                "regime": scene.get("regime"),
+                "size": size,
+                "reference_sha256": ev["sha256"],
+                "reference_passes": ev["passes"],
+                "reference_photons_per_pass": ev["photons"],
+                "reference_runs": len(ev["seeds"]),
+                "reference_noise": ev["noise"],
+                "input_relmse": ev["input_relmse"],
+                "converged": ev["converged"],
+                "seconds": ev["seconds"],
+            }
+        )
+    if not frozen:
+        fail(f"{manifest_path}: no scene of the splits {sorted(splits)} has an evaluation reference")
+    frozen.sort(key=lambda s: s["id"])
+    record = {
+        "source": {
+            "config": config_name,
+            "config_sha256": manifest.get("config_sha256"),
+            "splits": sorted(splits),
+        },
+        "scenes": frozen,
+    }
+    (args.out / "scenes.json").write_text(json.dumps(record, indent=1) + "\n")
+
+    for spec in args.config:
+        path, _, fams = spec.partition("=")
+        families = set(fams.split(",")) if fams else None
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as e:
+            fail(f"{path}: {e}")
+        if MARKER not in text:
+            fail(f"{path}: no line `{MARKER}` to write the scenes after")
+        head = text[: text.index(MARKER)] + MARKER + "\n"
+        chosen = [s for s in frozen if families is None or s["family"] in families]
+        if families is not None:
+            missing = families - {s["family"] for s in chosen}
+            if missing:
+                fail(f"{path}: no frozen scene of the families {sorted(missing)}")
+        body = []
+        for s in chosen:
+            d = args.out / s["id"]
+            body.append(
+                "\n[[scenes]]\n"
+                f'name = "{s["id"]}"\n'
+                f'xml = "{d / "scene.xml"}"\n'
+                f'reference = "{d / "reference.exr"}"\n'
+                f'reference_noise = {s["reference_noise"]:.6e}\n'
+            )
+        path.write_text(head + "".join(body))
+        print(f"{path}: {len(chosen)} scenes")
+    flagged = [s["id"] for s in frozen if not s["converged"]]
+    print(
+        f"{args.out}: {len(frozen)} scenes frozen"
+        + (f"; flagged (noise above its target): {', '.join(flagged)}" if flagged else "")
+    )
+
+
+if __name__ == "__main__":
+    main()
