@@ -48,6 +48,14 @@ def main() -> None:
     ap.add_argument("out", type=Path, help="folder of the frozen set, e.g. scenes/heldout")
     ap.add_argument("--splits", default="test", help="comma-separated splits (default: test)")
     ap.add_argument(
+        "--max-noise",
+        type=float,
+        default=0.25,
+        help="freeze only references whose noise is at most this fraction of the input error "
+        "they were converged against (default 0.25; their target is 0.1, flagged ones may be "
+        "far above it and would measure their own noise)",
+    )
+    ap.add_argument(
         "--config",
         action="append",
         default=[],
@@ -70,6 +78,14 @@ def main() -> None:
         if ev is None:
             print(f"skipped {scene['id']}: no evaluation reference", file=sys.stderr)
             continue
+        fraction = ev["noise"] / ev["input_relmse"]
+        if not fraction <= args.max_noise:
+            print(
+                f"skipped {scene['id']}: reference noise {fraction:.2f} x its input error "
+                f"(above --max-noise {args.max_noise})",
+                file=sys.stderr,
+            )
+            continue
         src_ref = args.dataset / ev["path"]
         if sha256(src_ref) != ev["sha256"]:
             fail(f"{src_ref}: checksum differs from the manifest's")
@@ -77,6 +93,7 @@ def main() -> None:
         dst = args.out / scene["id"]
         if dst.exists():
             shutil.rmtree(dst)
+        args.out.mkdir(parents=True, exist_ok=True)
         shutil.copytree(src_dir, dst)
         shutil.copyfile(src_ref, dst / "reference.exr")
         size = scene.get("size") or [manifest["width"], manifest["height"]]
@@ -98,17 +115,20 @@ def main() -> None:
             }
         )
     if not frozen:
-        fail(f"{manifest_path}: no scene of the splits {sorted(splits)} has an evaluation reference")
+        fail(f"{manifest_path}: no scene of the splits {sorted(splits)} has a usable evaluation reference")
+    source = {"config": config_name, "config_sha256": manifest.get("config_sha256")}
+    # Scenes frozen by earlier calls stay (a later session converges more of them), but only
+    # from the same dataset config: one set, one source.
+    record_path = args.out / "scenes.json"
+    if record_path.exists():
+        earlier = json.loads(record_path.read_text())
+        if earlier["source"] != source:
+            fail(f"{record_path}: frozen from {earlier['source']}, not {source}")
+        now = {s["id"] for s in frozen}
+        frozen += [s for s in earlier["scenes"] if s["id"] not in now]
     frozen.sort(key=lambda s: s["id"])
-    record = {
-        "source": {
-            "config": config_name,
-            "config_sha256": manifest.get("config_sha256"),
-            "splits": sorted(splits),
-        },
-        "scenes": frozen,
-    }
-    (args.out / "scenes.json").write_text(json.dumps(record, indent=1) + "\n")
+    record = {"source": source, "scenes": frozen}
+    record_path.write_text(json.dumps(record, indent=1) + "\n")
 
     for spec in args.config:
         path, _, fams = spec.partition("=")
@@ -122,10 +142,12 @@ def main() -> None:
             fail(f"{path}: no line `{MARKER}` to write the scenes after")
         head = text[: text.index(MARKER)] + MARKER + "\n"
         chosen = [s for s in frozen if families is None or s["family"] in families]
+        if not chosen:
+            fail(f"{path}: no frozen scene of the families {sorted(families)}")
         if families is not None:
             missing = families - {s["family"] for s in chosen}
             if missing:
-                fail(f"{path}: no frozen scene of the families {sorted(missing)}")
+                print(f"{path}: no frozen scene of the families {sorted(missing)}", file=sys.stderr)
         body = []
         for s in chosen:
             d = args.out / s["id"]
@@ -140,7 +162,7 @@ def main() -> None:
         print(f"{path}: {len(chosen)} scenes")
     flagged = [s["id"] for s in frozen if not s["converged"]]
     print(
-        f"{args.out}: {len(frozen)} scenes frozen"
+        f"{args.out}: {len(frozen)} scenes in the set"
         + (f"; flagged (noise above its target): {', '.join(flagged)}" if flagged else "")
     )
 

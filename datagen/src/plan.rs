@@ -265,8 +265,14 @@ fn family_turns(list: &[(String, Family)], splits: &[Split]) -> Vec<usize> {
 /// scenes (train/val/test), side, photons per pixel per pass (min–max), and the photons and eye
 /// passes (passes × pixels, in 128² units) of all input runs and of all reference runs.
 pub fn summary(plan: &Plan) -> String {
+    summary_of(plan, &vec![true; plan.scenes.len()])
+}
+
+/// [`summary`] of the scenes `keep` marks ([`SceneSelection::scenes_of`]).
+pub fn summary_of(plan: &Plan, keep: &[bool]) -> String {
+    let kept: Vec<&ScenePlan> = plan.scenes.iter().filter(|s| keep[s.index]).collect();
     let mut names: Vec<Option<String>> = Vec::new();
-    for s in &plan.scenes {
+    for s in &kept {
         if !names.contains(&s.render.regime) {
             names.push(s.render.regime.clone());
         }
@@ -278,9 +284,9 @@ pub fn summary(plan: &Plan) -> String {
     );
     let mut totals = [0.0f64; 4];
     for name in &names {
-        let scenes: Vec<&ScenePlan> = plan
-            .scenes
+        let scenes: Vec<&ScenePlan> = kept
             .iter()
+            .copied()
             .filter(|s| &s.render.regime == name)
             .collect();
         let count = |split: Split| scenes.iter().filter(|s| s.split == split).count();
@@ -325,7 +331,7 @@ pub fn summary(plan: &Plan) -> String {
     }
     out.push_str(&format!(
         "| all | {} | | | {:.3e} | {:.3e} | {:.3e} | {:.3e} |\n",
-        plan.scenes.len(),
+        kept.len(),
         totals[0],
         totals[1],
         totals[2],

@@ -400,4 +400,22 @@ fn the_plan_summary_counts_scenes_and_work_per_regime() {
     let eye: f64 = wide[7].parse().unwrap();
     assert!((eye - 10.0 * 2.0 * 576.0 / 16384.0).abs() < 1e-3, "{eye}");
     assert!(row("all")[2] == "25");
+
+    // `plan --per-family 1`: one scene of each family in each split, the rows of those only.
+    let selection = datagen::plan::SceneSelection {
+        per_family: Some((1, 1)),
+        ..Default::default()
+    };
+    let keep = selection.scenes_of(&plan).unwrap();
+    let firsts = keep.iter().filter(|&&k| k).count();
+    assert!(firsts >= 1 && firsts < 25, "{firsts}");
+    let table = datagen::plan::summary_of(&plan, &keep);
+    let all: Vec<&str> = table
+        .lines()
+        .find(|l| l.starts_with("| all |"))
+        .unwrap()
+        .split('|')
+        .map(str::trim)
+        .collect();
+    assert_eq!(all[2], firsts.to_string(), "{table}");
 }

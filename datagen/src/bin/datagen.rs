@@ -46,6 +46,8 @@ enum Command {
         /// Dataset config (TOML).
         #[arg(long)]
         config: PathBuf,
+        #[command(flatten)]
+        selection: SelectionArgs,
     },
     /// Render references and input bundles into OUT (resumable; shards share OUT).
     #[command(allow_negative_numbers = true)]
@@ -60,20 +62,8 @@ enum Command {
         /// or JOB_COMPLETION_INDEX/DATAGEN_SHARD_COUNT when set, else the whole dataset.
         #[arg(long, value_parser = Shard::parse)]
         shard: Option<Shard>,
-        /// Only the scenes of these splits (comma-separated: train, val, test).
-        #[arg(long, value_delimiter = ',')]
-        splits: Vec<Split>,
-        /// Only the scenes of these families (comma-separated, e.g. lamp,tabletop).
-        #[arg(long, value_delimiter = ',')]
-        families: Vec<String>,
-        /// Only these scene ids (comma-separated, e.g. 007-room).
-        #[arg(long, value_delimiter = ',')]
-        scenes: Vec<String>,
-        /// Only the A-th to B-th scene of each family in each split (1-based, inclusive, e.g.
-        /// 1-4): a slice of a dataset balanced across its families. Slices render the same
-        /// files as the whole dataset, so later slices add to earlier ones.
-        #[arg(long, value_name = "A-B", value_parser = SceneSelection::parse_range)]
-        per_family: Option<(usize, usize)>,
+        #[command(flatten)]
+        selection: SelectionArgs,
         /// Worker threads per render (0 = all cores; output does not depend on it).
         #[arg(long, default_value_t = 0)]
         threads: usize,
@@ -206,6 +196,42 @@ enum Command {
     },
 }
 
+/// Which scenes of a config a command takes (all criteria must hold; none given: all).
+#[derive(Debug, clap::Args)]
+struct SelectionArgs {
+    /// Only the scenes of these splits (comma-separated: train, val, test).
+    #[arg(long, value_delimiter = ',')]
+    splits: Vec<Split>,
+    /// Only the scenes of these families (comma-separated, e.g. lamp,tabletop).
+    #[arg(long, value_delimiter = ',')]
+    families: Vec<String>,
+    /// Only these scene ids (comma-separated, e.g. 007-room).
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// Only the A-th to B-th scene of each family in each split (1-based, inclusive, e.g.
+    /// 1-4): a slice of a dataset balanced across its families. Slices render the same files
+    /// as the whole dataset, so later slices add to earlier ones.
+    #[arg(long, value_name = "A-B", value_parser = SceneSelection::parse_range)]
+    per_family: Option<(usize, usize)>,
+}
+
+impl SelectionArgs {
+    /// The selection, and whether it leaves anything out.
+    fn into_selection(self) -> (SceneSelection, bool) {
+        let selected = !(self.splits.is_empty()
+            && self.families.is_empty()
+            && self.scenes.is_empty()
+            && self.per_family.is_none());
+        let selection = SceneSelection {
+            splits: self.splits,
+            families: self.families,
+            scenes: self.scenes,
+            per_family: self.per_family,
+        };
+        (selection, selected)
+    }
+}
+
 fn main() {
     cli_output::install();
     match run(Cli::parse()) {
@@ -275,19 +301,22 @@ fn run(cli: Cli) -> Result<i32> {
             }
             Ok(0)
         }
-        Command::Plan { config } => {
+        Command::Plan { config, selection } => {
             let config = Config::load(&config)?;
-            print!("{}", datagen::plan::summary(&Plan::new(&config)));
+            let plan = Plan::new(&config);
+            let keep = selection
+                .into_selection()
+                .0
+                .scenes_of(&plan)
+                .map_err(anyhow::Error::msg)?;
+            print!("{}", datagen::plan::summary_of(&plan, &keep));
             Ok(0)
         }
         Command::Render {
             config,
             out,
             shard,
-            splits,
-            families,
-            scenes,
-            per_family,
+            selection,
             threads,
             state_interval,
             quiet,
@@ -296,18 +325,10 @@ fn run(cli: Cli) -> Result<i32> {
             let env_shard =
                 Shard::from_env(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?;
             let shard = shard.or(env_shard).unwrap_or(Shard::ALL);
-            let selected = !(splits.is_empty()
-                && families.is_empty()
-                && scenes.is_empty()
-                && per_family.is_none());
+            let (selection, selected) = selection.into_selection();
             let options = RenderOptions {
                 shard,
-                selection: SceneSelection {
-                    splits,
-                    families,
-                    scenes,
-                    per_family,
-                },
+                selection,
                 threads,
                 progress: !quiet,
                 state_interval: positive_interval(state_interval)?,
