@@ -12,8 +12,8 @@ network was trained on in minutes. The copy is frozen on purpose: the XML beside
 is the one it was rendered from, whatever later changes to the scene generators do.
 
     python3 scripts/freeze_heldout.py data/large scenes/heldout --splits test \
-        --config configs/eval/heldout.toml \
-        --config configs/eval/heldout-families.toml=lamp,tabletop,exterior,material,textured
+        --config configs/eval/heldout-families.toml=lamp,tabletop,exterior,material,textured \
+        --config configs/eval/paper-heldout-families.toml=lamp,tabletop,exterior,material,textured
 
 A config is rewritten from the line `# --- scenes (scripts/freeze_heldout.py) ---` on; the lines
 above it (model, passes, peers, ...) are kept, so it must exist and hold that line.
