@@ -408,7 +408,7 @@ fn the_plan_summary_counts_scenes_and_work_per_regime() {
     };
     let keep = selection.scenes_of(&plan).unwrap();
     let firsts = keep.iter().filter(|&&k| k).count();
-    assert!(firsts >= 1 && firsts < 25, "{firsts}");
+    assert!((1..25).contains(&firsts), "{firsts}");
     let table = datagen::plan::summary_of(&plan, &keep);
     let all: Vec<&str> = table
         .lines()
