@@ -68,6 +68,14 @@ def main() -> None:
         manifest = json.loads(manifest_path.read_text())
     except (OSError, json.JSONDecodeError) as e:
         fail(f"{manifest_path}: {e}")
+    # Every config is checked before anything is copied: a bad one leaves the set as it was.
+    for spec in args.config:
+        path = Path(spec.partition("=")[0])
+        try:
+            if MARKER not in path.read_text():
+                fail(f"{path}: no line `{MARKER}` to write the scenes after")
+        except OSError as e:
+            fail(f"{path}: {e}")
     splits = set(args.splits.split(","))
     config_name = manifest.get("config_name", manifest.get("name", "?"))
     frozen = []
