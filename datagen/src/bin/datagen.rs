@@ -216,19 +216,13 @@ struct SelectionArgs {
 }
 
 impl SelectionArgs {
-    /// The selection, and whether it leaves anything out.
-    fn into_selection(self) -> (SceneSelection, bool) {
-        let selected = !(self.splits.is_empty()
-            && self.families.is_empty()
-            && self.scenes.is_empty()
-            && self.per_family.is_none());
-        let selection = SceneSelection {
+    fn into_selection(self) -> SceneSelection {
+        SceneSelection {
             splits: self.splits,
             families: self.families,
             scenes: self.scenes,
             per_family: self.per_family,
-        };
-        (selection, selected)
+        }
     }
 }
 
@@ -306,7 +300,6 @@ fn run(cli: Cli) -> Result<i32> {
             let plan = Plan::new(&config);
             let keep = selection
                 .into_selection()
-                .0
                 .scenes_of(&plan)
                 .map_err(anyhow::Error::msg)?;
             print!("{}", datagen::plan::summary_of(&plan, &keep));
@@ -325,7 +318,8 @@ fn run(cli: Cli) -> Result<i32> {
             let env_shard =
                 Shard::from_env(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?;
             let shard = shard.or(env_shard).unwrap_or(Shard::ALL);
-            let (selection, selected) = selection.into_selection();
+            let selection = selection.into_selection();
+            let selected = selection != SceneSelection::default();
             let options = RenderOptions {
                 shard,
                 selection,
