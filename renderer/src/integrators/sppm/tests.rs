@@ -340,11 +340,7 @@ fn both_schedules_converge_at_a_light_edge_from_64_to_4096_passes() {
         };
         let bundles = render_checkpoints(&scene, &s, &checkpoints);
         let lit_left = lit_side(&bundles[3].levels[0]);
-        let levels = match mode {
-            SppmMode::MultiLevel => LEVELS,
-            SppmMode::Single => 1,
-        };
-        for l in 0..levels {
+        for l in 0..mode.radius_levels() {
             let errors: Vec<f64> = bundles
                 .iter()
                 .map(|b| error(&b.levels[l], lit_left))
