@@ -720,13 +720,14 @@ mod tests {
         assert_eq!(serde_json::from_str::<ModelConfig>(&text).unwrap(), dual);
     }
 
-    /// The shipped model.json (no `unet` key) loads as the `small` preset with its screen
-    /// levels, a plain stack, and is written back as it is; a model.json written before screen
+    /// The shipped `small` weights' model.json (no `unet` key) loads as the `small` preset with
+    /// its screen levels, a plain stack, and is written back as it is; the default weights'
+    /// model.json loads as the `unet` preset with the same screen levels; a model.json written before screen
     /// levels existed loads without them and is written back without the key; a U-Net's config
     /// round-trips, and a misspelt key inside `unet` is refused like one outside it.
     #[test]
     fn model_json_files_without_unet_load_as_before() {
-        let shipped = include_str!("../../models/default/model.json");
+        let shipped = include_str!("../../models/small/model.json");
         let config: ModelConfig = serde_json::from_str(shipped).unwrap();
         assert_eq!(
             ModelConfig {
@@ -756,6 +757,17 @@ mod tests {
 
         let unet = ModelConfig::preset(Preset::UNet);
         unet.validate().unwrap();
+        let default = include_str!("../../models/default/model.json");
+        let config: ModelConfig = serde_json::from_str(default).unwrap();
+        config.validate().unwrap();
+        assert_eq!(
+            ModelConfig {
+                screen_levels: Vec::new(),
+                ..config.clone()
+            },
+            unet
+        );
+        assert_eq!(config.screen_levels.len(), 1);
         let text = serde_json::to_string(&unet).unwrap();
         assert!(text.contains(r#""preset":"unet""#), "{text}");
         assert!(
