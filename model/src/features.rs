@@ -240,12 +240,35 @@ pub fn pack_with(
         return pack(bundle);
     }
     // Shapes and values first: the filter reads the layers as the packing would.
-    pack(bundle)?;
-    pack(&crate::screen_filter::apply(bundle, screen))
+    check_bundle(bundle)?;
+    let filtered = crate::screen_filter::filtered(bundle, screen);
+    // Finite inputs can still overflow float32 in the filter's sums (values near f32::MAX).
+    for f in &filtered {
+        let name = bundle::LEVEL_NAMES[f.slot];
+        let bad = |i: usize, channel: String| FeatureError::NonFinite {
+            layer: format!("{name} (screen-filtered)"),
+            channel,
+            x: i % bundle.meta.width as usize,
+            y: i / bundle.meta.width as usize,
+        };
+        if let Some(i) = f.colour.data.iter().position(|v| !v.is_finite()) {
+            return Err(bad(i / 3, ["R", "G", "B"][i % 3].into()));
+        }
+        if let Some(i) = f.variance.iter().position(|v| !v.is_finite()) {
+            return Err(bad(i, "variance".into()));
+        }
+    }
+    Ok(pack_checked(bundle, &filtered))
 }
 
 /// Packs a bundle into network features and raw colours, rejecting bad shapes and NaN/Inf.
 pub fn pack(bundle: &Bundle) -> Result<PackedImage, FeatureError> {
+    check_bundle(bundle)?;
+    Ok(pack_checked(bundle, &[]))
+}
+
+/// Rejects a bundle whose layers have the wrong shape or hold NaN/Inf.
+fn check_bundle(bundle: &Bundle) -> Result<(), FeatureError> {
     let width = bundle.meta.width as usize;
     let height = bundle.meta.height as usize;
     if bundle.levels.len() != LEVELS {
@@ -275,41 +298,113 @@ pub fn pack(bundle: &Bundle) -> Result<PackedImage, FeatureError> {
             y,
         });
     }
+    Ok(())
+}
 
+/// How a packed plane is made from its source channel.
+#[derive(Clone, Copy)]
+enum Transform {
+    Identity,
+    Log,
+    /// max(d, 0) · scale (depth over the image's largest depth).
+    Scale(f32),
+}
+
+/// Where a packed plane comes from: a channel of an interleaved image, or a plane.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Channel(&'a Image, usize),
+    Plane(&'a [f32]),
+}
+
+/// [`pack`] of a checked bundle with `screen` levels in place of its own. Every plane is
+/// independent, so the planes are filled in parallel (the same values on any thread count).
+fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel]) -> PackedImage {
+    use rayon::prelude::*;
+    let width = bundle.meta.width as usize;
+    let height = bundle.meta.height as usize;
     let pixels = width * height;
-    let mut levels = Vec::with_capacity(COLOUR_CHANNELS * pixels);
-    for level in &bundle.levels {
-        push_planes(&mut levels, level, |v| v);
+    fn channels(image: &Image, t: Transform) -> impl Iterator<Item = (Source<'_>, Transform)> {
+        (0..image.channels).map(move |c| (Source::Channel(image, c), t))
     }
-    let mut features = Vec::with_capacity(INPUT_CHANNELS * pixels);
-    for level in &bundle.levels {
-        push_planes(&mut features, level, log_transform);
-    }
-    push_planes(&mut features, &bundle.variance, log_transform);
-    push_planes(&mut features, &bundle.albedo, |v| v);
-    push_planes(&mut features, &bundle.normal, |v| v);
-    let direct = bundle.direct.as_ref().map(|d| {
-        let mut planes = Vec::with_capacity(DIRECT_CHANNELS * pixels);
-        push_planes(&mut planes, &d.y, |v| v);
-        push_planes(&mut planes, &d.z, |v| v);
-        push_planes(&mut planes, &d.variance, |v| v);
-        planes
-    });
+    let level = |i: usize| {
+        screen
+            .iter()
+            .find(|f| f.slot == i)
+            .map_or(&bundle.levels[i], |f| &f.colour)
+    };
+    let variance = |i: usize| {
+        screen
+            .iter()
+            .find(|f| f.slot == i)
+            .map_or(Source::Channel(&bundle.variance, i), |f| {
+                Source::Plane(&f.variance)
+            })
+    };
+    let fill = |planes: Vec<(Source, Transform)>| -> Vec<f32> {
+        let mut out = vec![0.0f32; planes.len() * pixels];
+        out.par_chunks_mut(pixels.max(1))
+            .zip(planes.par_iter())
+            .for_each(|(plane, &(source, t))| {
+                let apply = |v: &mut f32, s: f32| {
+                    *v = match t {
+                        Transform::Identity => s,
+                        Transform::Log => log_transform(s),
+                        Transform::Scale(scale) => s.max(0.0) * scale,
+                    }
+                };
+                match source {
+                    Source::Channel(image, c) => {
+                        let values = image.data.iter().skip(c).step_by(image.channels);
+                        plane.iter_mut().zip(values).for_each(|(v, &s)| apply(v, s));
+                    }
+                    Source::Plane(values) => {
+                        plane.iter_mut().zip(values).for_each(|(v, &s)| apply(v, s));
+                    }
+                }
+            });
+        out
+    };
+    let levels = fill(
+        (0..LEVELS)
+            .flat_map(|i| channels(level(i), Transform::Identity))
+            .collect(),
+    );
     let max_depth = bundle.depth.data.iter().fold(0.0f32, |m, &d| m.max(d));
     let scale = if max_depth > 0.0 {
         1.0 / max_depth
     } else {
         0.0
     };
-    push_planes(&mut features, &bundle.depth, |d| d.max(0.0) * scale);
+    let features = fill(
+        (0..LEVELS)
+            .flat_map(|i| channels(level(i), Transform::Log))
+            .chain((0..LEVELS).map(|i| (variance(i), Transform::Log)))
+            .chain(channels(&bundle.albedo, Transform::Identity))
+            .chain(channels(&bundle.normal, Transform::Identity))
+            .chain(channels(&bundle.depth, Transform::Scale(scale)))
+            .collect(),
+    );
+    let direct = bundle.direct.as_ref().map(|d| {
+        fill(
+            channels(&d.y, Transform::Identity)
+                .chain(channels(&d.z, Transform::Identity))
+                .chain(channels(&d.variance, Transform::Identity))
+                .collect(),
+        )
+    });
     debug_assert_eq!(features.len(), INPUT_CHANNELS * pixels);
-    Ok(PackedImage {
+    debug_assert_eq!(levels.len(), COLOUR_CHANNELS * pixels);
+    debug_assert!(direct
+        .as_ref()
+        .is_none_or(|d| d.len() == DIRECT_CHANNELS * pixels));
+    PackedImage {
         width,
         height,
         features,
         levels,
         direct,
-    })
+    }
 }
 
 /// Converts an interleaved RGB reference image to planar layout, checking its size and values.
@@ -359,6 +454,44 @@ mod tests {
             levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
             direct: Some((0..DIRECT_CHANNELS).flat_map(|c| plane(50 + c)).collect()),
         }
+    }
+
+    #[test]
+    fn packing_with_screen_levels_equals_packing_the_filtered_bundle() {
+        use crate::screen_filter::{apply, ScreenLevel};
+        let (mut b, _) = crate::synthetic::synthetic_bundle(23, 11, 0.3, 3);
+        b.meta.passes = 16;
+        let screen = [
+            ScreenLevel {
+                slot: 4,
+                source: 4,
+                sigma: 2.0,
+                range: 2.0,
+            },
+            ScreenLevel {
+                slot: 2,
+                source: 3,
+                sigma: 1.0,
+                range: 0.0,
+            },
+        ];
+        let direct = b.clone();
+        let mut with_direct = b.clone();
+        with_direct.direct = Some(bundle::DirectLight {
+            y: direct.levels[0].clone(),
+            z: direct.levels[1].clone(),
+            variance: Image::new(23, 11, 2),
+        });
+        for bundle in [&b, &with_direct] {
+            let packed = pack_with(bundle, &screen).unwrap();
+            assert_eq!(packed, pack(&apply(bundle, &screen)).unwrap());
+            assert_ne!(packed, pack(bundle).unwrap());
+        }
+        // A filtered value past float32's range is an error naming the screen level.
+        let mut huge = b.clone();
+        huge.levels[4].data.fill(f32::MAX);
+        let err = pack_with(&huge, &screen[..1]).unwrap_err().to_string();
+        assert!(err.contains("screen-filtered"), "{err}");
     }
 
     #[test]

@@ -112,20 +112,45 @@ pub fn validate(levels: &[ScreenLevel]) -> Result<(), String> {
     Ok(())
 }
 
+/// One screen level's output: the filtered colour (interleaved RGB) and its variance plane,
+/// for level slot `slot`.
+pub struct FilteredLevel {
+    /// The level slot it replaces (1..4).
+    pub slot: usize,
+    /// The filtered level, RGB.
+    pub colour: Image,
+    /// Its variance, one value per pixel.
+    pub variance: Vec<f32>,
+}
+
+/// The screen levels of a bundle, each filtered from the original levels (so one level can
+/// feed several slots). The caller has checked the bundle's shapes.
+pub fn filtered(bundle: &Bundle, levels: &[ScreenLevel]) -> Vec<FilteredLevel> {
+    levels
+        .iter()
+        .map(|l| {
+            let sigma = sigma_at(l.sigma, bundle.meta.passes);
+            let source = &bundle.levels[l.source];
+            let direct = bundle.direct.as_ref().map(|d| &d.z);
+            let (colour, variance) = filter(bundle, source, l.source, direct, sigma, l.range);
+            FilteredLevel {
+                slot: l.slot,
+                colour,
+                variance,
+            }
+        })
+        .collect()
+}
+
 /// The bundle with its screen levels in place (a copy; `levels` empty: the bundle unchanged).
-/// Sources are read from the original levels, so one level can feed several slots. The caller
-/// has checked the bundle's shapes ([`crate::features::pack`] does it again).
+/// The caller has checked the bundle's shapes ([`crate::features::pack`] does it again).
 pub fn apply(bundle: &Bundle, levels: &[ScreenLevel]) -> Bundle {
     let mut out = bundle.clone();
-    for l in levels {
-        let sigma = sigma_at(l.sigma, bundle.meta.passes);
-        let source = &bundle.levels[l.source];
-        let direct = bundle.direct.as_ref().map(|d| &d.z);
-        let (colour, variance) = filter(bundle, source, l.source, direct, sigma, l.range);
-        out.levels[l.slot] = colour;
+    for f in filtered(bundle, levels) {
+        out.levels[f.slot] = f.colour;
         let channels = out.variance.channels;
-        for (p, v) in variance.into_iter().enumerate() {
-            out.variance.data[p * channels + l.slot] = v;
+        for (p, v) in f.variance.into_iter().enumerate() {
+            out.variance.data[p * channels + f.slot] = v;
         }
     }
     out
@@ -152,71 +177,52 @@ fn filter(
         return (level.clone(), variance);
     }
     let radius = ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS);
-    let inv_space = (1.0 / (2.0 * sigma * sigma)) as f32;
-    let photon: Vec<f32> = match direct {
+    let photon = match direct {
         Some(d) => level.data.iter().zip(&d.data).map(|(a, b)| a - b).collect(),
         None => level.data.clone(),
     };
-    let (albedo, normal, depth) = (&bundle.albedo.data, &bundle.normal.data, &bundle.depth.data);
+    // Planar copies: each neighbour offset then runs along a row as one loop over contiguous
+    // slices, which the compiler turns into vector instructions.
+    let planes = |data: &[f32]| -> [Vec<f32>; 3] {
+        std::array::from_fn(|k| data.iter().skip(k).step_by(3).copied().collect())
+    };
+    let guides = Guides {
+        width: w,
+        height: h,
+        albedo: planes(&bundle.albedo.data),
+        normal: planes(&bundle.normal.data),
+        depth: bundle.depth.data.clone(),
+        inv_depth: bundle
+            .depth
+            .data
+            .iter()
+            .map(|d| 1.0 / d.max(1e-6))
+            .collect(),
+        colour: planes(&level.data),
+        photon: planes(&photon),
+        variance,
+        radius,
+        inv_space: (1.0 / (2.0 * sigma * sigma)) as f32,
+        range,
+    };
     let rows: Vec<(Vec<f32>, Vec<f32>)> = (0..h)
         .into_par_iter()
         .map(|y| {
+            let mut sums = RowSums::new(w);
+            guides.accumulate_row(y, &mut sums);
             let mut colour = vec![0.0f32; 3 * w];
             let mut var = vec![0.0f32; w];
             for x in 0..w {
                 let c = y * w + x;
-                let dc = depth[c].max(1e-6);
-                let mut sum = 0.0f32;
-                let mut acc = [0.0f32; 3];
-                let mut acc_var = 0.0f32;
-                for ny in y.saturating_sub(radius)..(y + radius + 1).min(h) {
-                    for nx in x.saturating_sub(radius)..(x + radius + 1).min(w) {
-                        let n = ny * w + nx;
-                        let (dx, dy) = (nx as f32 - x as f32, ny as f32 - y as f32);
-                        let da = (0..3)
-                            .map(|k| (albedo[3 * n + k] - albedo[3 * c + k]).powi(2))
-                            .sum::<f32>();
-                        let dn = (0..3)
-                            .map(|k| (normal[3 * n + k] - normal[3 * c + k]).powi(2))
-                            .sum::<f32>();
-                        let dd = ((depth[n] - depth[c]) / dc).powi(2);
-                        let e = (dx * dx + dy * dy) * inv_space
-                            + da / (2.0 * ALBEDO_SIGMA * ALBEDO_SIGMA)
-                            + dn / (2.0 * NORMAL_SIGMA * NORMAL_SIGMA)
-                            + dd / (2.0 * DEPTH_SIGMA * DEPTH_SIGMA);
-                        let e = if range > 0.0 {
-                            let d2 = (0..3)
-                                .map(|k| (level.data[3 * n + k] - level.data[3 * c + k]).powi(2))
-                                .sum::<f32>()
-                                / 3.0;
-                            let v = variance[n] + variance[c];
-                            // Differences the noise explains cost nothing; zero variance (a
-                            // converged or empty pixel) admits equal colours only.
-                            let excess = (d2 - v).max(0.0);
-                            e + if excess > 0.0 {
-                                excess / (range * range * v).max(f32::MIN_POSITIVE)
-                            } else {
-                                0.0
-                            }
-                        } else {
-                            e
-                        };
-                        let k = (-e).exp();
-                        sum += k;
-                        for (a, p) in acc.iter_mut().zip(&photon[3 * n..3 * n + 3]) {
-                            *a += k * p;
-                        }
-                        acc_var += k * k * variance[n];
-                    }
-                }
-                // The centre's own weight is 1, so `sum` ≥ 1.
+                // The centre's own weight is 1, so the sum is ≥ 1.
+                let sum = sums.weight[x];
                 let back = direct.map_or([0.0; 3], |d| {
                     [d.data[3 * c], d.data[3 * c + 1], d.data[3 * c + 2]]
                 });
                 for k in 0..3 {
-                    colour[3 * x + k] = acc[k] / sum + back[k];
+                    colour[3 * x + k] = sums.colour[k][x] / sum + back[k];
                 }
-                var[x] = acc_var / (sum * sum);
+                var[x] = sums.variance[x] / (sum * sum);
             }
             (colour, var)
         })
@@ -230,6 +236,289 @@ fn filter(
     (out, out_var)
 }
 
+/// What the filter reads, planar (`plane[y·w + x]`), and its parameters.
+struct Guides {
+    width: usize,
+    height: usize,
+    albedo: [Vec<f32>; 3],
+    normal: [Vec<f32>; 3],
+    depth: Vec<f32>,
+    /// 1 / max(depth, 10⁻⁶): the depth term is relative to the centre pixel's depth.
+    inv_depth: Vec<f32>,
+    /// The level filtered (the range term compares it).
+    colour: [Vec<f32>; 3],
+    /// What is averaged: the level, less the photon-free part when the bundle has it.
+    photon: [Vec<f32>; 3],
+    variance: Vec<f32>,
+    radius: usize,
+    /// 1 / (2σ²).
+    inv_space: f32,
+    range: f32,
+}
+
+/// One row's running sums over the neighbours: Σ k, Σ k·photon (per channel), Σ k²·v.
+struct RowSums {
+    weight: Vec<f32>,
+    colour: [Vec<f32>; 3],
+    variance: Vec<f32>,
+}
+
+impl RowSums {
+    fn new(w: usize) -> Self {
+        RowSums {
+            weight: vec![0.0; w],
+            colour: std::array::from_fn(|_| vec![0.0; w]),
+            variance: vec![0.0; w],
+        }
+    }
+}
+
+impl Guides {
+    /// Adds every neighbour's weighted contribution to the sums of row `y`, neighbour rows in
+    /// order and, within a row, offsets from left to right: each pixel sums its neighbours in
+    /// the same order whatever the thread count or instruction set.
+    fn accumulate_row(&self, y: usize, sums: &mut RowSums) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU has AVX-512F (checked just above).
+                return unsafe { self.accumulate_row_avx512(y, sums) };
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2 (checked just above).
+                return unsafe { self.accumulate_row_avx2(y, sums) };
+            }
+        }
+        self.accumulate_row_portable(y, sums)
+    }
+
+    /// [`Guides::accumulate_row`] compiled for AVX-512. Rust never fuses a multiply and an add,
+    /// so every build computes the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    fn accumulate_row_avx512(&self, y: usize, sums: &mut RowSums) {
+        self.accumulate_row_portable(y, sums)
+    }
+
+    /// [`Guides::accumulate_row`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn accumulate_row_avx2(&self, y: usize, sums: &mut RowSums) {
+        self.accumulate_row_portable(y, sums)
+    }
+
+    #[inline(always)]
+    fn accumulate_row_portable(&self, y: usize, sums: &mut RowSums) {
+        let (w, r) = (self.width, self.radius);
+        for ny in y.saturating_sub(r)..(y + r + 1).min(self.height) {
+            let dy = ny as f32 - y as f32;
+            for dx in -(r as isize)..=r as isize {
+                // Centre pixels x whose neighbour x + dx lies inside the row.
+                let x0 = (-dx).max(0) as usize;
+                let x1 = (w as isize - dx.max(0)).max(x0 as isize) as usize;
+                if x0 >= x1 {
+                    continue;
+                }
+                let c0 = y * w + x0;
+                let n0 = (ny * w + x0) as isize + dx;
+                let n0 = n0 as usize;
+                let spatial = (dx as f32 * dx as f32 + dy * dy) * self.inv_space;
+                self.accumulate_offset(c0, n0, x0, x1 - x0, spatial, sums);
+            }
+        }
+    }
+}
+
+/// The same range of each of three planes.
+fn three<'a>(planes: &'a [Vec<f32>; 3], at: &std::ops::Range<usize>) -> [&'a [f32]; 3] {
+    [
+        &planes[0][at.clone()],
+        &planes[1][at.clone()],
+        &planes[2][at.clone()],
+    ]
+}
+
+impl Guides {
+    /// Adds neighbour pixels n0 + i to centre pixels c0 + i (row sums at x0 + i), i < len.
+    #[inline(always)]
+    fn accumulate_offset(
+        &self,
+        c0: usize,
+        n0: usize,
+        x0: usize,
+        len: usize,
+        spatial: f32,
+        sums: &mut RowSums,
+    ) {
+        let albedo_scale = 1.0 / (2.0 * ALBEDO_SIGMA * ALBEDO_SIGMA);
+        let normal_scale = 1.0 / (2.0 * NORMAL_SIGMA * NORMAL_SIGMA);
+        let depth_scale = 1.0 / (2.0 * DEPTH_SIGMA * DEPTH_SIGMA);
+        let range2 = self.range * self.range;
+        let use_range = self.range > 0.0;
+        let c = c0..c0 + len;
+        let n = n0..n0 + len;
+        let (ac, an) = (three(&self.albedo, &c), three(&self.albedo, &n));
+        let (nc, nn) = (three(&self.normal, &c), three(&self.normal, &n));
+        let (lc, ln) = (three(&self.colour, &c), three(&self.colour, &n));
+        let pn = three(&self.photon, &n);
+        let (dc, dn, inv_dc) = (
+            &self.depth[c.clone()],
+            &self.depth[n.clone()],
+            &self.inv_depth[c.clone()],
+        );
+        let (vc, vn) = (&self.variance[c], &self.variance[n]);
+        let weight = &mut sums.weight[x0..x0 + len];
+        let [s0, s1, s2] = &mut sums.colour;
+        let (s0, s1, s2) = (
+            &mut s0[x0..x0 + len],
+            &mut s1[x0..x0 + len],
+            &mut s2[x0..x0 + len],
+        );
+        let variance = &mut sums.variance[x0..x0 + len];
+        let streams = Streams {
+            ac,
+            an,
+            nc,
+            nn,
+            lc,
+            ln,
+            pn,
+            dc,
+            dn,
+            inv_dc,
+            vc,
+            vn,
+            use_range,
+        };
+        let mut sums = [weight, s0, s1, s2, variance];
+        let params = [spatial, albedo_scale, normal_scale, depth_scale, range2];
+        // Blocks of 16 pixels as fixed-size arrays (what the compiler vectorises: one AVX-512
+        // vector, two AVX2 ones), then the rest one by one with the same per-pixel arithmetic.
+        let mut i = 0;
+        while i + 16 <= len {
+            streams.block::<16>(i, &params, &mut sums);
+            i += 16;
+        }
+        while i < len {
+            streams.block::<1>(i, &params, &mut sums);
+            i += 1;
+        }
+    }
+}
+
+/// The centre (`…c`) and neighbour (`…n`) pixels' inputs of one offset along a row.
+struct Streams<'a> {
+    ac: [&'a [f32]; 3],
+    an: [&'a [f32]; 3],
+    nc: [&'a [f32]; 3],
+    nn: [&'a [f32]; 3],
+    lc: [&'a [f32]; 3],
+    ln: [&'a [f32]; 3],
+    pn: [&'a [f32]; 3],
+    dc: &'a [f32],
+    dn: &'a [f32],
+    inv_dc: &'a [f32],
+    vc: &'a [f32],
+    vn: &'a [f32],
+    /// The range term is on (its strength k > 0).
+    use_range: bool,
+}
+
+/// `L` values from `i` on.
+#[inline(always)]
+fn lanes<const L: usize>(s: &[f32], i: usize) -> &[f32; L] {
+    s[i..i + L].try_into().expect("block inside the row")
+}
+
+impl Streams<'_> {
+    /// Pixels i..i + L: their neighbour's weight k, added to the sums (Σ k, Σ k·photon per
+    /// channel, Σ k²·v). `params`: spatial term, albedo, normal and depth scales, k² of the
+    /// range term.
+    #[inline(always)]
+    fn block<const L: usize>(&self, i: usize, params: &[f32; 5], sums: &mut [&mut [f32]; 5]) {
+        let [spatial, albedo_scale, normal_scale, depth_scale, range2] = *params;
+        let three = |planes: &[&[f32]; 3]| planes.map(|p| *lanes::<L>(p, i));
+        let (ac, an, nc, nn) = (
+            three(&self.ac),
+            three(&self.an),
+            three(&self.nc),
+            three(&self.nn),
+        );
+        let (lc, ln, pn) = (three(&self.lc), three(&self.ln), three(&self.pn));
+        let (dc, dn, inv_dc) = (
+            lanes::<L>(self.dc, i),
+            lanes::<L>(self.dn, i),
+            lanes::<L>(self.inv_dc, i),
+        );
+        let (vc, vn) = (lanes::<L>(self.vc, i), lanes::<L>(self.vn, i));
+        let mut k = [0.0f32; L];
+        for l in 0..L {
+            let sq = |a: &[[f32; L]; 3], b: &[[f32; L]; 3]| {
+                let d0 = b[0][l] - a[0][l];
+                let d1 = b[1][l] - a[1][l];
+                let d2 = b[2][l] - a[2][l];
+                d0 * d0 + d1 * d1 + d2 * d2
+            };
+            let dd = (dn[l] - dc[l]) * inv_dc[l];
+            let mut e = spatial
+                + sq(&ac, &an) * albedo_scale
+                + sq(&nc, &nn) * normal_scale
+                + dd * dd * depth_scale;
+            if self.use_range {
+                // Differences the noise explains cost nothing; zero variance (a converged or
+                // empty pixel) admits equal colours only.
+                let v = vn[l] + vc[l];
+                let excess = (sq(&lc, &ln) / 3.0 - v).max(0.0);
+                e += excess / (range2 * v).max(f32::MIN_POSITIVE);
+            }
+            k[l] = exp_neg(e);
+        }
+        let [weight, s0, s1, s2, variance] = sums;
+        let add = |sum: &mut [f32], terms: [f32; L]| {
+            let sum: &mut [f32; L] = (&mut sum[i..i + L])
+                .try_into()
+                .expect("block inside the row");
+            for l in 0..L {
+                sum[l] += terms[l];
+            }
+        };
+        add(weight, k);
+        add(s0, std::array::from_fn(|l| k[l] * pn[0][l]));
+        add(s1, std::array::from_fn(|l| k[l] * pn[1][l]));
+        add(s2, std::array::from_fn(|l| k[l] * pn[2][l]));
+        add(variance, std::array::from_fn(|l| k[l] * k[l] * vn[l]));
+    }
+}
+
+/// exp(−e) for e ≥ 0 (+∞ included), in plain arithmetic the compiler vectorises (the C
+/// library's `expf` is one call per value): 2ⁿ · exp(r) with n = round(−e / ln 2) and
+/// |r| ≤ ln 2 / 2, exp(r) by Cephes' degree-6 polynomial (within 2 ulp of `expf`); 0 below
+/// e^−87, where `expf` is below 2⁻¹²⁵. exp_neg(0) = 1 exactly.
+#[inline(always)]
+fn exp_neg(e: f32) -> f32 {
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    // 1.5 · 2²³: adding it rounds to an integer held in the low mantissa bits.
+    const ROUND: f32 = 12_582_912.0;
+    let x = (-e).max(-87.0);
+    let t = x * LOG2E + ROUND;
+    let whole = t - ROUND;
+    let n = t.to_bits() as i32 - ROUND.to_bits() as i32;
+    let r = x - whole * LN2_HI - whole * LN2_LO;
+    let p = ((((1.987_569_2e-4 * r + 1.398_2e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r
+        + 1.666_666_5e-1)
+        * r
+        + 0.5;
+    let poly = p * r * r + r + 1.0;
+    let scale = f32::from_bits(((n + 127) as u32) << 23);
+    if e > 87.0 {
+        0.0
+    } else {
+        poly * scale
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -241,6 +530,129 @@ mod tests {
             source,
             sigma,
             range: 0.0,
+        }
+    }
+
+    #[test]
+    fn exp_neg_matches_the_c_library() {
+        assert_eq!(exp_neg(0.0), 1.0);
+        assert_eq!(exp_neg(f32::INFINITY), 0.0);
+        assert_eq!(exp_neg(88.0), 0.0);
+        let mut e = 0.0f32;
+        while e < 87.0 {
+            let (ours, libm) = (exp_neg(e), (-e).exp());
+            assert!(
+                (ours - libm).abs() <= 3.0 * f32::EPSILON * libm,
+                "exp(-{e}): {ours} vs {libm}"
+            );
+            e = e * 1.01 + 1e-4;
+        }
+    }
+
+    /// The filter as one loop per pixel over its window (with the C library's `expf`): what
+    /// the row-vectorised [`filter`] must compute.
+    fn filter_per_pixel(b: &Bundle, index: usize, sigma: f64, range: f32) -> (Vec<f32>, Vec<f32>) {
+        let (w, h) = (b.meta.width as usize, b.meta.height as usize);
+        let level = &b.levels[index];
+        let variance: Vec<f32> = (0..w * h).map(|p| b.variance.data[p * 5 + index]).collect();
+        let direct = b.direct.as_ref().map(|d| &d.z);
+        let photon: Vec<f32> = match direct {
+            Some(d) => level.data.iter().zip(&d.data).map(|(a, b)| a - b).collect(),
+            None => level.data.clone(),
+        };
+        let radius = ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS);
+        let inv_space = (1.0 / (2.0 * sigma * sigma)) as f32;
+        let (albedo, normal, depth) = (&b.albedo.data, &b.normal.data, &b.depth.data);
+        let (mut colour, mut var) = (vec![0.0f32; 3 * w * h], vec![0.0f32; w * h]);
+        for y in 0..h {
+            for x in 0..w {
+                let c = y * w + x;
+                let (mut sum, mut acc, mut acc_var) = (0.0f32, [0.0f32; 3], 0.0f32);
+                for ny in y.saturating_sub(radius)..(y + radius + 1).min(h) {
+                    for nx in x.saturating_sub(radius)..(x + radius + 1).min(w) {
+                        let n = ny * w + nx;
+                        let (dx, dy) = (nx as f32 - x as f32, ny as f32 - y as f32);
+                        let d2 = |v: &[f32]| {
+                            (0..3)
+                                .map(|k| (v[3 * n + k] - v[3 * c + k]).powi(2))
+                                .sum::<f32>()
+                        };
+                        let dd = ((depth[n] - depth[c]) / depth[c].max(1e-6)).powi(2);
+                        let mut e = (dx * dx + dy * dy) * inv_space
+                            + d2(albedo) / (2.0 * ALBEDO_SIGMA * ALBEDO_SIGMA)
+                            + d2(normal) / (2.0 * NORMAL_SIGMA * NORMAL_SIGMA)
+                            + dd / (2.0 * DEPTH_SIGMA * DEPTH_SIGMA);
+                        if range > 0.0 {
+                            let v = variance[n] + variance[c];
+                            let excess = (d2(&level.data) / 3.0 - v).max(0.0);
+                            if excess > 0.0 {
+                                e += excess / (range * range * v).max(f32::MIN_POSITIVE);
+                            }
+                        }
+                        let k = (-e).exp();
+                        sum += k;
+                        for (a, p) in acc.iter_mut().zip(&photon[3 * n..3 * n + 3]) {
+                            *a += k * p;
+                        }
+                        acc_var += k * k * variance[n];
+                    }
+                }
+                for k in 0..3 {
+                    colour[3 * c + k] = acc[k] / sum + direct.map_or(0.0, |d| d.data[3 * c + k]);
+                }
+                var[c] = acc_var / (sum * sum);
+            }
+        }
+        (colour, var)
+    }
+
+    #[test]
+    fn row_vectorised_filter_equals_the_per_pixel_loop() {
+        // A G-buffer with edges (albedo steps, a depth ramp and a step, tilted normals), noisy
+        // levels, zero-variance pixels, photon-free layers; with and without the range term,
+        // at a radius wider than the image's narrow side and at a small one.
+        let (w, h) = (37, 9);
+        let (mut b, _) = synthetic_bundle(w, h, 0.3, 11);
+        for p in 0..w * h {
+            let (x, y) = (p % w, p / w);
+            b.albedo.data[3 * p] = if x < 20 { 0.2 } else { 0.7 };
+            b.albedo.data[3 * p + 1] = 0.5 + 0.01 * (y as f32);
+            b.depth.data[p] = if x < 12 { 1.0 + 0.02 * x as f32 } else { 3.0 };
+            let t = 0.05 * (x as f32 - 18.0);
+            b.normal.data[3 * p] = t.sin();
+            b.normal.data[3 * p + 2] = t.cos();
+            if (x * 7 + y * 3) % 11 == 0 {
+                b.variance.data[p * 5 + 4] = 0.0;
+            }
+        }
+        let mut with_direct = b.clone();
+        let mut direct = crate::synthetic::synthetic_bundle(w, h, 0.1, 12).0.levels[0].clone();
+        for (d, z) in direct.data.iter_mut().zip(&b.levels[4].data) {
+            *d = d.min(*z) * 0.5;
+        }
+        with_direct.direct = Some(bundle::DirectLight {
+            y: direct.clone(),
+            z: direct,
+            variance: Image::new(w, h, 2),
+        });
+        for bundle in [&b, &with_direct] {
+            for (sigma, range) in [(4.0, 2.0), (4.0, 0.0), (0.7, 2.0)] {
+                let direct = bundle.direct.as_ref().map(|d| &d.z);
+                let (colour, var) = filter(bundle, &bundle.levels[4], 4, direct, sigma, range);
+                let (want, want_var) = filter_per_pixel(bundle, 4, sigma, range);
+                for (i, (a, e)) in colour.data.iter().zip(&want).enumerate() {
+                    assert!(
+                        (a - e).abs() <= 1e-5 * e.abs().max(1e-3),
+                        "σ {sigma} k {range} value {i}: {a} vs {e}"
+                    );
+                }
+                for (i, (a, e)) in var.iter().zip(&want_var).enumerate() {
+                    assert!(
+                        (a - e).abs() <= 1e-5 * e.abs().max(1e-6),
+                        "σ {sigma} k {range} variance {i}: {a} vs {e}"
+                    );
+                }
+            }
         }
     }
 

@@ -7,18 +7,20 @@
 //! `high`, through Python `pyoidn`; a development-side peer, never linked). With `--rounds R`
 //! every measurement is repeated R times, interleaved (ours, then OIDN, R times), so that a
 //! machine shared with other work loads both alike; the ratios are taken within each round.
+//! `--model DIR` times trained weights as `infer` runs them: the bundle packed with the model's
+//! screen-filtered levels (the filter's time counted), then the tiled reconstruction.
 //! Prints a table and optionally JSON.
 
 use std::path::PathBuf;
 use std::process::{Command, ExitCode};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Parser;
 use infer::oidn::{Denoiser, Guides};
 use infer::{reconstruct_tiled, Engine};
 use model::backend::Backend;
-use model::features::{pack, planar_reference};
+use model::features::{pack, pack_with, planar_reference};
 use model::model_dir::TrainedModel;
 use model::synthetic::synthetic_bundle;
 use model::{ModelConfig, Preset};
@@ -28,9 +30,20 @@ use serde_json::{json, Value};
 #[derive(Debug, Parser)]
 #[command(version, allow_negative_numbers = true)]
 struct Cli {
-    /// Network presets, comma-separated: paper, medium, small, tiny, unet (e.g. `unet,small`).
-    #[arg(long, default_value = "paper")]
-    preset: String,
+    /// Network presets, comma-separated: paper, medium, small, tiny, unet (e.g. `unet,small`);
+    /// absent: `paper`, unless `--model` is given. Randomly initialised, no screen levels:
+    /// the network, Eq. 6 and the guard are timed.
+    #[arg(long)]
+    preset: Option<String>,
+    /// Trained model directories (`model.json` + `model.bpk`, e.g. `models/default`) to time
+    /// as `infer` runs them: packing the bundle with the model's screen-filtered levels is
+    /// counted. Repeat the flag for several.
+    #[arg(long)]
+    model: Vec<PathBuf>,
+    /// The synthetic bundle's pass count: the screen filter's bandwidth shrinks with it
+    /// (σ₀ at 64 passes), so it sets what `--model` timings pay for the filter.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
+    passes: u32,
     /// Image width in pixels (and height, unless `--height` is given).
     #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
     size: u32,
@@ -100,22 +113,39 @@ fn main() -> ExitCode {
     }
 }
 
-/// One preset and engine's timings.
+/// A network to time: a randomly initialised preset, or trained weights from a directory.
+struct Entry {
+    /// The preset's name, or the directory.
+    name: String,
+    model: TrainedModel,
+    /// Trained weights: the packing with the model's screen levels is part of the time.
+    pack_in_time: bool,
+}
+
+/// One network and engine's timings.
 struct Timed {
-    preset: Preset,
+    /// Index into the entries.
+    entry: usize,
     engine: Engine,
     /// Median seconds of each round.
     rounds: Vec<f64>,
     /// Every timed run.
     all: Vec<f64>,
+    /// Of every timed run, the seconds spent packing the bundle (trained weights only).
+    packing: Vec<f64>,
     /// Peak RSS after its last run.
     rss: Option<f64>,
 }
 
 fn run(cli: &Cli) -> Result<()> {
-    let presets = cli
-        .preset
+    let preset_list = match (&cli.preset, cli.model.is_empty()) {
+        (Some(list), _) => list.as_str(),
+        (None, true) => "paper",
+        (None, false) => "",
+    };
+    let presets = preset_list
         .split(',')
+        .filter(|name| !name.trim().is_empty())
         .map(|name| {
             serde_json::from_value::<Preset>(Value::String(name.trim().to_string())).with_context(
                 || format!("unknown preset `{name}` (paper, medium, small, tiny, unet)"),
@@ -126,19 +156,36 @@ fn run(cli: &Cli) -> Result<()> {
     if let Some(note) = cli.backend.adapter_note(&device) {
         eprintln!("{note}");
     }
-    let models: Vec<TrainedModel> = presets
+    let mut entries: Vec<Entry> = presets
         .iter()
         .map(|&preset| {
             let config = ModelConfig::preset(preset);
-            TrainedModel {
-                dir: PathBuf::new(),
-                network: config.init(0, &device),
-                config,
+            Entry {
+                name: format!("{preset:?}"),
+                model: TrainedModel {
+                    dir: PathBuf::new(),
+                    network: config.init(0, &device),
+                    config,
+                },
+                pack_in_time: false,
             }
         })
         .collect();
+    for dir in &cli.model {
+        let model = TrainedModel::open(dir, &device)
+            .with_context(|| format!("loading the model in {}", dir.display()))?;
+        entries.push(Entry {
+            name: dir.display().to_string(),
+            model,
+            pack_in_time: true,
+        });
+    }
+    if entries.is_empty() {
+        bail!("nothing to time: give --preset or --model");
+    }
     let (n, h) = (cli.size as usize, cli.height.unwrap_or(cli.size) as usize);
-    let (bundle, _) = synthetic_bundle(n, h, 0.3, 1);
+    let (mut bundle, _) = synthetic_bundle(n, h, 0.3, 1);
+    bundle.meta.passes = cli.passes;
     let packed = pack(&bundle)?;
     // OIDN's inputs: the same bundle's sharpest level ỹ as the noisy HDR colour, its albedo and
     // normal (planar RGB).
@@ -153,20 +200,19 @@ fn run(cli: &Cli) -> Result<()> {
         planar(&bundle.albedo)?,
         planar(&bundle.normal)?,
     );
-    drop(bundle);
     let rss_before = peak_rss_mib();
     let engines = match cli.engine {
         Some(e) => vec![e],
         None => vec![Engine::Native, Engine::Burn],
     };
-    let mut timed: Vec<Timed> = models
-        .iter()
-        .flat_map(|m| {
-            engines.iter().map(|&engine| Timed {
-                preset: m.config.preset,
+    let mut timed: Vec<Timed> = (0..entries.len())
+        .flat_map(|entry| {
+            engines.iter().map(move |&engine| Timed {
+                entry,
                 engine,
                 rounds: Vec::new(),
                 all: Vec::new(),
+                packing: Vec::new(),
                 rss: None,
             })
         })
@@ -179,18 +225,29 @@ fn run(cli: &Cli) -> Result<()> {
     };
     for round in 0..cli.rounds as usize {
         for t in timed.iter_mut() {
-            let model = &models[presets.iter().position(|&p| p == t.preset).expect("built")];
+            let entry = &entries[t.entry];
+            let model = &entry.model;
             let mut times = Vec::new();
             let first = if round == 0 { 0 } else { 1 };
             for k in first..=cli.repeats.max(1) {
                 let start = Instant::now();
+                let own;
+                let input = if entry.pack_in_time {
+                    own = pack_with(&bundle, &model.config.screen_levels)?;
+                    if k > 0 {
+                        t.packing.push(start.elapsed().as_secs_f64());
+                    }
+                    &own
+                } else {
+                    &packed
+                };
                 let tile = cli.tile.unwrap_or(model.config.default_tile());
-                let r = reconstruct_tiled(model, &packed, tile, t.engine, &device, |_, _| {});
+                let r = reconstruct_tiled(model, input, tile, t.engine, &device, |_, _| {});
                 let s = start.elapsed().as_secs_f64();
                 assert!(r.image.iter().all(|v| v.is_finite()));
                 eprintln!(
-                    "round {round}: {:?} {:?} run {k}: {s:.3} s{}",
-                    t.preset,
+                    "round {round}: {} {:?} run {k}: {s:.3} s{}",
+                    entry.name,
                     t.engine,
                     if k == 0 { " (warm-up)" } else { "" }
                 );
@@ -252,9 +309,21 @@ fn run(cli: &Cli) -> Result<()> {
         cli.rounds,
         cli.repeats.max(1)
     );
-    for (m, preset) in models.iter().zip(&presets) {
+    for e in &entries {
+        let m = &e.model;
+        let screen = if e.pack_in_time {
+            format!(
+                ", {} screen level(s) packed in the time ({} passes)",
+                m.config.screen_levels.len(),
+                cli.passes
+            )
+        } else {
+            String::new()
+        };
         println!(
-            "  {preset:?} preset: +{} px halo per tile of {}",
+            "  {} ({:?} preset): +{} px halo per tile of {}{screen}",
+            e.name,
+            m.config.preset,
             m.config.conv_reach(),
             cli.tile.unwrap_or(m.config.default_tile())
         );
@@ -267,20 +336,27 @@ fn run(cli: &Cli) -> Result<()> {
     };
     for t in &timed {
         println!(
-            "  {:?} {:?} engine (infer, tiled): {:.3} s (rounds: {})   peak RSS so far {:.0} MiB (before: {:.0} MiB)",
-            t.preset,
+            "  {} {:?} engine (infer, tiled): {:.3} s (rounds: {})   peak RSS so far {:.0} MiB (before: {:.0} MiB)",
+            entries[t.entry].name,
             t.engine,
             median(&t.rounds),
             list(&t.rounds),
             t.rss.unwrap_or(f64::NAN),
             rss_before.unwrap_or(f64::NAN)
         );
+        if !t.packing.is_empty() {
+            println!(
+                "    of which packing the bundle with its screen levels: {:.3} s (median of {} runs)",
+                median(&t.packing),
+                t.packing.len()
+            );
+        }
     }
     for pair in timed.chunks(engines.len()) {
         if let [native, burn] = pair {
             println!(
-                "  {:?} native / burn: {:.2}",
-                native.preset,
+                "  {} native / burn: {:.2}",
+                entries[native.entry].name,
                 median(&native.rounds) / median(&burn.rounds)
             );
         }
@@ -296,7 +372,7 @@ fn run(cli: &Cli) -> Result<()> {
                 .zip(&oidn_rounds)
                 .map(|(ours, oidn)| ours / oidn)
                 .collect();
-            (format!("{:?} {:?}", t.preset, t.engine), ratios)
+            (format!("{} {:?}", entries[t.entry].name, t.engine), ratios)
         })
         .collect();
     if !oidn_rounds.is_empty() {
@@ -318,7 +394,10 @@ fn run(cli: &Cli) -> Result<()> {
     if let Some(p) = peer["infer_s"].as_f64() {
         let paper = timed
             .iter()
-            .find(|t| t.preset == Preset::Paper)
+            .find(|t| {
+                !entries[t.entry].pack_in_time
+                    && entries[t.entry].model.config.preset == Preset::Paper
+            })
             .expect("the peer runs only with the paper preset");
         println!(
             "  {} (whole image): {p:.3} s",
@@ -339,12 +418,15 @@ fn run(cli: &Cli) -> Result<()> {
     }
     if let Some(path) = &cli.output {
         let all = json!({
-            "preset": cli.preset, "width": n, "height": h, "tile": cli.tile.map_or("default".into(), |t| json!(t)),
+            "preset": preset_list, "models": cli.model, "passes": cli.passes, "width": n, "height": h, "tile": cli.tile.map_or("default".into(), |t| json!(t)),
             "backend": format!("{:?}", cli.backend), "threads": threads, "rounds": cli.rounds,
             "infer_s": ours,
             "engines": timed.iter().map(|t| json!({
-                "preset": format!("{:?}", t.preset), "engine": format!("{:?}", t.engine),
+                "name": entries[t.entry].name,
+                "preset": format!("{:?}", entries[t.entry].model.config.preset),
+                "engine": format!("{:?}", t.engine),
                 "infer_s": median(&t.rounds), "rounds_s": t.rounds, "all_s": t.all,
+                "packing_s": (!t.packing.is_empty()).then(|| median(&t.packing)),
                 "peak_rss_mib": t.rss,
             })).collect::<Vec<_>>(),
             "oidn": if oidn_rounds.is_empty() { Value::Null } else { json!({
