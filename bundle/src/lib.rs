@@ -166,7 +166,7 @@ impl Image {
     }
 
     /// Copies channel `c` out as a row-major plane.
-    fn plane(&self, c: usize) -> Vec<f32> {
+    pub fn plane(&self, c: usize) -> Vec<f32> {
         self.data
             .iter()
             .skip(c)
@@ -176,7 +176,7 @@ impl Image {
     }
 
     /// First non-finite sample as (x, y, channel index).
-    fn find_non_finite(&self) -> Option<(usize, usize, usize)> {
+    pub fn find_non_finite(&self) -> Option<(usize, usize, usize)> {
         let i = self.data.iter().position(|v| !v.is_finite())?;
         let pixel = i / self.channels;
         Some((pixel % self.width, pixel / self.width, i % self.channels))

@@ -245,17 +245,18 @@ pub fn pack_with(
     // Finite inputs can still overflow float32 in the filter's sums (values near f32::MAX).
     for f in &filtered {
         let name = bundle::LEVEL_NAMES[f.slot];
-        let bad = |i: usize, channel: String| FeatureError::NonFinite {
+        let bad = |x: usize, y: usize, channel: &str| FeatureError::NonFinite {
             layer: format!("{name} (screen-filtered)"),
-            channel,
-            x: i % bundle.meta.width as usize,
-            y: i / bundle.meta.width as usize,
+            channel: channel.into(),
+            x,
+            y,
         };
-        if let Some(i) = f.colour.data.iter().position(|v| !v.is_finite()) {
-            return Err(bad(i / 3, ["R", "G", "B"][i % 3].into()));
+        if let Some((x, y, c)) = f.colour.find_non_finite() {
+            return Err(bad(x, y, ["R", "G", "B"][c]));
         }
         if let Some(i) = f.variance.iter().position(|v| !v.is_finite()) {
-            return Err(bad(i, "variance".into()));
+            let width = bundle.meta.width as usize;
+            return Err(bad(i % width, i / width, "variance"));
         }
     }
     Ok(pack_checked(bundle, &filtered))
@@ -475,11 +476,10 @@ mod tests {
                 range: 0.0,
             },
         ];
-        let direct = b.clone();
         let mut with_direct = b.clone();
         with_direct.direct = Some(bundle::DirectLight {
-            y: direct.levels[0].clone(),
-            z: direct.levels[1].clone(),
+            y: b.levels[0].clone(),
+            z: b.levels[1].clone(),
             variance: Image::new(23, 11, 2),
         });
         for bundle in [&b, &with_direct] {

@@ -177,28 +177,28 @@ fn filter(
         return (level.clone(), variance);
     }
     let radius = ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS);
-    let photon = match direct {
-        Some(d) => level.data.iter().zip(&d.data).map(|(a, b)| a - b).collect(),
-        None => level.data.clone(),
-    };
+    let mut photon = level.clone();
+    if let Some(d) = direct {
+        for (p, b) in photon.data.iter_mut().zip(&d.data) {
+            *p -= b;
+        }
+    }
     // Planar copies: each neighbour offset then runs along a row as one loop over contiguous
     // slices, which the compiler turns into vector instructions.
-    let planes = |data: &[f32]| -> [Vec<f32>; 3] {
-        std::array::from_fn(|k| data.iter().skip(k).step_by(3).copied().collect())
-    };
+    let planes = |image: &Image| -> [Vec<f32>; 3] { std::array::from_fn(|k| image.plane(k)) };
     let guides = Guides {
         width: w,
         height: h,
-        albedo: planes(&bundle.albedo.data),
-        normal: planes(&bundle.normal.data),
-        depth: bundle.depth.data.clone(),
+        albedo: planes(&bundle.albedo),
+        normal: planes(&bundle.normal),
+        depth: &bundle.depth.data,
         inv_depth: bundle
             .depth
             .data
             .iter()
             .map(|d| 1.0 / d.max(1e-6))
             .collect(),
-        colour: planes(&level.data),
+        colour: planes(level),
         photon: planes(&photon),
         variance,
         radius,
@@ -237,12 +237,13 @@ fn filter(
 }
 
 /// What the filter reads, planar (`plane[y·w + x]`), and its parameters.
-struct Guides {
+struct Guides<'a> {
     width: usize,
     height: usize,
     albedo: [Vec<f32>; 3],
     normal: [Vec<f32>; 3],
-    depth: Vec<f32>,
+    /// The depth layer itself (one channel: already planar).
+    depth: &'a [f32],
     /// 1 / max(depth, 10⁻⁶): the depth term is relative to the centre pixel's depth.
     inv_depth: Vec<f32>,
     /// The level filtered (the range term compares it).
@@ -273,7 +274,7 @@ impl RowSums {
     }
 }
 
-impl Guides {
+impl Guides<'_> {
     /// Adds every neighbour's weighted contribution to the sums of row `y`, neighbour rows in
     /// order and, within a row, offsets from left to right: each pixel sums its neighbours in
     /// the same order whatever the thread count or instruction set.
@@ -338,7 +339,7 @@ fn three<'a>(planes: &'a [Vec<f32>; 3], at: &std::ops::Range<usize>) -> [&'a [f3
     ]
 }
 
-impl Guides {
+impl Guides<'_> {
     /// Adds neighbour pixels n0 + i to centre pixels c0 + i (row sums at x0 + i), i < len.
     #[inline(always)]
     fn accumulate_offset(
