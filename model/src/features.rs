@@ -225,9 +225,81 @@ fn push_planes(out: &mut Vec<f32>, image: &Image, f: impl Fn(f32) -> f32) {
 }
 
 /// log(1+x) of a radiance or variance, clamped at zero first (estimates are non-negative; a
-/// tiny negative from float round-off must not become NaN).
+/// tiny negative from float round-off must not become NaN); `v` finite. In plain arithmetic the
+/// compiler vectorises (the C library's `log1pf` is one call per value; 20 of the 27 feature
+/// planes go through here): u = 1 + x rounded, log u = e·ln 2 + log m with m ∈ [√½, √2) by
+/// Cephes' `logf` polynomial, plus (x − (u − 1)) / u for what the rounding of u lost. Within
+/// 2⁻²³ of `ln_1p`, relative (tested).
+#[inline(always)]
 fn log_transform(v: f32) -> f32 {
-    v.max(0.0).ln_1p()
+    const SQRT_HALF: f32 = std::f32::consts::FRAC_1_SQRT_2;
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    let x = v.max(0.0);
+    let u = 1.0 + x;
+    let bits = u.to_bits();
+    // u = m·2^e with m ∈ [½, 1); u ≥ 1, so it is normal and its sign bit clear.
+    let mut e = ((bits >> 23) as i32 - 126) as f32;
+    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f00_0000);
+    let small = m < SQRT_HALF;
+    let f = if small { m + m - 1.0 } else { m - 1.0 };
+    e = if small { e - 1.0 } else { e };
+    let z = f * f;
+    let p = ((((((((7.037_683_6e-2 * f - 1.151_461e-1) * f + 1.167_699_9e-1) * f
+        - 1.242_014_1e-1)
+        * f
+        + 1.424_932_3e-1)
+        * f
+        - 1.666_805_8e-1)
+        * f
+        + 2.000_071_5e-1)
+        * f
+        - 2.499_999_4e-1)
+        * f
+        + 3.333_333e-1)
+        * f
+        * z;
+    let log_u = (f + (p + e * LN2_LO - 0.5 * z)) + e * LN2_HI;
+    log_u + (x - (u - 1.0)) / u
+}
+
+/// [`log_transform`] of every value of `plane`, in place: blocks of 16 (one AVX-512 vector,
+/// two AVX2 ones) compiled for the best instruction set the CPU has. Rust never fuses a multiply
+/// and an add, so every build computes the same bits.
+fn log_transform_plane(plane: &mut [f32]) {
+    #[inline(always)]
+    fn portable(plane: &mut [f32]) {
+        let mut blocks = plane.chunks_exact_mut(16);
+        for block in &mut blocks {
+            let block: &mut [f32; 16] = block.try_into().expect("a block of 16");
+            for v in block.iter_mut() {
+                *v = log_transform(*v);
+            }
+        }
+        for v in blocks.into_remainder() {
+            *v = log_transform(*v);
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx512f")]
+        fn avx512(plane: &mut [f32]) {
+            portable(plane)
+        }
+        #[target_feature(enable = "avx2")]
+        fn avx2(plane: &mut [f32]) {
+            portable(plane)
+        }
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            return unsafe { avx512(plane) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { avx2(plane) };
+        }
+    }
+    portable(plane)
 }
 
 /// Packs a bundle for a network whose configuration puts `screen` levels in the place of some of
@@ -347,21 +419,28 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
         out.par_chunks_mut(pixels.max(1))
             .zip(planes.par_iter())
             .for_each(|(plane, &(source, t))| {
+                // The log is taken afterwards over the contiguous plane (vectorised).
                 let apply = |v: &mut f32, s: f32| {
                     *v = match t {
-                        Transform::Identity => s,
-                        Transform::Log => log_transform(s),
+                        Transform::Identity | Transform::Log => s,
                         Transform::Scale(scale) => s.max(0.0) * scale,
                     }
                 };
                 match source {
                     Source::Channel(image, c) => {
-                        let values = image.data.iter().skip(c).step_by(image.channels);
-                        plane.iter_mut().zip(values).for_each(|(v, &s)| apply(v, s));
+                        // Whole pixels, then the channel: `step_by` compiles to a slow loop.
+                        let pixels = image.data.chunks_exact(image.channels);
+                        plane
+                            .iter_mut()
+                            .zip(pixels)
+                            .for_each(|(v, p)| apply(v, p[c]));
                     }
                     Source::Plane(values) => {
                         plane.iter_mut().zip(values).for_each(|(v, &s)| apply(v, s));
                     }
+                }
+                if let Transform::Log = t {
+                    log_transform_plane(plane);
                 }
             });
         out
@@ -492,6 +571,26 @@ mod tests {
         huge.levels[4].data.fill(f32::MAX);
         let err = pack_with(&huge, &screen[..1]).unwrap_err().to_string();
         assert!(err.contains("screen-filtered"), "{err}");
+    }
+
+    #[test]
+    fn log_transform_matches_the_c_library() {
+        let mut values = vec![0.0f32, -0.0, -1e-7, f32::MIN_POSITIVE, 1e-45, f32::MAX];
+        // Every 4093rd positive float, subnormals to f32::MAX (≈ 520 000 values).
+        values.extend((0..0x7f7f_ffffu32).step_by(4093).map(f32::from_bits));
+        values.extend((0..20_000).map(|i| i as f32 * 1e-4));
+        values.extend((0..20_000).map(|i| 1.0 - i as f32 * 2.5e-5));
+        let mut plane = values.clone();
+        log_transform_plane(&mut plane);
+        for (&v, &got) in values.iter().zip(&plane) {
+            let want = v.max(0.0).ln_1p();
+            assert!(
+                (got - want).abs() <= want * 2f32.powi(-23) + f32::from_bits(1),
+                "log1p({v:e}) = {got:e}, the C library {want:e}"
+            );
+            assert_eq!(got.to_bits(), log_transform(v).to_bits(), "at {v:e}");
+        }
+        assert_eq!(log_transform(0.0).to_bits(), 0);
     }
 
     #[test]

@@ -31,6 +31,20 @@ struct Source<'a> {
     x: &'a [f32],
     rect: Rect,
     channels: usize,
+    /// `Some(fine)`: read as their nearest-neighbour ×2 upsampling on the finer grid's
+    /// rectangle `fine` (fine pixel (x, y) is `x`'s pixel (x / 2, y / 2)). A convolution after
+    /// an upsampling reads the coarse values in place: the upsampled activations, the widest of
+    /// the full-resolution ones, are never written.
+    upsampled: Option<Rect>,
+}
+
+/// A step's result in [`NativeNetwork::unet_layers`].
+#[derive(Clone)]
+enum Activation {
+    /// Channels-last values on a rectangle of the step's grid.
+    Dense(Vec<f32>, Rect),
+    /// An upsampling of step `coarse`, needed on `fine` (read in place, never written).
+    Upsampled { coarse: usize, fine: Rect },
 }
 
 /// Output pixels per chunk: the im2col buffer of one chunk stays in a core's L2 cache (256 px ×
@@ -166,8 +180,10 @@ impl ConvMatrix {
             let (oy, ox) = (out[1] + (first + p) / out_w, out[0] + (first + p) % out_w);
             let mut offset = 0;
             for source in sources {
-                let (input, c) = (source.rect, source.channels);
-                let in_w = input[2] - input[0];
+                let c = source.channels;
+                // The grid rectangle the taps read (outside it they are zero).
+                let input = source.upsampled.unwrap_or(source.rect);
+                let in_w = source.rect[2] - source.rect[0];
                 // Taps kx read column ox + kx − r; those inside the rectangle are one run.
                 let kx_lo = (input[0] + r).saturating_sub(ox).min(k);
                 let kx_hi = (input[2] + r).saturating_sub(ox).min(k).max(kx_lo);
@@ -179,9 +195,20 @@ impl ConvMatrix {
                         continue;
                     }
                     taps[..kx_lo * c].fill(0.0);
-                    let src = ((iy - input[1]) * in_w + (ox + kx_lo - r - input[0])) * c;
-                    let len = (kx_hi - kx_lo) * c;
-                    copy_run(&mut taps[kx_lo * c..kx_hi * c], &source.x[src..src + len]);
+                    if source.upsampled.is_some() {
+                        // One coarse pixel per tap: fine column ox + kx − r is coarse column
+                        // (ox + kx − r) / 2.
+                        let cy = iy / 2 - source.rect[1];
+                        for kx in kx_lo..kx_hi {
+                            let cx = (ox + kx - r) / 2 - source.rect[0];
+                            let src = (cy * in_w + cx) * c;
+                            copy_run(&mut taps[kx * c..(kx + 1) * c], &source.x[src..src + c]);
+                        }
+                    } else {
+                        let src = ((iy - input[1]) * in_w + (ox + kx_lo - r - input[0])) * c;
+                        let len = (kx_hi - kx_lo) * c;
+                        copy_run(&mut taps[kx_lo * c..kx_hi * c], &source.x[src..src + len]);
+                    }
                     taps[kx_hi * c..].fill(0.0);
                 }
                 offset += k * k * c;
@@ -282,7 +309,10 @@ impl ConvMatrix {
 
     /// [`ConvMatrix::forward_relu`] reading the channels of `sources` concatenated.
     fn forward_relu_sources(&self, sources: &[Source], out: Rect) -> Vec<f32> {
-        if let [single] = sources {
+        if let [single @ Source {
+            upsampled: None, ..
+        }] = sources
+        {
             return self.forward_relu(single.x, single.rect, out);
         }
         let pixels = (out[2] - out[0]) * (out[3] - out[1]);
@@ -347,25 +377,6 @@ fn pool(source: Source, out: Rect) -> Vec<f32> {
                     let bottom = value(iy + 1, ix, ch) + value(iy + 1, ix + 1, ch);
                     *v = (top + bottom) * 0.25;
                 }
-            }
-        });
-    y
-}
-
-/// Nearest-neighbour ×2 upsampling onto `out` (a rectangle of the finer grid) of `source`.
-fn upsample(source: Source, out: Rect) -> Vec<f32> {
-    let c = source.channels;
-    let (rect, x) = (source.rect, source.x);
-    let in_w = rect[2] - rect[0];
-    let out_w = out[2] - out[0];
-    let mut y = vec![0.0f32; out_w * (out[3] - out[1]) * c];
-    y.par_chunks_mut(out_w * c)
-        .enumerate()
-        .for_each(|(row, dst)| {
-            let iy = (out[1] + row) / 2 - rect[1];
-            for (i, px) in dst.chunks_exact_mut(c).enumerate() {
-                let ix = (out[0] + i) / 2 - rect[0];
-                copy_run(px, &x[(iy * in_w + ix) * c..][..c]);
             }
         });
     y
@@ -507,17 +518,37 @@ impl NativeNetwork {
         let sizes = scale_sizes(width, height, scales);
         let out = grow(interior, self.output.kernel / 2, width, height);
         let need = needed_rects(plan, kernel, out, &sizes);
-        let last_use = last_uses(plan);
-        let mut values: Vec<Option<(Vec<f32>, Rect)>> = vec![None; plan.len()];
+        // An upsampling is not computed: the convolutions reading it read its coarse input in
+        // place ([`Source::upsampled`]), which therefore lives as long as they need it.
+        let mut last_use = last_uses(plan);
+        for (i, step) in plan.iter().enumerate() {
+            if let Op::Upsample(j) = step.op {
+                last_use[j] = last_use[j].max(last_use[i]);
+            }
+        }
+        let mut values: Vec<Option<Activation>> = vec![None; plan.len()];
         let mut features = Some(x);
         for (i, step) in plan.iter().enumerate() {
             let Some(r) = need[i] else { continue };
-            let source = |j: usize| {
-                let (x, rect) = values[j].as_ref().expect("inputs come first");
-                Source {
+            let dense = |j: usize| match values[j].as_ref().expect("inputs come first") {
+                Activation::Dense(x, rect) => (x, *rect),
+                Activation::Upsampled { .. } => unreachable!("only convolutions read upsamplings"),
+            };
+            let source = |j: usize| match values[j].as_ref().expect("inputs come first") {
+                Activation::Dense(x, rect) => Source {
                     x,
                     rect: *rect,
                     channels: plan[j].channels,
+                    upsampled: None,
+                },
+                &Activation::Upsampled { coarse, fine } => {
+                    let (x, rect) = dense(coarse);
+                    Source {
+                        x,
+                        rect,
+                        channels: plan[j].channels,
+                        upsampled: Some(fine),
+                    }
                 }
             };
             let value = match &step.op {
@@ -526,25 +557,25 @@ impl NativeNetwork {
                         crate::unet::covers(region, r),
                         "features on {region:?} do not cover the needed {r:?}"
                     );
-                    (features.take().expect("one input step"), region)
+                    Activation::Dense(features.take().expect("one input step"), region)
                 }
                 Op::Conv { layer, inputs } => {
                     let sources: Vec<Source> = inputs.iter().map(|&j| source(j)).collect();
-                    (self.hidden[*layer].forward_relu_sources(&sources, r), r)
+                    Activation::Dense(self.hidden[*layer].forward_relu_sources(&sources, r), r)
                 }
                 Op::Pool(j) => {
                     debug_assert!(contains(
-                        values[*j].as_ref().map(|v| v.1),
+                        Some(dense(*j).1),
                         pool_input(r, sizes[step.scale - 1])
                     ));
-                    (pool(source(*j), r), r)
+                    Activation::Dense(pool(source(*j), r), r)
                 }
                 Op::Upsample(j) => {
-                    debug_assert!(contains(
-                        values[*j].as_ref().map(|v| v.1),
-                        upsample_input(r)
-                    ));
-                    (upsample(source(*j), r), r)
+                    debug_assert!(contains(Some(dense(*j).1), upsample_input(r)));
+                    Activation::Upsampled {
+                        coarse: *j,
+                        fine: r,
+                    }
                 }
             };
             values[i] = Some(value);
@@ -554,7 +585,10 @@ impl NativeNetwork {
                 }
             }
         }
-        values.pop().flatten().expect("the plan has steps")
+        match values.pop().flatten().expect("the plan has steps") {
+            Activation::Dense(x, rect) => (x, rect),
+            Activation::Upsampled { .. } => unreachable!("a plan ends with a convolution"),
+        }
     }
 
     /// Last layer, positive weights and Eq. 6 for the pixels of `out` (inside `region`, which
@@ -776,37 +810,39 @@ impl NativeNetwork {
             for ky in 0..window {
                 let start = (py + ky - r) * width + px - r;
                 let w_row = &w_j[ky * window..(ky + 1) * window];
+                let row = |c: usize| &d_planes[c * pixels + start..][..window + LANES - 1];
+                let (d0, d1, d2) = (row(0), row(1), row(2));
+                // The row's five sums in one loop: each is still added in window order (the
+                // scalar path's), but the five chains of dependent additions overlap instead of
+                // running one after another. Named accumulators, which the compiler keeps in
+                // registers (an array indexed by channel went through the stack).
                 let mut row_sum = [0.0f32; LANES];
-                for w in w_row {
+                let mut row_square = [0.0f32; LANES];
+                let (mut a0, mut a1, mut a2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+                for (kx, w) in w_row.iter().enumerate() {
+                    let lanes = |dc: &[f32]| -> [f32; LANES] {
+                        dc[kx..kx + LANES].try_into().expect("LANES values")
+                    };
+                    let (e0, e1, e2) = (lanes(d0), lanes(d1), lanes(d2));
                     for l in 0..LANES {
                         row_sum[l] += w[l];
+                        row_square[l] += w[l] * w[l];
+                        a0[l] += w[l] * e0[l];
+                        a1[l] += w[l] * e1[l];
+                        a2[l] += w[l] * e2[l];
                     }
                 }
                 for l in 0..LANES {
                     sum[l] += row_sum[l];
                 }
                 if self.guard > 0.0 {
-                    let mut row_square = [0.0f32; LANES];
-                    for w in w_row {
-                        for l in 0..LANES {
-                            row_square[l] += w[l] * w[l];
-                        }
-                    }
                     for l in 0..LANES {
                         square[l] += row_square[l];
                     }
                 }
-                for c in 0..3 {
-                    let dc = &d_planes[c * pixels + start..][..window + LANES - 1];
-                    let mut row_acc = [0.0f32; LANES];
-                    for (kx, w) in w_row.iter().enumerate() {
-                        let d = &dc[kx..kx + LANES];
-                        for l in 0..LANES {
-                            row_acc[l] += w[l] * d[l];
-                        }
-                    }
+                for (acc, row_acc) in acc.iter_mut().zip([a0, a1, a2]) {
                     for l in 0..LANES {
-                        acc[c][l] += row_acc[l];
+                        acc[l] += row_acc[l];
                     }
                 }
             }
