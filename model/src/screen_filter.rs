@@ -275,9 +275,9 @@ impl RowSums {
 }
 
 impl Guides<'_> {
-    /// Adds every neighbour's weighted contribution to the sums of row `y`, neighbour rows in
-    /// order and, within a row, offsets from left to right: each pixel sums its neighbours in
-    /// the same order whatever the thread count or instruction set.
+    /// Writes the sums of row `y`: each pixel adds its neighbours' weighted contributions, rows
+    /// in order and, within a row, offsets from left to right, in the same order whatever the
+    /// thread count, instruction set or whether it is summed in a block or alone.
     fn accumulate_row(&self, y: usize, sums: &mut RowSums) {
         #[cfg(target_arch = "x86_64")]
         {
@@ -308,47 +308,37 @@ impl Guides<'_> {
         self.accumulate_row_portable(y, sums)
     }
 
+    /// Centre pixels in blocks of 16 (one AVX-512 vector, two AVX2 ones) whose neighbours all
+    /// lie inside the row, each block summing every neighbour offset with its centre values and
+    /// sums held in registers; pixels near the row's ends one by one, over the offsets inside.
     #[inline(always)]
     fn accumulate_row_portable(&self, y: usize, sums: &mut RowSums) {
+        const L: usize = 16;
         let (w, r) = (self.width, self.radius);
-        for ny in y.saturating_sub(r)..(y + r + 1).min(self.height) {
-            let dy = ny as f32 - y as f32;
-            for dx in -(r as isize)..=r as isize {
-                // Centre pixels x whose neighbour x + dx lies inside the row.
-                let x0 = (-dx).max(0) as usize;
-                let x1 = (w as isize - dx.max(0)).max(x0 as isize) as usize;
-                if x0 >= x1 {
-                    continue;
-                }
-                let c0 = y * w + x0;
-                let n0 = (ny * w + x0) as isize + dx;
-                let n0 = n0 as usize;
-                let spatial = (dx as f32 * dx as f32 + dy * dy) * self.inv_space;
-                self.accumulate_offset(c0, n0, x0, x1 - x0, spatial, sums);
+        let mut x = 0;
+        while x < w {
+            if x >= r && x + L + r <= w {
+                self.centre_block::<L>(y, x, -(r as isize)..=r as isize, sums);
+                x += L;
+            } else {
+                // Offsets whose neighbour x + dx lies inside the row.
+                let dx0 = -(r.min(x) as isize);
+                let dx1 = r.min(w - 1 - x) as isize;
+                self.centre_block::<1>(y, x, dx0..=dx1, sums);
+                x += 1;
             }
         }
     }
-}
 
-/// The same range of each of three planes.
-fn three<'a>(planes: &'a [Vec<f32>; 3], at: &std::ops::Range<usize>) -> [&'a [f32]; 3] {
-    [
-        &planes[0][at.clone()],
-        &planes[1][at.clone()],
-        &planes[2][at.clone()],
-    ]
-}
-
-impl Guides<'_> {
-    /// Adds neighbour pixels n0 + i to centre pixels c0 + i (row sums at x0 + i), i < len.
+    /// Writes the sums of centre pixels (x + l, y), l < L, over the neighbours in rows
+    /// y − r ..= y + r (inside the image) and columns x + l + dx, dx ∈ `offsets` (inside the
+    /// row for every l).
     #[inline(always)]
-    fn accumulate_offset(
+    fn centre_block<const L: usize>(
         &self,
-        c0: usize,
-        n0: usize,
-        x0: usize,
-        len: usize,
-        spatial: f32,
+        y: usize,
+        x: usize,
+        offsets: std::ops::RangeInclusive<isize>,
         sums: &mut RowSums,
     ) {
         let albedo_scale = 1.0 / (2.0 * ALBEDO_SIGMA * ALBEDO_SIGMA);
@@ -356,138 +346,70 @@ impl Guides<'_> {
         let depth_scale = 1.0 / (2.0 * DEPTH_SIGMA * DEPTH_SIGMA);
         let range2 = self.range * self.range;
         let use_range = self.range > 0.0;
-        let c = c0..c0 + len;
-        let n = n0..n0 + len;
-        let (ac, an) = (three(&self.albedo, &c), three(&self.albedo, &n));
-        let (nc, nn) = (three(&self.normal, &c), three(&self.normal, &n));
-        let (lc, ln) = (three(&self.colour, &c), three(&self.colour, &n));
-        let pn = three(&self.photon, &n);
-        let (dc, dn, inv_dc) = (
-            &self.depth[c.clone()],
-            &self.depth[n.clone()],
-            &self.inv_depth[c.clone()],
-        );
-        let (vc, vn) = (&self.variance[c], &self.variance[n]);
-        let weight = &mut sums.weight[x0..x0 + len];
-        let [s0, s1, s2] = &mut sums.colour;
-        let (s0, s1, s2) = (
-            &mut s0[x0..x0 + len],
-            &mut s1[x0..x0 + len],
-            &mut s2[x0..x0 + len],
-        );
-        let variance = &mut sums.variance[x0..x0 + len];
-        let streams = Streams {
-            ac,
-            an,
-            nc,
-            nn,
-            lc,
-            ln,
-            pn,
-            dc,
-            dn,
-            inv_dc,
-            vc,
-            vn,
-            use_range,
+        let (w, r) = (self.width, self.radius);
+        let at = |plane: &[f32], i: usize| -> [f32; L] {
+            plane[i..i + L].try_into().expect("block inside the row")
         };
-        let mut sums = [weight, s0, s1, s2, variance];
-        let params = [spatial, albedo_scale, normal_scale, depth_scale, range2];
-        // Blocks of 16 pixels as fixed-size arrays (what the compiler vectorises: one AVX-512
-        // vector, two AVX2 ones), then the rest one by one with the same per-pixel arithmetic.
-        let mut i = 0;
-        while i + 16 <= len {
-            streams.block::<16>(i, &params, &mut sums);
-            i += 16;
-        }
-        while i < len {
-            streams.block::<1>(i, &params, &mut sums);
-            i += 1;
-        }
-    }
-}
-
-/// The centre (`…c`) and neighbour (`…n`) pixels' inputs of one offset along a row.
-struct Streams<'a> {
-    ac: [&'a [f32]; 3],
-    an: [&'a [f32]; 3],
-    nc: [&'a [f32]; 3],
-    nn: [&'a [f32]; 3],
-    lc: [&'a [f32]; 3],
-    ln: [&'a [f32]; 3],
-    pn: [&'a [f32]; 3],
-    dc: &'a [f32],
-    dn: &'a [f32],
-    inv_dc: &'a [f32],
-    vc: &'a [f32],
-    vn: &'a [f32],
-    /// The range term is on (its strength k > 0).
-    use_range: bool,
-}
-
-/// `L` values from `i` on.
-#[inline(always)]
-fn lanes<const L: usize>(s: &[f32], i: usize) -> &[f32; L] {
-    s[i..i + L].try_into().expect("block inside the row")
-}
-
-impl Streams<'_> {
-    /// Pixels i..i + L: their neighbour's weight k, added to the sums (Σ k, Σ k·photon per
-    /// channel, Σ k²·v). `params`: spatial term, albedo, normal and depth scales, k² of the
-    /// range term.
-    #[inline(always)]
-    fn block<const L: usize>(&self, i: usize, params: &[f32; 5], sums: &mut [&mut [f32]; 5]) {
-        let [spatial, albedo_scale, normal_scale, depth_scale, range2] = *params;
-        let three = |planes: &[&[f32]; 3]| planes.map(|p| *lanes::<L>(p, i));
-        let (ac, an, nc, nn) = (
-            three(&self.ac),
-            three(&self.an),
-            three(&self.nc),
-            three(&self.nn),
+        let three = |planes: &[Vec<f32>; 3], i: usize| planes.each_ref().map(|p| at(p, i));
+        let c = y * w + x;
+        let (ac, nc, lc) = (
+            three(&self.albedo, c),
+            three(&self.normal, c),
+            three(&self.colour, c),
         );
-        let (lc, ln, pn) = (three(&self.lc), three(&self.ln), three(&self.pn));
-        let (dc, dn, inv_dc) = (
-            lanes::<L>(self.dc, i),
-            lanes::<L>(self.dn, i),
-            lanes::<L>(self.inv_dc, i),
+        let (dc, inv_dc, vc) = (
+            at(self.depth, c),
+            at(&self.inv_depth, c),
+            at(&self.variance, c),
         );
-        let (vc, vn) = (lanes::<L>(self.vc, i), lanes::<L>(self.vn, i));
-        let mut k = [0.0f32; L];
-        for l in 0..L {
-            let sq = |a: &[[f32; L]; 3], b: &[[f32; L]; 3]| {
-                let d0 = b[0][l] - a[0][l];
-                let d1 = b[1][l] - a[1][l];
-                let d2 = b[2][l] - a[2][l];
-                d0 * d0 + d1 * d1 + d2 * d2
-            };
-            let dd = (dn[l] - dc[l]) * inv_dc[l];
-            let mut e = spatial
-                + sq(&ac, &an) * albedo_scale
-                + sq(&nc, &nn) * normal_scale
-                + dd * dd * depth_scale;
-            if self.use_range {
-                // Differences the noise explains cost nothing; zero variance (a converged or
-                // empty pixel) admits equal colours only.
-                let v = vn[l] + vc[l];
-                let excess = (sq(&lc, &ln) / 3.0 - v).max(0.0);
-                e += excess / (range2 * v).max(f32::MIN_POSITIVE);
+        let mut weight = [0.0f32; L];
+        let mut colour = [[0.0f32; L]; 3];
+        let mut variance = [0.0f32; L];
+        for ny in y.saturating_sub(r)..(y + r + 1).min(self.height) {
+            let dy = ny as f32 - y as f32;
+            for dx in offsets.clone() {
+                let n = (ny * w + x).wrapping_add_signed(dx);
+                let spatial = (dx as f32 * dx as f32 + dy * dy) * self.inv_space;
+                let (an, nn, ln, pn) = (
+                    three(&self.albedo, n),
+                    three(&self.normal, n),
+                    three(&self.colour, n),
+                    three(&self.photon, n),
+                );
+                let (dn, vn) = (at(self.depth, n), at(&self.variance, n));
+                for l in 0..L {
+                    let sq = |a: &[[f32; L]; 3], b: &[[f32; L]; 3]| {
+                        let d0 = b[0][l] - a[0][l];
+                        let d1 = b[1][l] - a[1][l];
+                        let d2 = b[2][l] - a[2][l];
+                        d0 * d0 + d1 * d1 + d2 * d2
+                    };
+                    let dd = (dn[l] - dc[l]) * inv_dc[l];
+                    let mut e = spatial
+                        + sq(&ac, &an) * albedo_scale
+                        + sq(&nc, &nn) * normal_scale
+                        + dd * dd * depth_scale;
+                    if use_range {
+                        // Differences the noise explains cost nothing; zero variance (a
+                        // converged or empty pixel) admits equal colours only.
+                        let v = vn[l] + vc[l];
+                        let excess = (sq(&lc, &ln) / 3.0 - v).max(0.0);
+                        e += excess / (range2 * v).max(f32::MIN_POSITIVE);
+                    }
+                    let k = exp_neg(e);
+                    weight[l] += k;
+                    for ch in 0..3 {
+                        colour[ch][l] += k * pn[ch][l];
+                    }
+                    variance[l] += k * k * vn[l];
+                }
             }
-            k[l] = exp_neg(e);
         }
-        let [weight, s0, s1, s2, variance] = sums;
-        let add = |sum: &mut [f32], terms: [f32; L]| {
-            let sum: &mut [f32; L] = (&mut sum[i..i + L])
-                .try_into()
-                .expect("block inside the row");
-            for l in 0..L {
-                sum[l] += terms[l];
-            }
-        };
-        add(weight, k);
-        add(s0, std::array::from_fn(|l| k[l] * pn[0][l]));
-        add(s1, std::array::from_fn(|l| k[l] * pn[1][l]));
-        add(s2, std::array::from_fn(|l| k[l] * pn[2][l]));
-        add(variance, std::array::from_fn(|l| k[l] * k[l] * vn[l]));
+        sums.weight[x..x + L].copy_from_slice(&weight);
+        for (sum, block) in sums.colour.iter_mut().zip(&colour) {
+            sum[x..x + L].copy_from_slice(block);
+        }
+        sums.variance[x..x + L].copy_from_slice(&variance);
     }
 }
 
