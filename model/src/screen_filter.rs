@@ -177,12 +177,14 @@ fn filter(
         return (level.clone(), variance);
     }
     let radius = ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS);
-    let mut photon = level.clone();
-    if let Some(d) = direct {
+    // Without photon-free layers the level itself is averaged (no copy).
+    let photon = direct.map(|d| {
+        let mut photon = level.clone();
         for (p, b) in photon.data.iter_mut().zip(&d.data) {
             *p -= b;
         }
-    }
+        photon
+    });
     // Planar copies: each neighbour offset then runs along a row as one loop over contiguous
     // slices, which the compiler turns into vector instructions.
     let planes = |image: &Image| -> [Vec<f32>; 3] { std::array::from_fn(|k| image.plane(k)) };
@@ -199,7 +201,7 @@ fn filter(
             .map(|d| 1.0 / d.max(1e-6))
             .collect(),
         colour: planes(level),
-        photon: planes(&photon),
+        photon: photon.as_ref().map(planes),
         variance,
         radius,
         inv_space: (1.0 / (2.0 * sigma * sigma)) as f32,
@@ -248,8 +250,9 @@ struct Guides<'a> {
     inv_depth: Vec<f32>,
     /// The level filtered (the range term compares it).
     colour: [Vec<f32>; 3],
-    /// What is averaged: the level, less the photon-free part when the bundle has it.
-    photon: [Vec<f32>; 3],
+    /// What is averaged when the bundle has photon-free layers: the level less that part
+    /// (`None`: the level, `colour`).
+    photon: Option<[Vec<f32>; 3]>,
     variance: Vec<f32>,
     radius: usize,
     /// 1 / (2σ²).
@@ -374,7 +377,7 @@ impl Guides<'_> {
                     three(&self.albedo, n),
                     three(&self.normal, n),
                     three(&self.colour, n),
-                    three(&self.photon, n),
+                    three(self.photon.as_ref().unwrap_or(&self.colour), n),
                 );
                 let (dn, vn) = (at(self.depth, n), at(&self.variance, n));
                 for l in 0..L {
