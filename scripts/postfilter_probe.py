@@ -1,0 +1,163 @@
+#!/usr/bin/env python3
+"""Probe: would a screen-space filter of the *output* close the gap to OIDN?
+
+For every frozen held-out scene (scenes/heldout) it reconstructs the dataset's largest-pass
+bundle of seed 0 with `infer`, then measures, as relMSE ÷ the bundle's best input level against
+the frozen converged reference:
+
+- `out`: the reconstruction as shipped;
+- `s{σ}v4r2`, `s{σ}vyr2`, `s{σ}norange`: the output filtered by the screen filter's
+  cross-bilateral (model/src/screen_filter.rs: same guide tolerances and range term; the
+  photon-free part left unfiltered) at σ = 1, 2, 3 px, the range term reading z̃4's or ỹ's
+  variance (strength 2), or no range term;
+- `oidn_out`, `oidn_y`: OIDN 2.5 (inconsistent, the peer) on the output and on ỹ.
+
+Equal passes, not equal time: a probe of what a filter could gain, not a result. A development
+tool (numpy, OpenEXR, pyoidn), never a runtime dependency.
+
+    python3 scripts/postfilter_probe.py --infer target/release/infer --model models/default \
+        --dataset data/large --out /tmp/postfilter
+"""
+
+import argparse
+import glob
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+try:
+    import Imath
+    import OpenEXR
+    import pyoidn
+except ImportError as e:
+    sys.exit(f"postfilter_probe.py: {e}: pip install numpy OpenEXR pyoidn==2.5.1.0")
+
+FLOAT = Imath.PixelType(Imath.PixelType.FLOAT)
+# The screen filter's guide tolerances (model/src/screen_filter.rs).
+ALBEDO_SIGMA, NORMAL_SIGMA, DEPTH_SIGMA = 0.1, 0.3, 0.05
+
+
+def read(path, names):
+    f = OpenEXR.InputFile(path)
+    dw = f.header()["dataWindow"]
+    w, h = dw.max.x - dw.min.x + 1, dw.max.y - dw.min.y + 1
+    return np.stack(
+        [np.frombuffer(f.channel(n, FLOAT), dtype=np.float32).reshape(h, w) for n in names], -1
+    )
+
+
+def rgb(path, prefix=""):
+    return read(path, [prefix + "R", prefix + "G", prefix + "B"])
+
+
+def relmse(x, ref):
+    return float(((x - ref) ** 2 / (ref.mean(-1, keepdims=True) ** 2 + 0.01)).mean())
+
+
+def shifted(a, dy, dx):
+    """a moved so that out[y, x] = a[y + dy, x + dx], and where that pixel exists."""
+    h, w = a.shape[:2]
+    out = np.zeros_like(a)
+    inside = np.zeros((h, w), bool)
+    dst = (slice(max(0, -dy), min(h, h - dy)), slice(max(0, -dx), min(w, w - dx)))
+    src = (slice(max(0, dy), min(h, h + dy)), slice(max(0, dx), min(w, w + dx)))
+    out[dst] = a[src]
+    inside[dst] = True
+    return out, inside
+
+
+def bilateral(img, var, albedo, normal, depth, sigma, strength, direct):
+    """The screen filter's cross-bilateral on `img` (photon part only), range term on `var`."""
+    photon = img - direct
+    r = min(int(np.ceil(2.5 * sigma)), 8)
+    inv_depth = 1 / np.maximum(depth, 1e-6)
+    weight = np.zeros(img.shape[:2])
+    total = np.zeros(img.shape)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            an, inside = shifted(albedo, dy, dx)
+            nn, _ = shifted(normal, dy, dx)
+            dn, _ = shifted(depth, dy, dx)
+            ln, _ = shifted(img, dy, dx)
+            pn, _ = shifted(photon, dy, dx)
+            vn, _ = shifted(var, dy, dx)
+            e = (dx * dx + dy * dy) / (2 * sigma * sigma)
+            e = e + ((an - albedo) ** 2).sum(-1) / (2 * ALBEDO_SIGMA**2)
+            e = e + ((nn - normal) ** 2).sum(-1) / (2 * NORMAL_SIGMA**2)
+            e = e + ((dn - depth) * inv_depth) ** 2 / (2 * DEPTH_SIGMA**2)
+            if strength > 0:
+                v = vn + var
+                excess = np.maximum(((ln - img) ** 2).sum(-1) / 3 - v, 0)
+                e = e + excess / np.maximum(strength**2 * v, 1e-30)
+            k = np.exp(-e) * inside
+            weight += k
+            total += k[..., None] * pn
+    return total / weight[..., None] + direct
+
+
+def oidn(color, albedo, normal):
+    c = np.ascontiguousarray(np.maximum(color, 0))
+    a = np.ascontiguousarray(np.clip(albedo, 0, 1))
+    n = np.ascontiguousarray(np.clip(normal, -1, 1))
+    return pyoidn.denoise(c, a, n, hdr=True, quality="high")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--infer", default="target/release/infer")
+    ap.add_argument("--model", default="models/default")
+    ap.add_argument("--dataset", default="data/large", help="dataset with the scenes' bundles")
+    ap.add_argument("--heldout", default="scenes/heldout")
+    ap.add_argument("--out", default="out/postfilter-probe")
+    a = ap.parse_args()
+    os.makedirs(a.out, exist_ok=True)
+    scenes = sorted(d for d in os.listdir(a.heldout) if os.path.isdir(os.path.join(a.heldout, d)))
+    rows = []
+    for s in scenes:
+        bundles = sorted(glob.glob(f"{a.dataset}/bundles/{s}/s00_*.exr"))
+        if not bundles:
+            print(f"skipped {s}: no bundle in {a.dataset}", file=sys.stderr)
+            continue
+        b = bundles[-1]
+        out_path = f"{a.out}/{s}.exr"
+        subprocess.run(
+            [a.infer, "--model", a.model, "--input", b, "--output", out_path],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
+        ref = rgb(f"{a.heldout}/{s}/reference.exr")
+        out = rgb(out_path)
+        y = rgb(b, "y.")
+        levels = [y] + [rgb(b, f"z{j}.") for j in range(1, 5)]
+        var = read(b, ["variance.y"] + [f"variance.z{j}" for j in range(1, 5)])
+        albedo = rgb(b, "albedo.")
+        normal = read(b, ["normal.X", "normal.Y", "normal.Z"])
+        depth = read(b, ["depth.Z"])[..., 0]
+        direct = (rgb(b, "ydirect.") + rgb(b, "zdirect.")) / 2
+        best = min(relmse(x, ref) for x in levels)
+        row = {"scene": s, "bundle": os.path.basename(b), "out": relmse(out, ref) / best}
+        for sigma in (1.0, 2.0, 3.0):
+            for name, v, strength in (
+                ("v4r2", var[..., 4], 2.0),
+                ("vyr2", var[..., 0], 2.0),
+                ("norange", var[..., 4], 0.0),
+            ):
+                f = bilateral(out, v, albedo, normal, depth, sigma, strength, direct)
+                row[f"s{sigma:g}{name}"] = relmse(f, ref) / best
+        row["oidn_out"] = relmse(oidn(out, albedo, normal), ref) / best
+        row["oidn_y"] = relmse(oidn(y, albedo, normal), ref) / best
+        rows.append(row)
+        print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}))
+    with open(f"{a.out}/rows.json", "w") as f:
+        json.dump(rows, f, indent=1)
+    print("\n| variant | median | geometric mean |\n|---|---|---|")
+    for k in [k for k in rows[0] if k not in ("scene", "bundle")]:
+        x = np.array([r[k] for r in rows])
+        print(f"| {k} | {np.median(x):.3f} | {np.exp(np.log(x).mean()):.3f} |")
+
+
+if __name__ == "__main__":
+    main()
