@@ -10,7 +10,9 @@ the frozen converged reference:
   cross-bilateral (model/src/screen_filter.rs: same guide tolerances and range term; the
   photon-free part left unfiltered) at σ = 1, 2, 3 px, the range term reading z̃4's or ỹ's
   variance (strength 2), or no range term;
-- `oidn_out`, `oidn_y`: OIDN 2.5 (inconsistent, the peer) on the output and on ỹ.
+- `oidn_out`, `oidn_y`: OIDN 2.5 (inconsistent, the peer) on the output and on ỹ;
+- `low2`, `low4`: the share of the output's relMSE left after blurring its error with a
+  Gaussian of σ = 2 or 4 px (small: the error is pixel-scale noise, not blotches).
 
 Equal passes, not equal time: a probe of what a filter could gain, not a result. A development
 tool (numpy, OpenEXR, pyoidn), never a runtime dependency.
@@ -98,6 +100,16 @@ def bilateral(img, var, albedo, normal, depth, sigma, strength, direct):
     return total / weight[..., None] + direct
 
 
+def blur(x, sigma):
+    """Separable Gaussian blur of an H×W×C image (edges mirrored)."""
+    r = int(3 * sigma)
+    k = np.exp(-np.arange(-r, r + 1) ** 2 / (2 * sigma * sigma))
+    k /= k.sum()
+    p = np.pad(x, ((r, r), (r, r), (0, 0)), mode="reflect")
+    rows = sum(k[i] * p[i : i + x.shape[0]] for i in range(2 * r + 1))
+    return sum(k[i] * rows[:, i : i + x.shape[1]] for i in range(2 * r + 1))
+
+
 def oidn(color, albedo, normal):
     c = np.ascontiguousarray(np.maximum(color, 0))
     a = np.ascontiguousarray(np.clip(albedo, 0, 1))
@@ -148,6 +160,8 @@ def main():
                 f = bilateral(out, v, albedo, normal, depth, sigma, strength, direct)
                 row[f"s{sigma:g}{name}"] = relmse(f, ref) / best
         row["oidn_out"] = relmse(oidn(out, albedo, normal), ref) / best
+        for sigma in (2, 4):
+            row[f"low{sigma}"] = relmse(ref + blur(out - ref, sigma), ref) / relmse(out, ref)
         row["oidn_y"] = relmse(oidn(y, albedo, normal), ref) / best
         rows.append(row)
         print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}))
