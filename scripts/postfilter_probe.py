@@ -12,7 +12,13 @@ the frozen converged reference:
   variance (strength 2), or no range term;
 - `oidn_out`, `oidn_y`: OIDN 2.5 (inconsistent, the peer) on the output and on ỹ;
 - `low2`, `low4`: the share of the output's relMSE left after blurring its error with a
-  Gaussian of σ = 2 or 4 px (small: the error is pixel-scale noise, not blotches).
+  Gaussian of σ = 2 or 4 px (small: the error is pixel-scale noise, not blotches);
+- `oracle{b}`: an upper bound for a *learned* per-pixel choice of filter: in every b×b block
+  the candidate (the output itself and the bilaterals above) with the least error against the
+  reference — what a network that picked the right blur everywhere could reach.
+
+With `--render-passes N` the bundles are rendered at the evaluation's setting (`infer --scene`,
+100 000 photons per pass, N passes, max depth 10) instead of taken from the dataset.
 
 Equal passes, not equal time: a probe of what a filter could gain, not a result. A development
 tool (numpy, OpenEXR, pyoidn), never a runtime dependency.
@@ -71,8 +77,11 @@ def shifted(a, dy, dx):
     return out, inside
 
 
-def bilateral(img, var, albedo, normal, depth, sigma, strength, direct):
-    """The screen filter's cross-bilateral on `img` (photon part only), range term on `var`."""
+def bilateral(img, var, albedo, normal, depth, sigma, strength, direct=None, noise="sum"):
+    """The screen filter's cross-bilateral on `img` (photon part only: `direct` is added back
+    unfiltered), range term on `var`, its noise v_c + v_n (`sum`, the screen levels'),
+    2·min(v_c, v_n) (`min`, the direct filter's) or 2·v_c (`centre`)."""
+    direct = np.zeros_like(img) if direct is None else direct
     photon = img - direct
     r = min(int(np.ceil(2.5 * sigma)), 8)
     inv_depth = 1 / np.maximum(depth, 1e-6)
@@ -91,7 +100,7 @@ def bilateral(img, var, albedo, normal, depth, sigma, strength, direct):
             e = e + ((nn - normal) ** 2).sum(-1) / (2 * NORMAL_SIGMA**2)
             e = e + ((dn - depth) * inv_depth) ** 2 / (2 * DEPTH_SIGMA**2)
             if strength > 0:
-                v = vn + var
+                v = {"sum": vn + var, "min": 2 * np.minimum(vn, var), "centre": 2 * var}[noise]
                 excess = np.maximum(((ln - img) ** 2).sum(-1) / 3 - v, 0)
                 e = e + excess / np.maximum(strength**2 * v, 1e-30)
             k = np.exp(-e) * inside
@@ -110,6 +119,19 @@ def blur(x, sigma):
     return sum(k[i] * rows[:, i : i + x.shape[1]] for i in range(2 * r + 1))
 
 
+def oracle(candidates, ref, block):
+    """Per block×block tile, the candidate image with the least squared relative error."""
+    h, w = ref.shape[:2]
+    norm = ref.mean(-1, keepdims=True) ** 2 + 0.01
+    out = candidates[0].copy()
+    for y in range(0, h, block):
+        for x in range(0, w, block):
+            t = (slice(y, y + block), slice(x, x + block))
+            errors = [(((c[t] - ref[t]) ** 2) / norm[t]).sum() for c in candidates]
+            out[t] = candidates[int(np.argmin(errors))][t]
+    return out
+
+
 def oidn(color, albedo, normal):
     c = np.ascontiguousarray(np.maximum(color, 0))
     a = np.ascontiguousarray(np.clip(albedo, 0, 1))
@@ -124,17 +146,30 @@ def main():
     ap.add_argument("--dataset", default="data/large", help="dataset with the scenes' bundles")
     ap.add_argument("--heldout", default="scenes/heldout")
     ap.add_argument("--out", default="out/postfilter-probe")
+    ap.add_argument("--render-passes", type=int, default=0,
+                    help="render each scene's bundle at this pass count instead (100 000 photons)")
+    ap.add_argument("--no-oidn", action="store_true", help="skip the OIDN columns")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     scenes = sorted(d for d in os.listdir(a.heldout) if os.path.isdir(os.path.join(a.heldout, d)))
     rows = []
     for s in scenes:
-        bundles = sorted(glob.glob(f"{a.dataset}/bundles/{s}/s00_*.exr"))
-        if not bundles:
-            print(f"skipped {s}: no bundle in {a.dataset}", file=sys.stderr)
-            continue
-        b = bundles[-1]
         out_path = f"{a.out}/{s}.exr"
+        if a.render_passes:
+            b = f"{a.out}/{s}_bundle.exr"
+            if not os.path.exists(b):
+                subprocess.run(
+                    [a.infer, "--model", a.model, "--scene", f"{a.heldout}/{s}/scene.xml",
+                     "--passes", str(a.render_passes), "--photons", "100000",
+                     "--seed", "20261128", "--max-depth", "10", "--output", out_path],
+                    check=True, stdout=subprocess.DEVNULL,
+                )
+        else:
+            bundles = sorted(glob.glob(f"{a.dataset}/bundles/{s}/s00_*.exr"))
+            if not bundles:
+                print(f"skipped {s}: no bundle in {a.dataset}", file=sys.stderr)
+                continue
+            b = bundles[-1]
         subprocess.run(
             [a.infer, "--model", a.model, "--input", b, "--output", out_path],
             check=True,
@@ -151,6 +186,7 @@ def main():
         direct = (rgb(b, "ydirect.") + rgb(b, "zdirect.")) / 2
         best = min(relmse(x, ref) for x in levels)
         row = {"scene": s, "bundle": os.path.basename(b), "out": relmse(out, ref) / best}
+        candidates = [out]
         for sigma in (1.0, 2.0, 3.0):
             for name, v, strength in (
                 ("v4r2", var[..., 4], 2.0),
@@ -159,10 +195,15 @@ def main():
             ):
                 f = bilateral(out, v, albedo, normal, depth, sigma, strength, direct)
                 row[f"s{sigma:g}{name}"] = relmse(f, ref) / best
-        row["oidn_out"] = relmse(oidn(out, albedo, normal), ref) / best
+                candidates.append(f)
+        for block in (4, 8, 16):
+            row[f"oracle{block}"] = relmse(oracle(candidates, ref, block), ref) / best
+        if not a.no_oidn:
+            row["oidn_out"] = relmse(oidn(out, albedo, normal), ref) / best
         for sigma in (2, 4):
             row[f"low{sigma}"] = relmse(ref + blur(out - ref, sigma), ref) / relmse(out, ref)
-        row["oidn_y"] = relmse(oidn(y, albedo, normal), ref) / best
+        if not a.no_oidn:
+            row["oidn_y"] = relmse(oidn(y, albedo, normal), ref) / best
         rows.append(row)
         print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}))
     with open(f"{a.out}/rows.json", "w") as f:

@@ -396,7 +396,7 @@ fn run(cli: &Cli) -> Result<()> {
     let mut input = if model.config.screen_levels.is_empty() {
         None
     } else {
-        Some(pack_with(&bundle, &model.config.screen_levels)?)
+        Some(pack_with(&bundle, &model.config.screen_filters())?)
     };
     if cli.whole_levels {
         packed.direct = None;

@@ -82,6 +82,7 @@ mod tests {
             features: vec![0.0; 27],
             levels,
             direct: None,
+            direct_added: None,
         };
         let output = vec![1.05, 1.05, 1.05];
         let r = ErrorReport::new(&packed, &output, &reference);

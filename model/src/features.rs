@@ -43,6 +43,10 @@ pub struct PackedImage {
     /// every z̃ level) RGB, then the variance of the mean of A's and of B's; `None` for a bundle
     /// rendered without it.
     pub direct: Option<Vec<f32>>,
+    /// The photon-free part to add to the combination's output when the model filters it
+    /// ([`crate::screen_filter::DirectFilter`]): 3 planes, RGB. `None`: the fused `direct`
+    /// layers as [`split_direct`] computes them.
+    pub direct_added: Option<Vec<f32>>,
 }
 
 impl PackedImage {
@@ -73,6 +77,7 @@ impl PackedImage {
             features: gather(&self.features, feature_channels(levels)),
             levels: gather(&self.levels, colour_channels(levels)),
             direct: self.direct.clone(),
+            direct_added: self.direct_added.clone(),
         }
     }
 
@@ -94,7 +99,8 @@ impl PackedImage {
             None => (Cow::Borrowed(&self.levels), None),
             Some(direct) => {
                 let mut levels = self.levels.clone();
-                let added = split_direct(&mut levels, direct, self.pixels());
+                let fused = split_direct(&mut levels, direct, self.pixels());
+                let added = self.direct_added.clone().unwrap_or(fused);
                 (Cow::Owned(levels), Some(added))
             }
         }
@@ -133,11 +139,20 @@ pub fn split_direct(levels: &mut [f32], direct: &[f32], pixels: usize) -> Vec<f3
     }
     (0..3 * pixels)
         .map(|i| {
-            let (va, vb) = (var_a[i % pixels], var_b[i % pixels]);
-            let weight_a = if va + vb > 0.0 { vb / (va + vb) } else { 0.5 };
+            let weight_a = subpath_a_weight(var_a[i % pixels], var_b[i % pixels]);
             weight_a * a[i] + (1.0 - weight_a) * b[i]
         })
         .collect()
+}
+
+/// The weight of path A's photon-free part in the fused one, given the variances of the means
+/// of A's and B's: inverse-variance weights, equal where both are zero.
+pub fn subpath_a_weight(var_a: f32, var_b: f32) -> f32 {
+    if var_a + var_b > 0.0 {
+        var_b / (var_a + var_b)
+    } else {
+        0.5
+    }
 }
 
 /// Planes of the full feature packing that a network combining `levels` reads: the log colours
@@ -302,18 +317,20 @@ fn log_transform_plane(plane: &mut [f32]) {
     portable(plane)
 }
 
-/// Packs a bundle for a network whose configuration puts `screen` levels in the place of some of
-/// the bundle's ([`crate::screen_filter`]), after checking the bundle as [`pack`] does.
+/// Packs a bundle for a network whose configuration applies `screen` filters
+/// ([`crate::screen_filter`]: filtered levels in the place of some of the bundle's, a filtered
+/// photon-free part), after checking the bundle as [`pack`] does.
 pub fn pack_with(
     bundle: &Bundle,
-    screen: &[crate::screen_filter::ScreenLevel],
+    screen: &crate::screen_filter::ScreenFilters,
 ) -> Result<PackedImage, FeatureError> {
     if screen.is_empty() {
         return pack(bundle);
     }
     // Shapes and values first: the filter reads the layers as the packing would.
     check_bundle(bundle)?;
-    let filtered = crate::screen_filter::filtered(bundle, screen);
+    let filtered = crate::screen_filter::filtered(bundle, &screen.levels);
+    let width = bundle.meta.width as usize;
     // Finite inputs can still overflow float32 in the filter's sums (values near f32::MAX).
     for f in &filtered {
         let name = bundle::LEVEL_NAMES[f.slot];
@@ -327,11 +344,24 @@ pub fn pack_with(
             return Err(bad(x, y, ["R", "G", "B"][c]));
         }
         if let Some(i) = f.variance.iter().position(|v| !v.is_finite()) {
-            let width = bundle.meta.width as usize;
             return Err(bad(i % width, i / width, "variance"));
         }
     }
-    Ok(pack_checked(bundle, &filtered))
+    let direct = screen
+        .direct
+        .as_ref()
+        .and_then(|d| crate::screen_filter::filtered_direct(bundle, d));
+    if let Some((x, y, c)) = direct.as_ref().and_then(|d| d.find_non_finite()) {
+        return Err(FeatureError::NonFinite {
+            layer: "ydirect + zdirect (direct-filtered)".into(),
+            channel: ["R", "G", "B"][c].into(),
+            x,
+            y,
+        });
+    }
+    let mut packed = pack_checked(bundle, &filtered);
+    packed.direct_added = direct.map(|d| (0..3).flat_map(|k| d.plane(k)).collect());
+    Ok(packed)
 }
 
 /// Packs a bundle into network features and raw colours, rejecting bad shapes and NaN/Inf.
@@ -484,6 +514,7 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
         features,
         levels,
         direct,
+        direct_added: None,
     }
 }
 
@@ -533,6 +564,7 @@ mod tests {
             features: (0..INPUT_CHANNELS).flat_map(plane).collect(),
             levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
             direct: Some((0..DIRECT_CHANNELS).flat_map(|c| plane(50 + c)).collect()),
+            direct_added: None,
         }
     }
 
@@ -562,14 +594,22 @@ mod tests {
             variance: Image::new(23, 11, 2),
         });
         for bundle in [&b, &with_direct] {
-            let packed = pack_with(bundle, &screen).unwrap();
+            let filters = crate::screen_filter::ScreenFilters {
+                levels: screen.to_vec(),
+                direct: None,
+            };
+            let packed = pack_with(bundle, &filters).unwrap();
             assert_eq!(packed, pack(&apply(bundle, &screen)).unwrap());
             assert_ne!(packed, pack(bundle).unwrap());
         }
         // A filtered value past float32's range is an error naming the screen level.
         let mut huge = b.clone();
         huge.levels[4].data.fill(f32::MAX);
-        let err = pack_with(&huge, &screen[..1]).unwrap_err().to_string();
+        let first = crate::screen_filter::ScreenFilters {
+            levels: screen[..1].to_vec(),
+            direct: None,
+        };
+        let err = pack_with(&huge, &first).unwrap_err().to_string();
         assert!(err.contains("screen-filtered"), "{err}");
     }
 

@@ -9,7 +9,7 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::screen_filter::ScreenLevel;
+use crate::screen_filter::{DirectFilter, ScreenFilters, ScreenLevel};
 
 use crate::unet::{forward_region, UNet};
 
@@ -109,6 +109,12 @@ pub struct ModelConfig {
     /// levels as rendered (every model.json written before it existed).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub screen_levels: Vec<ScreenLevel>,
+    /// The photon-free part (emission, next-event estimation) filtered across pixels before it
+    /// is added to the combination's output ([`crate::screen_filter::DirectFilter`];
+    /// docs/method.md §9). Absent: added as the two eye subpaths' fused estimate (every
+    /// model.json written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direct_filter: Option<DirectFilter>,
 }
 
 /// The safeguard strength κ of every preset and of model files that name none. With
@@ -157,6 +163,7 @@ impl ModelConfig {
             guard_target_noise: DEFAULT_GUARD_TARGET_NOISE,
             unet,
             screen_levels: Vec::new(),
+            direct_filter: None,
         }
     }
 
@@ -166,6 +173,14 @@ impl ModelConfig {
         self.in_channels = input_channels(levels.len());
         self.levels = levels;
         self
+    }
+
+    /// The screen-space filters this model applies to a bundle before packing it.
+    pub fn screen_filters(&self) -> ScreenFilters {
+        ScreenFilters {
+            levels: self.screen_levels.clone(),
+            direct: self.direct_filter.clone(),
+        }
     }
 
     /// Number of correlated estimates combined with ỹ (m − 1; 4 for the full network).
@@ -230,6 +245,9 @@ impl ModelConfig {
         }
         validate_levels(&self.levels)?;
         crate::screen_filter::validate(&self.screen_levels)?;
+        if let Some(d) = &self.direct_filter {
+            crate::screen_filter::validate_direct(d)?;
+        }
         let expected = input_channels(self.levels.len());
         if self.in_channels != expected {
             return Err(format!(
@@ -732,6 +750,7 @@ mod tests {
         assert_eq!(
             ModelConfig {
                 screen_levels: Vec::new(),
+                direct_filter: None,
                 ..config.clone()
             },
             ModelConfig::preset(Preset::Small)
@@ -763,6 +782,7 @@ mod tests {
         assert_eq!(
             ModelConfig {
                 screen_levels: Vec::new(),
+                direct_filter: None,
                 ..config.clone()
             },
             unet

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::features::{pack_with, planar_reference, PackedImage};
-use crate::screen_filter::ScreenLevel;
+use crate::screen_filter::ScreenFilters;
 
 /// A sample that was screened out, with the file and the reason.
 #[derive(Clone, Debug, PartialEq)]
@@ -25,11 +25,11 @@ pub struct Sample {
     pub reference: Vec<f32>,
 }
 
-/// Loads and checks one bundle and its reference, packed for a network with `screen` levels.
+/// Loads and checks one bundle and its reference, packed for a network with `screen` filters.
 pub fn load_sample(
     bundle_path: &Path,
     reference_path: &Path,
-    screen: &[ScreenLevel],
+    screen: &ScreenFilters,
 ) -> Result<Sample, BadSample> {
     let bad = |file: &Path, reason: String| BadSample {
         file: file.to_owned(),

@@ -19,6 +19,14 @@
 //! filtered (z̃ − d_B, then d_B added back): the combination takes d_B out of every z̃ level and
 //! adds the fused direct light after Eq. 6, which must not be spread across pixels (a light seen
 //! in one pixel would halo).
+//!
+//! The **direct filter** ([`DirectFilter`]) smooths that fused photon-free part itself with the
+//! same cross-bilateral before it is added back: next-event estimation and emission through two
+//! eye subpaths per pass are path-tracing noise that Eq. 6 never sees (47–79 % of the output's
+//! error on glass, shelf and table-top scenes, docs/results.md). Its range term compares a
+//! neighbour's difference with twice the *smaller* of the two pixels' variances, so a light or a
+//! rare bright sample next to a calm pixel (large variance, large difference) is never averaged
+//! into it: no halo. Same bandwidth rule, so it vanishes as passes grow like the screen levels.
 
 use bundle::{Bundle, Image};
 use rayon::prelude::*;
@@ -73,6 +81,56 @@ fn default_range() -> f32 {
     DEFAULT_RANGE
 }
 
+/// The direct filter's parameters: the fused photon-free part (emission and next-event
+/// estimation of eye subpaths A and B) filtered across pixels before it is added to Eq. 6's
+/// output, with bandwidth σ(N) = σ₀ (N/64)^(−1/6) like the screen levels.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DirectFilter {
+    /// σ₀ in pixels at [`SIGMA_PASSES`] passes.
+    pub sigma: f32,
+    /// Strength k of the range term: a neighbour loses weight as exp(−max(0, d² − V) / (k² V))
+    /// with V twice the smaller of the two pixels' variances (0: the G-buffer alone).
+    #[serde(default = "default_direct_range")]
+    pub range: f32,
+}
+
+/// The direct filter of `models/default`: σ₀ = 1 px, k = 4, chosen on 30 training scenes of
+/// `large` (three per family, 64 passes of 100 000 photons, the shipped weights) from σ₀ ∈
+/// {1, 2, 3} × k ∈ {1, 2, 4} × three range variances (sum, twice the smaller, twice the
+/// centre's): the best geometric mean with no scene above 1.02× the unfiltered output
+/// (docs/results.md, "The direct filter").
+pub const DEFAULT_DIRECT_FILTER: DirectFilter = DirectFilter {
+    sigma: 1.0,
+    range: 4.0,
+};
+
+/// Serde default of [`DirectFilter::range`].
+fn default_direct_range() -> f32 {
+    DEFAULT_DIRECT_FILTER.range
+}
+
+/// Every screen-space filter a model applies to a bundle before its combination.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ScreenFilters {
+    /// Filtered levels put in the place of some of the bundle's.
+    pub levels: Vec<ScreenLevel>,
+    /// The direct filter, if any.
+    pub direct: Option<DirectFilter>,
+}
+
+impl ScreenFilters {
+    /// No filter at all: the bundle as rendered.
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// Whether the bundle is packed as rendered.
+    pub fn is_empty(&self) -> bool {
+        self.levels.is_empty() && self.direct.is_none()
+    }
+}
+
 /// σ at `passes` for a σ₀ of `sigma`.
 pub fn sigma_at(sigma: f32, passes: u32) -> f64 {
     f64::from(sigma) * (f64::from(passes.max(1)) / SIGMA_PASSES).powf(-SIGMA_DECAY)
@@ -108,6 +166,23 @@ pub fn validate(levels: &[ScreenLevel]) -> Result<(), String> {
             ));
         }
         slots.push(l.slot);
+    }
+    Ok(())
+}
+
+/// Checks a direct filter: σ₀ positive and finite, the range 0 or positive.
+pub fn validate_direct(filter: &DirectFilter) -> Result<(), String> {
+    if !(filter.sigma.is_finite() && filter.sigma > 0.0) {
+        return Err(format!(
+            "direct_filter: sigma must be a positive number of pixels, got {}",
+            filter.sigma
+        ));
+    }
+    if !(filter.range.is_finite() && filter.range >= 0.0) {
+        return Err(format!(
+            "direct_filter: range must be 0 (off) or positive, got {}",
+            filter.range
+        ));
     }
     Ok(())
 }
@@ -176,7 +251,6 @@ fn filter(
     if sigma < MIN_SIGMA {
         return (level.clone(), variance);
     }
-    let radius = ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS);
     // Without photon-free layers the level itself is averaged (no copy).
     let photon = direct.map(|d| {
         let mut photon = level.clone();
@@ -185,6 +259,45 @@ fn filter(
         }
         photon
     });
+    cross_bilateral(
+        bundle,
+        level,
+        photon.as_ref(),
+        direct,
+        variance,
+        sigma,
+        range,
+        RangeNoise::Sum,
+    )
+}
+
+/// How the range term reads the noise of a pixel pair.
+#[derive(Clone, Copy, PartialEq)]
+enum RangeNoise {
+    /// v_c + v_n: the variance of the difference of two independent pixels.
+    Sum,
+    /// 2 · min(v_c, v_n): a neighbour whose own variance is large (a light, a rare bright
+    /// sample) cannot use it to enter a calm pixel.
+    TwiceMin,
+}
+
+/// The cross-bilateral of docs/method.md §9 at bandwidth `sigma` (≥ [`MIN_SIGMA`]): the
+/// weights compare `colour` (with `variance`, one value per pixel) and the bundle's G-buffer;
+/// `photon` (default `colour`) is what is averaged and `back` what is added afterwards. Returns
+/// the filtered image and its variance Σ k² v / (Σ k)² (pixels taken as independent).
+#[allow(clippy::too_many_arguments)]
+fn cross_bilateral(
+    bundle: &Bundle,
+    colour: &Image,
+    photon: Option<&Image>,
+    back: Option<&Image>,
+    variance: Vec<f32>,
+    sigma: f64,
+    range: f32,
+    noise: RangeNoise,
+) -> (Image, Vec<f32>) {
+    let (w, h) = (colour.width, colour.height);
+    let radius = ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS);
     // Planar copies: each neighbour offset then runs along a row as one loop over contiguous
     // slices, which the compiler turns into vector instructions.
     let planes = |image: &Image| -> [Vec<f32>; 3] { std::array::from_fn(|k| image.plane(k)) };
@@ -200,12 +313,13 @@ fn filter(
             .iter()
             .map(|d| 1.0 / d.max(1e-6))
             .collect(),
-        colour: planes(level),
-        photon: photon.as_ref().map(planes),
+        colour: planes(colour),
+        photon: photon.map(planes),
         variance,
         radius,
         inv_space: (1.0 / (2.0 * sigma * sigma)) as f32,
         range,
+        twice_min: noise == RangeNoise::TwiceMin,
     };
     let rows: Vec<(Vec<f32>, Vec<f32>)> = (0..h)
         .into_par_iter()
@@ -218,7 +332,7 @@ fn filter(
                 let c = y * w + x;
                 // The centre's own weight is 1, so the sum is ≥ 1.
                 let sum = sums.weight[x];
-                let back = direct.map_or([0.0; 3], |d| {
+                let back = back.map_or([0.0; 3], |d| {
                     [d.data[3 * c], d.data[3 * c + 1], d.data[3 * c + 2]]
                 });
                 for k in 0..3 {
@@ -236,6 +350,43 @@ fn filter(
         out_var.extend(var);
     }
     (out, out_var)
+}
+
+/// The fused photon-free part of `bundle` (paths A and B weighted by the inverse of their
+/// variances, as [`crate::features::split_direct`] fuses them), filtered by `filter` at the
+/// bundle's pass count, interleaved RGB. `None` where there is nothing to filter: a bundle
+/// without photon-free layers, or σ(N) below [`MIN_SIGMA`] (the filter is then the identity and
+/// the combination fuses the layers itself).
+pub fn filtered_direct(bundle: &Bundle, filter: &DirectFilter) -> Option<Image> {
+    let direct = bundle.direct.as_ref()?;
+    let sigma = sigma_at(filter.sigma, bundle.meta.passes);
+    if sigma < MIN_SIGMA {
+        return None;
+    }
+    let (w, h) = (direct.y.width, direct.y.height);
+    let mut fused = Image::new(w, h, 3);
+    let mut variance = Vec::with_capacity(w * h);
+    for p in 0..w * h {
+        let (va, vb) = (direct.variance.data[2 * p], direct.variance.data[2 * p + 1]);
+        let weight_a = crate::features::subpath_a_weight(va, vb);
+        for k in 0..3 {
+            let i = 3 * p + k;
+            fused.data[i] = weight_a * direct.y.data[i] + (1.0 - weight_a) * direct.z.data[i];
+        }
+        // The variance of the fused mean: weights a, 1 − a on independent estimates.
+        variance.push(weight_a * weight_a * va + (1.0 - weight_a) * (1.0 - weight_a) * vb);
+    }
+    let (out, _) = cross_bilateral(
+        bundle,
+        &fused,
+        None,
+        None,
+        variance,
+        sigma,
+        filter.range,
+        RangeNoise::TwiceMin,
+    );
+    Some(out)
 }
 
 /// What the filter reads, planar (`plane[y·w + x]`), and its parameters.
@@ -258,6 +409,8 @@ struct Guides<'a> {
     /// 1 / (2σ²).
     inv_space: f32,
     range: f32,
+    /// The range term's noise is 2 · min(v_c, v_n) instead of v_c + v_n ([`RangeNoise`]).
+    twice_min: bool,
 }
 
 /// One row's running sums over the neighbours: Σ k, Σ k·photon (per channel), Σ k²·v.
@@ -395,7 +548,11 @@ impl Guides<'_> {
                     if use_range {
                         // Differences the noise explains cost nothing; zero variance (a
                         // converged or empty pixel) admits equal colours only.
-                        let v = vn[l] + vc[l];
+                        let v = if self.twice_min {
+                            2.0 * vn[l].min(vc[l])
+                        } else {
+                            vn[l] + vc[l]
+                        };
                         let excess = (sq(&lc, &ln) / 3.0 - v).max(0.0);
                         e += excess / (range2 * v).max(f32::MIN_POSITIVE);
                     }
@@ -694,6 +851,97 @@ mod tests {
             let r = out.levels[4].data[3 * (y * 16 + 8)];
             assert!((l - 0.1).abs() < 1e-3 && (r - 4.0).abs() < 1e-3, "{l} {r}");
         }
+    }
+
+    /// A bundle of `w`×`h` whose photon-free parts are a flat 1.0 plus independent noise of
+    /// variance `var` in paths A and B (variances of their means: `var`).
+    fn noisy_direct(w: usize, h: usize, var: f32, seed: u64) -> Bundle {
+        use rand_core::{RngCore, SeedableRng};
+        let (mut b, _) = synthetic_bundle(w, h, 0.1, seed);
+        b.meta.passes = 64;
+        // One flat surface: the G-buffer lets every neighbour in.
+        b.albedo.data.fill(0.5);
+        for n in b.normal.data.chunks_exact_mut(3) {
+            n.copy_from_slice(&[0.0, 0.0, 1.0]);
+        }
+        b.depth.data.fill(2.0);
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+        let mut noisy = || {
+            let mut img = Image::new(w, h, 3);
+            for p in img.data.chunks_exact_mut(3) {
+                // A uniform of variance `var`, the same in R, G and B.
+                let u = (rng.next_u32() >> 8) as f32 / (1u32 << 24) as f32 - 0.5;
+                p.fill(1.0 + u * (12.0 * var).sqrt());
+            }
+            img
+        };
+        let (y, z) = (noisy(), noisy());
+        let mut variance = Image::new(w, h, 2);
+        variance.data.fill(var);
+        b.direct = Some(bundle::DirectLight { y, z, variance });
+        b
+    }
+
+    #[test]
+    fn the_direct_filter_averages_noise_keeps_a_light_and_vanishes() {
+        let filter = DirectFilter {
+            sigma: 1.0,
+            range: 4.0,
+        };
+        let mut b = noisy_direct(24, 20, 0.01, 7);
+        let direct = b.direct.clone().unwrap();
+        let fused: Vec<f32> = (0..direct.y.data.len())
+            .map(|i| 0.5 * (direct.y.data[i] + direct.z.data[i]))
+            .collect();
+        let error = |x: &[f32]| x.iter().map(|v| (v - 1.0).powi(2)).sum::<f32>();
+        let out = filtered_direct(&b, &filter).expect("σ(64) = 1 px filters");
+        // σ = 1 px on a flat surface averages ≈ 2πσ² pixels: the error falls well below half.
+        assert!(
+            error(&out.data) < 0.3 * error(&fused),
+            "{} vs {}",
+            error(&out.data),
+            error(&fused)
+        );
+        // A light seen in one pixel by both subpaths (bright, its variance large) is not spread
+        // into its calm neighbours, and keeps most of its value.
+        let light = 10 * 24 + 12;
+        let d = b.direct.as_mut().unwrap();
+        for k in 0..3 {
+            d.y.data[3 * light + k] = 100.0;
+            d.z.data[3 * light + k] = 100.0;
+        }
+        d.variance.data[2 * light..2 * light + 2].fill(2000.0);
+        let lit = filtered_direct(&b, &filter).unwrap();
+        for p in (0..24 * 20).filter(|&p| p != light) {
+            let moved = (lit.data[3 * p] - out.data[3 * p]).abs();
+            assert!(moved < 1e-3, "pixel {p} moved by {moved}");
+        }
+        assert!(lit.data[3 * light] > 99.0, "{}", lit.data[3 * light]);
+        // σ(N) below MIN_SIGMA: nothing to filter, the combination fuses the layers itself.
+        b.meta.passes = 64 * 64 * 64 * 64;
+        assert!(filtered_direct(&b, &filter).is_none());
+        b.meta.passes = 64;
+        b.direct = None;
+        assert!(filtered_direct(&b, &filter).is_none());
+    }
+
+    #[test]
+    fn packing_with_a_direct_filter_changes_only_the_added_part() {
+        let b = noisy_direct(16, 12, 0.01, 9);
+        let plain = crate::features::pack(&b).unwrap();
+        let screen = ScreenFilters {
+            levels: Vec::new(),
+            direct: Some(DEFAULT_DIRECT_FILTER),
+        };
+        let filtered = crate::features::pack_with(&b, &screen).unwrap();
+        let (plain_levels, plain_added) = plain.combination_inputs();
+        let (levels, added) = filtered.combination_inputs();
+        assert_eq!(plain_levels, levels);
+        assert_eq!(plain.features, filtered.features);
+        let expected = filtered_direct(&b, &DEFAULT_DIRECT_FILTER).unwrap();
+        let planar: Vec<f32> = (0..3).flat_map(|k| expected.plane(k)).collect();
+        assert_eq!(added.unwrap(), planar);
+        assert_ne!(plain_added.unwrap(), planar);
     }
 
     #[test]

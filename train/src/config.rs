@@ -74,6 +74,11 @@ pub struct TrainConfig {
     /// the bundle's levels.
     #[serde(default)]
     pub screen_levels: Vec<model::screen_filter::ScreenLevel>,
+    /// The photon-free part filtered across pixels before it is added to the output
+    /// (docs/method.md §9): `{ sigma = 1.0, range = 4.0 }` (`models/default`'s). The loss sees
+    /// the filtered output and `model.json` keeps it for inference. Absent: not filtered.
+    #[serde(default)]
+    pub direct_filter: Option<model::screen_filter::DirectFilter>,
     /// Patch side in pixels.
     pub patch: usize,
     /// Patch stride in pixels.
@@ -171,6 +176,7 @@ impl TrainConfig {
             c.guard_target_noise = lambda;
         }
         c.screen_levels = self.screen_levels.clone();
+        c.direct_filter = self.direct_filter.clone();
         match &self.levels {
             Some(levels) => c.with_levels(levels.clone()),
             None => c,
@@ -231,6 +237,11 @@ impl TrainConfig {
             "screen_levels",
             format!("{:?}", model.screen_levels),
             format!("{:?}", net.screen_levels),
+        );
+        differ(
+            "direct_filter",
+            format!("{:?}", model.direct_filter),
+            format!("{:?}", net.direct_filter),
         );
         out.extend(crate::training::settings_differences(settings, &ours));
         // Same keys, different network: a preset whose sizes changed since the checkpoint.

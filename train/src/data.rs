@@ -23,7 +23,7 @@ use model::features::{
 };
 use model::network::all_levels;
 use model::sample::{load_sample, BadSample, Sample};
-use model::screen_filter::ScreenLevel;
+use model::screen_filter::ScreenFilters;
 
 /// Where a sample's pixels come from: files, or memory (tests, synthetic data).
 #[derive(Clone, Debug)]
@@ -182,8 +182,8 @@ pub struct PatchDataset {
     /// five unless set with [`PatchDataset::with_levels`]).
     pub levels: Vec<usize>,
     /// Screen-space levels the network reads in the place of some bundle levels (a model's
-    /// [`model::ModelConfig::screen_levels`]); applied as images load from files.
-    screen: Vec<ScreenLevel>,
+    /// [`model::ModelConfig::screen_filters`]); applied as images load from files.
+    screen: ScreenFilters,
     cache_images: usize,
     cache: Vec<(usize, Arc<Sample>)>,
 }
@@ -299,7 +299,7 @@ impl PatchDataset {
                 };
             // Screening reads the bundle as rendered (the screen levels only replace planes of
             // a bundle that passed these checks).
-            match load_sample(&bundle, &reference, &[]) {
+            match load_sample(&bundle, &reference, &ScreenFilters::none()) {
                 Ok(sample) => {
                     let (width, height) = (sample.packed.width, sample.packed.height);
                     if width < patch || height < patch {
@@ -354,18 +354,18 @@ impl PatchDataset {
             patch,
             stride,
             levels: all_levels(),
-            screen: Vec::new(),
+            screen: ScreenFilters::none(),
             cache_images: cache_images.max(1),
             cache: Vec::new(),
         }
     }
 
-    /// Loads images from now on with `screen` levels in place (a model's
-    /// [`model::ModelConfig::screen_levels`]); cached images of other settings are dropped.
+    /// Loads images from now on with `screen` filters applied (a model's
+    /// [`model::ModelConfig::screen_filters`]); cached images of other settings are dropped.
     /// In-memory samples are already packed and stay as they are.
-    pub fn set_screen_levels(&mut self, screen: &[ScreenLevel]) {
-        if self.screen != screen {
-            self.screen = screen.to_vec();
+    pub fn set_screen_filters(&mut self, screen: &ScreenFilters) {
+        if self.screen != *screen {
+            self.screen = screen.clone();
             self.cache.clear();
         }
     }
@@ -479,8 +479,12 @@ impl PatchDataset {
                 Some(direct) => {
                     patch_direct.clear();
                     crop(direct, &direct_planes, w, h, r, p, &mut patch_direct);
-                    let added = split_direct(&mut batch.combined[start..], &patch_direct, p * p);
-                    batch.direct.extend(added);
+                    let fused = split_direct(&mut batch.combined[start..], &patch_direct, p * p);
+                    match &packed.direct_added {
+                        // The model filters the photon-free part: its filtered planes are added.
+                        Some(added) => crop(added, &[0, 1, 2], w, h, r, p, &mut batch.direct),
+                        None => batch.direct.extend(fused),
+                    }
                 }
                 None => batch.direct.resize(batch.direct.len() + 3 * p * p, 0.0),
             }
@@ -547,6 +551,7 @@ mod tests {
                 features: (0..INPUT_CHANNELS).flat_map(plane).collect(),
                 levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
                 direct: None,
+                direct_added: None,
             },
             reference: (0..3).flat_map(plane).collect(),
         }

@@ -257,7 +257,7 @@ pub fn validate(
     // Per image: squared-error sums of the output and the levels, and the values summed.
     let mut sums = vec![(0.0f64, [0.0f64; LEVELS], 0usize); dataset.images.len()];
     dataset.levels = config.levels.clone();
-    dataset.set_screen_levels(&config.screen_levels);
+    dataset.set_screen_filters(&config.screen_filters());
     let refs: Vec<_> = (0..dataset.images.len())
         .flat_map(|i| dataset.image_patches(i, dataset.patch))
         .collect();
@@ -351,6 +351,7 @@ impl Trainer {
         // Screen levels change what the network reads, not its weights' shapes: weights trained
         // on the bundle's levels start the fine-tuning to filtered ones (and back).
         trained.config.screen_levels = config.screen_levels.clone();
+        trained.config.direct_filter = config.direct_filter.clone();
         if trained.config == config {
             return Ok(Self::fresh(trained.network, config, settings, device));
         }
@@ -398,7 +399,7 @@ impl Trainer {
         let start = Instant::now();
         let epoch = self.epochs_done;
         train.levels = self.config.levels.clone();
-        train.set_screen_levels(&self.config.screen_levels);
+        train.set_screen_filters(&self.config.screen_filters());
         let plan = train.epoch_plan(self.settings.seed, epoch);
         let total = plan.len();
         let batch_size = self.settings.batch.max(1);

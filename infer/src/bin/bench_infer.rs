@@ -8,7 +8,8 @@
 //! every measurement is repeated R times, interleaved (ours, then OIDN, R times), so that a
 //! machine shared with other work loads both alike; the ratios are taken within each round.
 //! `--model DIR` times trained weights as `infer` runs them: the bundle packed with the model's
-//! screen-filtered levels (the filter's time counted), then the tiled reconstruction.
+//! screen-filtered levels and its direct filter (their time counted), then the tiled
+//! reconstruction. The synthetic bundle carries photon-free layers as rendered bundles do.
 //! Prints a table and optionally JSON.
 
 use std::path::PathBuf;
@@ -113,6 +114,30 @@ fn main() -> ExitCode {
     }
 }
 
+/// Photon-free layers for the synthetic bundle: every bundle `infer --scene` renders carries
+/// them, and the emission split and a model's direct filter run on them, so the timed bundle
+/// must too. Path A's part is a share of the noisy ỹ, path B's the same share of z̃1, with the
+/// variances that share implies.
+fn add_direct_light(bundle: &mut bundle::Bundle) {
+    const SHARE: f32 = 0.4;
+    let scaled = |image: &bundle::Image| {
+        let mut out = image.clone();
+        out.data.iter_mut().for_each(|v| *v *= SHARE);
+        out
+    };
+    let (w, h) = (bundle.levels[0].width, bundle.levels[0].height);
+    let mut variance = bundle::Image::new(w, h, 2);
+    for (p, v) in variance.data.chunks_exact_mut(2).enumerate() {
+        v[0] = SHARE * SHARE * bundle.variance.data[p * 5];
+        v[1] = SHARE * SHARE * bundle.variance.data[p * 5 + 1];
+    }
+    bundle.direct = Some(bundle::DirectLight {
+        y: scaled(&bundle.levels[0]),
+        z: scaled(&bundle.levels[1]),
+        variance,
+    });
+}
+
 /// A network to time: a randomly initialised preset, or trained weights from a directory.
 struct Entry {
     /// The preset's name, or the directory.
@@ -186,6 +211,7 @@ fn run(cli: &Cli) -> Result<()> {
     let (n, h) = (cli.size as usize, cli.height.unwrap_or(cli.size) as usize);
     let (mut bundle, _) = synthetic_bundle(n, h, 0.3, 1);
     bundle.meta.passes = cli.passes;
+    add_direct_light(&mut bundle);
     let packed = pack(&bundle)?;
     // OIDN's inputs: the same bundle's sharpest level ỹ as the noisy HDR colour, its albedo and
     // normal (planar RGB).
@@ -233,7 +259,7 @@ fn run(cli: &Cli) -> Result<()> {
                 let start = Instant::now();
                 let own;
                 let input = if entry.pack_in_time {
-                    own = pack_with(&bundle, &model.config.screen_levels)?;
+                    own = pack_with(&bundle, &model.config.screen_filters())?;
                     if k > 0 {
                         t.packing.push(start.elapsed().as_secs_f64());
                     }
@@ -346,7 +372,7 @@ fn run(cli: &Cli) -> Result<()> {
         );
         if !t.packing.is_empty() {
             println!(
-                "    of which packing the bundle with its screen levels: {:.3} s (median of {} runs)",
+                "    of which packing the bundle with its screen filters: {:.3} s (median of {} runs)",
                 median(&t.packing),
                 t.packing.len()
             );

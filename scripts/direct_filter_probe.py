@@ -1,0 +1,122 @@
+#!/usr/bin/env python3
+"""Probe: how much of the output's error is the photon-free part, and which direct filter.
+
+The emission split (docs/method.md §5.4) adds the fused photon-free part of eye subpaths A and
+B — emission and next-event estimation — after Eq. 6, unfiltered. For each scene this probe
+renders a bundle at the evaluation's setting (`infer --scene`: 100 000 photons per pass,
+`--passes`, max depth 10) and reconstructs it with `--model` (its own `direct_filter`, if any,
+taken out), then reports:
+
+- `direct_share`: the fused part's own noise (its variance, from `directvariance`) as a share
+  of the output's relMSE — what no choice of Eq. 6's weights can remove;
+- `ab_check`: the measured mean (A − B)² over the predicted v_A + v_B (≈ 1: the variances are
+  right);
+- `{mode}-s{σ₀}k{k}`: the output's relMSE with the fused part replaced by the cross-bilateral of
+  model/src/screen_filter.rs (G-buffer guides, σ₀ at 64 passes, range strength k), its range
+  term reading v_c + v_n (`sum`), 2·min(v_c, v_n) (`min`) or 2·v_c (`centre`), ÷ the output's.
+
+`--scenes` lists scene directories holding `scene.xml`; `--references` is a pattern giving
+each one's reference (`{name}` is the directory's name). Choose on training scenes (their
+references may be noisy: that noise is independent and adds to every variant alike), never on
+the frozen held-out ones. Equal passes; a development tool (numpy, OpenEXR).
+
+    python3 scripts/direct_filter_probe.py --infer target/release/infer --model models/default \
+        --scenes $(ls -d data/large/scenes/* | awk -F- '{c[$2]++; if (c[$2] <= 3) print}') \
+        --references 'data/large/references/{name}.exr' --out out/direct-filter-probe
+"""
+
+import argparse
+import json
+import math
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from postfilter_probe import bilateral, read, relmse, rgb  # noqa: E402
+
+
+def unfiltered_model(model, out):
+    """The model with its `direct_filter` taken out (a copy under `out`): the probe replaces
+    the unfiltered fused part of the output by each variant, so the output must hold it as is."""
+    with open(f"{model}/model.json") as f:
+        config = json.load(f)
+    if "direct_filter" not in config:
+        return model
+    copy = f"{out}/model-without-direct-filter"
+    os.makedirs(copy, exist_ok=True)
+    for name in os.listdir(model):
+        if name.startswith("model.") and name != "model.json":
+            shutil.copyfile(f"{model}/{name}", f"{copy}/{name}")
+    del config["direct_filter"]
+    with open(f"{copy}/model.json", "w") as f:
+        json.dump(config, f, indent=2)
+    return copy
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--infer", default="target/release/infer")
+    ap.add_argument("--model", default="models/default")
+    ap.add_argument("--scenes", nargs="+", required=True)
+    ap.add_argument("--references", required=True, help="pattern with {name}")
+    ap.add_argument("--passes", type=int, default=64)
+    ap.add_argument("--out", default="out/direct-filter-probe")
+    a = ap.parse_args()
+    os.makedirs(a.out, exist_ok=True)
+    model = unfiltered_model(a.model, a.out)
+    rows = []
+    for scene in a.scenes:
+        name = os.path.basename(os.path.normpath(scene))
+        out_path = f"{a.out}/{name}.exr"
+        bundle = f"{a.out}/{name}_bundle.exr"
+        if not os.path.exists(bundle):
+            subprocess.run(
+                [a.infer, "--model", model, "--scene", f"{scene}/scene.xml",
+                 "--passes", str(a.passes), "--photons", "100000", "--seed", "7",
+                 "--max-depth", "10", "--output", out_path],
+                check=True, stdout=subprocess.DEVNULL,
+            )
+        ref = rgb(a.references.format(name=name))
+        out = rgb(out_path)
+        ya, zb = rgb(bundle, "ydirect."), rgb(bundle, "zdirect.")
+        dv = read(bundle, ["directvariance.y", "directvariance.z"])
+        va, vb = dv[..., 0], dv[..., 1]
+        wa = np.where(va + vb > 0, vb / np.maximum(va + vb, 1e-38), 0.5)[..., None]
+        fused = wa * ya + (1 - wa) * zb
+        fused_var = va * vb / np.maximum(va + vb, 1e-38)
+        albedo = rgb(bundle, "albedo.")
+        normal = read(bundle, ["normal.X", "normal.Y", "normal.Z"])
+        depth = read(bundle, ["depth.Z"])[..., 0]
+        norm = ref.mean(-1) ** 2 + 0.01
+        error = relmse(out, ref)
+        row = {
+            "scene": name,
+            "out": error,
+            "direct_share": float((fused_var / norm).mean()) / error,
+            "ab_check": float((((ya - zb) ** 2).mean(-1) / norm).mean())
+            / max(float(((va + vb) / norm).mean()), 1e-30),
+        }
+        for mode in ("sum", "min", "centre"):
+            for sigma in (1.0, 2.0, 3.0):
+                for k in (1.0, 2.0, 4.0):
+                    f = bilateral(fused, fused_var, albedo, normal, depth, sigma, k, noise=mode)
+                    row[f"{mode}-s{sigma:g}k{k:g}"] = relmse(out - fused + f, ref) / error
+        rows.append(row)
+        print(json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}),
+              flush=True)
+    with open(f"{a.out}/rows.json", "w") as f:
+        json.dump(rows, f, indent=1)
+    print("\n| variant | median | geometric mean | worst |\n|---|---|---|---|")
+    for k in [k for k in rows[0] if k not in ("scene", "out")]:
+        x = [r[k] for r in rows]
+        gm = math.exp(sum(math.log(max(v, 1e-30)) for v in x) / len(x))
+        print(f"| {k} | {statistics.median(x):.3f} | {gm:.3f} | {max(x):.3f} |")
+
+
+if __name__ == "__main__":
+    main()
