@@ -29,7 +29,6 @@ import argparse
 import json
 import math
 import os
-import shutil
 import statistics
 import subprocess
 import sys
@@ -37,25 +36,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from postfilter_probe import bilateral, read, relmse, rgb  # noqa: E402
-
-
-def unfiltered_model(model, out):
-    """The model with its `direct_filter` taken out (a copy under `out`): the probe replaces
-    the unfiltered fused part of the output by each variant, so the output must hold it as is."""
-    with open(f"{model}/model.json") as f:
-        config = json.load(f)
-    if "direct_filter" not in config:
-        return model
-    copy = f"{out}/model-without-direct-filter"
-    os.makedirs(copy, exist_ok=True)
-    for name in os.listdir(model):
-        if name.startswith("model.") and name != "model.json":
-            shutil.copyfile(f"{model}/{name}", f"{copy}/{name}")
-    del config["direct_filter"]
-    with open(f"{copy}/model.json", "w") as f:
-        json.dump(config, f, indent=2)
-    return copy
+from postfilter_probe import bilateral, fused_direct, read, relmse, rgb, unfiltered_model  # noqa: E402
 
 
 def main():
@@ -86,9 +67,7 @@ def main():
         ya, zb = rgb(bundle, "ydirect."), rgb(bundle, "zdirect.")
         dv = read(bundle, ["directvariance.y", "directvariance.z"])
         va, vb = dv[..., 0], dv[..., 1]
-        wa = np.where(va + vb > 0, vb / np.maximum(va + vb, 1e-38), 0.5)[..., None]
-        fused = wa * ya + (1 - wa) * zb
-        fused_var = va * vb / np.maximum(va + vb, 1e-38)
+        fused, fused_var = fused_direct(bundle)
         albedo = rgb(bundle, "albedo.")
         normal = read(bundle, ["normal.X", "normal.Y", "normal.Z"])
         depth = read(bundle, ["depth.Z"])[..., 0]

@@ -5,7 +5,8 @@ For every frozen held-out scene (scenes/heldout) it reconstructs the dataset's l
 bundle of seed 0 with `infer`, then measures, as relMSE ÷ the bundle's best input level against
 the frozen converged reference:
 
-- `out`: the reconstruction as shipped;
+- `out`: the reconstruction as shipped (its photon-free part, direct-filtered or not, is
+  what the filters below leave as it is);
 - `s{σ}v4r2`, `s{σ}vyr2`, `s{σ}norange`: the output filtered by the screen filter's
   cross-bilateral (model/src/screen_filter.rs: same guide tolerances and range term; the
   photon-free part left unfiltered) at σ = 1, 2, 3 px, the range term reading z̃4's or ỹ's
@@ -31,6 +32,7 @@ import argparse
 import glob
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -109,6 +111,34 @@ def bilateral(img, var, albedo, normal, depth, sigma, strength, direct=None, noi
     return total / weight[..., None] + direct
 
 
+def unfiltered_model(model, out):
+    """The model with its `direct_filter` taken out (a copy under `out`): its output holds the
+    unfiltered fused photon-free part, so that output less that part is the photon part."""
+    with open(f"{model}/model.json") as f:
+        config = json.load(f)
+    if "direct_filter" not in config:
+        return model
+    copy = f"{out}/model-without-direct-filter"
+    os.makedirs(copy, exist_ok=True)
+    for name in os.listdir(model):
+        if name.startswith("model.") and name != "model.json":
+            shutil.copyfile(f"{model}/{name}", f"{copy}/{name}")
+    del config["direct_filter"]
+    with open(f"{copy}/model.json", "w") as f:
+        json.dump(config, f, indent=2)
+    return copy
+
+
+def fused_direct(bundle):
+    """The photon-free parts of eye subpaths A and B weighted by the inverse of their variances
+    (as the emission split fuses them) and the fused mean's variance."""
+    ya, zb = rgb(bundle, "ydirect."), rgb(bundle, "zdirect.")
+    dv = read(bundle, ["directvariance.y", "directvariance.z"])
+    va, vb = dv[..., 0], dv[..., 1]
+    wa = np.where(va + vb > 0, vb / np.maximum(va + vb, 1e-38), 0.5)[..., None]
+    return wa * ya + (1 - wa) * zb, va * vb / np.maximum(va + vb, 1e-38)
+
+
 def blur(x, sigma):
     """Separable Gaussian blur of an H×W×C image (edges mirrored)."""
     r = int(3 * sigma)
@@ -153,8 +183,10 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     scenes = sorted(d for d in os.listdir(a.heldout) if os.path.isdir(os.path.join(a.heldout, d)))
     rows = []
+    raw_model = unfiltered_model(a.model, a.out)
     for s in scenes:
         out_path = f"{a.out}/{s}.exr"
+        raw_path = f"{a.out}/{s}_without_direct_filter.exr"
         if a.render_passes:
             b = f"{a.out}/{s}_bundle.exr"
             if not os.path.exists(b):
@@ -170,11 +202,12 @@ def main():
                 print(f"skipped {s}: no bundle in {a.dataset}", file=sys.stderr)
                 continue
             b = bundles[-1]
-        subprocess.run(
-            [a.infer, "--model", a.model, "--input", b, "--output", out_path],
-            check=True,
-            stdout=subprocess.DEVNULL,
-        )
+        for model, path in ((a.model, out_path), (raw_model, raw_path)):
+            subprocess.run(
+                [a.infer, "--model", model, "--input", b, "--output", path],
+                check=True,
+                stdout=subprocess.DEVNULL,
+            )
         ref = rgb(f"{a.heldout}/{s}/reference.exr")
         out = rgb(out_path)
         y = rgb(b, "y.")
@@ -183,7 +216,9 @@ def main():
         albedo = rgb(b, "albedo.")
         normal = read(b, ["normal.X", "normal.Y", "normal.Z"])
         depth = read(b, ["depth.Z"])[..., 0]
-        direct = (rgb(b, "ydirect.") + rgb(b, "zdirect.")) / 2
+        # The output's photon-free part: the output less its photon part, which is the output
+        # without the direct filter less the unfiltered fused part.
+        direct = out - (rgb(raw_path) - fused_direct(b)[0])
         best = min(relmse(x, ref) for x in levels)
         row = {"scene": s, "bundle": os.path.basename(b), "out": relmse(out, ref) / best}
         candidates = [out]
