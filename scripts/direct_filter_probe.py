@@ -13,7 +13,8 @@ taken out), then reports:
   right);
 - `{mode}-s{σ₀}k{k}`: the output's relMSE with the fused part replaced by the cross-bilateral of
   model/src/screen_filter.rs (G-buffer guides, σ₀ at 64 passes, range strength k), its range
-  term reading v_c + v_n (`sum`), 2·min(v_c, v_n) (`min`) or 2·v_c (`centre`), ÷ the output's.
+  term reading v_c + v_n (`sum`), 2·min(v_c, v_n) (`min`) or 2·v_c (`centre`), ÷ the output's
+  (`--sigmas`, `--ks`, `--modes` choose the grid; σ is the bandwidth at `--passes`).
 
 `--scenes` lists scene directories holding `scene.xml`; `--references` is a pattern giving
 each one's reference (`{name}` is the directory's name). Choose on training scenes (their
@@ -47,6 +48,10 @@ def main():
     ap.add_argument("--references", required=True, help="pattern with {name}")
     ap.add_argument("--passes", type=int, default=64)
     ap.add_argument("--out", default="out/direct-filter-probe")
+    ap.add_argument("--sigmas", default="1,2,3",
+                    help="bandwidths in pixels at --passes (the shipped σ₀ = 1 is 0.794 at 256)")
+    ap.add_argument("--ks", default="1,2,4", help="range strengths")
+    ap.add_argument("--modes", default="sum,min,centre", help="range noise rules")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     model = unfiltered_model(a.model, a.out)
@@ -80,9 +85,9 @@ def main():
             "ab_check": float((((ya - zb) ** 2).mean(-1) / norm).mean())
             / max(float(((va + vb) / norm).mean()), 1e-30),
         }
-        for mode in ("sum", "min", "centre"):
-            for sigma in (1.0, 2.0, 3.0):
-                for k in (1.0, 2.0, 4.0):
+        for mode in a.modes.split(","):
+            for sigma in [float(x) for x in a.sigmas.split(",")]:
+                for k in [float(x) for x in a.ks.split(",")]:
                     f = bilateral(fused, fused_var, albedo, normal, depth, sigma, k, noise=mode)
                     row[f"{mode}-s{sigma:g}k{k:g}"] = relmse(out - fused + f, ref) / error
         rows.append(row)
