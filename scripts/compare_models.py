@@ -7,7 +7,8 @@ depth; bundles kept under `--out`, so a second call only reconstructs), reconstr
 bundle with each `--models` entry (`infer --input`) and prints, per scene and overall
 (geometric mean, median, range, scenes better), each later model's relMSE ÷ the first's. Equal
 passes, not equal time: a candidate that wins here still has to win in `evaluate`. Writes
-`scores.json` under `--out/p<passes>`. A development tool (numpy, OpenEXR).
+`scores.json` under `--out/p<passes>`. Run from the repository root, like `evaluate` (the
+config's scene paths are relative to it). A development tool (numpy, OpenEXR).
 
     python3 scripts/compare_models.py --infer target/release/infer \
         --config configs/eval/heldout.toml --passes 64 \
@@ -41,22 +42,19 @@ def main():
         cfg = tomllib.load(f)
     out = f"{a.out}/p{a.passes}"
     os.makedirs(out, exist_ok=True)
-    root = os.path.dirname(os.path.abspath(a.config))
-    # Scene paths in an evaluation config are relative to the repository root (two levels up).
-    root = os.path.dirname(os.path.dirname(root))
     rows = []
     for scene in cfg["scenes"]:
         name = scene["name"]
         bundle = f"{out}/{name}_bundle.exr"
         if not os.path.exists(bundle):
             subprocess.run(
-                [a.infer, "--model", a.models[0], "--scene", os.path.join(root, scene["xml"]),
+                [a.infer, "--model", a.models[0], "--scene", scene["xml"],
                  "--passes", str(a.passes), "--photons", str(cfg.get("photons_per_pass", 100000)),
                  "--seed", str(cfg.get("seed", 1)), "--max-depth", str(cfg.get("max_depth", 10)),
                  "--output", f"{out}/{name}.exr"],
                 check=True, stdout=subprocess.DEVNULL,
             )
-        ref = rgb(os.path.join(root, scene["reference"]))
+        ref = rgb(scene["reference"])
         row = {"scene": name}
         for i, model in enumerate(a.models):
             recon = f"{out}/{name}_m{i}.exr"
