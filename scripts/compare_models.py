@@ -38,8 +38,16 @@ def main():
     a = ap.parse_args()
     if len(a.models) < 2:
         ap.error("--models needs a baseline and at least one candidate")
-    with open(a.config, "rb") as f:
-        cfg = tomllib.load(f)
+    for model in a.models:
+        if not os.path.isfile(os.path.join(model, "model.json")):
+            sys.exit(f"compare_models: {model}: no model.json (not a model directory)")
+    try:
+        with open(a.config, "rb") as f:
+            cfg = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        sys.exit(f"compare_models: {a.config}: {e}")
+    if not cfg.get("scenes"):
+        sys.exit(f"compare_models: {a.config}: no [[scenes]]")
     out = f"{a.out}/p{a.passes}"
     os.makedirs(out, exist_ok=True)
     rows = []
@@ -75,4 +83,8 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except subprocess.CalledProcessError as e:
+        # infer has printed its own error (file, channel or line) on stderr.
+        sys.exit(f"compare_models: {e.cmd[0]} failed with exit status {e.returncode}")
