@@ -120,6 +120,13 @@ pub fn page(results: &EvalResults, dir: &Path) -> Result<String> {
         percent(s.median_overhead),
         s.failed
     );
+    if let Some(n) = &s.noise_corrected {
+        let _ = writeln!(
+            h,
+            "<p class=\"note\">{}</p>",
+            escape(&noise_corrected_sentence(n))
+        );
+    }
     h.push_str(
         "<table><tr><th class=\"l\">scene</th><th>ours s<br>(render+inf.)</th><th>ours relMSE</th>\
          <th>standard relMSE<br>equal time</th><th>ratio</th><th>standard relMSE<br>equal passes</th>\
@@ -467,6 +474,28 @@ fn lexically_normal(path: &Path) -> PathBuf {
         }
     }
     out
+}
+
+/// The summary's ratios with the references' noise taken out, as one sentence.
+pub fn noise_corrected_sentence(n: &crate::NoiseCorrected) -> String {
+    let value = |v: Option<f64>| v.map_or_else(|| "–".into(), |x| format!("{x:.3}"));
+    let mut out = format!(
+        "With the references' own noise taken out of both errors (where it is at most {} of \
+         each; ratios measured against noisy references are pulled toward 1): median ours / \
+         standard SPPM {} over {} scene(s)",
+        crate::ReferenceNoise::CORRECTABLE,
+        value(n.median_ratio_equal_time),
+        n.scenes
+    );
+    for p in &n.peers {
+        out += &format!(
+            ", ours / {} {} over {}",
+            p.peer.name(),
+            value(p.median_ratio),
+            p.scenes
+        );
+    }
+    out + "."
 }
 
 #[cfg(test)]

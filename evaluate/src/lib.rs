@@ -120,6 +120,25 @@ impl ReferenceNoise {
         self.noise / self.smallest_error
     }
 
+    /// The largest noise, as a fraction of either error, for which [`Self::corrected_ratio`]
+    /// is reported: beyond it the difference of two noisy estimates is mostly noise.
+    pub const CORRECTABLE: f64 = 0.5;
+
+    /// `ours / other` with the reference's noise taken out of both errors: (ours − n) / (other −
+    /// n). Against a reference with independent noise of relMSE n, each measured relMSE is the
+    /// error against the true image plus n in expectation, which pulls every ratio toward 1;
+    /// this undoes it. Which of the two is smaller does not change. `None` where the noise is
+    /// unknown (NaN) or more than [`Self::CORRECTABLE`] of either error.
+    pub fn corrected_ratio(&self, ours: f64, other: f64) -> Option<f64> {
+        let n = self.noise;
+        let ok = n.is_finite()
+            && n >= 0.0
+            && ours.is_finite()
+            && other.is_finite()
+            && n <= Self::CORRECTABLE * ours.min(other);
+        ok.then(|| (ours - n) / (other - n))
+    }
+
     /// Whether the reference is too noisy for the smallest differences measured with it.
     pub fn too_noisy(&self) -> bool {
         // NaN (an unrecorded or broken noise) counts as too noisy.
@@ -180,6 +199,23 @@ pub struct Summary {
     /// Scenes where ours beats the best input level.
     pub ours_better_than_best_input: usize,
     /// Ours against each peer that was run (`peers`), at equal time.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub peers: Vec<PeerSummary>,
+    /// With noisy references (training targets): the ratios with the references' noise taken
+    /// out ([`ReferenceNoise::corrected_ratio`]), over the scenes where that is measured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise_corrected: Option<NoiseCorrected>,
+}
+
+/// Medians of ratios with the reference's noise taken out of both errors, over the scenes whose
+/// recorded noise is at most [`ReferenceNoise::CORRECTABLE`] of both.
+#[derive(Clone, Debug, Serialize)]
+pub struct NoiseCorrected {
+    /// Scenes with a corrected ratio against standard SPPM.
+    pub scenes: usize,
+    /// Median over them of ours / standard at equal time, corrected.
+    pub median_ratio_equal_time: Option<f64>,
+    /// Per peer: scenes with a corrected ratio and their median.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub peers: Vec<PeerSummary>,
 }
@@ -346,6 +382,25 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
                     }
                     if let Some(n) = r.reference_noise.as_ref().filter(|n| n.too_noisy()) {
                         eprintln!("  warning: {}", n.warning());
+                        let mut line = String::new();
+                        let standard = c.standard_equal_time.relmse;
+                        if let Some(x) = n.corrected_ratio(c.ours_relmse, standard) {
+                            line += &format!(" standard {x:.3}");
+                        }
+                        for peer in &config.peers {
+                            let corrected = c
+                                .peer(*peer)
+                                .and_then(|p| n.corrected_ratio(c.ours_relmse, p.relmse));
+                            if let Some(x) = corrected {
+                                line += &format!(", {} {x:.3}", peer.name());
+                            }
+                        }
+                        if !line.is_empty() {
+                            eprintln!(
+                                "  ratios with the reference's noise taken out:{}",
+                                line.trim_start_matches(',')
+                            );
+                        }
                     }
                     for (v, e) in variants.iter().zip(&c.variant_relmse) {
                         eprintln!(
@@ -474,10 +529,21 @@ fn evaluate_one(
 
 /// Aggregates at the largest pass count.
 pub fn summarise(results: &[SceneResult], passes: u32) -> Summary {
+    fn at_passes(r: &SceneResult, passes: u32) -> Option<&scene::Checkpoint> {
+        r.eval
+            .as_ref()?
+            .checkpoints
+            .iter()
+            .find(|c| c.passes == passes)
+    }
     let last: Vec<&scene::Checkpoint> = results
         .iter()
-        .filter_map(|r| r.eval.as_ref())
-        .filter_map(|e| e.checkpoints.iter().find(|c| c.passes == passes))
+        .filter_map(|r| at_passes(r, passes))
+        .collect();
+    // Each scene's checkpoint with its reference's noise, where the dataset recorded one.
+    let noisy: Vec<(&scene::Checkpoint, &ReferenceNoise)> = results
+        .iter()
+        .filter_map(|r| Some((at_passes(r, passes)?, r.reference_noise.as_ref()?)))
         .collect();
     let ratios: Vec<f64> = last.iter().map(|c| c.ratio_equal_time).collect();
     let overheads: Vec<f64> = results
@@ -514,7 +580,36 @@ pub fn summarise(results: &[SceneResult], passes: u32) -> Summary {
                 })
             })
             .collect(),
+        noise_corrected: noise_corrected(&noisy),
     }
+}
+
+/// The summary's ratios with the references' noise taken out; `None` when no scene has one.
+fn noise_corrected(noisy: &[(&scene::Checkpoint, &ReferenceNoise)]) -> Option<NoiseCorrected> {
+    let standard: Vec<f64> = noisy
+        .iter()
+        .filter_map(|(c, n)| n.corrected_ratio(c.ours_relmse, c.standard_equal_time.relmse))
+        .collect();
+    let peers: Vec<PeerSummary> = [peers::Peer::SppmOidn, peers::Peer::PtOidn]
+        .into_iter()
+        .filter_map(|peer| {
+            let ratios: Vec<f64> = noisy
+                .iter()
+                .filter_map(|(c, n)| n.corrected_ratio(c.ours_relmse, c.peer(peer)?.relmse))
+                .collect();
+            (!ratios.is_empty()).then(|| PeerSummary {
+                peer,
+                scenes: ratios.len(),
+                ours_better: ratios.iter().filter(|r| **r < 1.0).count(),
+                median_ratio: median(&ratios),
+            })
+        })
+        .collect();
+    (!standard.is_empty() || !peers.is_empty()).then(|| NoiseCorrected {
+        scenes: standard.len(),
+        median_ratio_equal_time: median(&standard),
+        peers,
+    })
 }
 
 /// Reads a file written next to the page, for embedding.
@@ -568,5 +663,57 @@ mod reference_noise_tests {
         assert!(ReferenceNoise::measure(Some(f64::NAN), &eval)
             .unwrap()
             .too_noisy());
+    }
+
+    #[test]
+    fn the_corrected_ratio_takes_the_noise_out_of_both_errors() {
+        let n = ReferenceNoise {
+            noise: 0.01,
+            smallest_error: 0.02,
+        };
+        // True errors 0.01 and 0.04 measured as 0.02 and 0.05: 0.4 pulled to 0.25.
+        assert!((n.corrected_ratio(0.02, 0.05).unwrap() - 0.25).abs() < 1e-12);
+        // The order of the two never changes.
+        assert!(n.corrected_ratio(0.05, 0.02).unwrap() > 1.0);
+        // Noise above half of either error: not measured.
+        assert_eq!(n.corrected_ratio(0.019, 0.05), None);
+        assert_eq!(n.corrected_ratio(0.05, 0.019), None);
+        let nan = ReferenceNoise {
+            noise: f64::NAN,
+            smallest_error: 0.02,
+        };
+        assert_eq!(nan.corrected_ratio(0.02, 0.05), None);
+    }
+
+    #[test]
+    fn the_summary_reports_corrected_medians_only_where_the_noise_allows() {
+        use crate::peers::Peer;
+        // Ours 0.02, standard 1.0 (the fixture), SPPM + OIDN 0.05; noise 0.01 on the first
+        // scene, 0.2 (too much) on the second, none on the third.
+        let mut results = Vec::new();
+        for (name, noise) in [("a", Some(0.01)), ("b", Some(0.2)), ("c", None)] {
+            let mut c = checkpoint(64, 0.02);
+            c.sppm_oidn = Some(peer(0.05));
+            let mut r = scene(name, vec![c]);
+            r.reference_noise = ReferenceNoise::measure(noise, r.eval.as_ref().unwrap());
+            results.push(r);
+        }
+        let s = summarise(&results, 64);
+        let n = s.noise_corrected.expect("one scene has a usable noise");
+        assert_eq!(n.scenes, 1);
+        let standard = results[0].eval.as_ref().unwrap().checkpoints[0]
+            .standard_equal_time
+            .relmse;
+        let expected = (0.02 - 0.01) / (standard - 0.01);
+        assert!((n.median_ratio_equal_time.unwrap() - expected).abs() < 1e-12);
+        assert_eq!(n.peers.len(), 1);
+        assert_eq!(n.peers[0].peer, Peer::SppmOidn);
+        assert_eq!(n.peers[0].scenes, 1);
+        assert!((n.peers[0].median_ratio.unwrap() - 0.25).abs() < 1e-12);
+        // Without any recorded noise there is nothing to report.
+        for r in &mut results {
+            r.reference_noise = None;
+        }
+        assert!(summarise(&results, 64).noise_corrected.is_none());
     }
 }

@@ -95,6 +95,9 @@ fn run(cli: &Cli) -> Result<bool> {
         s.median_ratio_equal_time
             .map_or_else(|| "–".into(), |v| format!("{v:.3}"))
     );
+    if let Some(n) = &s.noise_corrected {
+        println!("{}", evaluate::html::noise_corrected_sentence(n));
+    }
     println!("wrote {}", config.output.join("index.html").display());
     println!("wrote {}", config.output.join("results.json").display());
     if s.failed > 0 {
