@@ -742,6 +742,97 @@ fn is_sharp(roughness: &Roughness, alpha_texture: &Option<Texture>, tp: TexPoint
     alpha < SHARP_ALPHA_THRESHOLD
 }
 
+/// A BSDF made ready to be evaluated for many light directions with one viewer direction at
+/// one shading point — the photon gather, where every photon around a visible point costs an
+/// evaluation. What depends only on the point and the viewer is done once: the side a
+/// `twosided` model shows, and the tilted frame of a `normalmap` or `bumpmap` (a texture
+/// lookup, and for a bump map its gradient, per evaluation otherwise). Its values are exactly
+/// [`Bsdf::eval`]'s (radiance mode) and [`Bsdf::eval_split`]'s.
+pub struct PointBsdf<'a> {
+    /// The viewer direction the model sees (mirrored on a `twosided` model's back face).
+    wo: Vec3,
+    /// Whether light directions are mirrored too (the back face of a `twosided` model).
+    flipped: bool,
+    sp: &'a ShadingPoint,
+    model: PointModel<'a>,
+}
+
+/// What [`PointBsdf`] evaluates.
+enum PointModel<'a> {
+    /// A `twosided` model seen edge-on: zero.
+    Zero,
+    /// A model evaluated as it is.
+    Plain(&'a Bsdf),
+    /// A normal- or bump-mapped model with its frame for this point and viewer.
+    Tilted(perturbed::Perturbed<'a>),
+}
+
+impl Bsdf {
+    /// This model at `sp` for viewer `wo`, ready for many light directions ([`PointBsdf`]).
+    pub fn at_point<'a>(&'a self, wo: Vec3, sp: &'a ShadingPoint) -> PointBsdf<'a> {
+        let (model, wo, flipped) = match self {
+            Bsdf::TwoSided { front, back } => {
+                if wo.z > 0.0 {
+                    (front.as_ref(), wo, false)
+                } else if wo.z < 0.0 {
+                    (back.as_ref(), flip(wo), true)
+                } else {
+                    return PointBsdf {
+                        wo,
+                        flipped: false,
+                        sp,
+                        model: PointModel::Zero,
+                    };
+                }
+            }
+            _ => (self, wo, false),
+        };
+        let model = match model {
+            Bsdf::NormalMap(b) => PointModel::Tilted(perturbed::perturbed(b, wo, sp)),
+            Bsdf::BumpMap(b) => PointModel::Tilted(perturbed::perturbed(b, wo, sp)),
+            other => PointModel::Plain(other),
+        };
+        PointBsdf {
+            wo,
+            flipped,
+            sp,
+            model,
+        }
+    }
+}
+
+impl PointBsdf<'_> {
+    /// The light direction as the resolved model sees it.
+    #[inline]
+    fn light(&self, wi: Vec3) -> Vec3 {
+        if self.flipped {
+            flip(wi)
+        } else {
+            wi
+        }
+    }
+
+    /// [`Bsdf::eval`] in radiance mode for light direction `wi`.
+    pub fn eval(&self, wi: Vec3) -> Rgb {
+        let wi = self.light(wi);
+        match &self.model {
+            PointModel::Zero => Rgb::ZERO,
+            PointModel::Plain(b) => b.eval(self.wo, wi, self.sp, TransportMode::Radiance),
+            PointModel::Tilted(p) => p.eval(self.wo, wi, TransportMode::Radiance),
+        }
+    }
+
+    /// [`Bsdf::eval_split`] for light direction `wi`.
+    pub fn eval_split(&self, wi: Vec3) -> (Rgb, Rgb) {
+        let wi = self.light(wi);
+        match &self.model {
+            PointModel::Zero => (Rgb::ZERO, Rgb::ZERO),
+            PointModel::Plain(b) => b.eval_split(self.wo, wi, self.sp),
+            PointModel::Tilted(p) => p.eval_split(self.wo, wi),
+        }
+    }
+}
+
 /// Mirror a local direction to the other side of the surface (twosided's back face).
 #[inline]
 fn flip(w: Vec3) -> Vec3 {

@@ -20,7 +20,7 @@ fn shadow_terminator(n: Vec3, w: Vec3) -> f32 {
 }
 
 /// A nested model seen through a tilted frame at one shading point.
-struct Perturbed<'a> {
+pub(super) struct Perturbed<'a> {
     /// The nested model.
     pub nested: &'a Bsdf,
     /// The tilted frame, in the shading frame.
@@ -191,7 +191,7 @@ pub trait TiltedModel {
 }
 
 /// `model`'s nested model in the frame `wo` selects at `sp`.
-fn perturbed<'a, M: TiltedModel + ?Sized>(
+pub(super) fn perturbed<'a, M: TiltedModel + ?Sized>(
     model: &'a M,
     wo: Vec3,
     sp: &ShadingPoint,

@@ -2022,3 +2022,51 @@ fn principledthin_is_the_same_from_both_sides_and_reciprocal_in_reflection() {
     );
     assert!(matches!(sheet, Bsdf::PrincipledThin(ref t) if !t.transmits()));
 }
+
+/// `Bsdf::at_point` is the photon gather's shortcut: its values must be exactly those of
+/// `eval` (radiance mode) and `eval_split`, bit for bit, for every wrapper it resolves (the
+/// side of `twosided`, the tilted frame of `normalmap` and `bumpmap`) and for models it leaves
+/// as they are.
+#[test]
+fn at_point_evaluates_exactly_as_eval() {
+    use MicrofacetKind::{Beckmann, Ggx};
+    let glossy = || rough_plastic(rough(Beckmann, 0.05, 0.05), 1.5, rgb(0.6, 0.3, 0.2), false);
+    let models = [
+        bumped(glossy()),
+        normal_mapped(rgb(0.7, 0.4, 0.9), glossy()),
+        two_sided(bumped(glossy()), diffuse(constant(0.5))),
+        two_sided(
+            diffuse(constant(0.3)),
+            normal_mapped(rgb(0.3, 0.6, 0.8), glossy()),
+        ),
+        two_sided(glossy(), glossy()),
+        rough_conductor(rough(Ggx, 0.3, 0.1), gold()),
+        blend(0.4, diffuse(constant(0.2)), bumped(glossy())),
+        diffuse(constant(0.8)),
+    ];
+    let points = [FLAT, ShadingPoint::flat(Vec2::new(0.3, 0.7))];
+    let mut r = rng(40);
+    for (m, bsdf) in models.iter().enumerate() {
+        for sp in &points {
+            let mut wos = test_directions(true);
+            wos.push(Vec3::new(1.0, 0.0, 0.0));
+            for wo in wos {
+                let point = bsdf.at_point(wo, sp);
+                for _ in 0..64 {
+                    let u = uniform2(&mut r);
+                    let z = 2.0 * u.x - 1.0;
+                    let s = (1.0 - z * z).max(0.0).sqrt();
+                    let phi = 2.0 * std::f32::consts::PI * u.y;
+                    let wi = Vec3::new(s * phi.cos(), s * phi.sin(), z);
+                    let expected = bsdf.eval(wo, wi, sp, TransportMode::Radiance);
+                    assert_eq!(point.eval(wi), expected, "model {m}, wo {wo}, wi {wi}");
+                    assert_eq!(
+                        point.eval_split(wi),
+                        bsdf.eval_split(wo, wi, sp),
+                        "model {m}, wo {wo}, wi {wi}"
+                    );
+                }
+            }
+        }
+    }
+}

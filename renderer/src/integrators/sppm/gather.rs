@@ -4,7 +4,7 @@
 //! rejected. Under the CPPM schedule the levels' radii are tested one by one (they need not
 //! be nested) and the contributing photons are counted into each level's cells.
 
-use crate::bsdf::{Bsdf, TransportMode};
+use crate::bsdf::Bsdf;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use crate::texture::TexPoint;
@@ -177,15 +177,17 @@ fn for_each_accepted(
             f
         }
         None => {
+            // The side and the tilted frame, which do not depend on the photon: once.
+            let point = bsdf.at_point(vp.wo, &vp.sp);
             grid.for_each_within(vp.p, r_max, |photon, d2| {
                 if !same_surface(photon) {
                     return;
                 }
                 let wi = vp.frame.to_local(photon.wi);
                 let f = if vp.broad_only {
-                    bsdf.eval_split(vp.wo, wi, &vp.sp).0
+                    point.eval_split(wi).0
                 } else {
-                    bsdf.eval(vp.wo, wi, &vp.sp, TransportMode::Radiance)
+                    point.eval(wi)
                 };
                 if f != Rgb::ZERO {
                     add(photon, d2, f * photon.flux);
