@@ -233,6 +233,18 @@ pub struct PeerSummary {
     pub median_ratio: Option<f64>,
 }
 
+impl PeerSummary {
+    /// The summary of ours ÷ `peer` over the scenes' `ratios`; `None` without any.
+    fn from_ratios(peer: peers::Peer, ratios: &[f64]) -> Option<Self> {
+        (!ratios.is_empty()).then(|| PeerSummary {
+            peer,
+            scenes: ratios.len(),
+            ours_better: ratios.iter().filter(|r| **r < 1.0).count(),
+            median_ratio: median(ratios),
+        })
+    }
+}
+
 /// Everything written to results.json.
 #[derive(Clone, Debug, Serialize)]
 pub struct EvalResults {
@@ -572,12 +584,7 @@ pub fn summarise(results: &[SceneResult], passes: u32) -> Summary {
                     .iter()
                     .filter_map(|c| c.peer(peer).map(|p| p.ratio))
                     .collect();
-                (!ratios.is_empty()).then(|| PeerSummary {
-                    peer,
-                    scenes: ratios.len(),
-                    ours_better: ratios.iter().filter(|r| **r < 1.0).count(),
-                    median_ratio: median(&ratios),
-                })
+                PeerSummary::from_ratios(peer, &ratios)
             })
             .collect(),
         noise_corrected: noise_corrected(&noisy),
@@ -597,12 +604,7 @@ fn noise_corrected(noisy: &[(&scene::Checkpoint, &ReferenceNoise)]) -> Option<No
                 .iter()
                 .filter_map(|(c, n)| n.corrected_ratio(c.ours_relmse, c.peer(peer)?.relmse))
                 .collect();
-            (!ratios.is_empty()).then(|| PeerSummary {
-                peer,
-                scenes: ratios.len(),
-                ours_better: ratios.iter().filter(|r| **r < 1.0).count(),
-                median_ratio: median(&ratios),
-            })
+            PeerSummary::from_ratios(peer, &ratios)
         })
         .collect();
     (!standard.is_empty() || !peers.is_empty()).then(|| NoiseCorrected {
