@@ -33,7 +33,7 @@ use renderer::integrators::sppm::{SppmSettings, DEFAULT_MAX_DEPTH};
 pub const METHOD_NOTE: &str = "Equal time: ours is charged render seconds (multi-level SPPM up \
 to the checkpoint) plus inference seconds (bundle assembly, feature packing, network and \
 combination). Standard SPPM (single level) runs once with dense checkpoints (every configured \
-pass count plus four per doubling) until it has both the largest configured pass count and a \
+pass count plus sixteen per doubling) until it has both the largest configured pass count and a \
 render time past the slowest ours total; its relMSE at ours' total time is interpolated linearly in log(time)–log(relMSE) between the two \
 checkpoints around it. Render times exclude the evaluator's own callback work (bundle assembly \
 and error computation at checkpoints), so the dense checkpoints do not slow the baseline. \
