@@ -247,6 +247,11 @@ pub struct BundleMeta {
         skip_serializing_if = "is_default_schedule"
     )]
     pub schedule: String,
+    /// Light samples of next-event estimation at each visible point (docs/sppm.md). Not
+    /// written when one, so bundles rendered before the option keep their metadata; a bundle
+    /// without it took one.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub emitter_samples: u32,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
@@ -256,6 +261,16 @@ pub struct BundleMeta {
 /// [`DEFAULT_SCHEDULE`] as a `String` (serde's default of [`BundleMeta::schedule`]).
 fn default_schedule() -> String {
     DEFAULT_SCHEDULE.into()
+}
+
+/// One (serde's default of [`BundleMeta::emitter_samples`]).
+fn one() -> u32 {
+    1
+}
+
+/// Whether `n` is one (then [`BundleMeta::emitter_samples`] is not written).
+fn is_one(n: &u32) -> bool {
+    *n == 1
 }
 
 /// Whether `schedule` is [`DEFAULT_SCHEDULE`] (then it is not written).
@@ -542,6 +557,9 @@ fn check_meta(path: &Path, decoded: &Decoded, meta: &BundleMeta) -> Result<(), B
     if meta.passes == 0 {
         return Err(bad(META_ATTRIBUTE, "passes is 0".into()));
     }
+    if meta.emitter_samples == 0 {
+        return Err(bad(META_ATTRIBUTE, "emitter_samples is 0".into()));
+    }
     Ok(())
 }
 
@@ -714,6 +732,7 @@ mod tests {
                 seconds: 12.5,
                 integrator: "sppm-ml".into(),
                 schedule: DEFAULT_SCHEDULE.into(),
+                emitter_samples: 1,
                 width: width as u32,
                 height: height as u32,
             },

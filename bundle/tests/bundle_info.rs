@@ -45,6 +45,7 @@ fn write_sample(path: &std::path::Path, passes: u32) {
             seconds: 0.5,
             integrator: "sppm-ml".into(),
             schedule: bundle::DEFAULT_SCHEDULE.into(),
+            emitter_samples: 1,
             width: w as u32,
             height: h as u32,
         },

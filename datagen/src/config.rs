@@ -52,6 +52,12 @@ pub struct RenderConfig {
     /// fingerprint of a config without it is what it was before the option existed.
     #[serde(default, skip_serializing_if = "is_sppm")]
     pub schedule: RadiusSchedule,
+    /// Light samples at each visible point of the input runs (absent: one, as every dataset
+    /// rendered before the option; `infer --scene` and `evaluate` render with two, the
+    /// multi-level default). References take one whatever this says. Not serialised when
+    /// absent, so older configs keep their fingerprints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub emitter_samples: Option<u32>,
     /// Input regimes (`[[render.regimes]]`): each scene is rendered in one of them — its own
     /// photon density, pass counts, seeds and image side — instead of `photons_per_pass`,
     /// `passes`, `seeds` and the config's size. Absent: every scene as above. Every optional
@@ -981,6 +987,9 @@ impl Config {
                         .into(),
                 )
             }
+        }
+        if r.emitter_samples == Some(0) {
+            return Err("render.emitter_samples must be positive".into());
         }
         if r.seeds == 0 || r.reference_passes == 0 {
             return Err("render.seeds and render.reference_passes must be positive".into());

@@ -39,7 +39,9 @@ pub struct RunSpec {
     pub size: (u32, u32),
 }
 
-/// The multi-level SPPM settings of a dataset run with radius schedule `schedule`.
+/// The multi-level SPPM settings of a dataset run with radius schedule `schedule`: one light
+/// sample per visible point (references always; input runs unless the config's
+/// `render.emitter_samples` says otherwise).
 pub fn run_settings(
     scene_id: &str,
     seed: u64,
@@ -56,6 +58,8 @@ pub fn run_settings(
         max_depth,
         threads,
         scene_name: scene_id.to_owned(),
+        // Every dataset rendered before the option existed took one.
+        emitter_samples: Some(1),
         ..SppmSettings::default()
     }
 }
@@ -681,14 +685,17 @@ fn run_job(
         }
         Job::Inputs { seed_index, .. } => {
             let spec = RunSpec {
-                sppm: run_settings(
-                    &sp.id,
-                    seed,
-                    r.photons_per_pass,
-                    config.render.max_depth,
-                    config.render.schedule,
-                    options.threads,
-                ),
+                sppm: SppmSettings {
+                    emitter_samples: Some(config.render.emitter_samples.unwrap_or(1)),
+                    ..run_settings(
+                        &sp.id,
+                        seed,
+                        r.photons_per_pass,
+                        config.render.max_depth,
+                        config.render.schedule,
+                        options.threads,
+                    )
+                },
                 passes: r.passes.clone(),
                 state: Some(state.clone()),
                 defines,

@@ -39,6 +39,15 @@ pub struct EvalConfig {
     /// Bound on SPPM eye (delta/glossy) and photon bounces; default the renderer's (16).
     #[serde(default)]
     pub max_depth: Option<u32>,
+    /// Light samples at each visible point of our multi-level runs (stratified); absent: the
+    /// renderer's default for multi-level SPPM (two).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub emitter_samples: Option<u32>,
+    /// Light samples at each visible point of the standard SPPM run, whose image the SPPM +
+    /// OIDN peer denoises; absent: one, the paper's standard SPPM. Two makes both peers use
+    /// the stratified direct-light estimate ours uses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub standard_emitter_samples: Option<u32>,
     /// Radius schedule of both runs: `sppm` (default) or `cppm`, which makes the study
     /// single-level CPPM against multi-level CPPM + reconstruction (the paper's "Ours + CPPM").
     /// Not written when `sppm`, so results saved before the option existed still match.
@@ -220,6 +229,9 @@ impl EvalConfig {
         }
         if self.max_depth == Some(0) {
             bail!("max_depth must be positive");
+        }
+        if self.emitter_samples == Some(0) || self.standard_emitter_samples == Some(0) {
+            bail!("emitter_samples and standard_emitter_samples must be positive");
         }
         for (i, peer) in self.peers.iter().enumerate() {
             if self.peers[..i].contains(peer) {
@@ -433,6 +445,27 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("ppm"), "{e}");
+        // Light samples per visible point: absent means the renderer's defaults (ours two,
+        // the standard run one) and is not written back; zero is refused.
+        assert_eq!(
+            (c.emitter_samples, c.standard_emitter_samples),
+            (None, None)
+        );
+        assert!(!serde_json::to_string(&c)
+            .unwrap()
+            .contains("emitter_samples"));
+        let both: EvalConfig =
+            toml::from_str(&top("emitter_samples = 3\nstandard_emitter_samples = 2\n")).unwrap();
+        both.validate().unwrap();
+        assert_eq!(
+            (both.emitter_samples, both.standard_emitter_samples),
+            (Some(3), Some(2))
+        );
+        for zero in ["emitter_samples = 0\n", "standard_emitter_samples = 0\n"] {
+            let z: EvalConfig = toml::from_str(&top(zero)).unwrap();
+            let e = z.validate().unwrap_err().to_string();
+            assert!(e.contains("emitter_samples"), "{e}");
+        }
         assert_eq!(c.engine, None);
         let native: EvalConfig = toml::from_str(&format!("engine = \"native\"\n{base}")).unwrap();
         assert_eq!(native.engine, Some(infer::Engine::Native));

@@ -37,7 +37,9 @@ pass count plus sixteen per doubling) until it has both the largest configured p
 render time past the slowest ours total; its relMSE at ours' total time is interpolated linearly in log(time)–log(relMSE) between the two \
 checkpoints around it. Render times exclude the evaluator's own callback work (bundle assembly \
 and error computation at checkpoints), so the dense checkpoints do not slow the baseline. \
-Overhead = multi-level render seconds / single-level render seconds at the same pass count − 1.";
+Overhead = multi-level render seconds / single-level render seconds at the same pass count − 1. \
+Light samples per visible point: ours' runs take emitter_samples (absent: two, stratified), the \
+standard run standard_emitter_samples (absent: one, the paper's standard SPPM).";
 
 /// The outcome of one scene.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -310,6 +312,7 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
         peers: &config.peers,
         denoiser: &denoiser,
         max_depth: config.max_depth,
+        standard_emitter_samples: config.standard_emitter_samples.unwrap_or(1),
     };
     // The settings and model files, hashed once for every scene's saved result.
     let run_fingerprint = resume::run_fingerprint(config)?;
@@ -321,6 +324,7 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
             seed: config.seed,
             threads: config.threads,
             max_depth: config.max_depth.unwrap_or(DEFAULT_MAX_DEPTH),
+            emitter_samples: config.emitter_samples,
             schedule: config.schedule,
             scene_name: s.name.clone(),
             ..SppmSettings::default()

@@ -12,6 +12,7 @@ use sha2::{Digest, Sha256};
 
 use crate::config::{EvalConfig, EvalScene};
 use crate::SceneResult;
+use renderer::integrators::sppm::SppmSettings;
 
 /// Format tag of a per-scene result file.
 const FORMAT: &str = "sppm-ml-eval-scene/1";
@@ -58,6 +59,19 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
     // Only when there are peers, so that results saved before peers existed still match.
     if !config.peers.is_empty() {
         settings["peers"] = serde_json::json!(config.peers);
+    }
+    // Light samples per visible point of our runs: named unless one, the only count there was
+    // before the option existed.
+    let emitter_samples = SppmSettings {
+        emitter_samples: config.emitter_samples,
+        ..SppmSettings::default()
+    }
+    .emitter_samples();
+    if emitter_samples != 1 {
+        settings["emitter_samples"] = serde_json::json!(emitter_samples);
+    }
+    if let Some(n) = config.standard_emitter_samples.filter(|&n| n != 1) {
+        settings["standard_emitter_samples"] = serde_json::json!(n);
     }
     // Only CPPM is named: the fingerprints of SPPM evaluations stay what they were before
     // the option existed.

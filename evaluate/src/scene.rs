@@ -83,6 +83,9 @@ pub struct PeerSetup<'a> {
     /// Path depth of the path tracer when the scene has no `<integrator>`: the evaluation's
     /// `max_depth` (the references' depth), else unbounded.
     pub max_depth: Option<u32>,
+    /// Light samples per visible point of the standard SPPM run, whose image SPPM + OIDN
+    /// denoises (the paper's standard SPPM: one).
+    pub standard_emitter_samples: u32,
 }
 
 /// Everything measured on one scene.
@@ -238,9 +241,13 @@ pub fn evaluate_scene(
     let mut sppm_captures: Vec<Option<Capture>> = (0..targets.len()).map(|_| None).collect();
     let mut shown: Option<(u32, f64, Vec<f32>)> = None;
     let mut shown_final = false;
+    let standard = SppmSettings {
+        emitter_samples: Some(peers.standard_emitter_samples),
+        ..settings.clone()
+    };
     let kept = run_timed(
         &built,
-        settings,
+        &standard,
         SppmMode::Single,
         &stop,
         "standard",

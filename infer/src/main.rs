@@ -114,6 +114,10 @@ struct Cli {
     /// the scene file's depth is the path tracer's and is not used) [default: 16].
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..), help_heading = "Rendering (--scene)")]
     max_depth: Option<u32>,
+    /// `--scene`: light samples at each visible point, their light choices stratified (as
+    /// `render --emitter-samples` for `sppm-ml`) [default: 2].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..), help_heading = "Rendering (--scene)")]
+    emitter_samples: Option<u32>,
     /// `--scene`: turn unsupported plugins/attributes of the scene into warnings instead of
     /// errors (as `render --lenient`).
     #[arg(long, help_heading = "Rendering (--scene)")]
@@ -151,13 +155,14 @@ fn backend_parser() -> impl TypedValueParser<Value = Backend> {
 const DEFAULT_MODEL: &str = "models/default";
 
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
-const RENDERING_ONLY: [&str; 10] = [
+const RENDERING_ONLY: [&str; 11] = [
     "passes",
     "time",
     "photons",
     "schedule",
     "seed",
     "max_depth",
+    "emitter_samples",
     "lenient",
     "define",
     "state",
@@ -540,6 +545,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
         max_depth: cli
             .max_depth
             .unwrap_or(renderer::integrators::sppm::DEFAULT_MAX_DEPTH),
+        emitter_samples: cli.emitter_samples,
         ..SppmSettings::default()
     };
     let stop = StopCondition {

@@ -105,6 +105,7 @@ pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, I
             seconds: 0.0,
             integrator: "synthetic".into(),
             schedule: bundle::DEFAULT_SCHEDULE.into(),
+            emitter_samples: 1,
             width: w as u32,
             height: h as u32,
         },

@@ -137,6 +137,9 @@ pub fn square_to_uniform_sphere(u: Vec2) -> Vec3 {
     Vec3::new(r * c, r * s, z)
 }
 
+/// The largest `f32` below one: where a uniform number built by arithmetic must stay in [0, 1).
+pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
 /// Density of [`square_to_uniform_sphere`].
 pub const UNIFORM_SPHERE_PDF: f32 = 1.0 / (4.0 * PI);
 

@@ -184,6 +184,12 @@ pub fn check_identity<I: Serialize>(path: &Path, saved: &I, here: &I) -> Result<
     for (key, value) in fields {
         let old = a.get(key).unwrap_or(&serde_json::Value::Null);
         if old != value {
+            // A key the file lacks was written by an older build and holds its default.
+            let old = if old.is_null() {
+                "absent (the default)".to_string()
+            } else {
+                old.to_string()
+            };
             let hint = if key == "scene_fingerprint" {
                 " (the scene file, a file it reads — include, mesh, texture — or its -D overrides \
                  changed)"

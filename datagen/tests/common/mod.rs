@@ -80,6 +80,7 @@ pub fn stand_in_bundle(
             seconds: 1.5,
             integrator: "sppm-ml".into(),
             schedule: bundle::DEFAULT_SCHEDULE.into(),
+            emitter_samples: 1,
             width: width as u32,
             height: height as u32,
         },

@@ -108,7 +108,9 @@ struct Cli {
     spp: Option<u32>,
 
     /// Direct: light samples per pixel sample (Mitsuba's `emitter_samples`). Default: the
-    /// file's `direct` integrator's, else 1.
+    /// file's `direct` integrator's, else 1. SPPM: light samples at each visible point, their
+    /// light choices stratified. Default: 2 for `sppm-ml` (the method's setting, docs/sppm.md),
+    /// 1 for `sppm` (the paper's standard SPPM). Recorded in the bundles.
     #[arg(long, help_heading = "Direct")]
     emitter_samples: Option<u32>,
     /// Direct: BSDF samples per pixel sample (Mitsuba's `bsdf_samples`). Default: the file's
@@ -153,15 +155,20 @@ fn main() -> ExitCode {
 /// Options that only the SPPM integrators read, by their clap ids.
 const SPPM_ONLY: [&str; 6] = ["photons", "passes", "time", "knn", "max_radius", "schedule"];
 /// Options that only the direct integrator reads.
-const DIRECT_ONLY: [&str; 2] = ["emitter_samples", "bsdf_samples"];
+const DIRECT_ONLY: [&str; 1] = ["bsdf_samples"];
+/// Options that the direct and the SPPM integrators read.
+const DIRECT_AND_SPPM: [&str; 1] = ["emitter_samples"];
 
 impl IntegratorKind {
     /// The command-line options (clap ids) this integrator ignores, and who reads them.
     fn ignored_options(self) -> Vec<(&'static str, &'static str)> {
         let sppm = SPPM_ONLY.map(|id| (id, "the SPPM integrators (sppm, sppm-ml)"));
         let direct = DIRECT_ONLY.map(|id| (id, "the direct integrator"));
+        let lights = DIRECT_AND_SPPM.map(|id| (id, "the direct and SPPM integrators"));
         match self {
-            IntegratorKind::Path | IntegratorKind::Volpath => [&sppm[..], &direct[..]].concat(),
+            IntegratorKind::Path | IntegratorKind::Volpath => {
+                [&sppm[..], &direct[..], &lights[..]].concat()
+            }
             IntegratorKind::Direct => {
                 let path = [
                     ("max_depth", "path and SPPM"),
@@ -178,7 +185,7 @@ impl IntegratorKind {
                     ("max_depth", "path and SPPM"),
                     ("rr_depth", "the path tracer"),
                 ];
-                [&sppm[..], &direct[..], &path[..]].concat()
+                [&sppm[..], &direct[..], &lights[..], &path[..]].concat()
             }
             // Depths and sample counts go to the integrators it nests.
             IntegratorKind::Aov => sppm.to_vec(),
@@ -713,6 +720,7 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
             .max_depth
             .filter(|&d| d > 0)
             .map_or(DEFAULT_MAX_DEPTH, |d| d as u32),
+        emitter_samples: cli.emitter_samples,
         threads: cli.threads,
         scene_name: cli.scene.display().to_string(),
         ..SppmSettings::default()

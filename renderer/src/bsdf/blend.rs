@@ -13,6 +13,7 @@
 //! choice probability folded into its `pdf`.
 
 use super::{Bsdf, BsdfSample, ShadingPoint, TransportMode};
+use crate::sampling::ONE_MINUS_EPSILON;
 use crate::spectrum::Rgb;
 use crate::texture::{TexPoint, Texture};
 use glam::{Vec2, Vec3};
@@ -107,7 +108,7 @@ impl Blend {
         } else {
             (a, 1.0 - w, (u_lobe - w) / (1.0 - w))
         };
-        let s = chosen.sample(wo, sp, u_lobe.min(ONE_MINUS_EPS), u, mode)?;
+        let s = chosen.sample(wo, sp, u_lobe.min(ONE_MINUS_EPSILON), u, mode)?;
         if s.delta {
             return Some(BsdfSample {
                 pdf: s.pdf * p_choice,
@@ -133,6 +134,3 @@ impl Blend {
         a.delta_probability(wo, sp) * (1.0 - w) + b.delta_probability(wo, sp) * w
     }
 }
-
-/// The largest f32 below 1: a rescaled `u_lobe` must stay in [0, 1).
-const ONE_MINUS_EPS: f32 = 1.0 - f32::EPSILON / 2.0;

@@ -13,7 +13,8 @@
 //! emitter at every sample would cost as much as there are emitters.
 
 use super::bounds::{bounding_sphere, LightBounds, LightBounds4};
-use super::selection::{pick, BELOW_ONE, IMPORTANCE_CAP, POWER_SHARE};
+use super::selection::{pick, IMPORTANCE_CAP, POWER_SHARE};
+use crate::sampling::ONE_MINUS_EPSILON;
 use crate::shapes::{normal_cone, Mesh};
 use glam::{Vec3, Vec4};
 
@@ -237,7 +238,7 @@ impl EmitterTree {
             let shares = Self::shares(node, p, n).to_array();
             let (k, below) = pick(&shares, u)?;
             let q = shares[k];
-            u = ((u - below) / q).clamp(0.0, BELOW_ONE);
+            u = ((u - below) / q).clamp(0.0, ONE_MINUS_EPSILON);
             pmf *= q;
             let child = node.child[k];
             if child & EMITTER != 0 {

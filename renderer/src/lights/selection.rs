@@ -17,7 +17,7 @@
 
 use super::bounds::{EmitterBounds, LightBounds, LightBounds4};
 use super::emitter_tree::{EmitterTree, TreeEmitter, MAX_EMITTERS};
-use crate::sampling::Distribution1D;
+use crate::sampling::{Distribution1D, ONE_MINUS_EPSILON};
 use glam::Vec3;
 
 /// Most lights of one kind (finite or infinite) the selection weighs one by one (every light
@@ -87,9 +87,6 @@ struct Split {
 
 /// The largest importance counted (the sum of [`MAX_SPATIAL_LIGHTS`] of them stays finite).
 pub(super) const IMPORTANCE_CAP: f32 = 1e30;
-
-/// The largest f32 below 1: a rescaled random number must stay in [0, 1).
-pub(super) const BELOW_ONE: f32 = 1.0 - f32::EPSILON / 2.0;
 
 impl LightSelection {
     /// Builds the selection from each light's power (channel mean) and emission bounds.
@@ -201,13 +198,17 @@ impl LightSelection {
             return self.by_power.sample(u);
         };
         let (group, share, u) = if s.infinite.lights.is_empty() || u < s.finite_pmf {
-            (&s.finite, s.finite_pmf, (u / s.finite_pmf).min(BELOW_ONE))
+            (
+                &s.finite,
+                s.finite_pmf,
+                (u / s.finite_pmf).min(ONE_MINUS_EPSILON),
+            )
         } else {
             let rest = 1.0 - s.finite_pmf;
             (
                 &s.infinite,
                 rest,
-                ((u - s.finite_pmf) / rest).clamp(0.0, BELOW_ONE),
+                ((u - s.finite_pmf) / rest).clamp(0.0, ONE_MINUS_EPSILON),
             )
         };
         let (k, pmf, u_rest) = group.sample(p, n, u);
@@ -298,7 +299,7 @@ impl Group {
             return (0, 0.0, 0.0);
         };
         let wj = w[j];
-        let u_rest = ((target - below) / wj).clamp(0.0, BELOW_ONE);
+        let u_rest = ((target - below) / wj).clamp(0.0, ONE_MINUS_EPSILON);
         (j, wj / total, u_rest)
     }
 

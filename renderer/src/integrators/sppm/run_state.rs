@@ -52,6 +52,10 @@ struct RunIdentity {
     alpha: f32,
     /// Bound on eye and photon bounces.
     max_depth: u32,
+    /// Light samples at each visible point; not written when one, so the files of runs from
+    /// before the option (which took one) read as such.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    emitter_samples: u32,
     /// The radius schedule; not written for SPPM runs, so their files are what they were
     /// before CPPM existed (and such files read as SPPM).
     #[serde(default, skip_serializing_if = "is_sppm")]
@@ -59,6 +63,16 @@ struct RunIdentity {
     /// CPPM's parameters, for CPPM runs: a build with other ones refuses to resume.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     cppm: Option<CppmParameters>,
+}
+
+/// One (serde's default of [`RunIdentity::emitter_samples`]).
+fn one() -> u32 {
+    1
+}
+
+/// Whether `n` is one (then it is left out of the header).
+fn is_one(n: &u32) -> bool {
+    *n == 1
 }
 
 /// Whether `schedule` is SPPM's (the default, left out of the header).
@@ -269,6 +283,7 @@ impl<'a> StateStore<'a> {
                 knn: settings.knn,
                 alpha: settings.alpha,
                 max_depth: settings.max_depth,
+                emitter_samples: settings.emitter_samples(),
                 schedule: settings.schedule,
                 cppm: (settings.schedule == RadiusSchedule::Cppm).then(CppmParameters::current),
             },

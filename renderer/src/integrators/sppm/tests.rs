@@ -1213,7 +1213,7 @@ fn hidden_emitters_are_seen_through_by_the_eye_path() {
     let up = crate::math::Ray::new(Vec3::new(0.01, 0.0, 0.02), Vec3::Y);
     let trace = |scene: &Scene| {
         let mut rng = rng_for(3, 0, 0);
-        trace_eye_path(scene, up, &mut rng, 8)
+        trace_eye_path(scene, up, &mut rng, 8, 1)
     };
     let shown = trace(&scene);
     let on_light = shown.vp.expect("a visible point on the light");
@@ -1257,11 +1257,83 @@ fn hidden_emitters_stay_hidden_through_a_mask() {
             .map(|i| {
                 let mut rng = rng_for(5, 0, i);
                 let ray = crate::math::Ray::new(Vec3::new(0.1, 0.1, -2.0), Vec3::Z);
-                trace_eye_path(scene, ray, &mut rng, 8).direct
+                trace_eye_path(scene, ray, &mut rng, 8, 1).direct
             })
             .fold(Rgb::ZERO, |a, b| a + b)
     };
     assert!(through_the_panel(&scene).min_element() > 10.0);
     scene.integrator = Some(crate::description::IntegratorDesc::hiding_emitters());
     assert_eq!(through_the_panel(&scene), Rgb::ZERO);
+}
+
+/// Light samples at the visible point (`emitter_samples`, their light choices stratified): the
+/// photon-free part keeps its expectation and loses variance. Two ceiling lights of unequal
+/// power, so that one sample picks either and two stratified ones tend to take both.
+#[test]
+fn stratified_light_samples_keep_the_direct_light_and_cut_its_variance() {
+    let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
+    let shapes = vec![
+        quad("floor", -y, z, x, 0, None),
+        quad("ceiling", y, x, z, 0, None),
+        quad("back", z, y, x, 0, None),
+        quad("front", -z, x, y, 0, None),
+        quad("left", -x, y, z, 0, None),
+        quad("right", x, z, y, 0, None),
+        quad(
+            "bright",
+            y * 0.99 - x * 0.6,
+            x * 0.2,
+            z * 0.2,
+            0,
+            Some(Rgb::splat(9.0)),
+        ),
+        quad(
+            "dim",
+            y * 0.99 + x * 0.6,
+            x * 0.2,
+            z * 0.2,
+            0,
+            Some(Rgb::splat(3.0)),
+        ),
+    ];
+    let scene = scene(
+        camera(
+            Vec3::new(0.0, 0.0, -0.95),
+            Vec3::new(0.0, -0.3, 1.0),
+            70.0,
+            8,
+        ),
+        vec![diffuse(0.6)],
+        shapes,
+        vec![],
+    );
+    // Image mean of path A's photon-free part, the variance of that mean, and the mean
+    // per-pixel variance of the pixel means.
+    let direct = |n: u32| {
+        let s = SppmSettings {
+            emitter_samples: Some(n),
+            ..settings(SppmMode::MultiLevel, 1000, 11)
+        };
+        let b = render(&scene, &s, 64);
+        assert_eq!(b.meta.emitter_samples, n);
+        let d = b
+            .direct
+            .expect("multi-level bundles carry the photon-free parts");
+        let pixels = d.y.width * d.y.height;
+        let var: Vec<f64> = (0..pixels).map(|p| d.variance.data[2 * p] as f64).collect();
+        let mean_var = var.iter().sum::<f64>() / pixels as f64;
+        (mean_rgb(&d.y), mean_var / pixels as f64, mean_var)
+    };
+    let (m1, v1, pv1) = direct(1);
+    let (m2, v2, pv2) = direct(2);
+    assert!(m1 > 0.05, "the lights reach the walls: {m1}");
+    let sigma = (v1 + v2).sqrt();
+    assert!(
+        (m2 - m1).abs() < 4.0 * sigma,
+        "same expectation: {m1} vs {m2} (σ of the difference {sigma})"
+    );
+    assert!(
+        pv2 < 0.7 * pv1,
+        "two stratified samples cut the variance: {pv2} vs {pv1}"
+    );
 }

@@ -12,7 +12,7 @@
 use crate::bsdf::{Bsdf, BsdfSample, Lobe, ShadingPoint, TransportMode};
 use crate::frame::Frame;
 use crate::math::Ray;
-use crate::sampling::{power_heuristic, Pcg32, UniformSource};
+use crate::sampling::{power_heuristic, Pcg32, UniformSource, ONE_MINUS_EPSILON};
 use crate::scene::{EmitterHit, Scene, SurfaceInteraction};
 use crate::spectrum::Rgb;
 use glam::Vec3;
@@ -162,8 +162,10 @@ fn emission_along(
     }
 }
 
-/// Next-event estimation at `si`: one light sample, MIS-weighted against BSDF sampling.
+/// Next-event estimation at `si`: one light sample, MIS-weighted against BSDF sampling, its
+/// light choice drawn from stratum `k` of `n` (u = (k + ξ)/n; `n` = 1 is the plain sample).
 #[inline]
+#[allow(clippy::too_many_arguments)]
 fn direct_light(
     scene: &Scene,
     si: &SurfaceInteraction,
@@ -171,8 +173,11 @@ fn direct_light(
     bsdf: &Bsdf,
     wo: Vec3,
     rng: &mut Pcg32,
+    k: u32,
+    n: u32,
 ) -> Rgb {
-    let u_sel = rng.next_f32();
+    // For n = 1 this is ξ itself, so one sample keeps the random streams it always had.
+    let u_sel = ((k as f32 + rng.next_f32()) / n as f32).min(ONE_MINUS_EPSILON);
     let u = rng.next_2d();
     let Some(ls) = scene.sample_li(si.p, si.ng, u_sel, u) else {
         return Rgb::ZERO;
@@ -188,6 +193,31 @@ fn direct_light(
         power_heuristic(ls.pdf, bsdf.pdf(wo, wi, sp))
     };
     f * (wi.z.abs() * w) * ls.weight
+}
+
+/// Next-event estimation at a visible point: the mean of `n` light samples whose light choices
+/// are stratified, so that with several lights each sample tends to pick another one. Each
+/// sample keeps its MIS weight against the one BSDF probe (the weights of a light-sampled and
+/// a BSDF-sampled path still sum to one), so the mean has the single sample's expectation.
+#[allow(clippy::too_many_arguments)]
+fn direct_light_at_visible_point(
+    scene: &Scene,
+    si: &SurfaceInteraction,
+    sp: &ShadingPoint,
+    bsdf: &Bsdf,
+    wo: Vec3,
+    rng: &mut Pcg32,
+    n: u32,
+) -> Rgb {
+    let mut sum = Rgb::ZERO;
+    for k in 0..n {
+        sum += direct_light(scene, si, sp, bsdf, wo, rng, k, n);
+    }
+    if n == 1 {
+        sum
+    } else {
+        sum / n as f32
+    }
 }
 
 /// Emission found by the BSDF-sampled probe ray `bs` from `si` (the BSDF-sampling half of the
@@ -229,8 +259,15 @@ fn visible_point(
 }
 
 /// Traces one eye subpath starting with `ray`; `max_depth` bounds the number of delta/glossy
-/// bounces before the path gives up without a visible point.
-pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u32) -> EyePath {
+/// bounces before the path gives up without a visible point; `emitter_samples` light samples
+/// estimate direct light at the visible point.
+pub fn trace_eye_path(
+    scene: &Scene,
+    mut ray: Ray,
+    rng: &mut Pcg32,
+    max_depth: u32,
+    emitter_samples: u32,
+) -> EyePath {
     let mut out = EyePath::default();
     let mut gbuffer_set = false;
     // Set when the path continues from a sharp split: the emission it meets next was already
@@ -291,6 +328,10 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
             // follows the sharp part instead (see `Bsdf::eval_split`). The branch is drawn
             // only for such models, so every other scene keeps its random streams.
             let sharp = bsdf.sharp_share(wo, &sp).map(sharp_probability);
+            // Next-event estimation at this visible point, scaled by the caller.
+            let direct_here = |rng: &mut Pcg32| {
+                direct_light_at_visible_point(scene, &si, &sp, bsdf, wo, rng, emitter_samples)
+            };
             // Direct light for the whole model, the MIS probe's sample `bs`, and the
             // throughput the visible point's photons get.
             let (bs, vp_beta) = if p_delta > 0.0 {
@@ -316,10 +357,10 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
                     break;
                 }
                 let vp_beta = beta / (1.0 - p_delta);
-                out.direct += vp_beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
+                out.direct += vp_beta * direct_here(rng);
                 (bs, vp_beta)
             } else {
-                out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
+                out.direct += beta * direct_here(rng);
                 // The BSDF-sampling half of the MIS pair: it only looks for emitters.
                 let u_lobe = rng.next_f32();
                 let u = rng.next_2d();
@@ -362,7 +403,9 @@ pub fn trace_eye_path(scene: &Scene, mut ray: Ray, rng: &mut Pcg32, max_depth: u
             break;
         }
         if lobe == Lobe::Glossy {
-            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng);
+            // One light sample at a glossy vertex on the way: the visible point's own samples
+            // are where the photon-free part's noise was measured to sit.
+            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng, 0, 1);
         }
         let u_lobe = rng.next_f32();
         let u = rng.next_2d();
