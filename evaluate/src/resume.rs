@@ -12,7 +12,7 @@ use sha2::{Digest, Sha256};
 
 use crate::config::{EvalConfig, EvalScene};
 use crate::SceneResult;
-use renderer::integrators::sppm::SppmSettings;
+use renderer::integrators::sppm::DEFAULT_EMITTER_SAMPLES_MULTI_LEVEL;
 
 /// Format tag of a per-scene result file.
 const FORMAT: &str = "sppm-ml-eval-scene/1";
@@ -62,11 +62,9 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
     }
     // Light samples per visible point of our runs: named unless one, the only count there was
     // before the option existed.
-    let emitter_samples = SppmSettings {
-        emitter_samples: config.emitter_samples,
-        ..SppmSettings::default()
-    }
-    .emitter_samples();
+    let emitter_samples = config
+        .emitter_samples
+        .unwrap_or(DEFAULT_EMITTER_SAMPLES_MULTI_LEVEL);
     if emitter_samples != 1 {
         settings["emitter_samples"] = serde_json::json!(emitter_samples);
     }

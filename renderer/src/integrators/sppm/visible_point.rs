@@ -162,8 +162,12 @@ fn emission_along(
     }
 }
 
-/// Next-event estimation at `si`: one light sample, MIS-weighted against BSDF sampling, its
-/// light choice drawn from stratum `k` of `n` (u = (k + ξ)/n; `n` = 1 is the plain sample).
+/// Next-event estimation at `si`: the mean of `n` light samples, each MIS-weighted against
+/// BSDF sampling, sample k drawing its light choice from the stratum [k/n, (k+1)/n) so that
+/// with several lights the samples tend to pick different ones. Each keeps its weight against
+/// the one BSDF probe (a light-sampled and a BSDF-sampled path's weights still sum to one), so
+/// the mean has the single sample's expectation; `n` = 1 is the plain sample, its random
+/// streams unchanged.
 #[inline]
 #[allow(clippy::too_many_arguments)]
 fn direct_light(
@@ -173,51 +177,31 @@ fn direct_light(
     bsdf: &Bsdf,
     wo: Vec3,
     rng: &mut Pcg32,
-    k: u32,
     n: u32,
 ) -> Rgb {
-    // For n = 1 this is ξ itself, so one sample keeps the random streams it always had.
-    let u_sel = ((k as f32 + rng.next_f32()) / n as f32).min(ONE_MINUS_EPSILON);
-    let u = rng.next_2d();
-    let Some(ls) = scene.sample_li(si.p, si.ng, u_sel, u) else {
-        return Rgb::ZERO;
+    let mut sample = |k: u32| {
+        // For n = 1 this is ξ itself.
+        let u_sel = ((k as f32 + rng.next_f32()) / n as f32).min(ONE_MINUS_EPSILON);
+        let u = rng.next_2d();
+        let Some(ls) = scene.sample_li(si.p, si.ng, u_sel, u) else {
+            return Rgb::ZERO;
+        };
+        let wi = si.to_local(ls.wi);
+        let f = bsdf.eval(wo, wi, sp, TransportMode::Radiance);
+        if f.max_element() <= 0.0 || scene.light_occluded(si.p, si.ng, &ls) {
+            return Rgb::ZERO;
+        }
+        let w = if ls.delta {
+            1.0
+        } else {
+            power_heuristic(ls.pdf, bsdf.pdf(wo, wi, sp))
+        };
+        f * (wi.z.abs() * w) * ls.weight
     };
-    let wi = si.to_local(ls.wi);
-    let f = bsdf.eval(wo, wi, sp, TransportMode::Radiance);
-    if f.max_element() <= 0.0 || scene.light_occluded(si.p, si.ng, &ls) {
-        return Rgb::ZERO;
-    }
-    let w = if ls.delta {
-        1.0
-    } else {
-        power_heuristic(ls.pdf, bsdf.pdf(wo, wi, sp))
-    };
-    f * (wi.z.abs() * w) * ls.weight
-}
-
-/// Next-event estimation at a visible point: the mean of `n` light samples whose light choices
-/// are stratified, so that with several lights each sample tends to pick another one. Each
-/// sample keeps its MIS weight against the one BSDF probe (the weights of a light-sampled and
-/// a BSDF-sampled path still sum to one), so the mean has the single sample's expectation.
-#[allow(clippy::too_many_arguments)]
-fn direct_light_at_visible_point(
-    scene: &Scene,
-    si: &SurfaceInteraction,
-    sp: &ShadingPoint,
-    bsdf: &Bsdf,
-    wo: Vec3,
-    rng: &mut Pcg32,
-    n: u32,
-) -> Rgb {
-    let mut sum = Rgb::ZERO;
-    for k in 0..n {
-        sum += direct_light(scene, si, sp, bsdf, wo, rng, k, n);
-    }
     if n == 1 {
-        sum
-    } else {
-        sum / n as f32
+        return sample(0);
     }
+    (0..n).fold(Rgb::ZERO, |sum, k| sum + sample(k)) / n as f32
 }
 
 /// Emission found by the BSDF-sampled probe ray `bs` from `si` (the BSDF-sampling half of the
@@ -329,9 +313,8 @@ pub fn trace_eye_path(
             // only for such models, so every other scene keeps its random streams.
             let sharp = bsdf.sharp_share(wo, &sp).map(sharp_probability);
             // Next-event estimation at this visible point, scaled by the caller.
-            let direct_here = |rng: &mut Pcg32| {
-                direct_light_at_visible_point(scene, &si, &sp, bsdf, wo, rng, emitter_samples)
-            };
+            let direct_here =
+                |rng: &mut Pcg32| direct_light(scene, &si, &sp, bsdf, wo, rng, emitter_samples);
             // Direct light for the whole model, the MIS probe's sample `bs`, and the
             // throughput the visible point's photons get.
             let (bs, vp_beta) = if p_delta > 0.0 {
@@ -405,7 +388,7 @@ pub fn trace_eye_path(
         if lobe == Lobe::Glossy {
             // One light sample at a glossy vertex on the way: the visible point's own samples
             // are where the photon-free part's noise was measured to sit.
-            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng, 0, 1);
+            out.direct += beta * direct_light(scene, &si, &sp, bsdf, wo, rng, 1);
         }
         let u_lobe = rng.next_f32();
         let u = rng.next_2d();
