@@ -52,7 +52,7 @@ run options (defaults: the paper preset on the `small` dataset):
                      `screen_levels` to match --init weights trained with them); a key the run
                      writes already (dataset, preset, patch, stride, batch, lr, epochs, seed,
                      output, init, backend, cache_images) is a TOML error
-  --bench-batches "A B …"   batches timed (default "8 16 28": on an H200 the paper preset's
+  --bench-batches "A B …"   batches timed (default "8 16 28"; "" times none: on an H200 the paper preset's
                      batches from 64 of 64² need a buffer above the device's limit; a failing
                      batch is left out)
   --bench-patch N    patch side of the timed steps (default 64, the paper's)
@@ -139,7 +139,11 @@ pack() {
     tree=$(git ls-files -z --cached --others --exclude-standard | du -cb --files0-from=- 2>/dev/null | tail -1 | cut -f1)
     packed=$(du -sb "$PACK" | cut -f1)
     echo "packed $PACK: $((packed / 1024 / 1024)) MiB; working tree $((tree / 1024 / 1024)) MiB; together $(((tree + packed) / 1024 / 1024)) MiB of the node's 64"
-    [ $((tree + packed)) -le $((62 * 1024 * 1024)) ] || die "pack: over the 64 MiB a node takes"
+    # The node takes the working tree as it is on disk: tracked files the run does not read
+    # (other models' weights, contact sheets) can be moved aside for the call and restored with
+    # `git checkout -- PATHS` (docs/training.md).
+    [ $((tree + packed)) -le $((62 * 1024 * 1024)) ] ||
+        die "pack: over the 64 MiB a node takes; $PACK is complete: move tracked files the node does not need out of the working tree for the call (e.g. models/paper/model.bpk, *.safetensors, docs/images/*contact-sheet*.png), then git checkout them back"
     echo "on the node (repository root, carry $PACK): bash scripts/device/train_gpu.sh run --budget 500"
 }
 
@@ -245,6 +249,11 @@ run() {
     t0=$(date +%s)
     # shellcheck disable=SC2086 # $dgargs is a list of options
     "$bin/datagen" render --config "$dgconfig" --out "$data" --quiet $dgargs
+    if [ -n "$dgargs" ]; then
+        # A slice of a dataset ends without a manifest (the rest is not rendered): list the
+        # scenes it rendered.
+        "$bin/datagen" manifest --config "$dgconfig" --out "$data" --partial
+    fi
     datagen_s=$(( $(date +%s) - t0 ))
     echo "datagen: ${datagen_s} s"
 

@@ -25,9 +25,10 @@ struct Cli {
     /// Scene file (Mitsuba 3 XML).
     #[arg(default_value = DEFAULT_SCENE)]
     scene: PathBuf,
-    /// Image side length (sets the `res` default of the file).
-    #[arg(long, default_value_t = 256)]
-    res: u32,
+    /// Image side length: sets the file's `res` default (the default scene's is 256). Leave it
+    /// out for a scene without one (e.g. a dataset's generated scenes, which fix their size).
+    #[arg(long)]
+    res: Option<u32>,
     /// Photons traced per pass (the same for both modes).
     #[arg(long, default_value_t = 100_000)]
     photons: u64,
@@ -90,7 +91,10 @@ fn run() -> Result<()> {
         !cli.threads.is_empty(),
         "--threads needs at least one count"
     );
-    let defines = vec![("res".to_string(), cli.res.to_string())];
+    let defines: Vec<(String, String)> = cli
+        .res
+        .map(|res| vec![("res".to_string(), res.to_string())])
+        .unwrap_or_default();
     cli_output::paths::check_default_input(&cli.scene, DEFAULT_SCENE, "the bundled default scene")
         .map_err(anyhow::Error::msg)?;
     let loaded = renderer::scene_file::load_for_sppm(&cli.scene, &defines, false)?;

@@ -56,6 +56,8 @@ enum PresetArg {
     Medium,
     Small,
     Tiny,
+    /// The shipped weights' network (`models/default`).
+    Unet,
 }
 
 fn device(name: &str) -> Result<Device> {
@@ -129,6 +131,7 @@ fn run(cli: &Cli) -> Result<()> {
         PresetArg::Medium => Preset::Medium,
         PresetArg::Small => Preset::Small,
         PresetArg::Tiny => Preset::Tiny,
+        PresetArg::Unet => Preset::UNet,
     };
     let config = ModelConfig::preset(preset);
     let base = device(&cli.backend)?;
