@@ -66,25 +66,31 @@ fn furnace(rho: f32) -> Scene {
     )
 }
 
+/// The six inward-facing walls of the box [−1,1]³, all of BSDF 0 but the back and left walls.
+fn box_walls(back: usize, left: usize) -> Vec<ShapeDesc> {
+    let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
+    vec![
+        quad("floor", -y, z, x, 0, None),
+        quad("ceiling", y, x, z, 0, None),
+        quad("back", z, y, x, back, None),
+        quad("front", -z, x, y, 0, None),
+        quad("left", -x, y, z, left, None),
+        quad("right", x, z, y, 0, None),
+    ]
+}
+
 /// A closed diffuse box [−1,1]³ (inward normals) with a small ceiling light, seen from inside.
 fn lit_box(res: u32) -> Scene {
     let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
-    let shapes = vec![
-        quad("floor", -y, z, x, 0, None),
-        quad("ceiling", y, x, z, 0, None),
-        quad("back", z, y, x, 1, None),
-        quad("front", -z, x, y, 0, None),
-        quad("left", -x, y, z, 2, None),
-        quad("right", x, z, y, 0, None),
-        quad(
-            "light",
-            y * 0.99,
-            x * 0.25,
-            z * 0.25,
-            0,
-            Some(Rgb::splat(8.0)),
-        ),
-    ];
+    let mut shapes = box_walls(1, 2);
+    shapes.extend([quad(
+        "light",
+        y * 0.99,
+        x * 0.25,
+        z * 0.25,
+        0,
+        Some(Rgb::splat(8.0)),
+    )]);
     scene(
         camera(
             Vec3::new(0.0, 0.0, -0.95),
@@ -1272,13 +1278,8 @@ fn hidden_emitters_stay_hidden_through_a_mask() {
 #[test]
 fn stratified_light_samples_keep_the_direct_light_and_cut_its_variance() {
     let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
-    let shapes = vec![
-        quad("floor", -y, z, x, 0, None),
-        quad("ceiling", y, x, z, 0, None),
-        quad("back", z, y, x, 0, None),
-        quad("front", -z, x, y, 0, None),
-        quad("left", -x, y, z, 0, None),
-        quad("right", x, z, y, 0, None),
+    let mut shapes = box_walls(0, 0);
+    shapes.extend([
         quad(
             "bright",
             y * 0.99 - x * 0.6,
@@ -1295,7 +1296,7 @@ fn stratified_light_samples_keep_the_direct_light_and_cut_its_variance() {
             0,
             Some(Rgb::splat(3.0)),
         ),
-    ];
+    ]);
     let scene = scene(
         camera(
             Vec3::new(0.0, 0.0, -0.95),
