@@ -11,7 +11,7 @@ use crate::manifest::{
     assemble_manifest, config_fingerprint, jobs_of_other_config, outputs_intact, read_record,
     to_json, JobRecord, SampleEntry, SceneEntry, MANIFEST_FORMAT,
 };
-use crate::plan::{Job, Plan, SceneSelection, Shard};
+use crate::plan::{Job, JobKinds, Plan, SceneSelection, Shard};
 use crate::scene::write_scene_files;
 use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle, Image};
@@ -100,6 +100,8 @@ pub struct RenderOptions {
     pub shard: Shard,
     /// Which scenes are rendered (default: all).
     pub selection: SceneSelection,
+    /// Which of their jobs: references, inputs or both.
+    pub kinds: JobKinds,
     /// Worker threads per render (0 = all cores).
     pub threads: usize,
     /// Draw progress bars on stderr.
@@ -257,7 +259,7 @@ pub fn render_dataset_to(
         .selection
         .scenes_of(&plan)
         .map_err(anyhow::Error::msg)?;
-    let mine = plan.shard_jobs(options.shard, &keep);
+    let mine = plan.shard_jobs(options.shard, &keep, options.kinds);
     let multi = MultiProgress::with_draw_target(target);
     // A line for the user: above the bars, or plainly on stderr where no bar is drawn (--quiet,
     // or stderr is not a terminal).

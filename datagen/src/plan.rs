@@ -215,9 +215,9 @@ impl Plan {
 
     /// Indices of the jobs shard `index` of `count` runs: every `count`-th job of the scenes
     /// `keep` marks ([`SceneSelection::scenes_of`]; all `true` for the whole dataset).
-    pub fn shard_jobs(&self, shard: Shard, keep: &[bool]) -> Vec<usize> {
+    pub fn shard_jobs(&self, shard: Shard, keep: &[bool], kinds: JobKinds) -> Vec<usize> {
         (0..self.jobs.len())
-            .filter(|&j| keep[self.jobs[j].scene()])
+            .filter(|&j| keep[self.jobs[j].scene()] && kinds.runs(&self.jobs[j]))
             .enumerate()
             .filter(|(k, _)| k % shard.count as usize == shard.index as usize)
             .map(|(_, j)| j)
@@ -416,6 +416,35 @@ impl SceneSelection {
             );
         }
         Ok(keep)
+    }
+}
+
+/// Which kinds of the selected scenes' jobs a `datagen render` runs. They suit different
+/// machines: a scene's reference is one long run that writes one small image (on `large`, more
+/// than half of a scene's time and ≈ 0.3 MB), its inputs short runs that write most of its
+/// bytes (≈ 13 MB). A short-lived node with many cores can render references and hand them
+/// back; the bundles are rendered where training reads them. Either kind resumes the same way,
+/// and a later call with the other kind completes the scenes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum JobKinds {
+    /// References and inputs.
+    #[default]
+    All,
+    /// Only the references.
+    References,
+    /// Only the input bundles.
+    Inputs,
+}
+
+impl JobKinds {
+    /// Whether `job` is of these kinds.
+    pub fn runs(self, job: &Job) -> bool {
+        matches!(
+            (self, job),
+            (JobKinds::All, _)
+                | (JobKinds::References, Job::Reference { .. })
+                | (JobKinds::Inputs, Job::Inputs { .. })
+        )
     }
 }
 

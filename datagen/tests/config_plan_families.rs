@@ -206,7 +206,11 @@ fn shards_partition_the_jobs() {
     for n in 1..=7u32 {
         let mut seen = vec![0u32; plan.jobs.len()];
         for i in 0..n {
-            let mine = plan.shard_jobs(Shard::new(i, n).unwrap(), &vec![true; plan.scenes.len()]);
+            let mine = plan.shard_jobs(
+                Shard::new(i, n).unwrap(),
+                &vec![true; plan.scenes.len()],
+                Default::default(),
+            );
             // Balanced within one job.
             let ideal = plan.jobs.len() as f64 / f64::from(n);
             assert!(

@@ -128,6 +128,7 @@ fn dataset(name: &str) -> (PathBuf, Manifest) {
     let options = RenderOptions {
         shard: Shard::ALL,
         selection: Default::default(),
+        kinds: Default::default(),
         threads: 1,
         progress: false,
         state_interval: 60.0,

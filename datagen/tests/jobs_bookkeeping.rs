@@ -89,6 +89,7 @@ fn options(shard: Shard) -> RenderOptions {
     RenderOptions {
         shard,
         selection: Default::default(),
+        kinds: Default::default(),
         threads: 1,
         progress: false,
         state_interval: 60.0,
@@ -519,6 +520,54 @@ fn scene_selections_render_their_scenes_and_add_up_to_the_whole() {
     };
     let report = render_dataset(&config, &dir, with(rest), &StandIn::default()).unwrap();
     assert!(report.manifest_complete);
+    assert_same(&snapshot(&whole), &snapshot(&dir));
+    std::fs::remove_dir_all(&whole).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `datagen render --jobs`: the references of a dataset, then its inputs (in two shards, on
+/// other machines in practice), are the whole dataset byte for byte; each call runs only its
+/// kind, skips nothing of the other, and the manifest is complete only after both.
+#[test]
+fn reference_and_input_jobs_rendered_apart_add_up_to_the_whole() {
+    use datagen::plan::{Job, JobKinds, Plan};
+    let config = test_config(16, &[2, 4], 2, 4);
+    let plan = Plan::new(&config);
+    let references = plan
+        .jobs
+        .iter()
+        .filter(|j| matches!(j, Job::Reference { .. }))
+        .count();
+    let inputs = plan.jobs.len() - references;
+    assert!(references > 0 && inputs > references);
+    let whole = fresh_dir("fake-kinds-whole");
+    render_dataset(&config, &whole, options(Shard::ALL), &StandIn::default()).unwrap();
+
+    let dir = fresh_dir("fake-kinds");
+    let refs_only = RenderOptions {
+        kinds: JobKinds::References,
+        ..options(Shard::ALL)
+    };
+    let report = render_dataset(&config, &dir, refs_only.clone(), &StandIn::default()).unwrap();
+    assert_eq!((report.rendered, report.skipped), (references, 0));
+    assert!(!report.manifest_complete);
+    assert!(!dir.join("bundles").exists(), "no input was rendered");
+    // Again: everything of its kind is done.
+    let report = render_dataset(&config, &dir, refs_only, &StandIn::default()).unwrap();
+    assert_eq!((report.rendered, report.skipped), (0, references));
+
+    let mut rendered = 0;
+    for i in 0..2 {
+        let inputs_only = RenderOptions {
+            kinds: JobKinds::Inputs,
+            ..options(Shard::new(i, 2).unwrap())
+        };
+        let report = render_dataset(&config, &dir, inputs_only, &StandIn::default()).unwrap();
+        assert_eq!(report.skipped, 0, "the references are not the inputs' jobs");
+        rendered += report.rendered;
+        assert_eq!(report.manifest_complete, i == 1);
+    }
+    assert_eq!(rendered, inputs);
     assert_same(&snapshot(&whole), &snapshot(&dir));
     std::fs::remove_dir_all(&whole).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();

@@ -302,6 +302,7 @@ fn options() -> RenderOptions {
     RenderOptions {
         shard: Shard::ALL,
         selection: Default::default(),
+        kinds: Default::default(),
         threads: 1,
         progress: false,
         state_interval: 60.0,

@@ -11,7 +11,7 @@ use datagen::evaluation_reference::{evaluation_references, EvaluationOptions};
 use datagen::families::{generate, scene_list};
 use datagen::jobs::{check_external_scenes, render_dataset, RenderOptions};
 use datagen::manifest::{assemble_manifest, Manifest};
-use datagen::plan::{Plan, SceneSelection, Shard, Split};
+use datagen::plan::{JobKinds, Plan, SceneSelection, Shard, Split};
 use datagen::reference_noise::{markdown, noise_table, TABLE_FILE};
 use datagen::scene::write_scene_files;
 use datagen::sppm_backend::SppmBackend;
@@ -64,6 +64,11 @@ enum Command {
         shard: Option<Shard>,
         #[command(flatten)]
         selection: SelectionArgs,
+        /// Which jobs of the selected scenes: `references` (the long runs, small files: for a
+        /// node with many cores that hands its files back), `inputs` (the bundles) or `all`.
+        /// The kinds resume alike; a later call with the other kind completes the scenes.
+        #[arg(long, value_enum, default_value_t = JobsArg::All)]
+        jobs: JobsArg,
         /// Worker threads per render (0 = all cores; output does not depend on it).
         #[arg(long, default_value_t = 0)]
         threads: usize,
@@ -196,6 +201,24 @@ enum Command {
     },
 }
 
+/// `render --jobs`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum JobsArg {
+    All,
+    References,
+    Inputs,
+}
+
+impl From<JobsArg> for JobKinds {
+    fn from(a: JobsArg) -> Self {
+        match a {
+            JobsArg::All => JobKinds::All,
+            JobsArg::References => JobKinds::References,
+            JobsArg::Inputs => JobKinds::Inputs,
+        }
+    }
+}
+
 /// Which scenes of a config a command takes (all criteria must hold; none given: all).
 #[derive(Debug, clap::Args)]
 struct SelectionArgs {
@@ -310,6 +333,7 @@ fn run(cli: Cli) -> Result<i32> {
             out,
             shard,
             selection,
+            jobs,
             threads,
             state_interval,
             quiet,
@@ -319,10 +343,12 @@ fn run(cli: Cli) -> Result<i32> {
                 Shard::from_env(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?;
             let shard = shard.or(env_shard).unwrap_or(Shard::ALL);
             let selection = selection.into_selection();
-            let selected = selection != SceneSelection::default();
+            // A part of the dataset: its manifest waits for the rest.
+            let selected = selection != SceneSelection::default() || !matches!(jobs, JobsArg::All);
             let options = RenderOptions {
                 shard,
                 selection,
+                kinds: jobs.into(),
                 threads,
                 progress: !quiet,
                 state_interval: positive_interval(state_interval)?,
