@@ -425,7 +425,7 @@ impl SceneSelection {
 /// bytes (≈ 13 MB). A short-lived node with many cores can render references and hand them
 /// back; the bundles are rendered where training reads them. Either kind resumes the same way,
 /// and a later call with the other kind completes the scenes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum JobKinds {
     /// References and inputs.
     #[default]

@@ -67,8 +67,8 @@ enum Command {
         /// Which jobs of the selected scenes: `references` (the long runs, small files: for a
         /// node with many cores that hands its files back), `inputs` (the bundles) or `all`.
         /// The kinds resume alike; a later call with the other kind completes the scenes.
-        #[arg(long, value_enum, default_value_t = JobsArg::All)]
-        jobs: JobsArg,
+        #[arg(long, value_enum, default_value_t = JobKinds::All)]
+        jobs: JobKinds,
         /// Worker threads per render (0 = all cores; output does not depend on it).
         #[arg(long, default_value_t = 0)]
         threads: usize,
@@ -201,24 +201,6 @@ enum Command {
     },
 }
 
-/// `render --jobs`.
-#[derive(Debug, Clone, Copy, clap::ValueEnum)]
-enum JobsArg {
-    All,
-    References,
-    Inputs,
-}
-
-impl From<JobsArg> for JobKinds {
-    fn from(a: JobsArg) -> Self {
-        match a {
-            JobsArg::All => JobKinds::All,
-            JobsArg::References => JobKinds::References,
-            JobsArg::Inputs => JobKinds::Inputs,
-        }
-    }
-}
-
 /// Which scenes of a config a command takes (all criteria must hold; none given: all).
 #[derive(Debug, clap::Args)]
 struct SelectionArgs {
@@ -344,11 +326,11 @@ fn run(cli: Cli) -> Result<i32> {
             let shard = shard.or(env_shard).unwrap_or(Shard::ALL);
             let selection = selection.into_selection();
             // A part of the dataset: its manifest waits for the rest.
-            let selected = selection != SceneSelection::default() || !matches!(jobs, JobsArg::All);
+            let selected = selection != SceneSelection::default() || jobs != JobKinds::All;
             let options = RenderOptions {
                 shard,
                 selection,
-                kinds: jobs.into(),
+                kinds: jobs,
                 threads,
                 progress: !quiet,
                 state_interval: positive_interval(state_interval)?,
