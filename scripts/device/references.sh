@@ -20,7 +20,7 @@
 set -euo pipefail
 
 die() { echo "references.sh: $*" >&2; exit 1; }
-usage() { sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; }
 
 cd "$(dirname "$0")/../.."
 PACK=.refs-node
