@@ -19,7 +19,7 @@ mkdir -p "$out/tune" "$out/reports"
 cases="$out/cases.tsv"; : > "$cases"
 for scene in cornell-diffuse glass-mirror-spheres rough-materials many-lights spot-point-thinlens mixed-features; do
     xml="$root/scenes/validation/$scene/scene.xml"
-    depth=$(grep -o 'name="max_depth" value="[0-9]*"' "$xml" | grep -o '[0-9]*$')
+    depth=$(grep -o 'name="max_depth" value="[0-9]*"' "$xml" | grep -o '[0-9]\+')
     if [ ! -f "$out/tune/${scene}_ref.exr" ]; then
         "$bin/render" "$xml" -D res=64 --integrator sppm --photons 100000 --passes 2048 --seed 11 \
             --max-depth "$depth" --out "$out/tune/${scene}_ref" >/dev/null 2>&1

@@ -783,11 +783,15 @@ mod tests {
             ModelConfig {
                 screen_levels: Vec::new(),
                 direct_filter: None,
+                guard_target_noise: unet.guard_target_noise,
                 ..config.clone()
             },
             unet
         );
         assert_eq!(config.screen_levels.len(), 1);
+        // The shipped weights trust the screen-filtered smoothest level less than the presets
+        // do (journal/2026-12-04-guard-lambda.md).
+        assert_eq!(config.guard_target_noise, 32.0);
         let text = serde_json::to_string(&unet).unwrap();
         assert!(text.contains(r#""preset":"unet""#), "{text}");
         assert!(

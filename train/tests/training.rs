@@ -376,6 +376,20 @@ fn grown_network_computes_the_same_function_and_trains() {
         .count();
     assert!(from_new > 0, "the new channels' output weights never moved");
 
+    // Another guard is not another architecture: the same weights, the config's guard.
+    let other_guard = ModelConfig {
+        guard: small.guard + 4.0,
+        guard_target_noise: small.guard_target_noise * 4.0,
+        ..small.clone()
+    };
+    let reguarded = Trainer::from_weights(other_guard.clone(), settings.clone(), &dir, &device)
+        .expect("a different guard must start from the same weights");
+    assert_eq!(reguarded.config, other_guard);
+    assert_eq!(
+        raw_output(&reguarded.model.valid(), &device),
+        raw_output(&net, &device)
+    );
+
     let narrower_window = ModelConfig {
         window: small.window - 2,
         ..big.clone()
