@@ -26,7 +26,6 @@ the frozen held-out ones. Equal passes; a development tool (numpy, OpenEXR).
         --references 'data/large/references/{name}.exr' --out out/direct-filter-probe
 """
 
-import argparse
 import json
 import math
 import os
@@ -37,17 +36,13 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from postfilter_probe import bilateral, fused_direct, read, relmse, rgb, unfiltered_model  # noqa: E402
+from postfilter_probe import (  # noqa: E402
+    bilateral, fused_direct, read, relmse, rgb, scene_probe_arguments, unfiltered_model,
+)
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--infer", default="target/release/infer")
-    ap.add_argument("--model", default="models/default")
-    ap.add_argument("--scenes", nargs="+", required=True)
-    ap.add_argument("--references", required=True, help="pattern with {name}")
-    ap.add_argument("--passes", type=int, default=64)
-    ap.add_argument("--out", default="out/direct-filter-probe")
+    ap = scene_probe_arguments(__doc__, "out/direct-filter-probe")
     ap.add_argument("--sigmas", default="1,2,3",
                     help="bandwidths in pixels at --passes (the shipped σ₀ = 1 is 0.794 at 256)")
     ap.add_argument("--ks", default="1,2,4", help="range strengths")

@@ -15,7 +15,6 @@ tool (numpy, OpenEXR).
         --pairs 16,8 16,32 8,32
 """
 
-import argparse
 import math
 import os
 import statistics
@@ -23,17 +22,11 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from postfilter_probe import relmse, rgb  # noqa: E402
+from postfilter_probe import relmse, rgb, scene_probe_arguments  # noqa: E402
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--infer", default="target/release/infer")
-    ap.add_argument("--model", default="models/default")
-    ap.add_argument("--scenes", nargs="+", required=True)
-    ap.add_argument("--references", required=True, help="pattern with {name}")
-    ap.add_argument("--passes", type=int, default=64)
-    ap.add_argument("--out", default="out/guard-probe")
+    ap = scene_probe_arguments(__doc__, "out/guard-probe")
     ap.add_argument("--pairs", nargs="+", default=["16,8", "16,32"],
                     help="κ,λ pairs; the first is the baseline")
     a = ap.parse_args()

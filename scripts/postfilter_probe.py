@@ -50,6 +50,20 @@ FLOAT = Imath.PixelType(Imath.PixelType.FLOAT)
 ALBEDO_SIGMA, NORMAL_SIGMA, DEPTH_SIGMA = 0.1, 0.3, 0.05
 
 
+def scene_probe_arguments(doc, out):
+    """The command line the equal-pass probes share: the `infer` binary, the model, the scene
+    directories, their references (a pattern with `{name}`), the pass count and the output
+    folder (default `out`)."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap.add_argument("--infer", default="target/release/infer")
+    ap.add_argument("--model", default="models/default")
+    ap.add_argument("--scenes", nargs="+", required=True)
+    ap.add_argument("--references", required=True, help="pattern with {name}")
+    ap.add_argument("--passes", type=int, default=64)
+    ap.add_argument("--out", default=out)
+    return ap
+
+
 def read(path, names):
     f = OpenEXR.InputFile(path)
     dw = f.header()["dataWindow"]
