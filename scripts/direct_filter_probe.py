@@ -30,14 +30,14 @@ import json
 import math
 import os
 import statistics
-import subprocess
 import sys
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from postfilter_probe import (  # noqa: E402
-    bilateral, fused_direct, read, relmse, rgb, scene_probe_arguments, unfiltered_model,
+    bilateral, fused_direct, probe_render, read, relmse, rgb, scene_probe_arguments,
+    unfiltered_model,
 )
 
 
@@ -53,15 +53,7 @@ def main():
     rows = []
     for scene in a.scenes:
         name = os.path.basename(os.path.normpath(scene))
-        out_path = f"{a.out}/{name}.exr"
-        bundle = f"{a.out}/{name}_bundle.exr"
-        if not os.path.exists(bundle):
-            subprocess.run(
-                [a.infer, "--model", model, "--scene", f"{scene}/scene.xml",
-                 "--passes", str(a.passes), "--photons", "100000", "--seed", "7",
-                 "--max-depth", "10", "--output", out_path],
-                check=True, stdout=subprocess.DEVNULL,
-            )
+        out_path, bundle = probe_render(a.infer, model, scene, a.passes, a.out)
         ref = rgb(a.references.format(name=name))
         out = rgb(out_path)
         ya, zb = rgb(bundle, "ydirect."), rgb(bundle, "zdirect.")

@@ -22,7 +22,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from postfilter_probe import relmse, rgb, scene_probe_arguments  # noqa: E402
+from postfilter_probe import probe_render, relmse, rgb, scene_probe_arguments  # noqa: E402
 
 
 def main():
@@ -34,14 +34,7 @@ def main():
     errors = {}
     for scene in a.scenes:
         name = os.path.basename(os.path.normpath(scene))
-        bundle = f"{a.out}/{name}_bundle.exr"
-        if not os.path.exists(bundle):
-            subprocess.run(
-                [a.infer, "--model", a.model, "--scene", f"{scene}/scene.xml",
-                 "--passes", str(a.passes), "--photons", "100000", "--seed", "7",
-                 "--max-depth", "10", "--output", f"{a.out}/{name}.exr"],
-                check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            )
+        _, bundle = probe_render(a.infer, a.model, scene, a.passes, a.out)
         ref = rgb(a.references.format(name=name))
         row = []
         for pair in a.pairs:

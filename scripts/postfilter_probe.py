@@ -64,6 +64,21 @@ def scene_probe_arguments(doc, out):
     return ap
 
 
+def probe_render(infer, model, scene, passes, out):
+    """Renders `scene` (a directory holding `scene.xml`) at the evaluation's setting — 100 000
+    photons per pass, `passes`, seed 7, max depth 10 — and reconstructs it with `model`, unless
+    done before: returns (output, bundle) paths, `{out}/{name}.exr` and `{out}/{name}_bundle.exr`."""
+    name = os.path.basename(os.path.normpath(scene))
+    output, bundle = f"{out}/{name}.exr", f"{out}/{name}_bundle.exr"
+    if not os.path.exists(bundle):
+        subprocess.run(
+            [infer, "--model", model, "--scene", f"{scene}/scene.xml", "--passes", str(passes),
+             "--photons", "100000", "--seed", "7", "--max-depth", "10", "--output", output],
+            check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )
+    return output, bundle
+
+
 def read(path, names):
     f = OpenEXR.InputFile(path)
     dw = f.header()["dataWindow"]

@@ -340,6 +340,19 @@ impl ModelConfig {
 }
 
 impl ModelConfig {
+    /// This config with `other`'s settings around the network — what it reads (screen levels,
+    /// direct filter) and what happens to its output (the guard) — which change no weight's
+    /// shape: weights trained with some start a fine-tuning with others.
+    pub fn with_settings_around_the_network_of(self, other: &ModelConfig) -> ModelConfig {
+        ModelConfig {
+            screen_levels: other.screen_levels.clone(),
+            direct_filter: other.direct_filter.clone(),
+            guard: other.guard,
+            guard_target_noise: other.guard_target_noise,
+            ..self
+        }
+    }
+
     /// Why a network of architecture `from` cannot be grown into this one (`None`: it can).
     /// Growing needs the same inputs, kernel and weighting, no fewer hidden layers or filters,
     /// and the same window or (ReLU weighting) a wider one.

@@ -348,12 +348,8 @@ impl Trainer {
     ) -> Result<Self, String> {
         let device = device.clone().autodiff();
         let mut trained = TrainedModel::open(dir, &device).map_err(|e| e.to_string())?;
-        // Screen levels change what the network reads and the guard what happens to its output,
-        // not its weights' shapes: weights trained with other ones start the fine-tuning to these.
-        trained.config.screen_levels = config.screen_levels.clone();
-        trained.config.direct_filter = config.direct_filter.clone();
-        trained.config.guard = config.guard;
-        trained.config.guard_target_noise = config.guard_target_noise;
+        // The filters and the guard are the config's: they change no weight's shape.
+        trained.config = trained.config.with_settings_around_the_network_of(&config);
         if trained.config == config {
             return Ok(Self::fresh(trained.network, config, settings, device));
         }
