@@ -44,13 +44,6 @@ pub const SCHEDULES: [&str; 2] = ["sppm", "cppm"];
 /// The schedule of a bundle whose metadata names none (every bundle written before CPPM).
 pub const DEFAULT_SCHEDULE: &str = "sppm";
 
-/// Eye subpaths of a multi-level bundle (`renderer`'s `EyeSubpaths`): two independent ones,
-/// or one shared by all levels.
-pub const EYE_SUBPATHS: [&str; 2] = ["separate", "shared"];
-
-/// The method's two eye subpaths, what a bundle without the attribute used.
-pub const DEFAULT_EYE_SUBPATHS: &str = "separate";
-
 /// Channel names of an RGB layer.
 const RGB: [&str; 3] = ["R", "G", "B"];
 /// Channel names of the normal layer.
@@ -259,14 +252,6 @@ pub struct BundleMeta {
     /// without it took one.
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub emitter_samples: u32,
-    /// Eye subpaths per pixel and pass ([`EYE_SUBPATHS`]). Not written when `separate`, so
-    /// bundles rendered before the option keep their metadata; single-level bundles are
-    /// `separate` (one subpath is all they trace).
-    #[serde(
-        default = "default_eye_subpaths",
-        skip_serializing_if = "is_default_eye_subpaths"
-    )]
-    pub eye_subpaths: String,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
@@ -276,16 +261,6 @@ pub struct BundleMeta {
 /// [`DEFAULT_SCHEDULE`] as a `String` (serde's default of [`BundleMeta::schedule`]).
 fn default_schedule() -> String {
     DEFAULT_SCHEDULE.into()
-}
-
-/// [`DEFAULT_EYE_SUBPATHS`] as a `String` (serde's default of [`BundleMeta::eye_subpaths`]).
-fn default_eye_subpaths() -> String {
-    DEFAULT_EYE_SUBPATHS.into()
-}
-
-/// Whether `eye_subpaths` is [`DEFAULT_EYE_SUBPATHS`] (then it is not written).
-fn is_default_eye_subpaths(eye_subpaths: &str) -> bool {
-    eye_subpaths == DEFAULT_EYE_SUBPATHS
 }
 
 /// One (serde's default of [`BundleMeta::emitter_samples`]).
@@ -585,15 +560,6 @@ fn check_meta(path: &Path, decoded: &Decoded, meta: &BundleMeta) -> Result<(), B
     if meta.emitter_samples == 0 {
         return Err(bad(META_ATTRIBUTE, "emitter_samples is 0".into()));
     }
-    if !EYE_SUBPATHS.contains(&meta.eye_subpaths.as_str()) {
-        return Err(bad(
-            META_ATTRIBUTE,
-            format!(
-                "eye_subpaths \"{}\" (expected one of {EYE_SUBPATHS:?})",
-                meta.eye_subpaths
-            ),
-        ));
-    }
     Ok(())
 }
 
@@ -767,7 +733,6 @@ mod tests {
                 integrator: "sppm-ml".into(),
                 schedule: DEFAULT_SCHEDULE.into(),
                 emitter_samples: 1,
-                eye_subpaths: DEFAULT_EYE_SUBPATHS.into(),
                 width: width as u32,
                 height: height as u32,
             },

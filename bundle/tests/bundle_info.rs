@@ -46,7 +46,6 @@ fn write_sample(path: &std::path::Path, passes: u32) {
             integrator: "sppm-ml".into(),
             schedule: bundle::DEFAULT_SCHEDULE.into(),
             emitter_samples: 1,
-            eye_subpaths: bundle::DEFAULT_EYE_SUBPATHS.into(),
             width: w as u32,
             height: h as u32,
         },

@@ -3,7 +3,7 @@
 //! unknown fields so typos are errors naming the field.
 
 use crate::plan::Split;
-use renderer::integrators::sppm::{EyeSubpaths, RadiusSchedule};
+use renderer::integrators::sppm::RadiusSchedule;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -58,12 +58,6 @@ pub struct RenderConfig {
     /// absent, so older configs keep their fingerprints.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub emitter_samples: Option<u32>,
-    /// Eye subpaths per pixel and pass of the input runs (`separate`, the method's two, or
-    /// `shared`, one for all levels; docs/sppm.md "One eye subpath"). References are rendered
-    /// with two whatever this says. Not serialised when `separate`, so older configs keep
-    /// their fingerprints.
-    #[serde(default, skip_serializing_if = "is_separate")]
-    pub eye_subpaths: EyeSubpaths,
     /// Input regimes (`[[render.regimes]]`): each scene is rendered in one of them — its own
     /// photon density, pass counts, seeds and image side — instead of `photons_per_pass`,
     /// `passes`, `seeds` and the config's size. Absent: every scene as above. Every optional
@@ -106,11 +100,6 @@ pub struct Regime {
     /// Passes of each reference run of its scenes (absent: `render.reference_passes`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_passes: Option<u32>,
-}
-
-/// Whether `eye_subpaths` is the default, the method's two.
-fn is_separate(eye_subpaths: &EyeSubpaths) -> bool {
-    *eye_subpaths == EyeSubpaths::Separate
 }
 
 /// Whether `schedule` is the default, SPPM's.

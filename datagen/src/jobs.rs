@@ -689,7 +689,6 @@ fn run_job(
             let spec = RunSpec {
                 sppm: SppmSettings {
                     emitter_samples: Some(config.render.emitter_samples.unwrap_or(1)),
-                    eye_subpaths: config.render.eye_subpaths,
                     ..run_settings(
                         &sp.id,
                         seed,

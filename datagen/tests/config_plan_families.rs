@@ -198,35 +198,6 @@ fn render_schedule_defaults_to_sppm_and_takes_cppm() {
     assert!(e.contains("s.toml") && e.contains("ppm"), "{e}");
 }
 
-/// `[render] eye_subpaths`: absent is the method's two (`separate`) and leaves the fingerprint as
-/// it was; `"shared"` parses and changes it; any other value is refused naming the file.
-#[test]
-fn render_eye_subpaths_default_to_separate_and_take_shared() {
-    use renderer::integrators::sppm::EyeSubpaths;
-    let text = std::fs::read_to_string(preset_path("tiny")).unwrap();
-    let tiny = Config::parse(&text, "tiny.toml").unwrap();
-    assert_eq!(tiny.render.eye_subpaths, EyeSubpaths::Separate);
-    let with = |value: &str| {
-        let edited = text.replacen(
-            "max_depth = 8",
-            &format!("max_depth = 8\neye_subpaths = {value}"),
-            1,
-        );
-        assert_ne!(edited, text, "tiny.toml no longer has `max_depth = 8`");
-        Config::parse(&edited, "e.toml")
-    };
-    let fingerprint = datagen::manifest::config_fingerprint;
-    assert_eq!(
-        fingerprint(&with("\"separate\"").unwrap()),
-        fingerprint(&tiny)
-    );
-    let shared = with("\"shared\"").unwrap();
-    assert_eq!(shared.render.eye_subpaths, EyeSubpaths::Shared);
-    assert_ne!(fingerprint(&shared), fingerprint(&tiny));
-    let e = with("\"one\"").unwrap_err().to_string();
-    assert!(e.contains("e.toml") && e.contains("one"), "{e}");
-}
-
 #[test]
 fn shards_partition_the_jobs() {
     let plan = Plan::new(&preset("small"));

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use bundle::manifest::Manifest;
-use renderer::integrators::sppm::{EyeSubpaths, RadiusSchedule};
+use renderer::integrators::sppm::RadiusSchedule;
 use serde::{Deserialize, Serialize};
 
 /// `configs/eval/<name>.toml`. Relative paths are relative to the current directory (run from
@@ -53,11 +53,6 @@ pub struct EvalConfig {
     /// Not written when `sppm`, so results saved before the option existed still match.
     #[serde(default, skip_serializing_if = "is_sppm")]
     pub schedule: RadiusSchedule,
-    /// Eye subpaths per pixel and pass of our multi-level runs: `separate` (default, the
-    /// method's two) or `shared` (one for all levels; docs/sppm.md "One eye subpath"). Not
-    /// written when `separate`, so results saved before the option existed still match.
-    #[serde(default, skip_serializing_if = "is_separate")]
-    pub eye_subpaths: EyeSubpaths,
     /// Evaluate only the first N scenes (explicit ones first, then the dataset's).
     #[serde(default)]
     pub limit: Option<usize>,
@@ -88,11 +83,6 @@ fn default_python() -> String {
 
 fn default_oidn_script() -> PathBuf {
     "scripts/oidn_denoise.py".into()
-}
-
-/// Whether `eye_subpaths` is the default, the method's two.
-fn is_separate(eye_subpaths: &EyeSubpaths) -> bool {
-    *eye_subpaths == EyeSubpaths::Separate
 }
 
 /// Whether `schedule` is the default, SPPM's.
@@ -455,16 +445,6 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("ppm"), "{e}");
-        // Eye subpaths: separate by default and then not written back (old results match);
-        // shared taken; any other value refused naming it.
-        assert_eq!(c.eye_subpaths, EyeSubpaths::Separate);
-        assert!(!serde_json::to_string(&c).unwrap().contains("eye_subpaths"));
-        let shared: EvalConfig = toml::from_str(&top("eye_subpaths = \"shared\"\n")).unwrap();
-        assert_eq!(shared.eye_subpaths, EyeSubpaths::Shared);
-        let e = toml::from_str::<EvalConfig>(&top("eye_subpaths = \"one\"\n"))
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("one") && e.contains("shared"), "{e}");
         // Light samples per visible point: absent means the renderer's defaults (ours two,
         // the standard run one) and is not written back; zero is refused.
         assert_eq!(

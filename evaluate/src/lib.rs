@@ -325,7 +325,6 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
             threads: config.threads,
             max_depth: config.max_depth.unwrap_or(DEFAULT_MAX_DEPTH),
             emitter_samples: config.emitter_samples,
-            eye_subpaths: config.eye_subpaths,
             schedule: config.schedule,
             scene_name: s.name.clone(),
             ..SppmSettings::default()

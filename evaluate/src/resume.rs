@@ -12,7 +12,7 @@ use sha2::{Digest, Sha256};
 
 use crate::config::{EvalConfig, EvalScene};
 use crate::SceneResult;
-use renderer::integrators::sppm::{EyeSubpaths, DEFAULT_EMITTER_SAMPLES_MULTI_LEVEL};
+use renderer::integrators::sppm::DEFAULT_EMITTER_SAMPLES_MULTI_LEVEL;
 
 /// Format tag of a per-scene result file.
 const FORMAT: &str = "sppm-ml-eval-scene/1";
@@ -75,9 +75,6 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
     // the option existed.
     if config.schedule != renderer::integrators::sppm::RadiusSchedule::Sppm {
         settings["schedule"] = serde_json::json!(config.schedule.name());
-    }
-    if config.eye_subpaths != EyeSubpaths::Separate {
-        settings["eye_subpaths"] = serde_json::json!(config.eye_subpaths.name());
     }
     let mut h = Sha256::new();
     h.update(settings.to_string().as_bytes());

@@ -20,7 +20,7 @@ use infer::{reconstruct_tiled, Engine, ErrorReport};
 use model::backend::Backend;
 use model::features::{interleaved, pack, pack_with, planar_reference};
 use model::model_dir::TrainedModel;
-use renderer::integrators::sppm::{EyeSubpaths, RadiusSchedule};
+use renderer::integrators::sppm::RadiusSchedule;
 
 /// Reconstruct a multi-level SPPM render with a trained combiner network.
 ///
@@ -103,16 +103,6 @@ struct Cli {
         help_heading = "Rendering (--scene)"
     )]
     schedule: RadiusSchedule,
-    /// `--scene`: eye subpaths per pixel and pass (as `render --eye-subpaths`): `separate`,
-    /// the method's two, or `shared`, one for all five levels (faster per pass; docs/sppm.md,
-    /// "One eye subpath"). The bundled models were trained on `separate` bundles.
-    #[arg(
-        long,
-        value_enum,
-        default_value_t = EyeSubpaths::Separate,
-        help_heading = "Rendering (--scene)"
-    )]
-    eye_subpaths: EyeSubpaths,
     /// `--scene`: random seed of the render.
     #[arg(long, default_value_t = 1, help_heading = "Rendering (--scene)")]
     seed: u64,
@@ -165,12 +155,11 @@ fn backend_parser() -> impl TypedValueParser<Value = Backend> {
 const DEFAULT_MODEL: &str = "models/default";
 
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
-const RENDERING_ONLY: [&str; 12] = [
+const RENDERING_ONLY: [&str; 11] = [
     "passes",
     "time",
     "photons",
     "schedule",
-    "eye_subpaths",
     "seed",
     "max_depth",
     "emitter_samples",
@@ -557,7 +546,6 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
             .max_depth
             .unwrap_or(renderer::integrators::sppm::DEFAULT_MAX_DEPTH),
         emitter_samples: cli.emitter_samples,
-        eye_subpaths: cli.eye_subpaths,
         ..SppmSettings::default()
     };
     let stop = StopCondition {

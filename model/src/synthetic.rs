@@ -106,7 +106,6 @@ pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, I
             integrator: "synthetic".into(),
             schedule: bundle::DEFAULT_SCHEDULE.into(),
             emitter_samples: 1,
-            eye_subpaths: bundle::DEFAULT_EYE_SUBPATHS.into(),
             width: w as u32,
             height: h as u32,
         },

@@ -81,7 +81,6 @@ pub fn stand_in_bundle(
             integrator: "sppm-ml".into(),
             schedule: bundle::DEFAULT_SCHEDULE.into(),
             emitter_samples: 1,
-            eye_subpaths: bundle::DEFAULT_EYE_SUBPATHS.into(),
             width: width as u32,
             height: height as u32,
         },

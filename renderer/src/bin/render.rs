@@ -12,7 +12,7 @@ use renderer::description::{AovSpec, IntegratorDesc};
 use renderer::film::Film;
 use renderer::image_io::{write_channels_exr, write_png_srgb, write_rgb_exr};
 use renderer::integrators::path::PathTracer;
-use renderer::integrators::sppm::{EyeSubpaths, RadiusSchedule};
+use renderer::integrators::sppm::RadiusSchedule;
 use renderer::integrators::RayIntegrator;
 use renderer::parity::aov::{environment_seen, render_aovs, DepthIntegrator};
 use renderer::parity::direct::DirectIntegrator;
@@ -139,12 +139,6 @@ struct Cli {
     /// the bundles.
     #[arg(long, value_enum, default_value_t = RadiusSchedule::Sppm, help_heading = "SPPM")]
     schedule: RadiusSchedule,
-    /// SPPM (multi-level): `separate` traces the method's two eye subpaths per pixel and pass
-    /// (A for level 1, B for levels 2..5); `shared` traces one for all five levels, with a
-    /// second set of light samples at its visible point for the photon-free part's other half
-    /// (faster per pass; docs/sppm.md, "One eye subpath"). Recorded in the bundles.
-    #[arg(long, value_enum, default_value_t = EyeSubpaths::Separate, help_heading = "SPPM")]
-    eye_subpaths: EyeSubpaths,
 }
 
 fn main() -> ExitCode {
@@ -159,15 +153,7 @@ fn main() -> ExitCode {
 }
 
 /// Options that only the SPPM integrators read, by their clap ids.
-const SPPM_ONLY: [&str; 7] = [
-    "photons",
-    "passes",
-    "time",
-    "knn",
-    "max_radius",
-    "schedule",
-    "eye_subpaths",
-];
+const SPPM_ONLY: [&str; 6] = ["photons", "passes", "time", "knn", "max_radius", "schedule"];
 /// Options that only the direct integrator reads.
 const DIRECT_ONLY: [&str; 1] = ["bsdf_samples"];
 /// Options that the direct and the SPPM integrators read.
@@ -192,12 +178,7 @@ impl IntegratorKind {
             }
             IntegratorKind::Sppm | IntegratorKind::SppmMl => {
                 let path = [("spp", "path and direct"), ("rr_depth", "the path tracer")];
-                let multi_level = [("eye_subpaths", "multi-level SPPM (sppm-ml)")];
-                let multi_level = match self {
-                    IntegratorKind::Sppm => &multi_level[..],
-                    _ => &[],
-                };
-                [&path[..], &direct[..], multi_level].concat()
+                [&path[..], &direct[..]].concat()
             }
             IntegratorKind::Depth => {
                 let path = [
@@ -740,7 +721,6 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
             .filter(|&d| d > 0)
             .map_or(DEFAULT_MAX_DEPTH, |d| d as u32),
         emitter_samples: cli.emitter_samples,
-        eye_subpaths: cli.eye_subpaths,
         threads: cli.threads,
         scene_name: cli.scene.display().to_string(),
         ..SppmSettings::default()

@@ -8,8 +8,7 @@
 //!    traced to their visible points ([`visible_point`]); a pixel without radii yet gets
 //!    r₅ = distance to the k-th nearest photon (capped) at its first visible point; A gathers
 //!    level 1 (`y`) at r₁, B gathers levels 2..5 (`z1`..`z4`) with one query at r₅
-//!    ([`gather`]) — or, with [`EyeSubpaths::Shared`], A alone gathers all five at r₅ —;
-//!    the per-pass estimates enter Welford accumulators ([`accumulate`]);
+//!    ([`gather`]); the per-pass estimates enter Welford accumulators ([`accumulate`]);
 //!    then all radii shrink by r² ← r²·(i+α)/(i+1) ([`radius`]).
 //!
 //! Under the CPPM schedule ([`RadiusSchedule::Cppm`]) step 2 differs in the radii only: each
@@ -41,7 +40,6 @@ use anyhow::{bail, Result};
 use bundle::{Bundle, BundleMeta, DirectLight, Image};
 use glam::UVec2;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
 use crate::sampling::{rng_for, UniformSource};
 use crate::scene::Scene;
@@ -92,34 +90,6 @@ pub fn filter_warning(filter: crate::filter::FilterDesc) -> Option<String> {
          the film to match them",
         filter.describe()
     ))
-}
-
-/// How many eye subpaths multi-level SPPM traces per pixel and pass.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum EyeSubpaths {
-    /// The method's two independent subpaths (SPEC §3.4): A gathers level 1 at r₁, B levels
-    /// 2..5 at r₅, so level 1's eye-path noise is independent of the others'.
-    #[default]
-    Separate,
-    /// One subpath, A, gathers all five levels with one query at r₅ (their photons nested).
-    /// The photon-free part's second half takes the light samples of every visible point
-    /// again from B's stream, so the emission split still fuses two estimates of next-event
-    /// estimation. Saves B's tracing (20–40 % of a multi-level pass at 1.5 photons per pixel);
-    /// gives up the independence of level 1's eye-path noise (docs/sppm.md, "One eye subpath").
-    /// Each level is still an SPPM estimate from a valid eye path: the output converges as
-    /// before. Single-level SPPM traces one subpath either way.
-    Shared,
-}
-
-impl EyeSubpaths {
-    /// The name on command lines, in configs and in bundle metadata.
-    pub fn name(self) -> &'static str {
-        match self {
-            EyeSubpaths::Separate => "separate",
-            EyeSubpaths::Shared => "shared",
-        }
-    }
 }
 
 /// Which estimator to run.
@@ -194,8 +164,6 @@ pub struct SppmSettings {
     /// [`DEFAULT_EMITTER_SAMPLES_MULTI_LEVEL`] for multi-level and one for single-level SPPM
     /// (the paper's standard SPPM); see [`SppmSettings::emitter_samples`].
     pub emitter_samples: Option<u32>,
-    /// Eye subpaths per pixel and pass of multi-level SPPM (ignored by single-level SPPM).
-    pub eye_subpaths: EyeSubpaths,
     /// Worker threads (0: all cores). The output does not depend on it.
     pub threads: usize,
     /// Scene identifier written into bundle metadata.
@@ -214,7 +182,6 @@ impl Default for SppmSettings {
             schedule: RadiusSchedule::Sppm,
             max_depth: DEFAULT_MAX_DEPTH,
             emitter_samples: None,
-            eye_subpaths: EyeSubpaths::Separate,
             threads: 0,
             scene_name: String::new(),
         }
@@ -353,15 +320,9 @@ fn render_pixel(
     let scene = ctx.scene;
     let width = scene.camera.resolution().x as usize;
     let pixel = UVec2::new((index % width) as u32, (index / width) as u32);
-    // One subpath shared by the five levels draws its visible points' light samples a second
-    // time from B's stream (`EyeSubpaths::Shared`).
-    let shared = ctx.settings.mode == SppmMode::MultiLevel
-        && ctx.settings.eye_subpaths == EyeSubpaths::Shared;
     // Each subpath with the reconstruction filter's weight of its film position.
     let trace = |sub: u64| -> (EyePath, f32) {
-        let stream = |sub: u64| rng_for(ctx.settings.seed, ctx.pass as u64, 2 * index as u64 + sub);
-        let mut rng = stream(sub);
-        let mut second = shared.then(|| stream(1));
+        let mut rng = rng_for(ctx.settings.seed, ctx.pass as u64, 2 * index as u64 + sub);
         let u_film = rng.next_2d();
         let u_lens = rng.next_2d();
         let sample = scene.camera.sample_ray(pixel, u_film, u_lens);
@@ -369,7 +330,6 @@ fn render_pixel(
             scene,
             sample.ray,
             &mut rng,
-            second.as_mut(),
             ctx.settings.max_depth,
             ctx.settings.emitter_samples(),
         );
@@ -377,7 +337,6 @@ fn render_pixel(
     };
     let (a, weight_a) = trace(0);
     let (b, weight_b) = match ctx.settings.mode {
-        SppmMode::MultiLevel if shared => (None, 1.0),
         SppmMode::MultiLevel => {
             let (b, w) = trace(1);
             (Some(b), w)
@@ -414,28 +373,6 @@ fn render_pixel(
     let mut estimates = [Rgb::ZERO; LEVELS];
     let mut found = 0;
     match ctx.settings.mode {
-        SppmMode::MultiLevel if shared => {
-            // Level 1 carries the first light samples, levels 2..5 the second ones: the two
-            // halves of the photon-free part the emission split fuses.
-            estimates[0] = a.direct;
-            for e in &mut estimates[1..] {
-                *e = a.direct_second;
-            }
-            if let Some(vp) = &a.vp {
-                gather_levels(vp, 0..LEVELS, &mut estimates);
-                found += 1;
-            }
-            for e in &mut estimates {
-                *e *= weight_a;
-            }
-            let direct_a = sanitize_pair(&mut estimates[..1], a.direct * weight_a);
-            let direct_b = sanitize_pair(&mut estimates[1..], a.direct_second * weight_a);
-            for (w, e) in state.levels.iter_mut().zip(&estimates) {
-                w.push(*e);
-            }
-            state.direct[0].push(direct_a);
-            state.direct[1].push(direct_b);
-        }
         SppmMode::MultiLevel => {
             estimates[0] = a.direct;
             if let Some(vp) = &a.vp {
@@ -586,12 +523,6 @@ fn make_bundle(
             integrator: settings.mode.name().into(),
             schedule: settings.schedule.name().into(),
             emitter_samples: settings.emitter_samples(),
-            eye_subpaths: match settings.mode {
-                SppmMode::MultiLevel => settings.eye_subpaths,
-                SppmMode::Single => EyeSubpaths::Separate,
-            }
-            .name()
-            .into(),
             width: res.x,
             height: res.y,
         },

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use super::accumulate::{GBufferSum, Welford};
 use super::cppm::{self, CppmLevel, CELLS};
 use super::radius::{RadiusSchedule, LEVELS};
-use super::{EyeSubpaths, PixelState, RenderSummary, SppmMode, SppmSettings};
+use super::{PixelState, RenderSummary, SppmMode, SppmSettings};
 use crate::state_file::{self, check_identity, Cursor, StateFile};
 
 /// First line of an SPPM state file.
@@ -56,10 +56,6 @@ struct RunIdentity {
     /// before the option (which took one) read as such.
     #[serde(default = "one", skip_serializing_if = "is_one")]
     emitter_samples: u32,
-    /// Eye subpaths of multi-level SPPM; not written when separate (the files of runs from
-    /// before the option read as such).
-    #[serde(default, skip_serializing_if = "is_separate")]
-    eye_subpaths: EyeSubpaths,
     /// The radius schedule; not written for SPPM runs, so their files are what they were
     /// before CPPM existed (and such files read as SPPM).
     #[serde(default, skip_serializing_if = "is_sppm")]
@@ -67,11 +63,6 @@ struct RunIdentity {
     /// CPPM's parameters, for CPPM runs: a build with other ones refuses to resume.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     cppm: Option<CppmParameters>,
-}
-
-/// Whether `e` is the method's two subpaths (then it is left out of the header).
-fn is_separate(e: &EyeSubpaths) -> bool {
-    *e == EyeSubpaths::Separate
 }
 
 /// One (serde's default of [`RunIdentity::emitter_samples`]).
@@ -293,10 +284,6 @@ impl<'a> StateStore<'a> {
                 alpha: settings.alpha,
                 max_depth: settings.max_depth,
                 emitter_samples: settings.emitter_samples(),
-                eye_subpaths: match settings.mode {
-                    SppmMode::MultiLevel => settings.eye_subpaths,
-                    SppmMode::Single => EyeSubpaths::Separate,
-                },
                 schedule: settings.schedule,
                 cppm: (settings.schedule == RadiusSchedule::Cppm).then(CppmParameters::current),
             },

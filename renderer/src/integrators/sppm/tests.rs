@@ -1219,7 +1219,7 @@ fn hidden_emitters_are_seen_through_by_the_eye_path() {
     let up = crate::math::Ray::new(Vec3::new(0.01, 0.0, 0.02), Vec3::Y);
     let trace = |scene: &Scene| {
         let mut rng = rng_for(3, 0, 0);
-        trace_eye_path(scene, up, &mut rng, None, 8, 1)
+        trace_eye_path(scene, up, &mut rng, 8, 1)
     };
     let shown = trace(&scene);
     let on_light = shown.vp.expect("a visible point on the light");
@@ -1263,7 +1263,7 @@ fn hidden_emitters_stay_hidden_through_a_mask() {
             .map(|i| {
                 let mut rng = rng_for(5, 0, i);
                 let ray = crate::math::Ray::new(Vec3::new(0.1, 0.1, -2.0), Vec3::Z);
-                trace_eye_path(scene, ray, &mut rng, None, 8, 1).direct
+                trace_eye_path(scene, ray, &mut rng, 8, 1).direct
             })
             .fold(Rgb::ZERO, |a, b| a + b)
     };
@@ -1337,100 +1337,4 @@ fn stratified_light_samples_keep_the_direct_light_and_cut_its_variance() {
         pv2 < 0.7 * pv1,
         "two stratified samples cut the variance: {pv2} vs {pv1}"
     );
-}
-
-/// One eye subpath for all levels (`EyeSubpaths::Shared`): bit-identical for any thread count,
-/// recorded in the metadata, changing only multi-level runs (single-level SPPM traces one
-/// subpath either way), and its photon-free halves independent draws at one visible point.
-#[test]
-fn shared_eye_subpath_is_deterministic_and_recorded() {
-    let scene = lit_box(10);
-    for schedule in [RadiusSchedule::Sppm, RadiusSchedule::Cppm] {
-        let mut s = SppmSettings {
-            schedule,
-            eye_subpaths: EyeSubpaths::Shared,
-            ..settings(SppmMode::MultiLevel, 3_000, 9)
-        };
-        let mut one = render(&scene, &s, 3);
-        s.threads = 2;
-        let mut two = render(&scene, &s, 3);
-        one.meta.seconds = 0.0;
-        two.meta.seconds = 0.0;
-        assert_eq!(one.meta, two.meta);
-        assert_eq!(one.meta.eye_subpaths, "shared");
-        assert!(
-            bundle_bits(&one) == bundle_bits(&two),
-            "{schedule:?}: thread count changed the bundle"
-        );
-        s.eye_subpaths = EyeSubpaths::Separate;
-        let separate = render(&scene, &s, 3);
-        assert_eq!(separate.meta.eye_subpaths, "separate");
-        assert_ne!(bundle_bits(&one), bundle_bits(&separate));
-        // The two halves of the photon-free part share the path but not the light samples.
-        let d = one
-            .direct
-            .as_ref()
-            .expect("multi-level bundles carry the direct halves");
-        assert!(d.y.data.iter().zip(&d.z.data).any(|(a, b)| a != b));
-    }
-    let single = |eye_subpaths| {
-        let s = SppmSettings {
-            eye_subpaths,
-            ..settings(SppmMode::Single, 3_000, 9)
-        };
-        let mut b = render(&scene, &s, 3);
-        b.meta.seconds = 0.0;
-        b
-    };
-    let (separate, shared) = (single(EyeSubpaths::Separate), single(EyeSubpaths::Shared));
-    assert_eq!(shared.meta.eye_subpaths, "separate");
-    assert!(bundle_bits(&separate) == bundle_bits(&shared));
-}
-
-/// With the same seed both modes trace the same photons and start from the same radii, so every
-/// level (and each half of the photon-free part) has the same expectation whether one subpath
-/// serves all levels or two: their image means over independent eye-path seeds agree within
-/// their standard errors (a 3 % bias on levels 2..5 fails it by 7σ).
-#[test]
-fn shared_eye_subpath_keeps_every_level_s_expectation() {
-    let scene = lit_box(8);
-    const RUNS: usize = 12;
-    // Per run: the image means of the five levels, then of the two direct halves.
-    let means = |eye_subpaths| -> Vec<[f64; LEVELS + 2]> {
-        (0..RUNS)
-            .map(|run| {
-                let s = SppmSettings {
-                    eye_subpaths,
-                    ..settings(SppmMode::MultiLevel, 4_000, 100 + run as u64)
-                };
-                let b = render(&scene, &s, 12);
-                let d = b
-                    .direct
-                    .expect("multi-level bundles carry the direct halves");
-                let mut m = [0.0; LEVELS + 2];
-                for (l, level) in b.levels.iter().enumerate() {
-                    m[l] = mean_rgb(level);
-                }
-                m[LEVELS] = mean_rgb(&d.y);
-                m[LEVELS + 1] = mean_rgb(&d.z);
-                m
-            })
-            .collect()
-    };
-    let (separate, shared) = (means(EyeSubpaths::Separate), means(EyeSubpaths::Shared));
-    let stats = |runs: &[[f64; LEVELS + 2]], k: usize| {
-        let mean = runs.iter().map(|m| m[k]).sum::<f64>() / RUNS as f64;
-        let var = runs.iter().map(|m| (m[k] - mean).powi(2)).sum::<f64>() / (RUNS - 1) as f64;
-        (mean, var / RUNS as f64)
-    };
-    for k in 0..LEVELS + 2 {
-        let (a, va) = stats(&separate, k);
-        let (b, vb) = stats(&shared, k);
-        assert!(a > 0.01, "quantity {k} is lit: {a}");
-        let sigma = (va + vb).sqrt();
-        assert!(
-            (a - b).abs() < 4.0 * sigma + 1e-9 * a,
-            "quantity {k}: separate {a} vs shared {b} (σ of the difference {sigma})"
-        );
-    }
 }

@@ -102,11 +102,6 @@ fn choose_part(sharp: Option<f32>, rng: &mut Pcg32) -> (Part, f32) {
 pub struct EyePath {
     /// Radiance gathered without photons (emission, NEE), already multiplied by throughput.
     pub direct: Rgb,
-    /// `direct` with the light samples of every diffuse vertex drawn again from a second random
-    /// stream (emission along the path, glossy vertices' light samples and the MIS probes
-    /// shared): the photon-free part's second half when one subpath serves all levels
-    /// (`EyeSubpaths::Shared`). Equal to `direct` without a second stream.
-    pub direct_second: Rgb,
     /// The visible point, if the path reached a diffuse or rough surface.
     pub vp: Option<VisiblePoint>,
     /// G-buffer features at the visible point (zeros without one).
@@ -249,19 +244,15 @@ fn visible_point(
 
 /// Traces one eye subpath starting with `ray`; `max_depth` bounds the number of delta/glossy
 /// bounces before the path gives up without a visible point; `emitter_samples` light samples
-/// estimate direct light at the visible point, and again from `second` where given
-/// ([`EyePath::direct_second`]).
+/// estimate direct light at the visible point.
 pub fn trace_eye_path(
     scene: &Scene,
     mut ray: Ray,
     rng: &mut Pcg32,
-    mut second: Option<&mut Pcg32>,
     max_depth: u32,
     emitter_samples: u32,
 ) -> EyePath {
     let mut out = EyePath::default();
-    // What the second stream's light samples add over the first ones' (zero without it).
-    let mut second_minus_first = Rgb::ZERO;
     let mut gbuffer_set = false;
     // Set when the path continues from a sharp split: the emission it meets next was already
     // counted by that vertex's NEE and MIS probe.
@@ -324,14 +315,6 @@ pub fn trace_eye_path(
             // Next-event estimation at this visible point, scaled by the caller.
             let direct_here =
                 |rng: &mut Pcg32| direct_light(scene, &si, &sp, bsdf, wo, rng, emitter_samples);
-            // Light samples from the first stream, and again from the second, with throughput.
-            let mut sample_direct = |rng: &mut Pcg32, throughput: Rgb| {
-                let first = throughput * direct_here(rng);
-                if let Some(second) = second.as_deref_mut() {
-                    second_minus_first += throughput * direct_here(second) - first;
-                }
-                first
-            };
             // Direct light for the whole model, the MIS probe's sample `bs`, and the
             // throughput the visible point's photons get.
             let (bs, vp_beta) = if p_delta > 0.0 {
@@ -357,10 +340,10 @@ pub fn trace_eye_path(
                     break;
                 }
                 let vp_beta = beta / (1.0 - p_delta);
-                out.direct += sample_direct(rng, vp_beta);
+                out.direct += vp_beta * direct_here(rng);
                 (bs, vp_beta)
             } else {
-                out.direct += sample_direct(rng, beta);
+                out.direct += beta * direct_here(rng);
                 // The BSDF-sampling half of the MIS pair: it only looks for emitters.
                 let u_lobe = rng.next_f32();
                 let u = rng.next_2d();
@@ -417,7 +400,6 @@ pub fn trace_eye_path(
         }
         seen_directly &= bs.passes_through(wo);
     }
-    out.direct_second = out.direct + second_minus_first;
     out
 }
 
