@@ -16,14 +16,15 @@ taken out), then reports:
   term reading v_c + v_n (`sum`), 2·min(v_c, v_n) (`min`) or 2·v_c (`centre`), ÷ the output's
   (`--sigmas`, `--ks`, `--modes` choose the grid; σ is the bandwidth at `--passes`).
 
-`--scenes` lists scene directories holding `scene.xml`; `--references` is a pattern giving
-each one's reference (`{name}` is the directory's name). Choose on training scenes (their
+`--dataset DIR` takes the first `--per-family` (3) training scenes of each family from DIR's
+manifest (or `--scenes` directories with a `--references` pattern, `{name}` the directory's
+name; a scene a manifest puts in another split is refused). Choose on training scenes (their
 references may be noisy: that noise is independent and adds to every variant alike), never on
 the frozen held-out ones. Equal passes; a development tool (numpy, OpenEXR).
 
     python3 scripts/direct_filter_probe.py --infer target/release/infer --model models/default \
-        --scenes $(ls -d data/large/scenes/* | awk -F- '{c[$2]++; if (c[$2] <= 3) print}') \
-        --references 'data/large/references/{name}.exr' --out out/direct-filter-probe
+        --dataset data/large \
+        --out out/direct-filter-probe
 """
 
 import json
@@ -36,7 +37,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from postfilter_probe import (  # noqa: E402
-    bilateral, fused_direct, probe_render, read, relmse, rgb, scene_probe_arguments,
+    bilateral, fused_direct, probe_render, probe_scenes, read, relmse, rgb,
+    scene_probe_arguments,
     unfiltered_model,
 )
 
@@ -51,7 +53,7 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     model = unfiltered_model(a.model, a.out)
     rows = []
-    for scene in a.scenes:
+    for scene in probe_scenes(a):
         name = os.path.basename(os.path.normpath(scene))
         out_path, bundle = probe_render(a.infer, model, scene, a.passes, a.out)
         ref = rgb(a.references.format(name=name))

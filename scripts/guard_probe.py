@@ -10,8 +10,8 @@ every pair alike and pulls the ratios toward 1), never on the frozen held-out on
 tool (numpy, OpenEXR).
 
     python3 scripts/guard_probe.py --infer target/release/infer --passes 256 \\
-        --scenes $(ls -d data/large/scenes/* | awk -F- '{c[$2]++; if (c[$2] <= 3) print}') \\
-        --references 'data/large/references/{name}.exr' --out out/guard-probe-256 \\
+        --dataset data/large \\
+        --out out/guard-probe-256 \\
         --pairs 16,8 16,32 8,32
 """
 
@@ -22,7 +22,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from postfilter_probe import probe_render, relmse, rgb, scene_probe_arguments  # noqa: E402
+from postfilter_probe import probe_render, probe_scenes, relmse, rgb, scene_probe_arguments  # noqa: E402
 
 
 def main():
@@ -32,7 +32,7 @@ def main():
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     errors = {}
-    for scene in a.scenes:
+    for scene in probe_scenes(a):
         name = os.path.basename(os.path.normpath(scene))
         _, bundle = probe_render(a.infer, a.model, scene, a.passes, a.out)
         ref = rgb(a.references.format(name=name))

@@ -51,17 +51,53 @@ ALBEDO_SIGMA, NORMAL_SIGMA, DEPTH_SIGMA = 0.1, 0.3, 0.05
 
 
 def scene_probe_arguments(doc, out):
-    """The command line the equal-pass probes share: the `infer` binary, the model, the scene
-    directories, their references (a pattern with `{name}`), the pass count and the output
-    folder (default `out`)."""
+    """The command line the equal-pass probes share: the `infer` binary, the model, the scenes
+    (`--dataset DIR --per-family N`: the first N of each family in the *train* split of
+    DIR/manifest.json, or `--scenes` directories), their references (a pattern with `{name}`;
+    default DIR/references/{name}.exr), the pass count and the output folder (default `out`).
+    Resolve them with [`probe_scenes`]."""
     ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("--infer", default="target/release/infer")
     ap.add_argument("--model", default="models/default")
-    ap.add_argument("--scenes", nargs="+", required=True)
-    ap.add_argument("--references", required=True, help="pattern with {name}")
+    ap.add_argument("--dataset", help="a datagen dataset: its train split's scenes")
+    ap.add_argument("--per-family", type=int, default=3,
+                    help="with --dataset: this many train scenes per family (default 3)")
+    ap.add_argument("--scenes", nargs="+", help="scene directories (holding scene.xml)")
+    ap.add_argument("--references", help="pattern with {name}")
     ap.add_argument("--passes", type=int, default=64)
     ap.add_argument("--out", default=out)
     return ap
+
+
+def probe_scenes(a):
+    """The scene directories the probe runs on, with `a.references` filled in. Probes choose
+    settings, so they run on training scenes only: a scene that a dataset's manifest beside it
+    puts in another split is refused (a listing of data/large/scenes holds its test scenes too:
+    the first three per family by name once included two of them)."""
+    if bool(a.dataset) == bool(a.scenes):
+        sys.exit("give either --dataset or --scenes")
+    if a.dataset:
+        manifest = json.load(open(os.path.join(a.dataset, "manifest.json")))
+        taken, scenes = {}, []
+        for scene in sorted(manifest["scenes"], key=lambda s: s["id"]):
+            if scene["split"] == "train" and taken.get(scene["family"], 0) < a.per_family:
+                taken[scene["family"]] = taken.get(scene["family"], 0) + 1
+                scenes.append(os.path.join(a.dataset, "scenes", scene["id"]))
+        a.references = a.references or os.path.join(a.dataset, "references", "{name}.exr")
+    else:
+        scenes = a.scenes
+    if not a.references:
+        sys.exit("--references is needed with --scenes")
+    for scene in scenes:
+        root = os.path.dirname(os.path.dirname(os.path.abspath(scene)))
+        path = os.path.join(root, "manifest.json")
+        if not os.path.exists(path):
+            continue
+        name = os.path.basename(os.path.normpath(scene))
+        split = {s["id"]: s["split"] for s in json.load(open(path))["scenes"]}.get(name)
+        if split not in (None, "train"):
+            sys.exit(f"{scene}: in the {split} split of {path}; probes choose on training scenes")
+    return scenes
 
 
 def probe_render(infer, model, scene, passes, out):
