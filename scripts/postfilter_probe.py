@@ -88,13 +88,15 @@ def probe_scenes(a):
         scenes = a.scenes
     if not a.references:
         sys.exit("--references is needed with --scenes")
+    splits = {}  # manifest path → {scene id: split}, each manifest read once
     for scene in scenes:
         root = os.path.dirname(os.path.dirname(os.path.abspath(scene)))
         path = os.path.join(root, "manifest.json")
         if not os.path.exists(path):
             continue
-        name = os.path.basename(os.path.normpath(scene))
-        split = {s["id"]: s["split"] for s in json.load(open(path))["scenes"]}.get(name)
+        if path not in splits:
+            splits[path] = {s["id"]: s["split"] for s in json.load(open(path))["scenes"]}
+        split = splits[path].get(os.path.basename(os.path.normpath(scene)))
         if split not in (None, "train"):
             sys.exit(f"{scene}: in the {split} split of {path}; probes choose on training scenes")
     return scenes
