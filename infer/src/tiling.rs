@@ -253,13 +253,14 @@ pub fn reconstruct_native(
         share_planes: &share_planes,
         variances: &variances,
     };
-    let mut image = vec![0.0f32; 3 * pixels];
-    let mut shares = vec![0.0f32; (LEVELS - 1) * pixels];
+    let mut image = model::native::zeros(3 * pixels);
+    let mut shares = model::native::zeros((LEVELS - 1) * pixels);
     let tiles = plan_tiles(width, height, tile, model.config.conv_reach());
     for (done, t) in tiles.iter().enumerate() {
         let (x, region) =
             network.hidden_layers(&packed.features, width, height, t.region, t.interior);
         network.combine(&x, region, t.interior, &colours, &mut image, &mut shares);
+        network.recycle(x);
         on_tile(done + 1, tiles.len());
     }
     add_direct(&mut image, added);
@@ -402,10 +403,12 @@ fn guard_variances(model: &TrainedModel, packed: &PackedImage) -> Vec<f32> {
 /// Adds the photon-free part the combination left out ([`PackedImage::combination_inputs`]) to
 /// the combined, clamped image.
 fn add_direct(image: &mut [f32], added: Option<Vec<f32>>) {
+    use rayon::prelude::*;
     if let Some(added) = added {
-        for (v, d) in image.iter_mut().zip(added) {
-            *v += d;
-        }
+        image
+            .par_iter_mut()
+            .zip(added.par_iter())
+            .for_each(|(v, d)| *v += d);
     }
 }
 

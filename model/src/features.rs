@@ -84,9 +84,10 @@ impl PackedImage {
     /// The variances of the means of the image's `m` levels (the planes after their colours,
     /// [`feature_channels`]), undone from log(1 + v): planar `[m][pixels]`, the safeguard's input.
     pub fn variances(&self, m: usize) -> Vec<f32> {
+        use rayon::prelude::*;
         let pixels = self.pixels();
         self.features[3 * m * pixels..4 * m * pixels]
-            .iter()
+            .par_iter()
             .map(|x| x.exp_m1())
             .collect()
     }
@@ -98,9 +99,12 @@ impl PackedImage {
         match &self.direct {
             None => (Cow::Borrowed(&self.levels), None),
             Some(direct) => {
-                let mut levels = self.levels.clone();
-                let fused = split_direct(&mut levels, direct, self.pixels());
-                let added = self.direct_added.clone().unwrap_or(fused);
+                let pixels = self.pixels();
+                let levels = without_direct(&self.levels, direct, pixels);
+                let added = match &self.direct_added {
+                    Some(added) => added.clone(),
+                    None => fused_direct(direct, pixels),
+                };
                 (Cow::Owned(levels), Some(added))
             }
         }
@@ -123,26 +127,64 @@ impl PackedImage {
 /// variance explode. Any weights in [0, 1] keep the sum between two estimates that converge, so
 /// the output still converges.
 pub fn split_direct(levels: &mut [f32], direct: &[f32], pixels: usize) -> Vec<f32> {
-    assert_eq!(direct.len(), DIRECT_CHANNELS * pixels, "direct planes");
-    assert!(
-        levels.len().is_multiple_of(3 * pixels) && levels.len() >= 6 * pixels,
-        "colour planes of ỹ and at least one z level"
-    );
-    let (a, rest) = direct.split_at(3 * pixels);
-    let (b, variances) = rest.split_at(3 * pixels);
-    let (var_a, var_b) = variances.split_at(pixels);
+    check_direct_shapes(levels, direct, pixels);
+    let (a, b) = (&direct[..3 * pixels], &direct[3 * pixels..6 * pixels]);
     for (l, level) in levels.chunks_exact_mut(3 * pixels).enumerate() {
         let part = if l == 0 { a } else { b };
         for (v, d) in level.iter_mut().zip(part) {
             *v -= d;
         }
     }
+    fused_direct(direct, pixels)
+}
+
+/// [`split_direct`]'s first half on a copy: the colour planes `levels` less their photon-free
+/// part, computed plane by plane on every core (the same values).
+pub fn without_direct(levels: &[f32], direct: &[f32], pixels: usize) -> Vec<f32> {
+    use rayon::prelude::*;
+    check_direct_shapes(levels, direct, pixels);
+    let mut out = crate::native::zeros(levels.len());
+    if pixels == 0 {
+        return out;
+    }
+    out.par_chunks_mut(pixels)
+        .zip(levels.par_chunks(pixels))
+        .enumerate()
+        .for_each(|(plane, (out, level))| {
+            // Plane `plane` is channel plane % 3 of level plane / 3: ỹ less A's part, a z̃ less B's.
+            let part = if plane < 3 { 0 } else { 3 };
+            let part = &direct[(part + plane % 3) * pixels..][..pixels];
+            for ((o, v), d) in out.iter_mut().zip(level).zip(part) {
+                *o = v - d;
+            }
+        });
+    out
+}
+
+/// [`split_direct`]'s second half: the two subpaths' photon-free parts weighted by the inverse
+/// of their variances, three planes.
+pub fn fused_direct(direct: &[f32], pixels: usize) -> Vec<f32> {
+    use rayon::prelude::*;
+    assert_eq!(direct.len(), DIRECT_CHANNELS * pixels, "direct planes");
+    let (a, rest) = direct.split_at(3 * pixels);
+    let (b, variances) = rest.split_at(3 * pixels);
+    let (var_a, var_b) = variances.split_at(pixels);
     (0..3 * pixels)
+        .into_par_iter()
         .map(|i| {
             let weight_a = subpath_a_weight(var_a[i % pixels], var_b[i % pixels]);
             weight_a * a[i] + (1.0 - weight_a) * b[i]
         })
         .collect()
+}
+
+/// The shapes [`split_direct`] needs.
+fn check_direct_shapes(levels: &[f32], direct: &[f32], pixels: usize) {
+    assert_eq!(direct.len(), DIRECT_CHANNELS * pixels, "direct planes");
+    assert!(
+        levels.len().is_multiple_of(3 * pixels) && levels.len() >= 6 * pixels,
+        "colour planes of ỹ and at least one z level"
+    );
 }
 
 /// The weight of path A's photon-free part in the fused one, given the variances of the means
@@ -360,7 +402,13 @@ pub fn pack_with(
         });
     }
     let mut packed = pack_checked(bundle, &filtered);
-    packed.direct_added = direct.map(|d| (0..3).flat_map(|k| d.plane(k)).collect());
+    packed.direct_added = direct.map(|d| {
+        use rayon::prelude::*;
+        (0..3)
+            .into_par_iter()
+            .flat_map_iter(|k| d.plane(k))
+            .collect()
+    });
     Ok(packed)
 }
 
@@ -445,7 +493,7 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
             })
     };
     let fill = |planes: Vec<(Source, Transform)>| -> Vec<f32> {
-        let mut out = vec![0.0f32; planes.len() * pixels];
+        let mut out = crate::native::zeros(planes.len() * pixels);
         out.par_chunks_mut(pixels.max(1))
             .zip(planes.par_iter())
             .for_each(|(plane, &(source, t))| {
@@ -690,5 +738,20 @@ mod tests {
         let mut direct = vec![0.0f32; 16];
         direct[..6].fill(1.0);
         assert_eq!(split_direct(&mut levels, &direct, 2), vec![0.5; 6]);
+    }
+
+    #[test]
+    fn the_copying_halves_equal_split_direct() {
+        // Every plane and pixel distinct, so a channel or level mixed up shows.
+        let pixels = 3;
+        let levels: Vec<f32> = (0..15 * pixels)
+            .map(|i| 100.0 + (i * i % 17) as f32)
+            .collect();
+        let mut direct: Vec<f32> = (0..6 * pixels).map(|i| (i * 7 % 11) as f32).collect();
+        direct.extend([0.5, 0.0, 2.0, 1.5, 0.0, 0.25]);
+        let mut split = levels.clone();
+        let added = split_direct(&mut split, &direct, pixels);
+        assert_eq!(without_direct(&levels, &direct, pixels), split);
+        assert_eq!(fused_direct(&direct, pixels), added);
     }
 }

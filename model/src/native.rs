@@ -288,9 +288,9 @@ impl ConvMatrix {
     /// The convolution ("same" padding in the whole image) followed by ReLU, evaluated on
     /// `out` from channels-last `x` on `input` = `out` grown by the kernel radius and clipped
     /// to the image. Returns channels-last values on `out`.
-    fn forward_relu(&self, x: &[f32], input: Rect, out: Rect) -> Vec<f32> {
+    fn forward_relu(&self, x: &[f32], input: Rect, out: Rect, buffers: &Buffers) -> Vec<f32> {
         let pixels = (out[2] - out[0]) * (out[3] - out[1]);
-        let mut y = vec![0.0f32; pixels * self.cout];
+        let mut y = buffers.take(pixels * self.cout);
         // One im2col buffer per worker, reused across its chunks: im2col overwrites every
         // entry, and a fresh multi-MB allocation per chunk would be zero-filled and page-faulted.
         y.par_chunks_mut(CHUNK_PIXELS * self.cout)
@@ -308,15 +308,15 @@ impl ConvMatrix {
     }
 
     /// [`ConvMatrix::forward_relu`] reading the channels of `sources` concatenated.
-    fn forward_relu_sources(&self, sources: &[Source], out: Rect) -> Vec<f32> {
+    fn forward_relu_sources(&self, sources: &[Source], out: Rect, buffers: &Buffers) -> Vec<f32> {
         if let [single @ Source {
             upsampled: None, ..
         }] = sources
         {
-            return self.forward_relu(single.x, single.rect, out);
+            return self.forward_relu(single.x, single.rect, out, buffers);
         }
         let pixels = (out[2] - out[0]) * (out[3] - out[1]);
-        let mut y = vec![0.0f32; pixels * self.cout];
+        let mut y = buffers.take(pixels * self.cout);
         y.par_chunks_mut(CHUNK_PIXELS * self.cout)
             .enumerate()
             .for_each_init(Vec::new, |columns, (chunk, dst)| {
@@ -330,6 +330,14 @@ impl ConvMatrix {
             });
         y
     }
+}
+
+/// `len` zeros written on every core: a large buffer's first touch (the kernel mapping and
+/// zeroing its pages, or the allocator's memset of reused memory) is otherwise serial.
+pub fn zeros(len: usize) -> Vec<f32> {
+    let mut v = Vec::with_capacity(len);
+    v.par_extend(rayon::iter::repeat_n(0.0f32, len));
+    v
 }
 
 /// `dst.copy_from_slice(src)` for the short runs of im2col and upsampling (a pixel's channels,
@@ -352,12 +360,12 @@ fn copy_run(dst: &mut [f32], src: &[f32]) {
 
 /// 2×2 average pooling onto `out` (a rectangle of the coarser grid) of `source` (the finer
 /// grid's values; pixels past its rectangle lie past the grid's border and count as 0).
-fn pool(source: Source, out: Rect) -> Vec<f32> {
+fn pool(source: Source, out: Rect, buffers: &Buffers) -> Vec<f32> {
     let c = source.channels;
     let (rect, x) = (source.rect, source.x);
     let in_w = rect[2] - rect[0];
     let out_w = out[2] - out[0];
-    let mut y = vec![0.0f32; out_w * (out[3] - out[1]) * c];
+    let mut y = buffers.take(out_w * (out[3] - out[1]) * c);
     let value = |iy: usize, ix: usize, ch: usize| {
         if iy < rect[3] && ix < rect[2] {
             x[((iy - rect[1]) * in_w + ix - rect[0]) * c + ch]
@@ -385,11 +393,22 @@ fn pool(source: Source, out: Rect) -> Vec<f32> {
 /// ỹ − z̃ʲ for every correlated level j of planar `levels` (`[3·m][pixels]`), planar
 /// `[(m − 1)·3][pixels]` (what [`CombinationInputs::differences`] holds).
 pub fn level_differences(levels: &[f32], pixels: usize) -> Vec<f32> {
+    let mut out = zeros(levels.len().saturating_sub(3 * pixels));
+    if pixels == 0 {
+        return out;
+    }
     let y = &levels[..3 * pixels];
-    levels[3 * pixels..]
-        .chunks_exact(3 * pixels)
-        .flat_map(|z| y.iter().zip(z).map(|(y, z)| y - z))
-        .collect()
+    // Plane by plane on every core: plane i is channel i % 3 of a z̃ level.
+    out.par_chunks_mut(pixels)
+        .zip(levels[3 * pixels..].par_chunks(pixels))
+        .enumerate()
+        .for_each(|(i, (out, z))| {
+            let y = &y[(i % 3) * pixels..][..pixels];
+            for ((d, y), z) in out.iter_mut().zip(y).zip(z) {
+                *d = y - z;
+            }
+        });
+    out
 }
 
 /// A trained network rearranged for the native engine.
@@ -406,6 +425,73 @@ pub struct NativeNetwork {
     guard_target_noise: f32,
     /// A U-Net's plan ([`crate::unet::UNet::plan`]); `None`: the hidden layers run in order.
     plan: Option<Vec<Step>>,
+    /// Activation buffers no longer read, for the next layers and tiles.
+    buffers: Buffers,
+}
+
+/// Activation buffers handed from layers that are done to layers that start. A fresh
+/// multi-MB allocation is mapped from the kernel page by page, each page zeroed on first touch:
+/// that took ≈ 12 % of a 1280×720 reconstruction (docs/performance.md); a buffer taken from
+/// here is already mapped. Every user overwrites the whole buffer, so its old values never
+/// matter.
+#[derive(Default)]
+struct Buffers(std::sync::Mutex<Vec<Vec<f32>>>);
+
+impl Buffers {
+    /// A buffer of `len` values (their contents unspecified): the smallest held one that
+    /// fits, else a new one. When none fits, the largest held one is freed first, so what is
+    /// held plus what is in use never exceeds what fresh allocations would have needed by more
+    /// than the buffers too small for anything still to come.
+    fn take(&self, len: usize) -> Vec<f32> {
+        let mut held = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let fits = (0..held.len())
+            .filter(|&i| held[i].capacity() >= len)
+            .min_by_key(|&i| held[i].capacity());
+        match fits {
+            Some(i) => {
+                let mut buffer = held.swap_remove(i);
+                drop(held);
+                // Shrinking keeps the values; growing within the capacity writes zeros only
+                // over already mapped memory.
+                if buffer.len() >= len {
+                    buffer.truncate(len);
+                } else {
+                    let more = len - buffer.len();
+                    buffer.par_extend(rayon::iter::repeat_n(0.0, more));
+                }
+                buffer
+            }
+            None => {
+                if let Some(i) = (0..held.len()).max_by_key(|&i| held[i].capacity()) {
+                    drop(held.swap_remove(i));
+                }
+                drop(held);
+                zeros(len)
+            }
+        }
+    }
+
+    /// Hands back a buffer no longer read.
+    fn give(&self, buffer: Vec<f32>) {
+        self.0
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(buffer);
+    }
+}
+
+impl Clone for Buffers {
+    /// A clone starts with no buffers of its own.
+    fn clone(&self) -> Self {
+        Buffers::default()
+    }
+}
+
+impl std::fmt::Debug for Buffers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let held = self.0.lock().map_or(0, |b| b.len());
+        write!(f, "Buffers({held} held)")
+    }
 }
 
 /// Planar colours of the whole image that the combination reads.
@@ -457,6 +543,7 @@ impl NativeNetwork {
             guard: config.guard,
             guard_target_noise: config.guard_target_noise,
             plan,
+            buffers: Buffers::default(),
         }
     }
 
@@ -473,7 +560,7 @@ impl NativeNetwork {
     ) -> (Vec<f32>, Rect) {
         let channels = features.len() / (width * height).max(1);
         let (rw, rh) = (region[2] - region[0], region[3] - region[1]);
-        let mut x = vec![0.0f32; rw * rh * channels];
+        let mut x = self.buffers.take(rw * rh * channels);
         // Row by row, every channel of a pixel written together (sequential writes; one read
         // stream per plane).
         let planes: Vec<&[f32]> = features.chunks_exact(width * height).collect();
@@ -495,7 +582,8 @@ impl NativeNetwork {
         let mut region = region;
         for (l, conv) in self.hidden.iter().enumerate() {
             let out = grow(interior, (layers - 1 - l) * reach, width, height);
-            x = conv.forward_relu(&x, region, out);
+            let y = conv.forward_relu(&x, region, out, &self.buffers);
+            self.buffers.give(std::mem::replace(&mut x, y));
             region = out;
         }
         (x, region)
@@ -561,14 +649,15 @@ impl NativeNetwork {
                 }
                 Op::Conv { layer, inputs } => {
                     let sources: Vec<Source> = inputs.iter().map(|&j| source(j)).collect();
-                    Activation::Dense(self.hidden[*layer].forward_relu_sources(&sources, r), r)
+                    let y = self.hidden[*layer].forward_relu_sources(&sources, r, &self.buffers);
+                    Activation::Dense(y, r)
                 }
                 Op::Pool(j) => {
                     debug_assert!(contains(
                         Some(dense(*j).1),
                         pool_input(r, sizes[step.scale - 1])
                     ));
-                    Activation::Dense(pool(source(*j), r), r)
+                    Activation::Dense(pool(source(*j), r, &self.buffers), r)
                 }
                 Op::Upsample(j) => {
                     debug_assert!(contains(Some(dense(*j).1), upsample_input(r)));
@@ -581,7 +670,9 @@ impl NativeNetwork {
             values[i] = Some(value);
             for (j, v) in values.iter_mut().enumerate().take(i) {
                 if last_use[j] == i {
-                    *v = None;
+                    if let Some(Activation::Dense(x, _)) = v.take() {
+                        self.buffers.give(x);
+                    }
                 }
             }
         }
@@ -589,6 +680,12 @@ impl NativeNetwork {
             Activation::Dense(x, rect) => (x, rect),
             Activation::Upsampled { .. } => unreachable!("a plan ends with a convolution"),
         }
+    }
+
+    /// Hands back the activation [`NativeNetwork::hidden_layers`] returned, once combined, for
+    /// the next tile's layers.
+    pub fn recycle(&self, x: Vec<f32>) {
+        self.buffers.give(x);
     }
 
     /// Last layer, positive weights and Eq. 6 for the pixels of `out` (inside `region`, which
@@ -1027,6 +1124,7 @@ mod tests {
             guard: 0.0,
             guard_target_noise: 0.0,
             plan: None,
+            buffers: Buffers::default(),
         }
     }
 

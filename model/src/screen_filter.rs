@@ -244,20 +244,25 @@ fn filter(
     range: f32,
 ) -> (Image, Vec<f32>) {
     let (w, h) = (level.width, level.height);
-    let var_channels = bundle.variance.channels;
-    let variance: Vec<f32> = (0..w * h)
-        .map(|p| bundle.variance.data[p * var_channels + index])
+    let variance: Vec<f32> = bundle
+        .variance
+        .data
+        .par_chunks_exact(bundle.variance.channels)
+        .map(|pixel| pixel[index])
         .collect();
+    debug_assert_eq!(variance.len(), w * h);
     if sigma < MIN_SIGMA {
         return (level.clone(), variance);
     }
     // Without photon-free layers the level itself is averaged (no copy).
-    let photon = direct.map(|d| {
-        let mut photon = level.clone();
-        for (p, b) in photon.data.iter_mut().zip(&d.data) {
-            *p -= b;
-        }
-        photon
+    let photon = direct.map(|d| Image {
+        data: level
+            .data
+            .par_iter()
+            .zip(d.data.par_iter())
+            .map(|(v, b)| v - b)
+            .collect(),
+        ..*level
     });
     cross_bilateral(
         bundle,
@@ -299,56 +304,72 @@ fn cross_bilateral(
     let (w, h) = (colour.width, colour.height);
     let radius = ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS);
     // Planar copies: each neighbour offset then runs along a row as one loop over contiguous
-    // slices, which the compiler turns into vector instructions.
-    let planes = |image: &Image| -> [Vec<f32>; 3] { std::array::from_fn(|k| image.plane(k)) };
+    // slices, which the compiler turns into vector instructions. Copied on every core at once.
+    let sources: Vec<&Image> = [&bundle.albedo, &bundle.normal, colour]
+        .into_iter()
+        .chain(photon)
+        .collect();
+    let mut planes = sources
+        .par_iter()
+        .flat_map(|image| (0..3).into_par_iter().map(|k| image.plane(k)))
+        .collect::<Vec<_>>()
+        .into_iter();
+    let mut three = || -> [Vec<f32>; 3] {
+        std::array::from_fn(|_| planes.next().expect("three planes per source"))
+    };
     let guides = Guides {
         width: w,
         height: h,
-        albedo: planes(&bundle.albedo),
-        normal: planes(&bundle.normal),
+        albedo: three(),
+        normal: three(),
         depth: &bundle.depth.data,
         inv_depth: bundle
             .depth
             .data
-            .iter()
+            .par_iter()
             .map(|d| 1.0 / d.max(1e-6))
             .collect(),
-        colour: planes(colour),
-        photon: photon.map(planes),
+        colour: three(),
+        photon: photon.map(|_| three()),
         variance,
         radius,
         inv_space: (1.0 / (2.0 * sigma * sigma)) as f32,
         range,
         twice_min: noise == RangeNoise::TwiceMin,
     };
-    let rows: Vec<(Vec<f32>, Vec<f32>)> = (0..h)
-        .into_par_iter()
-        .map(|y| {
-            let mut sums = RowSums::new(w);
-            guides.accumulate_row(y, &mut sums);
-            let mut colour = vec![0.0f32; 3 * w];
-            let mut var = vec![0.0f32; w];
-            for x in 0..w {
-                let c = y * w + x;
-                // The centre's own weight is 1, so the sum is ≥ 1.
-                let sum = sums.weight[x];
-                let back = back.map_or([0.0; 3], |d| {
-                    [d.data[3 * c], d.data[3 * c + 1], d.data[3 * c + 2]]
-                });
-                for k in 0..3 {
-                    colour[3 * x + k] = sums.colour[k][x] / sum + back[k];
-                }
-                var[x] = sums.variance[x] / (sum * sum);
-            }
-            (colour, var)
-        })
-        .collect();
-    let mut out = Image::new(w, h, 3);
-    let mut out_var = Vec::with_capacity(w * h);
-    for (y, (colour, var)) in rows.into_iter().enumerate() {
-        out.data[3 * y * w..3 * (y + 1) * w].copy_from_slice(&colour);
-        out_var.extend(var);
+    let zeros = crate::native::zeros;
+    let mut out = Image {
+        width: w,
+        height: h,
+        channels: 3,
+        data: zeros(3 * w * h),
+    };
+    let mut out_var = zeros(w * h);
+    if w == 0 {
+        return (out, out_var);
     }
+    out.data
+        .par_chunks_mut(3 * w)
+        .zip(out_var.par_chunks_mut(w))
+        .enumerate()
+        .for_each_init(
+            || RowSums::new(w),
+            |sums, (y, (colour, var))| {
+                guides.accumulate_row(y, sums);
+                for x in 0..w {
+                    let c = y * w + x;
+                    // The centre's own weight is 1, so the sum is ≥ 1.
+                    let sum = sums.weight[x];
+                    let back = back.map_or([0.0; 3], |d| {
+                        [d.data[3 * c], d.data[3 * c + 1], d.data[3 * c + 2]]
+                    });
+                    for k in 0..3 {
+                        colour[3 * x + k] = sums.colour[k][x] / sum + back[k];
+                    }
+                    var[x] = sums.variance[x] / (sum * sum);
+                }
+            },
+        );
     (out, out_var)
 }
 
@@ -364,18 +385,29 @@ pub fn filtered_direct(bundle: &Bundle, filter: &DirectFilter) -> Option<Image> 
         return None;
     }
     let (w, h) = (direct.y.width, direct.y.height);
-    let mut fused = Image::new(w, h, 3);
-    let mut variance = Vec::with_capacity(w * h);
-    for p in 0..w * h {
-        let (va, vb) = (direct.variance.data[2 * p], direct.variance.data[2 * p + 1]);
-        let weight_a = crate::features::subpath_a_weight(va, vb);
-        for k in 0..3 {
-            let i = 3 * p + k;
-            fused.data[i] = weight_a * direct.y.data[i] + (1.0 - weight_a) * direct.z.data[i];
-        }
-        // The variance of the fused mean: weights a, 1 − a on independent estimates.
-        variance.push(weight_a * weight_a * va + (1.0 - weight_a) * (1.0 - weight_a) * vb);
-    }
+    let zeros = crate::native::zeros;
+    let mut fused = Image {
+        width: w,
+        height: h,
+        channels: 3,
+        data: zeros(3 * w * h),
+    };
+    let mut variance = zeros(w * h);
+    fused
+        .data
+        .par_chunks_exact_mut(3)
+        .zip(variance.par_iter_mut())
+        .enumerate()
+        .for_each(|(p, (rgb, var))| {
+            let (va, vb) = (direct.variance.data[2 * p], direct.variance.data[2 * p + 1]);
+            let weight_a = crate::features::subpath_a_weight(va, vb);
+            for (k, v) in rgb.iter_mut().enumerate() {
+                let i = 3 * p + k;
+                *v = weight_a * direct.y.data[i] + (1.0 - weight_a) * direct.z.data[i];
+            }
+            // The variance of the fused mean: weights a, 1 − a on independent estimates.
+            *var = weight_a * weight_a * va + (1.0 - weight_a) * (1.0 - weight_a) * vb;
+        });
     let (out, _) = cross_bilateral(
         bundle,
         &fused,
