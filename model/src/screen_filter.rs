@@ -337,14 +337,7 @@ fn cross_bilateral(
         range,
         twice_min: noise == RangeNoise::TwiceMin,
     };
-    let zeros = crate::native::zeros;
-    let mut out = Image {
-        width: w,
-        height: h,
-        channels: 3,
-        data: zeros(3 * w * h),
-    };
-    let mut out_var = zeros(w * h);
+    let (mut out, mut out_var) = zeroed_rgb_and_plane(w, h);
     if w == 0 {
         return (out, out_var);
     }
@@ -373,6 +366,18 @@ fn cross_bilateral(
     (out, out_var)
 }
 
+/// A zero RGB image and a zero plane of `w`×`h`, written on every core.
+fn zeroed_rgb_and_plane(w: usize, h: usize) -> (Image, Vec<f32>) {
+    let zeros = crate::native::zeros;
+    let image = Image {
+        width: w,
+        height: h,
+        channels: 3,
+        data: zeros(3 * w * h),
+    };
+    (image, zeros(w * h))
+}
+
 /// The fused photon-free part of `bundle` (paths A and B weighted by the inverse of their
 /// variances, as [`crate::features::split_direct`] fuses them), filtered by `filter` at the
 /// bundle's pass count, interleaved RGB. `None` where there is nothing to filter: a bundle
@@ -385,14 +390,7 @@ pub fn filtered_direct(bundle: &Bundle, filter: &DirectFilter) -> Option<Image> 
         return None;
     }
     let (w, h) = (direct.y.width, direct.y.height);
-    let zeros = crate::native::zeros;
-    let mut fused = Image {
-        width: w,
-        height: h,
-        channels: 3,
-        data: zeros(3 * w * h),
-    };
-    let mut variance = zeros(w * h);
+    let (mut fused, mut variance) = zeroed_rgb_and_plane(w, h);
     fused
         .data
         .par_chunks_exact_mut(3)
