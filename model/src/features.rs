@@ -128,10 +128,11 @@ impl PackedImage {
 /// the output still converges.
 pub fn split_direct(levels: &mut [f32], direct: &[f32], pixels: usize) -> Vec<f32> {
     check_direct_shapes(levels, direct, pixels);
-    let (a, b) = (&direct[..3 * pixels], &direct[3 * pixels..6 * pixels]);
-    for (l, level) in levels.chunks_exact_mut(3 * pixels).enumerate() {
-        let part = if l == 0 { a } else { b };
-        for (v, d) in level.iter_mut().zip(part) {
+    for (plane, level) in levels.chunks_exact_mut(pixels).enumerate() {
+        for (v, d) in level
+            .iter_mut()
+            .zip(photon_free_part(direct, plane, pixels))
+        {
             *v -= d;
         }
     }
@@ -151,14 +152,19 @@ pub fn without_direct(levels: &[f32], direct: &[f32], pixels: usize) -> Vec<f32>
         .zip(levels.par_chunks(pixels))
         .enumerate()
         .for_each(|(plane, (out, level))| {
-            // Plane `plane` is channel plane % 3 of level plane / 3: ỹ less A's part, a z̃ less B's.
-            let part = if plane < 3 { 0 } else { 3 };
-            let part = &direct[(part + plane % 3) * pixels..][..pixels];
+            let part = photon_free_part(direct, plane, pixels);
             for ((o, v), d) in out.iter_mut().zip(level).zip(part) {
                 *o = v - d;
             }
         });
     out
+}
+
+/// The photon-free part that colour plane `plane` (channel plane % 3 of level plane / 3)
+/// carries: path A's for ỹ, path B's for every z̃.
+fn photon_free_part(direct: &[f32], plane: usize, pixels: usize) -> &[f32] {
+    let path = if plane < 3 { 0 } else { 3 };
+    &direct[(path + plane % 3) * pixels..][..pixels]
 }
 
 /// [`split_direct`]'s second half: the two subpaths' photon-free parts weighted by the inverse

@@ -317,11 +317,14 @@ fn cross_bilateral(
     let mut three = || -> [Vec<f32>; 3] {
         std::array::from_fn(|_| planes.next().expect("three planes per source"))
     };
+    // In the order of `sources`.
+    let (albedo, normal, colour) = (three(), three(), three());
+    let photon = photon.map(|_| three());
     let guides = Guides {
         width: w,
         height: h,
-        albedo: three(),
-        normal: three(),
+        albedo,
+        normal,
         depth: &bundle.depth.data,
         inv_depth: bundle
             .depth
@@ -329,8 +332,8 @@ fn cross_bilateral(
             .par_iter()
             .map(|d| 1.0 / d.max(1e-6))
             .collect(),
-        colour: three(),
-        photon: photon.map(|_| three()),
+        colour,
+        photon,
         variance,
         radius,
         inv_space: (1.0 / (2.0 * sigma * sigma)) as f32,
