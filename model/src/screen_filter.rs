@@ -42,8 +42,29 @@ pub const SIGMA_DECAY: f64 = 1.0 / 6.0;
 /// Below this σ the filter is the identity (a neighbour's weight would be below e^−12.5).
 pub const MIN_SIGMA: f64 = 0.2;
 
-/// Widest filter radius in pixels (the window is (2r + 1)²).
+/// Widest filter radius in pixels.
 pub const MAX_RADIUS: usize = 8;
+
+/// The filter's radius in pixels at bandwidth `sigma`: ⌈2.5σ⌉, at most [`MAX_RADIUS`]. The
+/// window is the disc of that radius, dx² + dy² ≤ r² (the isotropic cut of the Gaussian): the
+/// square's corners beyond it carry a spatial weight of at most e^−3.1 before the guide's terms
+/// and cost a third of the square's neighbours.
+fn radius(sigma: f64) -> usize {
+    ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS)
+}
+
+/// Half-widths of the disc of radius `r`, row by row: entry |dy| is the largest dx with
+/// dx² + dy² ≤ r².
+fn disc_reach(r: usize) -> Vec<usize> {
+    (0..=r)
+        .map(|dy| {
+            (0..=r)
+                .rev()
+                .find(|dx| dx * dx + dy * dy <= r * r)
+                .unwrap_or(0)
+        })
+        .collect()
+}
 
 /// Guide tolerances: albedo difference (Euclidean, RGB in [0, 1]), shading-normal difference
 /// (Euclidean between unit vectors: 0.3 ≈ 17°), depth difference relative to the pixel's depth.
@@ -302,7 +323,7 @@ fn cross_bilateral(
     noise: RangeNoise,
 ) -> (Image, Vec<f32>) {
     let (w, h) = (colour.width, colour.height);
-    let radius = ((2.5 * sigma).ceil() as usize).min(MAX_RADIUS);
+    let radius = radius(sigma);
     // Planar copies: each neighbour offset then runs along a row as one loop over contiguous
     // slices, which the compiler turns into vector instructions. Copied on every core at once.
     let sources: Vec<&Image> = [&bundle.albedo, &bundle.normal, colour]
@@ -335,6 +356,7 @@ fn cross_bilateral(
         colour,
         photon,
         variance,
+        reach: disc_reach(radius),
         radius,
         inv_space: (1.0 / (2.0 * sigma * sigma)) as f32,
         range,
@@ -439,6 +461,8 @@ struct Guides<'a> {
     photon: Option<[Vec<f32>; 3]>,
     variance: Vec<f32>,
     radius: usize,
+    /// The disc window's half-width at each |dy| ([`disc_reach`]).
+    reach: Vec<usize>,
     /// 1 / (2σ²).
     inv_space: f32,
     range: f32,
@@ -521,7 +545,7 @@ impl Guides<'_> {
 
     /// Writes the sums of centre pixels (x + l, y), l < L, over the neighbours in rows
     /// y − r ..= y + r (inside the image) and columns x + l + dx, dx ∈ `offsets` (inside the
-    /// row for every l).
+    /// row for every l) within the disc (|dx| ≤ `reach`[|dy|]).
     #[inline(always)]
     fn centre_block<const L: usize>(
         &self,
@@ -556,7 +580,8 @@ impl Guides<'_> {
         let mut variance = [0.0f32; L];
         for ny in y.saturating_sub(r)..(y + r + 1).min(self.height) {
             let dy = ny as f32 - y as f32;
-            for dx in offsets.clone() {
+            let reach = self.reach[ny.abs_diff(y)] as isize;
+            for dx in (*offsets.start()).max(-reach)..=(*offsets.end()).min(reach) {
                 let n = (ny * w + x).wrapping_add_signed(dx);
                 let spatial = (dx as f32 * dx as f32 + dy * dy) * self.inv_space;
                 let (an, nn, ln, pn) = (
@@ -686,6 +711,10 @@ mod tests {
                 let (mut sum, mut acc, mut acc_var) = (0.0f32, [0.0f32; 3], 0.0f32);
                 for ny in y.saturating_sub(radius)..(y + radius + 1).min(h) {
                     for nx in x.saturating_sub(radius)..(x + radius + 1).min(w) {
+                        let (adx, ady) = (nx.abs_diff(x), ny.abs_diff(y));
+                        if adx * adx + ady * ady > radius * radius {
+                            continue;
+                        }
                         let n = ny * w + nx;
                         let (dx, dy) = (nx as f32 - x as f32, ny as f32 - y as f32);
                         let d2 = |v: &[f32]| {
