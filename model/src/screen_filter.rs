@@ -67,7 +67,8 @@ fn disc_reach(r: usize) -> Vec<usize> {
 }
 
 /// Guide tolerances: albedo difference (Euclidean, RGB in [0, 1]), shading-normal difference
-/// (Euclidean between unit vectors: 0.3 ≈ 17°), depth difference relative to the pixel's depth.
+/// (Euclidean between unit vectors: 0.3 ≈ 17°), difference of the log depths (≈ the relative
+/// difference, the same read from either pixel).
 const ALBEDO_SIGMA: f32 = 0.1;
 const NORMAL_SIGMA: f32 = 0.3;
 const DEPTH_SIGMA: f32 = 0.05;
@@ -346,12 +347,11 @@ fn cross_bilateral(
         height: h,
         albedo,
         normal,
-        depth: &bundle.depth.data,
-        inv_depth: bundle
+        log_depth: bundle
             .depth
             .data
             .par_iter()
-            .map(|d| 1.0 / d.max(1e-6))
+            .map(|d| d.max(1e-6).ln())
             .collect(),
         colour,
         photon,
@@ -367,27 +367,26 @@ fn cross_bilateral(
         return (out, out_var);
     }
     out.data
-        .par_chunks_mut(3 * w)
-        .zip(out_var.par_chunks_mut(w))
+        .par_chunks_mut(3 * w * BAND_ROWS)
+        .zip(out_var.par_chunks_mut(w * BAND_ROWS))
         .enumerate()
-        .for_each_init(
-            || RowSums::new(w),
-            |sums, (y, (colour, var))| {
-                guides.accumulate_row(y, sums);
-                for x in 0..w {
-                    let c = y * w + x;
-                    // The centre's own weight is 1, so the sum is ≥ 1.
-                    let sum = sums.weight[x];
-                    let back = back.map_or([0.0; 3], |d| {
-                        [d.data[3 * c], d.data[3 * c + 1], d.data[3 * c + 2]]
-                    });
-                    for k in 0..3 {
-                        colour[3 * x + k] = sums.colour[k][x] / sum + back[k];
-                    }
-                    var[x] = sums.variance[x] / (sum * sum);
+        .for_each_init(BandSums::new, |sums, (band, (colour, var))| {
+            let y0 = band * BAND_ROWS;
+            let y1 = (y0 + BAND_ROWS).min(h);
+            guides.accumulate_band(y0, y1, sums);
+            for (i, (rgb, var)) in colour.chunks_exact_mut(3).zip(var).enumerate() {
+                let c = y0 * w + i;
+                // The centre's own weight is 1, so the sum is ≥ 1.
+                let sum = sums.weight[i];
+                let back = back.map_or([0.0; 3], |d| {
+                    [d.data[3 * c], d.data[3 * c + 1], d.data[3 * c + 2]]
+                });
+                for k in 0..3 {
+                    rgb[k] = sums.colour[k][i] / sum + back[k];
                 }
-            },
-        );
+                *var = sums.variance[i] / (sum * sum);
+            }
+        });
     (out, out_var)
 }
 
@@ -445,15 +444,14 @@ pub fn filtered_direct(bundle: &Bundle, filter: &DirectFilter) -> Option<Image> 
 }
 
 /// What the filter reads, planar (`plane[y·w + x]`), and its parameters.
-struct Guides<'a> {
+struct Guides {
     width: usize,
     height: usize,
     albedo: [Vec<f32>; 3],
     normal: [Vec<f32>; 3],
-    /// The depth layer itself (one channel: already planar).
-    depth: &'a [f32],
-    /// 1 / max(depth, 10⁻⁶): the depth term is relative to the centre pixel's depth.
-    inv_depth: Vec<f32>,
+    /// ln max(depth, 10⁻⁶): the depth term compares log depths, a relative difference that
+    /// reads the same from either pixel (so one weight serves both of a pair).
+    log_depth: Vec<f32>,
     /// The level filtered (the range term compares it).
     colour: [Vec<f32>; 3],
     /// What is averaged when the bundle has photon-free layers: the level less that part
@@ -470,89 +468,114 @@ struct Guides<'a> {
     twice_min: bool,
 }
 
-/// One row's running sums over the neighbours: Σ k, Σ k·photon (per channel), Σ k²·v.
-struct RowSums {
+/// Rows of output a band sums together: pairs reaching into the band from the r rows above
+/// it are weighed again by it (≈ 7 % more pairs at r = 5), the price of bands summed apart.
+const BAND_ROWS: usize = 32;
+
+/// One band's running sums over the neighbours, band-local `i = (y − y0)·w + x`: Σ k,
+/// Σ k·photon (per channel), Σ k²·v.
+struct BandSums {
     weight: Vec<f32>,
     colour: [Vec<f32>; 3],
     variance: Vec<f32>,
 }
 
-impl RowSums {
-    fn new(w: usize) -> Self {
-        RowSums {
-            weight: vec![0.0; w],
-            colour: std::array::from_fn(|_| vec![0.0; w]),
-            variance: vec![0.0; w],
+impl BandSums {
+    fn new() -> Self {
+        BandSums {
+            weight: Vec::new(),
+            colour: std::array::from_fn(|_| Vec::new()),
+            variance: Vec::new(),
+        }
+    }
+
+    /// Zero sums for `len` pixels.
+    fn reset(&mut self, len: usize) {
+        for plane in std::iter::once(&mut self.weight)
+            .chain(self.colour.iter_mut())
+            .chain(std::iter::once(&mut self.variance))
+        {
+            plane.clear();
+            plane.resize(len, 0.0);
         }
     }
 }
 
-impl Guides<'_> {
-    /// Writes the sums of row `y`: each pixel adds its neighbours' weighted contributions, rows
-    /// in order and, within a row, offsets from left to right, in the same order whatever the
-    /// thread count, instruction set or whether it is summed in a block or alone.
-    fn accumulate_row(&self, y: usize, sums: &mut RowSums) {
+impl Guides {
+    /// Writes the sums of the band of rows `y0..y1`. The weight of a pair of pixels is the
+    /// same from either side, so each pair within the window is weighed once — the upper (or,
+    /// in one row, the left) pixel as centre, the other one of the forward half of the disc —
+    /// and added to both. Rows, centre pixels and offsets are visited in one fixed order, so
+    /// every pixel's sum is added up in the same order whatever the thread count, the
+    /// instruction set or where a band starts.
+    fn accumulate_band(&self, y0: usize, y1: usize, sums: &mut BandSums) {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the CPU has AVX-512F (checked just above).
-                return unsafe { self.accumulate_row_avx512(y, sums) };
+                return unsafe { self.accumulate_band_avx512(y0, y1, sums) };
             }
             if std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU has AVX2 (checked just above).
-                return unsafe { self.accumulate_row_avx2(y, sums) };
+                return unsafe { self.accumulate_band_avx2(y0, y1, sums) };
             }
         }
-        self.accumulate_row_portable(y, sums)
+        self.accumulate_band_portable(y0, y1, sums)
     }
 
-    /// [`Guides::accumulate_row`] compiled for AVX-512. Rust never fuses a multiply and an add,
-    /// so every build computes the same bits.
+    /// [`Guides::accumulate_band`] compiled for AVX-512. Rust never fuses a multiply and an
+    /// add, so every build computes the same bits.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    fn accumulate_row_avx512(&self, y: usize, sums: &mut RowSums) {
-        self.accumulate_row_portable(y, sums)
+    fn accumulate_band_avx512(&self, y0: usize, y1: usize, sums: &mut BandSums) {
+        self.accumulate_band_portable(y0, y1, sums)
     }
 
-    /// [`Guides::accumulate_row`] compiled for AVX2.
+    /// [`Guides::accumulate_band`] compiled for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn accumulate_row_avx2(&self, y: usize, sums: &mut RowSums) {
-        self.accumulate_row_portable(y, sums)
+    fn accumulate_band_avx2(&self, y0: usize, y1: usize, sums: &mut BandSums) {
+        self.accumulate_band_portable(y0, y1, sums)
     }
 
     /// Centre pixels in blocks of 16 (one AVX-512 vector, two AVX2 ones) whose neighbours all
-    /// lie inside the row, each block summing every neighbour offset with its centre values and
-    /// sums held in registers; pixels near the row's ends one by one, over the offsets inside.
+    /// lie inside the row, their values and own sums held in registers; pixels near the row's
+    /// ends one by one, over the offsets inside. Rows above the band only give to it.
     #[inline(always)]
-    fn accumulate_row_portable(&self, y: usize, sums: &mut RowSums) {
+    fn accumulate_band_portable(&self, y0: usize, y1: usize, sums: &mut BandSums) {
         const L: usize = 16;
-        let (w, r) = (self.width, self.radius);
-        let mut x = 0;
-        while x < w {
-            if x >= r && x + L + r <= w {
-                self.centre_block::<L>(y, x, -(r as isize)..=r as isize, sums);
-                x += L;
-            } else {
-                // Offsets whose neighbour x + dx lies inside the row.
-                let dx0 = -(r.min(x) as isize);
-                let dx1 = r.min(w - 1 - x) as isize;
-                self.centre_block::<1>(y, x, dx0..=dx1, sums);
-                x += 1;
+        let (w, r) = (self.width, self.radius as isize);
+        sums.reset((y1 - y0) * w);
+        for y in y0.saturating_sub(self.radius)..y1 {
+            let mut x = 0;
+            while x < w {
+                if x as isize >= r && x + L + self.radius <= w {
+                    self.pair_block::<L>(y, x, (-r, r), (y0, y1), sums);
+                    x += L;
+                } else {
+                    // Offsets whose neighbour x + dx lies inside the row.
+                    let lo = -(x.min(self.radius) as isize);
+                    let hi = (w - 1 - x).min(self.radius) as isize;
+                    self.pair_block::<1>(y, x, (lo, hi), (y0, y1), sums);
+                    x += 1;
+                }
             }
         }
     }
 
-    /// Writes the sums of centre pixels (x + l, y), l < L, over the neighbours in rows
-    /// y − r ..= y + r (inside the image) and columns x + l + dx, dx ∈ `offsets` (inside the
-    /// row for every l) within the disc (|dx| ≤ `reach`[|dy|]).
+    /// Weighs centre pixels (x + l, y), l < L, against their neighbours of the forward half
+    /// disc — rows y + 1 ..= y + r (inside the image), and in row y the offsets dx > 0 — at
+    /// columns x + l + dx, dx ∈ `dx_range` (inside the row for every l); adds each weight to
+    /// the centre's sums if row y is in the band `y0..y1` and to the neighbour's if its row
+    /// is. The centre's own term (weight 1) is added with its sums.
     #[inline(always)]
-    fn centre_block<const L: usize>(
+    fn pair_block<const L: usize>(
         &self,
         y: usize,
         x: usize,
-        offsets: std::ops::RangeInclusive<isize>,
-        sums: &mut RowSums,
+        dx_range: (isize, isize),
+        (y0, y1): (usize, usize),
+        sums: &mut BandSums,
     ) {
         let albedo_scale = 1.0 / (2.0 * ALBEDO_SIGMA * ALBEDO_SIGMA);
         let normal_scale = 1.0 / (2.0 * NORMAL_SIGMA * NORMAL_SIGMA);
@@ -564,33 +587,40 @@ impl Guides<'_> {
             plane[i..i + L].try_into().expect("block inside the row")
         };
         let three = |planes: &[Vec<f32>; 3], i: usize| planes.each_ref().map(|p| at(p, i));
+        let photon = self.photon.as_ref().unwrap_or(&self.colour);
         let c = y * w + x;
-        let (ac, nc, lc) = (
+        let (ac, nc, lc, pc) = (
             three(&self.albedo, c),
             three(&self.normal, c),
             three(&self.colour, c),
+            three(photon, c),
         );
-        let (dc, inv_dc, vc) = (
-            at(self.depth, c),
-            at(&self.inv_depth, c),
-            at(&self.variance, c),
-        );
-        let mut weight = [0.0f32; L];
-        let mut colour = [[0.0f32; L]; 3];
-        let mut variance = [0.0f32; L];
-        for ny in y.saturating_sub(r)..(y + r + 1).min(self.height) {
-            let dy = ny as f32 - y as f32;
-            let reach = self.reach[ny.abs_diff(y)] as isize;
-            for dx in (*offsets.start()).max(-reach)..=(*offsets.end()).min(reach) {
+        let (dc, vc) = (at(&self.log_depth, c), at(&self.variance, c));
+        let centre_in = y >= y0;
+        // The centre's own term: k = 1.
+        let mut weight = [1.0f32; L];
+        let mut colour = pc;
+        let mut variance = vc;
+        for dy in 0..=r.min(self.height - 1 - y) {
+            let ny = y + dy;
+            let neighbour_in = (y0..y1).contains(&ny);
+            if !centre_in && !neighbour_in {
+                continue;
+            }
+            let reach = self.reach[dy] as isize;
+            let first = if dy == 0 { 1 } else { -reach };
+            let spatial_dy = (dy * dy) as f32;
+            for dx in first.max(dx_range.0)..=reach.min(dx_range.1) {
                 let n = (ny * w + x).wrapping_add_signed(dx);
-                let spatial = (dx as f32 * dx as f32 + dy * dy) * self.inv_space;
+                let spatial = (dx as f32 * dx as f32 + spatial_dy) * self.inv_space;
                 let (an, nn, ln, pn) = (
                     three(&self.albedo, n),
                     three(&self.normal, n),
                     three(&self.colour, n),
-                    three(self.photon.as_ref().unwrap_or(&self.colour), n),
+                    three(photon, n),
                 );
-                let (dn, vn) = (at(self.depth, n), at(&self.variance, n));
+                let (dn, vn) = (at(&self.log_depth, n), at(&self.variance, n));
+                let mut k = [0.0f32; L];
                 for l in 0..L {
                     let sq = |a: &[[f32; L]; 3], b: &[[f32; L]; 3]| {
                         let d0 = b[0][l] - a[0][l];
@@ -598,7 +628,7 @@ impl Guides<'_> {
                         let d2 = b[2][l] - a[2][l];
                         d0 * d0 + d1 * d1 + d2 * d2
                     };
-                    let dd = (dn[l] - dc[l]) * inv_dc[l];
+                    let dd = dn[l] - dc[l];
                     let mut e = spatial
                         + sq(&ac, &an) * albedo_scale
                         + sq(&nc, &nn) * normal_scale
@@ -614,20 +644,48 @@ impl Guides<'_> {
                         let excess = (sq(&lc, &ln) / 3.0 - v).max(0.0);
                         e += excess / (range2 * v).max(f32::MIN_POSITIVE);
                     }
-                    let k = exp_neg(e);
-                    weight[l] += k;
-                    for ch in 0..3 {
-                        colour[ch][l] += k * pn[ch][l];
+                    k[l] = exp_neg(e);
+                }
+                if centre_in {
+                    for l in 0..L {
+                        weight[l] += k[l];
+                        for ch in 0..3 {
+                            colour[ch][l] += k[l] * pn[ch][l];
+                        }
+                        variance[l] += k[l] * k[l] * vn[l];
                     }
-                    variance[l] += k * k * vn[l];
+                }
+                if neighbour_in {
+                    let i = ((ny - y0) * w + x).wrapping_add_signed(dx);
+                    let add = |sum: &mut Vec<f32>, values: [f32; L]| {
+                        for (s, v) in sum[i..i + L].iter_mut().zip(values) {
+                            *s += v;
+                        }
+                    };
+                    add(&mut sums.weight, k);
+                    for (sum, p) in sums.colour.iter_mut().zip(&pc) {
+                        add(sum, std::array::from_fn(|l| k[l] * p[l]));
+                    }
+                    add(
+                        &mut sums.variance,
+                        std::array::from_fn(|l| k[l] * k[l] * vc[l]),
+                    );
                 }
             }
         }
-        sums.weight[x..x + L].copy_from_slice(&weight);
-        for (sum, block) in sums.colour.iter_mut().zip(&colour) {
-            sum[x..x + L].copy_from_slice(block);
+        if centre_in {
+            let i = (y - y0) * w + x;
+            let add = |sum: &mut Vec<f32>, values: &[f32; L]| {
+                for (s, v) in sum[i..i + L].iter_mut().zip(values) {
+                    *s += v;
+                }
+            };
+            add(&mut sums.weight, &weight);
+            for (sum, values) in sums.colour.iter_mut().zip(&colour) {
+                add(sum, values);
+            }
+            add(&mut sums.variance, &variance);
         }
-        sums.variance[x..x + L].copy_from_slice(&variance);
     }
 }
 
@@ -722,7 +780,7 @@ mod tests {
                                 .map(|k| (v[3 * n + k] - v[3 * c + k]).powi(2))
                                 .sum::<f32>()
                         };
-                        let dd = ((depth[n] - depth[c]) / depth[c].max(1e-6)).powi(2);
+                        let dd = (depth[n].max(1e-6).ln() - depth[c].max(1e-6).ln()).powi(2);
                         let mut e = (dx * dx + dy * dy) * inv_space
                             + d2(albedo) / (2.0 * ALBEDO_SIGMA * ALBEDO_SIGMA)
                             + d2(normal) / (2.0 * NORMAL_SIGMA * NORMAL_SIGMA)
@@ -755,8 +813,14 @@ mod tests {
     fn row_vectorised_filter_equals_the_per_pixel_loop() {
         // A G-buffer with edges (albedo steps, a depth ramp and a step, tilted normals), noisy
         // levels, zero-variance pixels, photon-free layers; with and without the range term,
-        // at a radius wider than the image's narrow side and at a small one.
-        let (w, h) = (37, 9);
+        // at a radius wider than the image's narrow side and at a small one; an image of one
+        // band of rows and one of three (pairs across band borders).
+        for (w, h) in [(37, 9), (23, 2 * BAND_ROWS + 7)] {
+            vectorised_equals_per_pixel(w, h);
+        }
+    }
+
+    fn vectorised_equals_per_pixel(w: usize, h: usize) {
         let (mut b, _) = synthetic_bundle(w, h, 0.3, 11);
         for p in 0..w * h {
             let (x, y) = (p % w, p / w);
