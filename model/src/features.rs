@@ -474,8 +474,15 @@ enum Source<'a> {
     Plane(&'a [f32]),
 }
 
-/// [`pack`] of a checked bundle with `screen` levels in place of its own. Every plane is
-/// independent, so the planes are filled in parallel (the same values on any thread count).
+/// Pixels per run of [`pack_checked`]'s planes: a run of every source and every plane (≈ 1 MiB
+/// with photon-free layers) stays in a core's cache while its planes are filled.
+const PACK_RUN: usize = 4096;
+
+/// One packed plane's source and transform.
+type PlaneJob<'a> = (Source<'a>, Transform);
+
+/// [`pack`] of a checked bundle with `screen` levels in place of its own. Every value is
+/// independent, so runs of pixels are filled in parallel (the same values on any thread count).
 fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel]) -> PackedImage {
     use rayon::prelude::*;
     let width = bundle.meta.width as usize;
@@ -498,49 +505,71 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
                 Source::Plane(&f.variance)
             })
     };
-    let fill = |planes: Vec<(Source, Transform)>| -> Vec<f32> {
-        let mut out = crate::native::zeros(planes.len() * pixels);
-        out.par_chunks_mut(pixels.max(1))
-            .zip(planes.par_iter())
-            .for_each(|(plane, &(source, t))| {
-                // The log is taken afterwards over the contiguous plane (vectorised).
+    // Every buffer's planes, filled together in runs of pixels: a run of an interleaved image
+    // read for one plane is still in the cache for the others taken from it (whole planes
+    // read each image from memory once per channel and buffer).
+    let fill = |buffers: Vec<Vec<PlaneJob>>| -> Vec<Vec<f32>> {
+        let mut outs: Vec<Vec<f32>> = buffers
+            .iter()
+            .map(|planes| crate::native::zeros(planes.len() * pixels))
+            .collect();
+        // runs[i]: run i of every plane, with where its values come from.
+        let mut runs: Vec<Vec<(&mut [f32], PlaneJob)>> = Vec::new();
+        for (out, planes) in outs.iter_mut().zip(&buffers) {
+            for (plane, &job) in out.chunks_mut(pixels.max(1)).zip(planes) {
+                for (i, run) in plane.chunks_mut(PACK_RUN).enumerate() {
+                    if runs.len() <= i {
+                        runs.push(Vec::new());
+                    }
+                    runs[i].push((run, job));
+                }
+            }
+        }
+        runs.into_par_iter().enumerate().for_each(|(i, run)| {
+            let start = i * PACK_RUN;
+            for (values, (source, t)) in run {
+                // The log is taken afterwards over the contiguous run (vectorised).
                 let apply = |v: &mut f32, s: f32| {
                     *v = match t {
                         Transform::Identity | Transform::Log => s,
                         Transform::Scale(scale) => s.max(0.0) * scale,
                     }
                 };
+                let end = start + values.len();
                 match source {
                     Source::Channel(image, c) => {
                         // Whole pixels, then the channel: `step_by` compiles to a slow loop.
-                        let pixels = image.data.chunks_exact(image.channels);
-                        plane
+                        let n = image.channels;
+                        let pixels = image.data[n * start..n * end].chunks_exact(n);
+                        values
                             .iter_mut()
                             .zip(pixels)
                             .for_each(|(v, p)| apply(v, p[c]));
                     }
-                    Source::Plane(values) => {
-                        plane.iter_mut().zip(values).for_each(|(v, &s)| apply(v, s));
+                    Source::Plane(plane) => {
+                        values
+                            .iter_mut()
+                            .zip(&plane[start..end])
+                            .for_each(|(v, &s)| apply(v, s));
                     }
                 }
                 if let Transform::Log = t {
-                    log_transform_plane(plane);
+                    log_transform_plane(values);
                 }
-            });
-        out
+            }
+        });
+        outs
     };
-    let levels = fill(
-        (0..LEVELS)
-            .flat_map(|i| channels(level(i), Transform::Identity))
-            .collect(),
-    );
     let max_depth = bundle.depth.data.iter().fold(0.0f32, |m, &d| m.max(d));
     let scale = if max_depth > 0.0 {
         1.0 / max_depth
     } else {
         0.0
     };
-    let features = fill(
+    let mut buffers = vec![
+        (0..LEVELS)
+            .flat_map(|i| channels(level(i), Transform::Identity))
+            .collect(),
         (0..LEVELS)
             .flat_map(|i| channels(level(i), Transform::Log))
             .chain((0..LEVELS).map(|i| (variance(i), Transform::Log)))
@@ -548,15 +577,21 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
             .chain(channels(&bundle.normal, Transform::Identity))
             .chain(channels(&bundle.depth, Transform::Scale(scale)))
             .collect(),
-    );
-    let direct = bundle.direct.as_ref().map(|d| {
-        fill(
+    ];
+    if let Some(d) = &bundle.direct {
+        buffers.push(
             channels(&d.y, Transform::Identity)
                 .chain(channels(&d.z, Transform::Identity))
                 .chain(channels(&d.variance, Transform::Identity))
                 .collect(),
-        )
-    });
+        );
+    }
+    let mut filled = fill(buffers).into_iter();
+    let (levels, features) = (
+        filled.next().expect("the levels' buffer"),
+        filled.next().expect("the features' buffer"),
+    );
+    let direct = filled.next();
     debug_assert_eq!(features.len(), INPUT_CHANNELS * pixels);
     debug_assert_eq!(levels.len(), COLOUR_CHANNELS * pixels);
     debug_assert!(direct
