@@ -749,7 +749,7 @@ mod tests {
     }
 
     /// The filter as one loop per pixel over its window (with the C library's `expf`): what
-    /// the row-vectorised [`filter`] must compute.
+    /// the vectorised, pair-once [`filter`] must compute.
     fn filter_per_pixel(b: &Bundle, index: usize, sigma: f64, range: f32) -> (Vec<f32>, Vec<f32>) {
         let (w, h) = (b.meta.width as usize, b.meta.height as usize);
         let level = &b.levels[index];
@@ -810,7 +810,7 @@ mod tests {
     }
 
     #[test]
-    fn row_vectorised_filter_equals_the_per_pixel_loop() {
+    fn pair_once_filter_equals_the_per_pixel_loop() {
         // A G-buffer with edges (albedo steps, a depth ramp and a step, tilted normals), noisy
         // levels, zero-variance pixels, photon-free layers; with and without the range term,
         // at a radius wider than the image's narrow side and at a small one; an image of one
