@@ -370,7 +370,7 @@ fn cross_bilateral(
         .par_chunks_mut(3 * w * BAND_ROWS)
         .zip(out_var.par_chunks_mut(w * BAND_ROWS))
         .enumerate()
-        .for_each_init(BandSums::new, |sums, (band, (colour, var))| {
+        .for_each_init(BandSums::default, |sums, (band, (colour, var))| {
             let y0 = band * BAND_ROWS;
             let y1 = (y0 + BAND_ROWS).min(h);
             guides.accumulate_band(y0, y1, sums);
@@ -474,6 +474,7 @@ const BAND_ROWS: usize = 32;
 
 /// One band's running sums over the neighbours, band-local `i = (y − y0)·w + x`: Σ k,
 /// Σ k·photon (per channel), Σ k²·v.
+#[derive(Default)]
 struct BandSums {
     weight: Vec<f32>,
     colour: [Vec<f32>; 3],
@@ -481,12 +482,26 @@ struct BandSums {
 }
 
 impl BandSums {
-    fn new() -> Self {
-        BandSums {
-            weight: Vec::new(),
-            colour: std::array::from_fn(|_| Vec::new()),
-            variance: Vec::new(),
+    /// Adds the terms of pixels i .. i + L: Σ k, Σ k·photon, Σ k²·v.
+    #[inline(always)]
+    fn add<const L: usize>(
+        &mut self,
+        i: usize,
+        weight: &[f32; L],
+        colour: &[[f32; L]; 3],
+        variance: &[f32; L],
+    ) {
+        #[inline(always)]
+        fn add_run<const L: usize>(sum: &mut [f32], values: &[f32; L]) {
+            for (s, v) in sum.iter_mut().zip(values) {
+                *s += v;
+            }
         }
+        add_run(&mut self.weight[i..i + L], weight);
+        for (sum, values) in self.colour.iter_mut().zip(colour) {
+            add_run(&mut sum[i..i + L], values);
+        }
+        add_run(&mut self.variance[i..i + L], variance);
     }
 
     /// Zero sums for `len` pixels.
@@ -544,18 +559,18 @@ impl Guides {
     #[inline(always)]
     fn accumulate_band_portable(&self, y0: usize, y1: usize, sums: &mut BandSums) {
         const L: usize = 16;
-        let (w, r) = (self.width, self.radius as isize);
+        let (w, r) = (self.width, self.radius);
         sums.reset((y1 - y0) * w);
-        for y in y0.saturating_sub(self.radius)..y1 {
+        for y in y0.saturating_sub(r)..y1 {
             let mut x = 0;
             while x < w {
-                if x as isize >= r && x + L + self.radius <= w {
-                    self.pair_block::<L>(y, x, (-r, r), (y0, y1), sums);
+                if x >= r && x + L + r <= w {
+                    self.pair_block::<L>(y, x, (-(r as isize), r as isize), (y0, y1), sums);
                     x += L;
                 } else {
                     // Offsets whose neighbour x + dx lies inside the row.
-                    let lo = -(x.min(self.radius) as isize);
-                    let hi = (w - 1 - x).min(self.radius) as isize;
+                    let lo = -(x.min(r) as isize);
+                    let hi = (w - 1 - x).min(r) as isize;
                     self.pair_block::<1>(y, x, (lo, hi), (y0, y1), sums);
                     x += 1;
                 }
@@ -656,35 +671,17 @@ impl Guides {
                     }
                 }
                 if neighbour_in {
-                    let i = ((ny - y0) * w + x).wrapping_add_signed(dx);
-                    let add = |sum: &mut Vec<f32>, values: [f32; L]| {
-                        for (s, v) in sum[i..i + L].iter_mut().zip(values) {
-                            *s += v;
-                        }
-                    };
-                    add(&mut sums.weight, k);
-                    for (sum, p) in sums.colour.iter_mut().zip(&pc) {
-                        add(sum, std::array::from_fn(|l| k[l] * p[l]));
-                    }
-                    add(
-                        &mut sums.variance,
-                        std::array::from_fn(|l| k[l] * k[l] * vc[l]),
+                    sums.add(
+                        ((ny - y0) * w + x).wrapping_add_signed(dx),
+                        &k,
+                        &pc.map(|p| std::array::from_fn(|l| k[l] * p[l])),
+                        &std::array::from_fn(|l| k[l] * k[l] * vc[l]),
                     );
                 }
             }
         }
         if centre_in {
-            let i = (y - y0) * w + x;
-            let add = |sum: &mut Vec<f32>, values: &[f32; L]| {
-                for (s, v) in sum[i..i + L].iter_mut().zip(values) {
-                    *s += v;
-                }
-            };
-            add(&mut sums.weight, &weight);
-            for (sum, values) in sums.colour.iter_mut().zip(&colour) {
-                add(sum, values);
-            }
-            add(&mut sums.variance, &variance);
+            sums.add((y - y0) * w + x, &weight, &colour, &variance);
         }
     }
 }
