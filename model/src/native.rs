@@ -55,6 +55,32 @@ const CHUNK_PIXELS: usize = 256;
 /// vector, two AVX2 vectors.
 const LANES: usize = 16;
 
+/// The raw outputs of [`LANES`] neighbouring pixels as the output layer's product holds them:
+/// entry e's values of the pixels are the run `raw[e·stride..e·stride + LANES]`.
+struct EntryLanes<'a> {
+    raw: &'a mut [f32],
+    stride: usize,
+    entries: usize,
+}
+
+impl EntryLanes<'_> {
+    /// Entry `e`'s values, one per pixel.
+    #[inline(always)]
+    fn entry(&self, e: usize) -> &[f32; LANES] {
+        self.raw[e * self.stride..][..LANES]
+            .try_into()
+            .expect("LANES values")
+    }
+
+    /// [`EntryLanes::entry`], writable.
+    #[inline(always)]
+    fn entry_mut(&mut self, e: usize) -> &mut [f32; LANES] {
+        (&mut self.raw[e * self.stride..][..LANES])
+            .try_into()
+            .expect("LANES values")
+    }
+}
+
 /// One convolution as a matrix: `matrix[(ky·k + kx)·cin + ci][cout]` (the im2col order) and
 /// the bias.
 #[derive(Clone, Debug)]
@@ -249,13 +275,14 @@ impl ConvMatrix {
         }
     }
 
-    /// `dst` (`cout × pixels`, output-channel-major) = bias + (columns · matrix)ᵀ: each output
-    /// channel's values of all pixels in one run, the layout the combination reads lanes of
-    /// neighbouring pixels from (and gemm's natural, column-major, destination).
-    fn product_transposed(&self, columns: &[f32], pixels: usize, dst: &mut [f32]) {
+    /// `dst` (`cout` rows of `stride` ≥ `pixels` values, output-channel-major) = bias +
+    /// (columns · matrix)ᵀ: each output channel's values of all pixels in one run, the layout
+    /// the combination reads lanes of neighbouring pixels from (and gemm's natural,
+    /// column-major, destination).
+    fn product_transposed(&self, columns: &[f32], pixels: usize, dst: &mut [f32], stride: usize) {
         let (depth, cout) = (self.depth(), self.cout);
-        for (row, &b) in dst.chunks_exact_mut(pixels).zip(&self.bias) {
-            row.fill(b);
+        for (row, &b) in dst.chunks_exact_mut(stride).zip(&self.bias) {
+            row[..pixels].fill(b);
         }
         // SAFETY: columns holds pixels×depth values row-major, the matrix depth×cout row-major,
         // dst cout×pixels row-major (element (pixel, channel) at channel·pixels + pixel), as the
@@ -266,7 +293,7 @@ impl ConvMatrix {
                 cout,
                 depth,
                 dst.as_mut_ptr(),
-                pixels as isize,
+                stride as isize,
                 1,
                 true,
                 columns.as_ptr(),
@@ -709,21 +736,24 @@ impl NativeNetwork {
         let chunks: Vec<(Vec<f32>, Vec<f32>)> = (0..count.div_ceil(CHUNK_PIXELS))
             .into_par_iter()
             .map_init(
-                || (Vec::new(), Vec::new(), Vec::new(), Vec::new()),
-                |(columns, raw, lanes, weights), chunk| {
+                || (Vec::new(), Vec::new(), Vec::new()),
+                |(columns, raw, weights), chunk| {
                     let first = chunk * CHUNK_PIXELS;
                     let n = CHUNK_PIXELS.min(count - first);
                     // Per-worker buffers, fully overwritten (im2col; bias then product). A 1×1
                     // layer on its own input rectangle reads the activations as they lie: its
                     // im2col rows would be a copy of them. `raw` is entry-major, `[entry][n]`.
-                    raw.resize(n * conv.cout, 0.0);
+                    // Entries lie `stride` values apart; a multiple of 1 KiB would put the
+                    // LANES values of every fourth entry in the same L1 cache sets.
+                    let stride = n + LANES;
+                    raw.resize(stride * conv.cout, 0.0);
                     if conv.kernel == 1 && region == out {
                         let x = &x[first * conv.cin..(first + n) * conv.cin];
-                        conv.product_transposed(x, n, raw);
+                        conv.product_transposed(x, n, raw, stride);
                     } else {
                         columns.resize(n * conv.depth(), 0.0);
                         conv.im2col(x, region, out, first, columns);
-                        conv.product_transposed(columns, n, raw);
+                        conv.product_transposed(columns, n, raw, stride);
                     }
                     let mut colour = vec![0.0f32; 3 * n];
                     let mut share = vec![0.0f32; self.pairs * n];
@@ -746,20 +776,22 @@ impl NativeNetwork {
                             && px + LANES <= out[2]
                             && self.window_inside(px, py, LANES, colours)
                         {
-                            // Entry e of the LANES pixels: one run of `raw`, one vector.
-                            lanes.clear();
-                            lanes.extend((0..cout).map(|e| -> [f32; LANES] {
-                                let run = &raw[e * n + p..e * n + p + LANES];
-                                run.try_into().expect("LANES values")
-                            }));
-                            let results = self.combine_lanes(lanes, px, py, colours);
+                            // Entry e of the LANES pixels is one run of `raw`, read in
+                            // place (a copy into `[entry][lane]` arrays cost ≈ 3 % of a
+                            // 1280×720 reconstruction).
+                            let block = EntryLanes {
+                                raw: &mut raw[p..],
+                                stride,
+                                entries: cout,
+                            };
+                            let results = self.combine_lanes(block, px, py, colours);
                             for (l, result) in results.into_iter().enumerate() {
                                 store(p + l, result);
                             }
                             p += LANES;
                         } else {
                             weights.clear();
-                            weights.extend((0..cout).map(|e| raw[e * n + p]));
+                            weights.extend((0..cout).map(|e| raw[e * stride + p]));
                             store(p, self.combine_pixel(weights, px, py, colours));
                             p += 1;
                         }
@@ -797,13 +829,13 @@ impl NativeNetwork {
     }
 
     /// [`NativeNetwork::combine_pixel`] for the [`LANES`] pixels (px + l, py) of one row whose
-    /// windows lie inside the image, from their raw outputs `lanes` (`[entry][lane]`,
-    /// overwritten with the positive weights). Each lane does the scalar function's arithmetic in its order
+    /// windows lie inside the image, from their raw outputs `lanes` (overwritten with the
+    /// positive weights). Each lane does the scalar function's arithmetic in its order
     /// (bit-identical, `tests::lanes_equal_single_pixels`); the lanes only let the compiler use
     /// vector instructions, which the scalar window sums (sequential float additions) cannot.
     fn combine_lanes(
         &self,
-        lanes: &mut [[f32; LANES]],
+        lanes: EntryLanes,
         px: usize,
         py: usize,
         colours: &CombinationInputs,
@@ -829,7 +861,7 @@ impl NativeNetwork {
     #[target_feature(enable = "avx512f")]
     fn combine_lanes_avx512(
         &self,
-        lanes: &mut [[f32; LANES]],
+        lanes: EntryLanes,
         px: usize,
         py: usize,
         colours: &CombinationInputs,
@@ -843,7 +875,7 @@ impl NativeNetwork {
     #[target_feature(enable = "avx2")]
     fn combine_lanes_avx2(
         &self,
-        lanes: &mut [[f32; LANES]],
+        lanes: EntryLanes,
         px: usize,
         py: usize,
         colours: &CombinationInputs,
@@ -855,7 +887,7 @@ impl NativeNetwork {
     #[inline(always)]
     fn combine_lanes_portable(
         &self,
-        lanes: &mut [[f32; LANES]],
+        mut lanes: EntryLanes,
         px: usize,
         py: usize,
         colours: &CombinationInputs,
@@ -869,29 +901,31 @@ impl NativeNetwork {
         // (its whole window is inside the image).
         match self.weighting {
             Weighting::Relu => {
-                // Over the values as one slice: a flattened iterator or a loop over the lanes
-                // of each entry is compiled to scalar code or to gathers.
-                for w in lanes.as_flattened_mut() {
-                    *w = w.max(0.0) + 1e-4;
+                for e in 0..lanes.entries {
+                    for w in lanes.entry_mut(e) {
+                        *w = w.max(0.0) + 1e-4;
+                    }
                 }
             }
             Weighting::Softmax => {
                 // The maximum of each lane over all entries (f32::max ignores NaN, so the
                 // order does not matter), as `positive` takes it.
                 let mut max = [f32::NEG_INFINITY; LANES];
-                for w in lanes.iter() {
+                for e in 0..lanes.entries {
+                    let w = lanes.entry(e);
                     for l in 0..LANES {
                         max[l] = max[l].max(w[l]);
                     }
                 }
-                for w in lanes.iter_mut() {
+                for e in 0..lanes.entries {
+                    let w = lanes.entry_mut(e);
                     for l in 0..LANES {
                         w[l] = (w[l] - max[l]).exp();
                     }
                 }
             }
         }
-        let lanes = &*lanes;
+        let lanes = &lanes;
         let centre = py * width + px;
         let mut numerator = [[0.0f32; LANES]; 3];
         let mut sums = [[0.0f32; LANES]; LEVELS - 1];
@@ -899,13 +933,12 @@ impl NativeNetwork {
         for j in 0..self.pairs {
             let z_planes = &colours.levels[3 * (j + 1) * pixels..3 * (j + 2) * pixels];
             let d_planes = &colours.differences[3 * j * pixels..3 * (j + 1) * pixels];
-            let w_j = &lanes[j * area..(j + 1) * area];
             let mut sum = [0.0f32; LANES];
             let mut square = [0.0f32; LANES];
             let mut acc = [[0.0f32; LANES]; 3];
             for ky in 0..window {
                 let start = (py + ky - r) * width + px - r;
-                let w_row = &w_j[ky * window..(ky + 1) * window];
+                let first = j * area + ky * window;
                 let row = |c: usize| &d_planes[c * pixels + start..][..window + LANES - 1];
                 let (d0, d1, d2) = (row(0), row(1), row(2));
                 // The row's five sums in one loop: each is still added in window order (the
@@ -915,7 +948,8 @@ impl NativeNetwork {
                 let mut row_sum = [0.0f32; LANES];
                 let mut row_square = [0.0f32; LANES];
                 let (mut a0, mut a1, mut a2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-                for (kx, w) in w_row.iter().enumerate() {
+                for kx in 0..window {
+                    let w = lanes.entry(first + kx);
                     let lanes = |dc: &[f32]| -> [f32; LANES] {
                         dc[kx..kx + LANES].try_into().expect("LANES values")
                     };
@@ -1170,23 +1204,48 @@ mod tests {
                 };
                 for (px, py) in [(r, r), (width - r - LANES, height - r - 1), (r + 3, 5)] {
                     assert!(net.window_inside(px, py, LANES, &colours));
-                    // The network's raw outputs of the LANES pixels, `[entry][lane]`.
-                    let transposed: Vec<[f32; LANES]> = (0..entries)
-                        .map(|e| std::array::from_fn(|l| raw[l * entries + e]))
-                        .collect();
-                    let mut lanes = transposed.clone();
-                    let together = net.combine_lanes(&mut lanes, px, py, &colours);
-                    let mut portable = transposed.clone();
-                    let again = net.combine_lanes_portable(&mut portable, px, py, &colours);
+                    // The network's raw outputs of the LANES pixels as the product lays them
+                    // out, entry-major with a stride longer than LANES.
+                    let stride = LANES + 3;
+                    let mut entry_major = vec![f32::NAN; entries * stride];
+                    for e in 0..entries {
+                        for l in 0..LANES {
+                            entry_major[e * stride + l] = raw[l * entries + e];
+                        }
+                    }
+                    fn block(raw: &mut [f32], stride: usize, entries: usize) -> EntryLanes<'_> {
+                        EntryLanes {
+                            raw,
+                            stride,
+                            entries,
+                        }
+                    }
+                    let mut lanes = entry_major.clone();
+                    let together =
+                        net.combine_lanes(block(&mut lanes, stride, entries), px, py, &colours);
+                    let mut portable = entry_major.clone();
+                    let again = net.combine_lanes_portable(
+                        block(&mut portable, stride, entries),
+                        px,
+                        py,
+                        &colours,
+                    );
                     assert!(
                         together == again,
                         "{weighting:?} {guard}: the vector build differs"
                     );
                     #[cfg(target_arch = "x86_64")]
                     if std::arch::is_x86_feature_detected!("avx2") {
-                        let mut avx2 = transposed.clone();
+                        let mut avx2 = entry_major.clone();
                         // SAFETY: the CPU has AVX2 (checked just above).
-                        let eight = unsafe { net.combine_lanes_avx2(&mut avx2, px, py, &colours) };
+                        let eight = unsafe {
+                            net.combine_lanes_avx2(
+                                block(&mut avx2, stride, entries),
+                                px,
+                                py,
+                                &colours,
+                            )
+                        };
                         assert!(
                             eight == again,
                             "{weighting:?} {guard}: the AVX2 build differs"
