@@ -281,12 +281,14 @@ impl ConvMatrix {
     /// column-major, destination).
     fn product_transposed(&self, columns: &[f32], pixels: usize, dst: &mut [f32], stride: usize) {
         let (depth, cout) = (self.depth(), self.cout);
+        // What the unsafe product below relies on.
+        assert!(stride >= pixels && dst.len() >= cout * stride && columns.len() >= pixels * depth);
         for (row, &b) in dst.chunks_exact_mut(stride).zip(&self.bias) {
             row[..pixels].fill(b);
         }
         // SAFETY: columns holds pixels×depth values row-major, the matrix depth×cout row-major,
-        // dst cout×pixels row-major (element (pixel, channel) at channel·pixels + pixel), as the
-        // strides say; the buffers do not overlap.
+        // dst cout rows of `stride` ≥ pixels values (element (pixel, channel) at
+        // channel·stride + pixel), as the strides say; the buffers do not overlap.
         unsafe {
             gemm::gemm(
                 pixels,
@@ -742,7 +744,7 @@ impl NativeNetwork {
                     let n = CHUNK_PIXELS.min(count - first);
                     // Per-worker buffers, fully overwritten (im2col; bias then product). A 1×1
                     // layer on its own input rectangle reads the activations as they lie: its
-                    // im2col rows would be a copy of them. `raw` is entry-major, `[entry][n]`.
+                    // im2col rows would be a copy of them. `raw` is entry-major, `[entry][stride]`.
                     // Entries lie `stride` values apart; a multiple of 1 KiB would put the
                     // LANES values of every fourth entry in the same L1 cache sets.
                     let stride = n + LANES;
@@ -777,8 +779,7 @@ impl NativeNetwork {
                             && self.window_inside(px, py, LANES, colours)
                         {
                             // Entry e of the LANES pixels is one run of `raw`, read in
-                            // place (a copy into `[entry][lane]` arrays cost ≈ 3 % of a
-                            // 1280×720 reconstruction).
+                            // place (no copy into `[entry][lane]` arrays first).
                             let block = EntryLanes {
                                 raw: &mut raw[p..],
                                 stride,
