@@ -830,10 +830,11 @@ impl NativeNetwork {
     }
 
     /// [`NativeNetwork::combine_pixel`] for the [`LANES`] pixels (px + l, py) of one row whose
-    /// windows lie inside the image, from their raw outputs `lanes` (overwritten with the
-    /// positive weights). Each lane does the scalar function's arithmetic in its order
-    /// (bit-identical, `tests::lanes_equal_single_pixels`); the lanes only let the compiler use
-    /// vector instructions, which the scalar window sums (sequential float additions) cannot.
+    /// windows lie inside the image, from their raw outputs `lanes` (under the softmax
+    /// weighting overwritten with the positive weights). Each lane does the scalar function's
+    /// arithmetic in its order (bit-identical, `tests::lanes_equal_single_pixels`); the lanes
+    /// only let the compiler use vector instructions, which the scalar window sums (sequential
+    /// float additions) cannot.
     fn combine_lanes(
         &self,
         lanes: EntryLanes,
@@ -899,15 +900,12 @@ impl NativeNetwork {
         let r = window / 2;
         let area = window * window;
         // Positive weights, lane by lane what [`NativeNetwork::positive`] does to one pixel
-        // (its whole window is inside the image).
+        // (its whole window is inside the image). ReLU's is taken where the window sums read
+        // each raw value (`row_sums`: one pass over the entries instead of two); the softmax
+        // needs every entry's maximum first, so it rewrites them here.
+        let relu = self.weighting == Weighting::Relu;
         match self.weighting {
-            Weighting::Relu => {
-                for e in 0..lanes.entries {
-                    for w in lanes.entry_mut(e) {
-                        *w = w.max(0.0) + 1e-4;
-                    }
-                }
-            }
+            Weighting::Relu => {}
             Weighting::Softmax => {
                 // The maximum of each lane over all entries (f32::max ignores NaN, so the
                 // order does not matter), as `positive` takes it.
@@ -937,45 +935,22 @@ impl NativeNetwork {
             let mut sum = [0.0f32; LANES];
             let mut square = [0.0f32; LANES];
             let mut acc = [[0.0f32; LANES]; 3];
-            for ky in 0..window {
-                let start = (py + ky - r) * width + px - r;
-                let first = j * area + ky * window;
-                let row = |c: usize| &d_planes[c * pixels + start..][..window + LANES - 1];
-                let (d0, d1, d2) = (row(0), row(1), row(2));
-                // The row's five sums in one loop: each is still added in window order (the
-                // scalar path's), but the five chains of dependent additions overlap instead of
-                // running one after another. Named accumulators, which the compiler keeps in
-                // registers (an array indexed by channel went through the stack).
-                let mut row_sum = [0.0f32; LANES];
-                let mut row_square = [0.0f32; LANES];
-                let (mut a0, mut a1, mut a2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-                for kx in 0..window {
-                    let w = lanes.entry(first + kx);
-                    let lanes = |dc: &[f32]| -> [f32; LANES] {
-                        dc[kx..kx + LANES].try_into().expect("LANES values")
-                    };
-                    let (e0, e1, e2) = (lanes(d0), lanes(d1), lanes(d2));
-                    for l in 0..LANES {
-                        row_sum[l] += w[l];
-                        row_square[l] += w[l] * w[l];
-                        a0[l] += w[l] * e0[l];
-                        a1[l] += w[l] * e1[l];
-                        a2[l] += w[l] * e2[l];
-                    }
-                }
-                for l in 0..LANES {
-                    sum[l] += row_sum[l];
-                }
-                if self.guard > 0.0 {
-                    for l in 0..LANES {
-                        square[l] += row_square[l];
-                    }
-                }
-                for (acc, row_acc) in acc.iter_mut().zip([a0, a1, a2]) {
-                    for l in 0..LANES {
-                        acc[l] += row_acc[l];
-                    }
-                }
+            // Each window row's five sums (W, Σw², Σw·d per channel) are added up in window
+            // order (the scalar path's) and then added to the pixel's in row order; two rows
+            // run in one loop so that their ten chains of dependent additions overlap.
+            let guard = self.guard > 0.0;
+            // Row ky of the window: its first tap's offset in the planes and entry.
+            let at = |ky: usize| ((py + ky - r) * width + px - r, j * area + ky * window);
+            for pair in 0..window / 2 {
+                let (upper, lower) = (at(2 * pair), at(2 * pair + 1));
+                let [upper, lower] =
+                    row_pair_sums(lanes, relu, d_planes, pixels, window, upper, lower);
+                add_row_sums(&upper, &mut sum, &mut square, &mut acc, guard);
+                add_row_sums(&lower, &mut sum, &mut square, &mut acc, guard);
+            }
+            if window % 2 == 1 {
+                let last = row_sums(lanes, relu, d_planes, pixels, window, at(window - 1));
+                add_row_sums(&last, &mut sum, &mut square, &mut acc, guard);
             }
             for c in 0..3 {
                 let zc = &z_planes[c * pixels + centre..][..LANES];
@@ -986,15 +961,8 @@ impl NativeNetwork {
             sums[j] = sum;
             squares[j] = square;
         }
-        std::array::from_fn(|l| {
-            self.finish_pixel(
-                numerator.map(|n| n[l]),
-                sums.map(|s| s[l]),
-                squares.map(|s| s[l]),
-                centre + l,
-                colours,
-            )
-        })
+        let (rgb, shares) = self.finish(numerator, sums, squares, centre, colours);
+        std::array::from_fn(|l| (rgb.map(|c| c[l]), shares.map(|s| s[l])))
     }
 
     /// The positive transform of one pixel's raw outputs, in place; `inside` = (ky0, ky1, kx0,
@@ -1086,47 +1054,209 @@ impl NativeNetwork {
     fn finish_pixel(
         &self,
         numerator: [f32; 3],
-        mut sums: [f32; LEVELS - 1],
+        sums: [f32; LEVELS - 1],
         squares: [f32; LEVELS - 1],
         centre: usize,
         colours: &CombinationInputs,
     ) -> ([f32; 3], [f32; LEVELS - 1]) {
+        let (rgb, shares) = self.finish(
+            numerator.map(|v| [v]),
+            sums.map(|v| [v]),
+            squares.map(|v| [v]),
+            centre,
+            colours,
+        );
+        (rgb.map(|[v]| v), shares.map(|[v]| v))
+    }
+
+    /// [`NativeNetwork::finish_pixel`] for the `N` pixels `centre..centre + N` of one row, each
+    /// value an array of the pixels' (lane l: pixel centre + l). Every lane does the one-pixel
+    /// arithmetic in its order — one home for it, and lanes the compiler can turn into vector
+    /// instructions (the per-pixel scalar version took ≈ 3 % of a 1280×720 reconstruction).
+    #[inline(always)]
+    fn finish<const N: usize>(
+        &self,
+        numerator: [[f32; N]; 3],
+        mut sums: [[f32; N]; LEVELS - 1],
+        squares: [[f32; N]; LEVELS - 1],
+        centre: usize,
+        colours: &CombinationInputs,
+    ) -> ([[f32; N]; 3], [[f32; N]; LEVELS - 1]) {
         let pixels = colours.width * colours.height;
-        let total: f32 = sums.iter().sum();
-        let mut rgb = numerator.map(|v| v / total);
+        let mut total = [0.0f32; N];
+        for (l, total) in total.iter_mut().enumerate() {
+            *total = sums.iter().map(|s| s[l]).sum();
+        }
+        let mut rgb = numerator.map(|n| std::array::from_fn::<f32, N, _>(|l| n[l] / total[l]));
         if self.guard > 0.0 {
-            let v = |level: usize| colours.variances[level * pixels + centre];
-            let total_squared = total * total;
-            let mut noise = 0.0f32;
+            let v = |level: usize| -> &[f32; N] {
+                colours.variances[level * pixels + centre..][..N]
+                    .try_into()
+                    .expect("N values")
+            };
+            let mut noise = [0.0f32; N];
             for j in 0..self.pairs {
-                noise += squares[j] / total_squared * (v(j + 1) + v(0))
-                    + sums[j] * sums[j] / total_squared * v(j + 1);
+                let (vj, v0) = (v(j + 1), v(0));
+                for l in 0..N {
+                    let total_squared = total[l] * total[l];
+                    noise[l] += squares[j][l] / total_squared * (vj[l] + v0[l])
+                        + sums[j][l] * sums[j][l] / total_squared * vj[l];
+                }
             }
-            let target_noise = self.guard_target_noise * v(self.pairs) + GUARD_EVIDENCE_FLOOR;
-            let smoothest = &colours.levels[3 * self.pairs * pixels..];
-            // A non-finite Eq. 6 (overflow) is left as it is, for the caller to report.
-            for (c, out) in rgb.iter_mut().enumerate().filter(|(_, v)| v.is_finite()) {
-                let base = smoothest[c * pixels + centre];
-                let delta = *out - base;
-                let ratio = self.guard * noise / (delta * delta + target_noise);
-                // As the Burn path caps it (a NaN stays NaN, as there).
-                let ratio = if ratio > GUARD_RATIO_CAP {
-                    GUARD_RATIO_CAP
-                } else {
-                    ratio
-                };
-                *out = base + delta * (1.0 / (1.0 + ratio * ratio));
+            let smoothest = v(self.pairs);
+            let levels = &colours.levels[3 * self.pairs * pixels..];
+            for (c, out) in rgb.iter_mut().enumerate() {
+                let base: &[f32; N] = levels[c * pixels + centre..][..N]
+                    .try_into()
+                    .expect("N values");
+                for l in 0..N {
+                    let target_noise =
+                        self.guard_target_noise * smoothest[l] + GUARD_EVIDENCE_FLOOR;
+                    let delta = out[l] - base[l];
+                    let ratio = self.guard * noise[l] / (delta * delta + target_noise);
+                    // As the Burn path caps it (a NaN stays NaN, as there).
+                    let ratio = if ratio > GUARD_RATIO_CAP {
+                        GUARD_RATIO_CAP
+                    } else {
+                        ratio
+                    };
+                    let guarded = base[l] + delta * (1.0 / (1.0 + ratio * ratio));
+                    // A non-finite Eq. 6 (overflow) is left as it is, for the caller to report.
+                    if out[l].is_finite() {
+                        out[l] = guarded;
+                    }
+                }
             }
         }
-        let rgb = rgb.map(|v| v.max(0.0));
+        let rgb = rgb.map(|c| c.map(|v| v.max(0.0)));
         for s in sums.iter_mut() {
-            *s /= total;
+            for l in 0..N {
+                s[l] /= total[l];
+            }
         }
         (rgb, sums)
     }
 }
 
 pub use crate::unet::grow;
+
+/// The five sums of a window row for the [`LANES`] pixels of `lanes`, added in window order:
+/// W (the weights), Σw² and Σw·(ỹ − z̃ʲ) per channel. The row is given as the offset of the
+/// first pixel's leftmost tap in the planar differences `d_planes` (three planes of `pixels`)
+/// and the entry of that tap in `lanes`; with `relu`, `lanes` holds raw outputs and each is
+/// made a positive weight as it is read (max(w, 0) + 10⁻⁴, [`NativeNetwork::positive`]).
+#[inline(always)]
+fn row_sums(
+    lanes: &EntryLanes,
+    relu: bool,
+    d_planes: &[f32],
+    pixels: usize,
+    window: usize,
+    (start, first): (usize, usize),
+) -> [[f32; LANES]; 5] {
+    // Named accumulators, which the compiler keeps in registers (arrays of them went through
+    // the stack).
+    let (mut w_sum, mut w_square) = ([0.0f32; LANES], [0.0f32; LANES]);
+    let (mut a0, mut a1, mut a2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+    for kx in 0..window {
+        let w = weight(lanes.entry(first + kx), relu);
+        let [d0, d1, d2] = taps(d_planes, pixels, start + kx);
+        for l in 0..LANES {
+            w_sum[l] += w[l];
+            w_square[l] += w[l] * w[l];
+            a0[l] += w[l] * d0[l];
+            a1[l] += w[l] * d1[l];
+            a2[l] += w[l] * d2[l];
+        }
+    }
+    [w_sum, w_square, a0, a1, a2]
+}
+
+/// [`row_sums`] of two rows in one loop: their ten chains of dependent additions overlap
+/// (each keeps its order, so the same bits as one row at a time).
+#[inline(always)]
+fn row_pair_sums(
+    lanes: &EntryLanes,
+    relu: bool,
+    d_planes: &[f32],
+    pixels: usize,
+    window: usize,
+    (start, first): (usize, usize),
+    (start_2, first_2): (usize, usize),
+) -> [[[f32; LANES]; 5]; 2] {
+    let (mut w_sum, mut w_square) = ([0.0f32; LANES], [0.0f32; LANES]);
+    let (mut a0, mut a1, mut a2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+    let (mut w_sum_2, mut w_square_2) = ([0.0f32; LANES], [0.0f32; LANES]);
+    let (mut b0, mut b1, mut b2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+    for kx in 0..window {
+        let w = weight(lanes.entry(first + kx), relu);
+        let [d0, d1, d2] = taps(d_planes, pixels, start + kx);
+        let v = weight(lanes.entry(first_2 + kx), relu);
+        let [e0, e1, e2] = taps(d_planes, pixels, start_2 + kx);
+        for l in 0..LANES {
+            w_sum[l] += w[l];
+            w_square[l] += w[l] * w[l];
+            a0[l] += w[l] * d0[l];
+            a1[l] += w[l] * d1[l];
+            a2[l] += w[l] * d2[l];
+            w_sum_2[l] += v[l];
+            w_square_2[l] += v[l] * v[l];
+            b0[l] += v[l] * e0[l];
+            b1[l] += v[l] * e1[l];
+            b2[l] += v[l] * e2[l];
+        }
+    }
+    [
+        [w_sum, w_square, a0, a1, a2],
+        [w_sum_2, w_square_2, b0, b1, b2],
+    ]
+}
+
+/// The [`LANES`] weights of one window entry: with `relu` made positive from raw outputs as
+/// [`NativeNetwork::positive`] does (max(w, 0) + 10⁻⁴), else already positive.
+#[inline(always)]
+fn weight(entry: &[f32; LANES], relu: bool) -> [f32; LANES] {
+    if relu {
+        entry.map(|w| w.max(0.0) + 1e-4)
+    } else {
+        *entry
+    }
+}
+
+/// The three channels' ỹ − z̃ʲ of the [`LANES`] pixels from offset `at` of planar `d_planes`.
+#[inline(always)]
+fn taps(d_planes: &[f32], pixels: usize, at: usize) -> [&[f32; LANES]; 3] {
+    [0, 1, 2].map(|c| {
+        d_planes[c * pixels + at..][..LANES]
+            .try_into()
+            .expect("LANES values")
+    })
+}
+
+/// Adds one window row's sums ([`row_sums`]) to the pixel's: W, (with the guard) Σw², and
+/// Σw·(ỹ − z̃ʲ) per channel.
+#[inline(always)]
+fn add_row_sums(
+    row: &[[f32; LANES]; 5],
+    sum: &mut [f32; LANES],
+    square: &mut [f32; LANES],
+    acc: &mut [[f32; LANES]; 3],
+    guard: bool,
+) {
+    for l in 0..LANES {
+        sum[l] += row[0][l];
+    }
+    if guard {
+        for l in 0..LANES {
+            square[l] += row[1][l];
+        }
+    }
+    for (c, acc) in acc.iter_mut().enumerate() {
+        for l in 0..LANES {
+            acc[l] += row[2 + c][l];
+        }
+    }
+}
 
 /// Whether rectangle `outer` (absent: no) holds `inner`.
 fn contains(outer: Option<Rect>, inner: Rect) -> bool {
