@@ -48,6 +48,7 @@ struct Cli {
 
 fn main() -> ExitCode {
     cli_output::install();
+    infer::memory::retain_freed_memory();
     let cli = Cli::parse();
     match run(&cli) {
         Ok(true) => ExitCode::SUCCESS,

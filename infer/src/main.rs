@@ -211,6 +211,7 @@ fn parse_cli() -> Cli {
 
 fn main() -> ExitCode {
     cli_output::install();
+    infer::memory::retain_freed_memory();
     let cli = parse_cli();
     // Every parallel part (the render, the native engine, Burn's CPU backends) runs on rayon:
     // one pool of `--threads` bounds them all.

@@ -103,6 +103,7 @@ fn median(values: &[f64]) -> f64 {
 
 fn main() -> ExitCode {
     cli_output::install();
+    infer::memory::retain_freed_memory();
     let cli = Cli::parse();
     let result = renderer::threads::with_threads(cli.threads, || run(&cli)).and_then(|r| r);
     match result {
