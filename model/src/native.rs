@@ -15,12 +15,17 @@
 //!
 //! A U-Net ([`crate::unet`]) runs the same plan as the Burn path, each step on the rectangle
 //! the later steps need: a convolution reads its inputs' channels concatenated straight out of
-//! their buffers (no concatenated copy), pooling and upsampling are plain loops over rows.
+//! their buffers (no concatenated copy), pooling is a plain loop over rows, and an upsampling is
+//! never written: the convolution after it reads the coarse values, its weights folded onto
+//! them ([`upsampled_conv`]).
 
 use crate::combine::{GUARD_EVIDENCE_FLOOR, GUARD_RATIO_CAP};
 use crate::network::{ModelConfig, Network, Weighting, LEVELS};
 use crate::unet::{last_uses, needed_rects, pool_input, scale_sizes, upsample_input, Op, Step};
 use rayon::prelude::*;
+use upsampled_conv::FoldedUpsampling;
+
+mod upsampled_conv;
 
 /// A pixel rectangle `[x0, y0, x1, y1)` in image coordinates (or a coarser scale's grid).
 pub type Rect = crate::unet::Rect;
@@ -90,6 +95,9 @@ struct ConvMatrix {
     cout: usize,
     matrix: Vec<f32>,
     bias: Vec<f32>,
+    /// For a convolution whose first input is an upsampling: its weights folded onto the
+    /// coarse pixels ([`upsampled_conv`]).
+    folded: Option<Box<FoldedUpsampling>>,
 }
 
 impl ConvMatrix {
@@ -129,6 +137,7 @@ impl ConvMatrix {
             cout,
             matrix,
             bias,
+            folded: None,
         }
     }
 
@@ -207,8 +216,13 @@ impl ConvMatrix {
             let mut offset = 0;
             for source in sources {
                 let c = source.channels;
-                // The grid rectangle the taps read (outside it they are zero).
-                let input = source.upsampled.unwrap_or(source.rect);
+                if source.upsampled.is_none() {
+                    dense_taps(source, k, oy, ox, &mut row[offset..offset + k * k * c]);
+                    offset += k * k * c;
+                    continue;
+                }
+                // Upsampled: the fine grid's rectangle the taps read (outside it they are zero).
+                let input = source.upsampled.expect("dense sources are read above");
                 let in_w = source.rect[2] - source.rect[0];
                 // Taps kx read column ox + kx − r; those inside the rectangle are one run.
                 let kx_lo = (input[0] + r).saturating_sub(ox).min(k);
@@ -221,19 +235,13 @@ impl ConvMatrix {
                         continue;
                     }
                     taps[..kx_lo * c].fill(0.0);
-                    if source.upsampled.is_some() {
-                        // One coarse pixel per tap: fine column ox + kx − r is coarse column
-                        // (ox + kx − r) / 2.
-                        let cy = iy / 2 - source.rect[1];
-                        for kx in kx_lo..kx_hi {
-                            let cx = (ox + kx - r) / 2 - source.rect[0];
-                            let src = (cy * in_w + cx) * c;
-                            copy_run(&mut taps[kx * c..(kx + 1) * c], &source.x[src..src + c]);
-                        }
-                    } else {
-                        let src = ((iy - input[1]) * in_w + (ox + kx_lo - r - input[0])) * c;
-                        let len = (kx_hi - kx_lo) * c;
-                        copy_run(&mut taps[kx_lo * c..kx_hi * c], &source.x[src..src + len]);
+                    // One coarse pixel per tap: fine column ox + kx − r is coarse column
+                    // (ox + kx − r) / 2.
+                    let cy = iy / 2 - source.rect[1];
+                    for kx in kx_lo..kx_hi {
+                        let cx = (ox + kx - r) / 2 - source.rect[0];
+                        let src = (cy * in_w + cx) * c;
+                        copy_run(&mut taps[kx * c..(kx + 1) * c], &source.x[src..src + c]);
                     }
                     taps[kx_hi * c..].fill(0.0);
                 }
@@ -244,12 +252,36 @@ impl ConvMatrix {
 
     /// `dst` (`pixels × cout`) = bias + columns · matrix.
     fn product(&self, columns: &[f32], pixels: usize, dst: &mut [f32]) {
-        let (depth, cout) = (self.depth(), self.cout);
-        for row in dst.chunks_exact_mut(cout) {
-            row.copy_from_slice(&self.bias);
+        self.product_strided(&self.matrix, columns, pixels, dst, self.cout);
+    }
+
+    /// Pixel p's `cout` values at `dst[p·stride..]` = bias + (columns · `matrix`)'s row p, for
+    /// `matrix` of `columns.len() / pixels` rows (this layer's or a folded one).
+    fn product_strided(
+        &self,
+        matrix: &[f32],
+        columns: &[f32],
+        pixels: usize,
+        dst: &mut [f32],
+        stride: usize,
+    ) {
+        if pixels == 0 {
+            return;
         }
-        // SAFETY: the three buffers hold pixels×depth, depth×cout and pixels×cout f32 values in
-        // row-major order, matching the strides given, and do not overlap.
+        let cout = self.cout;
+        let depth = matrix.len() / cout;
+        // What the unsafe product below relies on.
+        assert!(
+            stride >= cout
+                && dst.len() >= (pixels - 1) * stride + cout
+                && columns.len() >= pixels * depth
+        );
+        for p in 0..pixels {
+            dst[p * stride..p * stride + cout].copy_from_slice(&self.bias);
+        }
+        // SAFETY: columns holds pixels×depth values row-major, the matrix depth×cout row-major,
+        // dst pixel p's values at p·stride.. (stride ≥ cout, within dst as asserted), as the
+        // strides say; the buffers do not overlap.
         unsafe {
             gemm::gemm(
                 pixels,
@@ -257,12 +289,12 @@ impl ConvMatrix {
                 depth,
                 dst.as_mut_ptr(),
                 1,
-                cout as isize,
+                stride as isize,
                 true,
                 columns.as_ptr(),
                 1,
                 depth as isize,
-                self.matrix.as_ptr(),
+                matrix.as_ptr(),
                 1,
                 cout as isize,
                 1.0,
@@ -344,6 +376,11 @@ impl ConvMatrix {
         {
             return self.forward_relu(single.x, single.rect, out, buffers);
         }
+        if let (Some(folded), [first, rest @ ..]) = (&self.folded, sources) {
+            if first.upsampled.is_some() && rest.iter().all(|s| s.upsampled.is_none()) {
+                return folded.forward_relu(self, sources, out, buffers);
+            }
+        }
         let pixels = (out[2] - out[0]) * (out[3] - out[1]);
         let mut y = buffers.take(pixels * self.cout);
         y.par_chunks_mut(CHUNK_PIXELS * self.cout)
@@ -384,6 +421,31 @@ fn copy_run(dst: &mut [f32], src: &[f32]) {
         }
     } else {
         dst.copy_from_slice(src);
+    }
+}
+
+/// The `k`×`k` taps around output pixel (ox, oy) of a source read as it lies (not
+/// upsampled), in the im2col order `[ky][kx][channel]`, into `taps` (`k²·channels` values);
+/// taps outside the source's rectangle are zero (they lie outside the grid).
+#[inline(always)]
+fn dense_taps(source: &Source, k: usize, oy: usize, ox: usize, taps: &mut [f32]) {
+    let (c, input) = (source.channels, source.rect);
+    let r = k / 2;
+    let in_w = input[2] - input[0];
+    // Taps kx read column ox + kx − r; those inside the rectangle are one run.
+    let kx_lo = (input[0] + r).saturating_sub(ox).min(k);
+    let kx_hi = (input[2] + r).saturating_sub(ox).min(k).max(kx_lo);
+    for (ky, taps) in taps.chunks_exact_mut(k * c).enumerate() {
+        let iy = (oy + ky).wrapping_sub(r);
+        if iy < input[1] || iy >= input[3] {
+            taps.fill(0.0);
+            continue;
+        }
+        taps[..kx_lo * c].fill(0.0);
+        let src = ((iy - input[1]) * in_w + (ox + kx_lo - r - input[0])) * c;
+        let len = (kx_hi - kx_lo) * c;
+        copy_run(&mut taps[kx_lo * c..kx_hi * c], &source.x[src..src + len]);
+        taps[kx_hi * c..].fill(0.0);
     }
 }
 
@@ -547,11 +609,17 @@ impl NativeNetwork {
     pub fn new(network: &Network, config: &ModelConfig) -> Self {
         let plan = config.unet.as_ref().map(|u| u.plan(config.in_channels));
         // A U-Net's convolutions of concatenated inputs take their rows source by source.
+        // Those whose first input is an upsampling read it folded onto the coarse pixels.
         let mut splits: Vec<Vec<usize>> = vec![Vec::new(); network.hidden.len()];
+        let mut upsampled = vec![false; network.hidden.len()];
         for step in plan.iter().flatten() {
             if let Op::Conv { layer, inputs } = &step.op {
                 let plan = plan.as_ref().expect("steps come from a plan");
                 splits[*layer] = inputs.iter().map(|&i| plan[i].channels).collect();
+                upsampled[*layer] = matches!(plan[inputs[0]].op, Op::Upsample(_))
+                    && inputs[1..]
+                        .iter()
+                        .all(|&i| !matches!(plan[i].op, Op::Upsample(_)));
             }
         }
         Self {
@@ -559,9 +627,16 @@ impl NativeNetwork {
                 .hidden
                 .iter()
                 .zip(&splits)
-                .map(|(conv, split)| match split.len() {
+                .zip(&upsampled)
+                .map(|((conv, split), &upsampled)| match split.len() {
                     0 | 1 => ConvMatrix::from_conv(conv),
-                    _ => ConvMatrix::from_concat_conv(conv, split),
+                    _ => {
+                        let mut m = ConvMatrix::from_concat_conv(conv, split);
+                        if upsampled {
+                            m.folded = FoldedUpsampling::new(&m, split[0]).map(Box::new);
+                        }
+                        m
+                    }
                 })
                 .collect(),
             output: ConvMatrix::from_conv(&network.output),
@@ -1278,6 +1353,7 @@ mod tests {
             cout: 0,
             matrix: Vec::new(),
             bias: Vec::new(),
+            folded: None,
         };
         NativeNetwork {
             hidden: Vec::new(),
