@@ -150,29 +150,16 @@ impl ConvMatrix {
     /// `first..first + pixels` of `out` (row-major), reading channels-last `x` laid out on
     /// `input`; taps outside `input` are zero (they lie outside the image).
     fn im2col(&self, x: &[f32], input: Rect, out: Rect, first: usize, columns: &mut [f32]) {
-        let (k, cin) = (self.kernel, self.cin);
-        let r = k / 2;
+        let source = Source {
+            x,
+            rect: input,
+            channels: self.cin,
+            upsampled: None,
+        };
         let out_w = out[2] - out[0];
-        let in_w = input[2] - input[0];
-        let depth = self.depth();
-        for (p, row) in columns.chunks_exact_mut(depth).enumerate() {
+        for (p, row) in columns.chunks_exact_mut(self.depth()).enumerate() {
             let (oy, ox) = (out[1] + (first + p) / out_w, out[0] + (first + p) % out_w);
-            for ky in 0..k {
-                let taps = &mut row[ky * k * cin..(ky + 1) * k * cin];
-                let iy = (oy + ky).wrapping_sub(r);
-                if iy < input[1] || iy >= input[3] {
-                    taps.fill(0.0);
-                    continue;
-                }
-                // Taps kx read column ox + kx − r; those inside the input rectangle are one run.
-                let kx_lo = (input[0] + r).saturating_sub(ox).min(k);
-                let kx_hi = (input[2] + r - ox).min(k).max(kx_lo);
-                taps[..kx_lo * cin].fill(0.0);
-                let src = ((iy - input[1]) * in_w + (ox + kx_lo - r - input[0])) * cin;
-                let len = (kx_hi - kx_lo) * cin;
-                copy_run(&mut taps[kx_lo * cin..kx_hi * cin], &x[src..src + len]);
-                taps[kx_hi * cin..].fill(0.0);
-            }
+            dense_taps(&source, self.kernel, oy, ox, row);
         }
     }
 
