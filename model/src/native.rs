@@ -1005,14 +1005,20 @@ impl NativeNetwork {
             let at = |ky: usize| ((py + ky - r) * width + px - r, j * area + ky * window);
             for pair in 0..window / 2 {
                 let (upper, lower) = (at(2 * pair), at(2 * pair + 1));
-                let [upper, lower] =
-                    row_pair_sums(lanes, relu, d_planes, pixels, window, upper, lower);
-                add_row_sums(&upper, &mut sum, &mut square, &mut acc, guard);
-                add_row_sums(&lower, &mut sum, &mut square, &mut acc, guard);
+                let (mut above, mut below) = (RowSums::default(), RowSums::default());
+                for kx in 0..window {
+                    above.add_tap(lanes, relu, d_planes, pixels, upper, kx);
+                    below.add_tap(lanes, relu, d_planes, pixels, lower, kx);
+                }
+                above.add_to(&mut sum, &mut square, &mut acc, guard);
+                below.add_to(&mut sum, &mut square, &mut acc, guard);
             }
             if window % 2 == 1 {
-                let last = row_sums(lanes, relu, d_planes, pixels, window, at(window - 1));
-                add_row_sums(&last, &mut sum, &mut square, &mut acc, guard);
+                let mut last = RowSums::default();
+                for kx in 0..window {
+                    last.add_tap(lanes, relu, d_planes, pixels, at(window - 1), kx);
+                }
+                last.add_to(&mut sum, &mut square, &mut acc, guard);
             }
             for c in 0..3 {
                 let zc = &z_planes[c * pixels + centre..][..LANES];
@@ -1202,76 +1208,68 @@ impl NativeNetwork {
 
 pub use crate::unet::grow;
 
-/// The five sums of a window row for the [`LANES`] pixels of `lanes`, added in window order:
-/// W (the weights), Σw² and Σw·(ỹ − z̃ʲ) per channel. The row is given as the offset of the
-/// first pixel's leftmost tap in the planar differences `d_planes` (three planes of `pixels`)
-/// and the entry of that tap in `lanes`; with `relu`, `lanes` holds raw outputs and each is
-/// made a positive weight as it is read (max(w, 0) + 10⁻⁴, [`NativeNetwork::positive`]).
-#[inline(always)]
-fn row_sums(
-    lanes: &EntryLanes,
-    relu: bool,
-    d_planes: &[f32],
-    pixels: usize,
-    window: usize,
-    (start, first): (usize, usize),
-) -> [[f32; LANES]; 5] {
-    // Named accumulators, which the compiler keeps in registers (arrays of them went through
-    // the stack).
-    let (mut w_sum, mut w_square) = ([0.0f32; LANES], [0.0f32; LANES]);
-    let (mut a0, mut a1, mut a2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-    for kx in 0..window {
-        let w = weight(lanes.entry(first + kx), relu);
-        let [d0, d1, d2] = taps(d_planes, pixels, start + kx);
-        for l in 0..LANES {
-            w_sum[l] += w[l];
-            w_square[l] += w[l] * w[l];
-            a0[l] += w[l] * d0[l];
-            a1[l] += w[l] * d1[l];
-            a2[l] += w[l] * d2[l];
-        }
-    }
-    [w_sum, w_square, a0, a1, a2]
+/// One window row's running sums for [`LANES`] pixels, each added in window order: W (the
+/// weights), Σw² and Σw·(ỹ − z̃ʲ) per channel. Named fields: the compiler keeps them in
+/// registers (arrays of them went through the stack).
+#[derive(Clone, Copy, Default)]
+struct RowSums {
+    w: [f32; LANES],
+    w_square: [f32; LANES],
+    wd0: [f32; LANES],
+    wd1: [f32; LANES],
+    wd2: [f32; LANES],
 }
 
-/// [`row_sums`] of two rows in one loop: their ten chains of dependent additions overlap
-/// (each keeps its order, so the same bits as one row at a time).
-#[inline(always)]
-fn row_pair_sums(
-    lanes: &EntryLanes,
-    relu: bool,
-    d_planes: &[f32],
-    pixels: usize,
-    window: usize,
-    (start, first): (usize, usize),
-    (start_2, first_2): (usize, usize),
-) -> [[[f32; LANES]; 5]; 2] {
-    let (mut w_sum, mut w_square) = ([0.0f32; LANES], [0.0f32; LANES]);
-    let (mut a0, mut a1, mut a2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-    let (mut w_sum_2, mut w_square_2) = ([0.0f32; LANES], [0.0f32; LANES]);
-    let (mut b0, mut b1, mut b2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-    for kx in 0..window {
+impl RowSums {
+    /// Adds the window tap `kx` of the row given as the offset of the first pixel's leftmost tap
+    /// in the planar differences `d_planes` (three planes of `pixels`) and the entry of that tap
+    /// in `lanes`; with `relu`, `lanes` holds raw outputs, each made a positive weight as it is
+    /// read (max(w, 0) + 10⁻⁴, [`NativeNetwork::positive`]).
+    #[inline(always)]
+    fn add_tap(
+        &mut self,
+        lanes: &EntryLanes,
+        relu: bool,
+        d_planes: &[f32],
+        pixels: usize,
+        (start, first): (usize, usize),
+        kx: usize,
+    ) {
         let w = weight(lanes.entry(first + kx), relu);
         let [d0, d1, d2] = taps(d_planes, pixels, start + kx);
-        let v = weight(lanes.entry(first_2 + kx), relu);
-        let [e0, e1, e2] = taps(d_planes, pixels, start_2 + kx);
         for l in 0..LANES {
-            w_sum[l] += w[l];
-            w_square[l] += w[l] * w[l];
-            a0[l] += w[l] * d0[l];
-            a1[l] += w[l] * d1[l];
-            a2[l] += w[l] * d2[l];
-            w_sum_2[l] += v[l];
-            w_square_2[l] += v[l] * v[l];
-            b0[l] += v[l] * e0[l];
-            b1[l] += v[l] * e1[l];
-            b2[l] += v[l] * e2[l];
+            self.w[l] += w[l];
+            self.w_square[l] += w[l] * w[l];
+            self.wd0[l] += w[l] * d0[l];
+            self.wd1[l] += w[l] * d1[l];
+            self.wd2[l] += w[l] * d2[l];
         }
     }
-    [
-        [w_sum, w_square, a0, a1, a2],
-        [w_sum_2, w_square_2, b0, b1, b2],
-    ]
+
+    /// Adds this row's sums to the pixel's: W, (with the guard) Σw², and Σw·(ỹ − z̃ʲ) per
+    /// channel.
+    #[inline(always)]
+    fn add_to(
+        &self,
+        sum: &mut [f32; LANES],
+        square: &mut [f32; LANES],
+        acc: &mut [[f32; LANES]; 3],
+        guard: bool,
+    ) {
+        for l in 0..LANES {
+            sum[l] += self.w[l];
+        }
+        if guard {
+            for l in 0..LANES {
+                square[l] += self.w_square[l];
+            }
+        }
+        for (acc, row) in acc.iter_mut().zip([&self.wd0, &self.wd1, &self.wd2]) {
+            for l in 0..LANES {
+                acc[l] += row[l];
+            }
+        }
+    }
 }
 
 /// The [`LANES`] weights of one window entry: with `relu` made positive from raw outputs as
@@ -1293,31 +1291,6 @@ fn taps(d_planes: &[f32], pixels: usize, at: usize) -> [&[f32; LANES]; 3] {
             .try_into()
             .expect("LANES values")
     })
-}
-
-/// Adds one window row's sums ([`row_sums`]) to the pixel's: W, (with the guard) Σw², and
-/// Σw·(ỹ − z̃ʲ) per channel.
-#[inline(always)]
-fn add_row_sums(
-    row: &[[f32; LANES]; 5],
-    sum: &mut [f32; LANES],
-    square: &mut [f32; LANES],
-    acc: &mut [[f32; LANES]; 3],
-    guard: bool,
-) {
-    for l in 0..LANES {
-        sum[l] += row[0][l];
-    }
-    if guard {
-        for l in 0..LANES {
-            square[l] += row[1][l];
-        }
-    }
-    for (c, acc) in acc.iter_mut().enumerate() {
-        for l in 0..LANES {
-            acc[l] += row[2 + c][l];
-        }
-    }
 }
 
 /// Whether rectangle `outer` (absent: no) holds `inner`.
