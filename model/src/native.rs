@@ -1256,17 +1256,17 @@ impl RowSums {
         acc: &mut [[f32; LANES]; 3],
         guard: bool,
     ) {
-        for l in 0..LANES {
-            sum[l] += self.w[l];
+        for (to, from) in sum.iter_mut().zip(&self.w) {
+            *to += from;
         }
         if guard {
-            for l in 0..LANES {
-                square[l] += self.w_square[l];
+            for (to, from) in square.iter_mut().zip(&self.w_square) {
+                *to += from;
             }
         }
         for (acc, row) in acc.iter_mut().zip([&self.wd0, &self.wd1, &self.wd2]) {
-            for l in 0..LANES {
-                acc[l] += row[l];
+            for (to, from) in acc.iter_mut().zip(row) {
+                *to += from;
             }
         }
     }
