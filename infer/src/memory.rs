@@ -19,7 +19,8 @@
 const HEAP_UP_TO: libc::c_int = 1 << 30;
 
 /// Makes glibc's allocator serve allocations up to 1 GiB from one heap for all threads and
-/// never hand the heap's free top back to the kernel. Call once, first thing in `main`.
+/// keep up to 2 GiB of free space at the heap's top instead of handing it back to the kernel.
+/// Call once, first thing in `main`.
 /// Elsewhere than Linux with glibc it does nothing (the platform allocator keeps its policy).
 pub fn retain_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]

@@ -106,6 +106,9 @@ impl FoldedUpsampling {
         let out_w = out[2] - out[0];
         let pixels = out_w * (out[3] - out[1]);
         let mut y = buffers.take(pixels * cout);
+        if pixels == 0 {
+            return y;
+        }
         // Whether a fine row (column) beside the output's lies outside the fine rectangle
         // while the coarse row (column) under it lies inside the coarse one.
         let unfoldable = |edge: usize, lo: usize, hi: usize, coarse_lo: usize, coarse_hi: usize| {
