@@ -203,13 +203,12 @@ impl ConvMatrix {
             let mut offset = 0;
             for source in sources {
                 let c = source.channels;
-                if source.upsampled.is_none() {
+                // Upsampled: the fine grid's rectangle the taps read (outside it they are zero).
+                let Some(input) = source.upsampled else {
                     dense_taps(source, k, oy, ox, &mut row[offset..offset + k * k * c]);
                     offset += k * k * c;
                     continue;
-                }
-                // Upsampled: the fine grid's rectangle the taps read (outside it they are zero).
-                let input = source.upsampled.expect("dense sources are read above");
+                };
                 let in_w = source.rect[2] - source.rect[0];
                 // Taps kx read column ox + kx − r; those inside the rectangle are one run.
                 let kx_lo = (input[0] + r).saturating_sub(ox).min(k);
@@ -363,25 +362,36 @@ impl ConvMatrix {
         {
             return self.forward_relu(single.x, single.rect, out, buffers);
         }
-        if let (Some(folded), [first, rest @ ..]) = (&self.folded, sources) {
-            if first.upsampled.is_some() && rest.iter().all(|s| s.upsampled.is_none()) {
-                return folded.forward_relu(self, sources, out, buffers);
-            }
+        if let Some(folded) = &self.folded {
+            return folded.forward_relu(self, sources, out, buffers);
         }
         let pixels = (out[2] - out[0]) * (out[3] - out[1]);
         let mut y = buffers.take(pixels * self.cout);
         y.par_chunks_mut(CHUNK_PIXELS * self.cout)
             .enumerate()
             .for_each_init(Vec::new, |columns, (chunk, dst)| {
-                let n = dst.len() / self.cout;
-                columns.resize(n * self.depth(), 0.0);
-                self.im2col_sources(sources, out, chunk * CHUNK_PIXELS, columns);
-                self.product(columns, n, dst);
+                self.product_sources(sources, out, chunk * CHUNK_PIXELS, columns, dst);
                 for v in dst.iter_mut() {
                     *v = v.max(0.0);
                 }
             });
         y
+    }
+
+    /// `dst` = bias + the convolution of `sources` at the output pixels `first..` of `out`
+    /// (`dst.len() / cout` of them, row-major), before ReLU; `columns` is scratch.
+    fn product_sources(
+        &self,
+        sources: &[Source],
+        out: Rect,
+        first: usize,
+        columns: &mut Vec<f32>,
+        dst: &mut [f32],
+    ) {
+        let n = dst.len() / self.cout;
+        columns.resize(n * self.depth(), 0.0);
+        self.im2col_sources(sources, out, first, columns);
+        self.product(columns, n, dst);
     }
 }
 
@@ -963,26 +973,23 @@ impl NativeNetwork {
         let area = window * window;
         // Positive weights, lane by lane what [`NativeNetwork::positive`] does to one pixel
         // (its whole window is inside the image). ReLU's is taken where the window sums read
-        // each raw value (`row_sums`: one pass over the entries instead of two); the softmax
-        // needs every entry's maximum first, so it rewrites them here.
+        // each raw value ([`RowSums::add_tap`]: one pass over the entries instead of two); the
+        // softmax needs every entry's maximum first, so it rewrites them here.
         let relu = self.weighting == Weighting::Relu;
-        match self.weighting {
-            Weighting::Relu => {}
-            Weighting::Softmax => {
-                // The maximum of each lane over all entries (f32::max ignores NaN, so the
-                // order does not matter), as `positive` takes it.
-                let mut max = [f32::NEG_INFINITY; LANES];
-                for e in 0..lanes.entries {
-                    let w = lanes.entry(e);
-                    for l in 0..LANES {
-                        max[l] = max[l].max(w[l]);
-                    }
+        if !relu {
+            // The maximum of each lane over all entries (f32::max ignores NaN, so the
+            // order does not matter), as `positive` takes it.
+            let mut max = [f32::NEG_INFINITY; LANES];
+            for e in 0..lanes.entries {
+                let w = lanes.entry(e);
+                for l in 0..LANES {
+                    max[l] = max[l].max(w[l]);
                 }
-                for e in 0..lanes.entries {
-                    let w = lanes.entry_mut(e);
-                    for l in 0..LANES {
-                        w[l] = (w[l] - max[l]).exp();
-                    }
+            }
+            for e in 0..lanes.entries {
+                let w = lanes.entry_mut(e);
+                for l in 0..LANES {
+                    w[l] = (w[l] - max[l]).exp();
                 }
             }
         }
@@ -1043,7 +1050,7 @@ impl NativeNetwork {
         match self.weighting {
             Weighting::Relu => {
                 for w in weights.iter_mut() {
-                    *w = w.max(0.0) + 1e-4;
+                    *w = relu_weight(*w);
                 }
             }
             Weighting::Softmax => {
@@ -1162,26 +1169,25 @@ impl NativeNetwork {
                     .try_into()
                     .expect("N values")
             };
+            let total_squared = total.map(|t| t * t);
             let mut noise = [0.0f32; N];
             for j in 0..self.pairs {
                 let (vj, v0) = (v(j + 1), v(0));
                 for l in 0..N {
-                    let total_squared = total[l] * total[l];
-                    noise[l] += squares[j][l] / total_squared * (vj[l] + v0[l])
-                        + sums[j][l] * sums[j][l] / total_squared * vj[l];
+                    noise[l] += squares[j][l] / total_squared[l] * (vj[l] + v0[l])
+                        + sums[j][l] * sums[j][l] / total_squared[l] * vj[l];
                 }
             }
-            let smoothest = v(self.pairs);
+            let target_noise =
+                v(self.pairs).map(|v| self.guard_target_noise * v + GUARD_EVIDENCE_FLOOR);
             let levels = &colours.levels[3 * self.pairs * pixels..];
             for (c, out) in rgb.iter_mut().enumerate() {
                 let base: &[f32; N] = levels[c * pixels + centre..][..N]
                     .try_into()
                     .expect("N values");
                 for l in 0..N {
-                    let target_noise =
-                        self.guard_target_noise * smoothest[l] + GUARD_EVIDENCE_FLOOR;
                     let delta = out[l] - base[l];
-                    let ratio = self.guard * noise[l] / (delta * delta + target_noise);
+                    let ratio = self.guard * noise[l] / (delta * delta + target_noise[l]);
                     // As the Burn path caps it (a NaN stays NaN, as there).
                     let ratio = if ratio > GUARD_RATIO_CAP {
                         GUARD_RATIO_CAP
@@ -1272,12 +1278,18 @@ impl RowSums {
     }
 }
 
+/// The ReLU weighting's positive weight of one raw output: max(w, 0) + 10⁻⁴.
+#[inline(always)]
+fn relu_weight(w: f32) -> f32 {
+    w.max(0.0) + 1e-4
+}
+
 /// The [`LANES`] weights of one window entry: with `relu` made positive from raw outputs as
 /// [`NativeNetwork::positive`] does (max(w, 0) + 10⁻⁴), else already positive.
 #[inline(always)]
 fn weight(entry: &[f32; LANES], relu: bool) -> [f32; LANES] {
     if relu {
-        entry.map(|w| w.max(0.0) + 1e-4)
+        entry.map(relu_weight)
     } else {
         *entry
     }

@@ -101,7 +101,7 @@ impl FoldedUpsampling {
         let up = sources[0];
         let fine = up.upsampled.expect("the first source is upsampled");
         debug_assert_eq!(up.channels, self.channels);
-        debug_assert!(sources[1..].iter().all(|s| s.upsampled.is_none()));
+        assert!(sources[1..].iter().all(|s| s.upsampled.is_none()));
         let cout = plain.cout;
         let out_w = out[2] - out[0];
         let pixels = out_w * (out[3] - out[1]);
@@ -123,9 +123,7 @@ impl FoldedUpsampling {
                 let oy = out[1] + row;
                 let first = row * out_w;
                 if unfoldable(oy, fine[1], fine[3], up.rect[1], up.rect[3]) {
-                    columns.resize(out_w * plain.depth(), 0.0);
-                    plain.im2col_sources(sources, out, first, columns);
-                    plain.product(columns, out_w, dst);
+                    plain.product_sources(sources, out, first, columns, dst);
                 } else {
                     for qx in 0..2 {
                         // The row's pixels of column parity qx, a chunk at a time.
@@ -149,9 +147,8 @@ impl FoldedUpsampling {
                     for ox in [out[0], out[2] - 1] {
                         if unfoldable(ox, fine[0], fine[2], up.rect[0], up.rect[2]) {
                             let at = ox - out[0];
-                            columns.resize(plain.depth(), 0.0);
-                            plain.im2col_sources(sources, out, first + at, columns);
-                            plain.product(columns, 1, &mut dst[at * cout..(at + 1) * cout]);
+                            let pixel = &mut dst[at * cout..(at + 1) * cout];
+                            plain.product_sources(sources, out, first + at, columns, pixel);
                         }
                     }
                 }
