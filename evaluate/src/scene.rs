@@ -153,7 +153,7 @@ pub fn evaluate_scene(
         let what = || format!("{}: bundle at {} passes", scene.name, tb.bundle.meta.passes);
         let t = Instant::now();
         // The model's input, its screen levels (if any) filtered: part of its time.
-        let input = pack_with(&tb.bundle, &model.config.screen_filters()).with_context(what)?;
+        let input = pack_with(&tb.bundle, &model.config.packing()).with_context(what)?;
         let rec = inference.reconstruct(model, &input);
         let inference_seconds = t.elapsed().as_secs_f64() + tb.assembly_seconds;
         // The levels as rendered, for the report's per-level errors.
@@ -165,7 +165,7 @@ pub fn evaluate_scene(
         let report = ErrorReport::new(&packed, &rec.image, &reference);
         let mut variant_relmse = Vec::with_capacity(variants.len());
         for v in variants {
-            let input = pack_with(&tb.bundle, &v.config.screen_filters()).with_context(what)?;
+            let input = pack_with(&tb.bundle, &v.config.packing()).with_context(what)?;
             let image = inference.reconstruct(v, &input).image;
             variant_relmse.push(relmse_planar(&image, &reference));
         }

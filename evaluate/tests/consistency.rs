@@ -98,7 +98,7 @@ fn screen_levels_converge_with_passes() {
     };
     let mut errors = Vec::new();
     for b in &bundles {
-        let packed = pack_with(b, &model.config.screen_filters()).unwrap();
+        let packed = pack_with(b, &model.config.packing()).unwrap();
         let out = reconstruct_tiled(
             &model,
             &packed,

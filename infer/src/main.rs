@@ -402,7 +402,7 @@ fn run(cli: &Cli) -> Result<()> {
     let mut input = if model.config.screen_levels.is_empty() {
         None
     } else {
-        Some(pack_with(&bundle, &model.config.screen_filters())?)
+        Some(pack_with(&bundle, &model.config.packing())?)
     };
     if cli.whole_levels {
         packed.direct = None;

@@ -80,6 +80,7 @@ mod tests {
             width: 1,
             height: 1,
             features: vec![0.0; 27],
+            extra: Vec::new(),
             levels,
             direct: None,
             direct_added: None,

@@ -67,7 +67,7 @@ fn stress_reports(
         .map(|model| {
             // The model's input: its screen levels (if any) in place; the report is on the
             // levels as rendered.
-            let input = pack_with(&bundle, &model.config.screen_filters()).unwrap();
+            let input = pack_with(&bundle, &model.config.packing()).unwrap();
             let out = reconstruct_tiled(model, &input, 0, Engine::Native, device, |_, _| {});
             ErrorReport::new(&packed, &out.image, &reference)
         })

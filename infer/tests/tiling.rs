@@ -272,6 +272,56 @@ fn native_engine_is_bit_identical_on_any_thread_count() {
 /// a cut 2×2 block at the border) cut into 20-px tiles (tile corners at odd positions of the
 /// coarser grids), tiled reconstruction equals the whole image on both engines, and a tile
 /// smaller than the U-Net's 43-px reach still sees all it needs.
+/// Networks reading extra feature planes (a U-Net and a dual tiny network): the native engine
+/// computes what Burn computes, tiles equal the whole image, and the planes change the output
+/// (a network fed zero planes reconstructs something else).
+#[test]
+fn extra_feature_planes_reach_both_engines_and_every_tile() {
+    use model::features::{pack_with, ExtraFeature};
+    let (mut bundle, _) = synthetic_bundle(45, 29, 0.3, 17);
+    bundle.meta.passes = 128;
+    let device = Device::flex();
+    let extra = vec![ExtraFeature::Disagreement, ExtraFeature::Passes];
+    for (name, config) in [
+        (
+            "unet",
+            ModelConfig::preset(Preset::UNet).with_extra_features(extra.clone()),
+        ),
+        (
+            "dual tiny",
+            ModelConfig::preset(Preset::Tiny)
+                .with_extra_features(extra.clone())
+                .with_levels(vec![0, 2]),
+        ),
+    ] {
+        config.validate().unwrap();
+        let m = TrainedModel {
+            dir: PathBuf::new(),
+            network: with_distinct_biases(config.init(19, &device)),
+            config,
+        };
+        let packed = pack_with(&bundle, &m.config.packing()).unwrap();
+        let burn = reconstruct_tiled(&m, &packed, 0, Engine::Burn, &device, |_, _| {});
+        let native = reconstruct_tiled(&m, &packed, 0, Engine::Native, &device, |_, _| {});
+        let d = max_relative_difference(&native.image, &burn.image);
+        assert!(d <= 2e-5, "{name}: native differs from Burn by {d:e}");
+        for engine in [Engine::Native, Engine::Burn] {
+            let tiled = reconstruct_tiled(&m, &packed, 16, engine, &device, |_, _| {});
+            let d = max_relative_difference(&tiled.image, &native.image);
+            assert!(d <= 2e-5, "{name} {engine:?}: tiles differ by {d:e}");
+        }
+        let mut blind = packed.clone();
+        let base = model::network::INPUT_CHANNELS * packed.pixels();
+        blind.features[base..].fill(0.0);
+        let without = reconstruct_tiled(&m, &blind, 0, Engine::Native, &device, |_, _| {});
+        let d = max_relative_difference(&without.image, &native.image);
+        assert!(
+            d > 1e-3,
+            "{name}: the extra planes change the output by only {d:e}"
+        );
+    }
+}
+
 #[test]
 fn unet_tiles_equal_the_whole_image_on_sides_not_multiple_of_8() {
     let (bundle, _) = synthetic_bundle(101, 67, 0.3, 13);

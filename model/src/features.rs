@@ -14,12 +14,18 @@
 //! A network combining only some levels (the Dual(ỹ, z̃j) variant of paper Table 1) reads the
 //! colour and variance planes of its levels plus the G-buffer, in the same order:
 //! [`feature_channels`] and [`PackedImage::select_levels`] pick them out of the full packing.
+//!
+//! A model may read [`ExtraFeature`] planes after those 27 (docs/method.md §9, "Other weight
+//! predictors"): how far ỹ and each z̃ʲ disagree against their noise, and the pass count —
+//! what the first convolution cannot compute from log colours and log variances by itself.
 
 use std::borrow::Cow;
 
 use bundle::{Bundle, Image};
+use serde::{Deserialize, Serialize};
 
 use crate::network::{GBUFFER_CHANNELS, INPUT_CHANNELS, LEVELS};
+use crate::screen_filter::ScreenFilters;
 
 /// Number of raw colour planes: five RGB estimates.
 pub const COLOUR_CHANNELS: usize = 3 * LEVELS;
@@ -35,8 +41,11 @@ pub struct PackedImage {
     pub width: usize,
     /// Height in pixels.
     pub height: usize,
-    /// [`INPUT_CHANNELS`] transformed feature planes.
+    /// [`INPUT_CHANNELS`] transformed feature planes, then those of each of `extra`
+    /// ([`ExtraFeature::packed_planes`]).
     pub features: Vec<f32>,
+    /// The extra feature planes packed after the 27, in this order.
+    pub extra: Vec<ExtraFeature>,
     /// [`COLOUR_CHANNELS`] raw linear colour planes: ỹ RGB, z̃1 RGB, …, z̃4 RGB.
     pub levels: Vec<f32>,
     /// [`DIRECT_CHANNELS`] planes of the photon-free part: path A's (in ỹ) RGB, path B's (in
@@ -74,7 +83,8 @@ impl PackedImage {
         PackedImage {
             width: self.width,
             height: self.height,
-            features: gather(&self.features, feature_channels(levels)),
+            features: gather(&self.features, feature_channels(levels, &self.extra)),
+            extra: self.extra.clone(),
             levels: gather(&self.levels, colour_channels(levels)),
             direct: self.direct.clone(),
             direct_added: self.direct_added.clone(),
@@ -203,13 +213,85 @@ pub fn subpath_a_weight(var_a: f32, var_b: f32) -> f32 {
     }
 }
 
-/// Planes of the full feature packing that a network combining `levels` reads: the log colours
-/// of its levels (RGB each), their log variances, then the seven G-buffer planes.
-pub fn feature_channels(levels: &[usize]) -> Vec<usize> {
+/// Planes of the full feature packing (with the `extra` planes) that a network combining
+/// `levels` reads: the log colours of its levels (RGB each), their log variances, the seven
+/// G-buffer planes, then each extra feature's planes for those levels.
+pub fn feature_channels(levels: &[usize], extra: &[ExtraFeature]) -> Vec<usize> {
     let colours = levels.iter().flat_map(|&l| 3 * l..3 * l + 3);
     let variances = levels.iter().map(|&l| COLOUR_CHANNELS + l);
     let gbuffer = COLOUR_CHANNELS + LEVELS..COLOUR_CHANNELS + LEVELS + GBUFFER_CHANNELS;
-    colours.chain(variances).chain(gbuffer).collect()
+    let mut planes: Vec<usize> = colours.chain(variances).chain(gbuffer).collect();
+    let mut start = INPUT_CHANNELS;
+    for feature in extra {
+        match feature {
+            // Plane j − 1 is ỹ against z̃ʲ.
+            ExtraFeature::Disagreement => {
+                planes.extend(levels.iter().filter(|&&l| l > 0).map(|&l| start + l - 1))
+            }
+            ExtraFeature::Passes => planes.push(start),
+        }
+        start += feature.packed_planes();
+    }
+    planes
+}
+
+/// Input planes a network may read beyond the paper's 27 (docs/method.md §9, "Other weight
+/// predictors"), packed after them in the order a model lists them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExtraFeature {
+    /// One plane per correlated level z̃ʲ: log(1 + d² / (v_ỹ + v_j + ε·m²)), with d² the squared
+    /// difference of ỹ and z̃ʲ (mean over RGB), v the variances of their means, m their mean
+    /// and ε = [`DISAGREEMENT_FLOOR`]. Large where z̃ʲ's wider kernel is biased (a caustic line,
+    /// a shadow edge) rather than noisy: the cue for weighing ỹ's side there. The network
+    /// sees log colours and log variances, from which a few ReLU convolutions approximate this
+    /// ratio only poorly.
+    Disagreement,
+    /// One plane, constant: log₂(passes) / 10. The levels' bias and noise shrink at different
+    /// rates as passes grow (the radii as N^(−1/6), the variances as N^(−2/3)), so the best
+    /// weights depend on the pass count, which the variances alone do not reveal.
+    Passes,
+}
+
+/// Relative tolerance of [`ExtraFeature::Disagreement`]: a difference of 1 % of the levels'
+/// mean counts as one standard deviation where the variances are zero (a converged or
+/// noise-free pixel), so the plane stays finite and calm there.
+pub const DISAGREEMENT_FLOOR: f32 = 1e-4;
+
+impl ExtraFeature {
+    /// Planes this feature adds to the full packing (all five levels).
+    pub fn packed_planes(self) -> usize {
+        match self {
+            ExtraFeature::Disagreement => LEVELS - 1,
+            ExtraFeature::Passes => 1,
+        }
+    }
+
+    /// Planes this feature gives a network combining `levels` estimates (ỹ and levels − 1
+    /// correlated ones).
+    pub fn network_planes(self, levels: usize) -> usize {
+        match self {
+            ExtraFeature::Disagreement => levels.saturating_sub(1),
+            ExtraFeature::Passes => 1,
+        }
+    }
+}
+
+/// How a model packs a bundle: the screen-space filters applied to it first, and the extra
+/// feature planes.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Packing {
+    /// Filtered levels and photon-free part ([`crate::screen_filter`]).
+    pub screen: ScreenFilters,
+    /// Extra planes after the 27 ([`ExtraFeature`]).
+    pub extra: Vec<ExtraFeature>,
+}
+
+impl Packing {
+    /// The bundle as rendered, the paper's 27 planes.
+    pub fn none() -> Self {
+        Self::default()
+    }
 }
 
 /// Planes of the raw colours ([`PackedImage::levels`]) of `levels`, RGB each: the combination's
@@ -365,18 +447,16 @@ fn log_transform_plane(plane: &mut [f32]) {
     portable(plane)
 }
 
-/// Packs a bundle for a network whose configuration applies `screen` filters
-/// ([`crate::screen_filter`]: filtered levels in the place of some of the bundle's, a filtered
-/// photon-free part), after checking the bundle as [`pack`] does.
-pub fn pack_with(
-    bundle: &Bundle,
-    screen: &crate::screen_filter::ScreenFilters,
-) -> Result<PackedImage, FeatureError> {
-    if screen.is_empty() {
-        return pack(bundle);
-    }
+/// Packs a bundle as a model's `packing` says: its screen filters ([`crate::screen_filter`]:
+/// filtered levels in the place of some of the bundle's, a filtered photon-free part) applied
+/// first, its extra planes after the 27; the bundle is checked as [`pack`] does.
+pub fn pack_with(bundle: &Bundle, packing: &Packing) -> Result<PackedImage, FeatureError> {
+    let screen = &packing.screen;
     // Shapes and values first: the filter reads the layers as the packing would.
     check_bundle(bundle)?;
+    if screen.is_empty() {
+        return Ok(pack_checked(bundle, &[], &packing.extra));
+    }
     let filtered = crate::screen_filter::filtered(bundle, &screen.levels);
     let width = bundle.meta.width as usize;
     // Finite inputs can still overflow float32 in the filter's sums (values near f32::MAX).
@@ -407,7 +487,7 @@ pub fn pack_with(
             y,
         });
     }
-    let mut packed = pack_checked(bundle, &filtered);
+    let mut packed = pack_checked(bundle, &filtered, &packing.extra);
     packed.direct_added = direct.map(|d| {
         use rayon::prelude::*;
         (0..3)
@@ -421,7 +501,7 @@ pub fn pack_with(
 /// Packs a bundle into network features and raw colours, rejecting bad shapes and NaN/Inf.
 pub fn pack(bundle: &Bundle) -> Result<PackedImage, FeatureError> {
     check_bundle(bundle)?;
-    Ok(pack_checked(bundle, &[]))
+    Ok(pack_checked(bundle, &[], &[]))
 }
 
 /// Rejects a bundle whose layers have the wrong shape or hold NaN/Inf.
@@ -467,11 +547,52 @@ enum Transform {
     Scale(f32),
 }
 
-/// Where a packed plane comes from: a channel of an interleaved image, or a plane.
+/// One value per pixel: a channel of an interleaved image, or a plane.
 #[derive(Clone, Copy)]
-enum Source<'a> {
+enum Scalar<'a> {
     Channel(&'a Image, usize),
     Plane(&'a [f32]),
+}
+
+impl Scalar<'_> {
+    /// The value at pixel `i`.
+    #[inline(always)]
+    fn at(self, i: usize) -> f32 {
+        match self {
+            Scalar::Channel(image, c) => image.data[i * image.channels + c],
+            Scalar::Plane(plane) => plane[i],
+        }
+    }
+}
+
+/// Where a packed plane comes from.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    /// Copied (and transformed).
+    Value(Scalar<'a>),
+    /// [`ExtraFeature::Disagreement`]'s ratio of ỹ (RGB, the variance of its mean) and a
+    /// correlated level (the same).
+    Disagreement {
+        y: (&'a Image, Scalar<'a>),
+        z: (&'a Image, Scalar<'a>),
+    },
+    /// The same value everywhere.
+    Constant(f32),
+}
+
+/// [`ExtraFeature::Disagreement`]'s ratio at pixel `i` before its log: d² / (v_ỹ + v_z + ε·m²),
+/// at most 10³⁰ (a finite plane whatever the inputs).
+#[inline(always)]
+fn disagreement(y: (&Image, Scalar), z: (&Image, Scalar), i: usize) -> f32 {
+    let (mut d2, mut sum) = (0.0f32, 0.0f32);
+    for c in 0..3 {
+        let (a, b) = (y.0.data[3 * i + c], z.0.data[3 * i + c]);
+        d2 += (a - b) * (a - b);
+        sum += a + b;
+    }
+    let mean = sum / 6.0;
+    let noise = y.1.at(i) + z.1.at(i) + DISAGREEMENT_FLOOR * mean * mean;
+    (d2 / 3.0 / noise.max(f32::MIN_POSITIVE)).min(1e30)
 }
 
 /// Pixels per run of [`pack_checked`]'s planes: a run of every source and every plane (≈ 1 MiB
@@ -481,15 +602,20 @@ const PACK_RUN: usize = 4096;
 /// One packed plane's source and transform.
 type PlaneJob<'a> = (Source<'a>, Transform);
 
-/// [`pack`] of a checked bundle with `screen` levels in place of its own. Every value is
-/// independent, so runs of pixels are filled in parallel (the same values on any thread count).
-fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel]) -> PackedImage {
+/// [`pack`] of a checked bundle with `screen` levels in place of its own and the `extra`
+/// planes after the 27. Every value is independent, so runs of pixels are filled in parallel
+/// (the same values on any thread count).
+fn pack_checked(
+    bundle: &Bundle,
+    screen: &[crate::screen_filter::FilteredLevel],
+    extra: &[ExtraFeature],
+) -> PackedImage {
     use rayon::prelude::*;
     let width = bundle.meta.width as usize;
     let height = bundle.meta.height as usize;
     let pixels = width * height;
     fn channels(image: &Image, t: Transform) -> impl Iterator<Item = (Source<'_>, Transform)> {
-        (0..image.channels).map(move |c| (Source::Channel(image, c), t))
+        (0..image.channels).map(move |c| (Source::Value(Scalar::Channel(image, c)), t))
     }
     let level = |i: usize| {
         screen
@@ -501,8 +627,8 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
         screen
             .iter()
             .find(|f| f.slot == i)
-            .map_or(Source::Channel(&bundle.variance, i), |f| {
-                Source::Plane(&f.variance)
+            .map_or(Scalar::Channel(&bundle.variance, i), |f| {
+                Scalar::Plane(&f.variance)
             })
     };
     // Every buffer's planes, filled together in runs of pixels: a run of an interleaved image
@@ -537,7 +663,7 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
                 };
                 let end = start + values.len();
                 match source {
-                    Source::Channel(image, c) => {
+                    Source::Value(Scalar::Channel(image, c)) => {
                         // Whole pixels, then the channel: `step_by` compiles to a slow loop.
                         let n = image.channels;
                         let pixels = image.data[n * start..n * end].chunks_exact(n);
@@ -546,12 +672,17 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
                             .zip(pixels)
                             .for_each(|(v, p)| apply(v, p[c]));
                     }
-                    Source::Plane(plane) => {
+                    Source::Value(Scalar::Plane(plane)) => {
                         values
                             .iter_mut()
                             .zip(&plane[start..end])
                             .for_each(|(v, &s)| apply(v, s));
                     }
+                    Source::Disagreement { y, z } => values
+                        .iter_mut()
+                        .enumerate()
+                        .for_each(|(k, v)| apply(v, disagreement(y, z, start + k))),
+                    Source::Constant(value) => values.fill(value),
                 }
                 if let Transform::Log = t {
                     log_transform_plane(values);
@@ -572,10 +703,25 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
             .collect(),
         (0..LEVELS)
             .flat_map(|i| channels(level(i), Transform::Log))
-            .chain((0..LEVELS).map(|i| (variance(i), Transform::Log)))
+            .chain((0..LEVELS).map(|i| (Source::Value(variance(i)), Transform::Log)))
             .chain(channels(&bundle.albedo, Transform::Identity))
             .chain(channels(&bundle.normal, Transform::Identity))
             .chain(channels(&bundle.depth, Transform::Scale(scale)))
+            .chain(extra.iter().flat_map(|feature| -> Vec<PlaneJob> {
+                match feature {
+                    ExtraFeature::Disagreement => (1..LEVELS)
+                        .map(|j| {
+                            let y = (level(0), variance(0));
+                            let z = (level(j), variance(j));
+                            (Source::Disagreement { y, z }, Transform::Log)
+                        })
+                        .collect(),
+                    ExtraFeature::Passes => {
+                        let passes = bundle.meta.passes.max(1) as f32;
+                        vec![(Source::Constant(passes.log2() / 10.0), Transform::Identity)]
+                    }
+                }
+            }))
             .collect(),
     ];
     if let Some(d) = &bundle.direct {
@@ -592,7 +738,10 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
         filled.next().expect("the features' buffer"),
     );
     let direct = filled.next();
-    debug_assert_eq!(features.len(), INPUT_CHANNELS * pixels);
+    debug_assert_eq!(
+        features.len(),
+        (INPUT_CHANNELS + extra.iter().map(|f| f.packed_planes()).sum::<usize>()) * pixels
+    );
     debug_assert_eq!(levels.len(), COLOUR_CHANNELS * pixels);
     debug_assert!(direct
         .as_ref()
@@ -601,6 +750,7 @@ fn pack_checked(bundle: &Bundle, screen: &[crate::screen_filter::FilteredLevel])
         width,
         height,
         features,
+        extra: extra.to_vec(),
         levels,
         direct,
         direct_added: None,
@@ -651,6 +801,7 @@ mod tests {
             width: 2,
             height: 1,
             features: (0..INPUT_CHANNELS).flat_map(plane).collect(),
+            extra: Vec::new(),
             levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
             direct: Some((0..DIRECT_CHANNELS).flat_map(|c| plane(50 + c)).collect()),
             direct_added: None,
@@ -683,9 +834,12 @@ mod tests {
             variance: Image::new(23, 11, 2),
         });
         for bundle in [&b, &with_direct] {
-            let filters = crate::screen_filter::ScreenFilters {
-                levels: screen.to_vec(),
-                direct: None,
+            let filters = Packing {
+                screen: ScreenFilters {
+                    levels: screen.to_vec(),
+                    direct: None,
+                },
+                extra: Vec::new(),
             };
             let packed = pack_with(bundle, &filters).unwrap();
             assert_eq!(packed, pack(&apply(bundle, &screen)).unwrap());
@@ -694,12 +848,114 @@ mod tests {
         // A filtered value past float32's range is an error naming the screen level.
         let mut huge = b.clone();
         huge.levels[4].data.fill(f32::MAX);
-        let first = crate::screen_filter::ScreenFilters {
-            levels: screen[..1].to_vec(),
-            direct: None,
+        let first = Packing {
+            screen: ScreenFilters {
+                levels: screen[..1].to_vec(),
+                direct: None,
+            },
+            extra: Vec::new(),
         };
         let err = pack_with(&huge, &first).unwrap_err().to_string();
         assert!(err.contains("screen-filtered"), "{err}");
+    }
+
+    /// The extra planes: the disagreement plane of each correlated level is log(1 + d² / (v_ỹ +
+    /// v_j + ε m²)) from the (screen-filtered) levels and variances, zero where the two agree;
+    /// the pass plane is log₂(passes) / 10; the 27 planes before them are `pack`'s; a Dual
+    /// network's selection takes its level's disagreement plane.
+    #[test]
+    fn extra_planes_are_the_disagreement_and_the_pass_count() {
+        let (mut b, _) = crate::synthetic::synthetic_bundle(9, 7, 0.3, 5);
+        b.meta.passes = 256;
+        // Pixel 3: ỹ equals z̃2 exactly.
+        for c in 0..3 {
+            b.levels[2].data[9 + c] = b.levels[0].data[9 + c];
+        }
+        let extra = vec![ExtraFeature::Passes, ExtraFeature::Disagreement];
+        let packing = Packing {
+            screen: ScreenFilters::none(),
+            extra: extra.clone(),
+        };
+        let packed = pack_with(&b, &packing).unwrap();
+        let pixels = 63;
+        assert_eq!(packed.extra, extra);
+        assert_eq!(packed.features.len(), (INPUT_CHANNELS + 5) * pixels);
+        let plain = pack(&b).unwrap();
+        assert_eq!(
+            packed.features[..INPUT_CHANNELS * pixels],
+            plain.features[..]
+        );
+        let plane = |k: usize| &packed.features[(INPUT_CHANNELS + k) * pixels..][..pixels];
+        assert!(plane(0).iter().all(|&v| v == 0.8));
+        for j in 1..LEVELS {
+            for p in 0..pixels {
+                let (y, z) = (
+                    &b.levels[0].data[3 * p..3 * p + 3],
+                    &b.levels[j].data[3 * p..3 * p + 3],
+                );
+                let d2: f64 = (0..3).map(|c| f64::from(y[c] - z[c]).powi(2)).sum::<f64>() / 3.0;
+                let m: f64 = (0..3).map(|c| f64::from(y[c] + z[c])).sum::<f64>() / 6.0;
+                let v = f64::from(b.variance.data[5 * p] + b.variance.data[5 * p + j]);
+                let want = (d2 / (v + f64::from(DISAGREEMENT_FLOOR) * m * m)).ln_1p();
+                let got = f64::from(plane(j)[p]);
+                assert!(
+                    (got - want).abs() <= 1e-5 * want.max(1.0),
+                    "level {j} pixel {p}: {got} vs {want}"
+                );
+            }
+        }
+        assert_eq!(plane(2)[3], 0.0);
+        assert!(plane(2).iter().filter(|&&v| v > 0.1).count() > pixels / 2);
+        // A Dual(ỹ, z̃3) network reads its level's planes, the G-buffer, then the pass plane
+        // and z̃3's disagreement plane, in the order of the model's list.
+        let dual = packed.select_levels(&[0, 3]);
+        assert_eq!(dual.features.len(), (input_channels(2) + 2) * pixels);
+        let tail = &dual.features[input_channels(2) * pixels..];
+        assert_eq!(&tail[..pixels], plane(0));
+        assert_eq!(&tail[pixels..], plane(3));
+        // The planes follow the screen-filtered level in its slot.
+        let filtered = Packing {
+            screen: ScreenFilters {
+                levels: vec![crate::screen_filter::ScreenLevel {
+                    slot: 4,
+                    source: 4,
+                    sigma: 2.0,
+                    range: 0.0,
+                }],
+                direct: None,
+            },
+            extra: vec![ExtraFeature::Disagreement],
+        };
+        let with_screen = pack_with(&b, &filtered).unwrap();
+        let last = |p: &PackedImage, k: usize| -> Vec<f32> {
+            p.features[(INPUT_CHANNELS + k) * pixels..][..pixels].to_vec()
+        };
+        assert_eq!(last(&with_screen, 0), plane(1));
+        assert_ne!(last(&with_screen, 3), plane(4));
+    }
+
+    /// Zero variances (a converged or empty pixel) leave the disagreement finite: equal black
+    /// levels give 0, a difference with zero variance a large finite value.
+    #[test]
+    fn disagreement_stays_finite_without_noise() {
+        let (mut b, _) = crate::synthetic::synthetic_bundle(4, 3, 0.3, 6);
+        b.variance.data.fill(0.0);
+        for level in &mut b.levels {
+            level.data[..3].fill(0.0);
+        }
+        // Pixel 1: z̃1 at 1000 against ỹ at 0; pixel 2: near float32's range (d² overflows).
+        b.levels[0].data[3..9].fill(0.0);
+        b.levels[1].data[3..6].fill(1000.0);
+        b.levels[1].data[6..9].fill(f32::MAX / 4.0);
+        let packing = Packing {
+            screen: ScreenFilters::none(),
+            extra: vec![ExtraFeature::Disagreement],
+        };
+        let packed = pack_with(&b, &packing).unwrap();
+        let plane = &packed.features[INPUT_CHANNELS * 12..][..12];
+        assert_eq!(plane[0], 0.0);
+        assert!(plane.iter().all(|v| v.is_finite()));
+        assert!(plane[1] > 10.0 && plane[2] > plane[1], "{plane:?}");
     }
 
     #[test]
@@ -724,7 +980,10 @@ mod tests {
 
     #[test]
     fn all_levels_select_the_full_packing_unchanged() {
-        assert_eq!(feature_channels(&all_levels()), (0..27).collect::<Vec<_>>());
+        assert_eq!(
+            feature_channels(&all_levels(), &[]),
+            (0..27).collect::<Vec<_>>()
+        );
         assert_eq!(colour_channels(&all_levels()), (0..15).collect::<Vec<_>>());
         let p = labelled();
         assert_eq!(p.select_levels(&all_levels()), p);
@@ -735,7 +994,7 @@ mod tests {
         // Dual(ỹ, z̃2): colours of ỹ (planes 0..3) and z̃2 (6..9), variances of ỹ (15) and z̃2
         // (17), then albedo, normal, depth (20..27).
         let want = vec![0, 1, 2, 6, 7, 8, 15, 17, 20, 21, 22, 23, 24, 25, 26];
-        assert_eq!(feature_channels(&[0, 2]), want);
+        assert_eq!(feature_channels(&[0, 2], &[]), want);
         assert_eq!(want.len(), input_channels(2));
         assert_eq!(colour_channels(&[0, 2]), vec![0, 1, 2, 6, 7, 8]);
         let s = labelled().select_levels(&[0, 2]);

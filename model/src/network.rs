@@ -9,6 +9,7 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
+use crate::features::{ExtraFeature, Packing};
 use crate::screen_filter::{DirectFilter, ScreenFilters, ScreenLevel};
 
 use crate::unet::{forward_region, UNet};
@@ -115,6 +116,11 @@ pub struct ModelConfig {
     /// model.json written before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub direct_filter: Option<DirectFilter>,
+    /// Input planes after the paper's 27, in this order ([`ExtraFeature`]; `in_channels`
+    /// counts them). Absent or empty: the paper's inputs (every model.json written before they
+    /// existed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub extra_features: Vec<ExtraFeature>,
 }
 
 /// The safeguard strength κ of every preset and of model files that name none. With
@@ -164,15 +170,35 @@ impl ModelConfig {
             unet,
             screen_levels: Vec::new(),
             direct_filter: None,
+            extra_features: Vec::new(),
         }
     }
 
     /// The same architecture combining only `levels` (indices into ỹ, z̃1..z̃4); the input
     /// channels follow. Call [`ModelConfig::validate`] to check the choice.
     pub fn with_levels(mut self, levels: Vec<usize>) -> Self {
-        self.in_channels = input_channels(levels.len());
         self.levels = levels;
+        self.in_channels = self.expected_in_channels();
         self
+    }
+
+    /// The same architecture reading the `extra` feature planes after the 27; the input
+    /// channels follow. Call [`ModelConfig::validate`] to check the choice.
+    pub fn with_extra_features(mut self, extra: Vec<ExtraFeature>) -> Self {
+        self.extra_features = extra;
+        self.in_channels = self.expected_in_channels();
+        self
+    }
+
+    /// The input channels of this config's levels and extra features.
+    fn expected_in_channels(&self) -> usize {
+        let m = self.levels.len();
+        input_channels(m)
+            + self
+                .extra_features
+                .iter()
+                .map(|f| f.network_planes(m))
+                .sum::<usize>()
     }
 
     /// The screen-space filters this model applies to a bundle before packing it.
@@ -180,6 +206,14 @@ impl ModelConfig {
         ScreenFilters {
             levels: self.screen_levels.clone(),
             direct: self.direct_filter.clone(),
+        }
+    }
+
+    /// How this model packs a bundle: its screen filters and extra feature planes.
+    pub fn packing(&self) -> Packing {
+        Packing {
+            screen: self.screen_filters(),
+            extra: self.extra_features.clone(),
         }
     }
 
@@ -248,11 +282,17 @@ impl ModelConfig {
         if let Some(d) = &self.direct_filter {
             crate::screen_filter::validate_direct(d)?;
         }
-        let expected = input_channels(self.levels.len());
+        for (i, f) in self.extra_features.iter().enumerate() {
+            if self.extra_features[..i].contains(f) {
+                return Err(format!("extra_features lists {f:?} twice"));
+            }
+        }
+        let expected = self.expected_in_channels();
         if self.in_channels != expected {
             return Err(format!(
-                "in_channels must be {expected} for {} levels, got {}",
+                "in_channels must be {expected} for {} levels and extra features {:?}, got {}",
                 self.levels.len(),
+                self.extra_features,
                 self.in_channels
             ));
         }
@@ -513,6 +553,75 @@ impl ModelConfig {
             output,
             weighting: self.weighting,
             unet: None,
+        }
+        .with_stable_ids())
+    }
+}
+
+impl ModelConfig {
+    /// Why the weights of a network of architecture `from` cannot start this one by reading
+    /// the extra feature planes this one adds (`None`: they can): everything but the extra
+    /// features must be the same, and this list must begin with `from`'s.
+    pub fn input_growth_obstacle(&self, from: &ModelConfig) -> Option<String> {
+        let adds = self.extra_features.len() > from.extra_features.len()
+            && self.extra_features.starts_with(&from.extra_features);
+        if !adds {
+            return Some(format!(
+                "extra_features {:?} do not extend the trained network's {:?}",
+                self.extra_features, from.extra_features
+            ));
+        }
+        let same_otherwise = ModelConfig {
+            extra_features: from.extra_features.clone(),
+            in_channels: from.in_channels,
+            ..self.clone()
+        } == *from;
+        (!same_otherwise).then(|| {
+            "only extra_features may differ from the trained network's architecture when \
+             features are added"
+                .to_owned()
+        })
+    }
+
+    /// The trained network `net` (architecture `from`) reading this config's further extra
+    /// feature planes: its first convolution gets zero weights from the new input channels
+    /// (packed after the old ones, [`crate::features::feature_channels`]), so it computes the
+    /// same function, and fine-tuning moves them (zero weights still receive gradients).
+    pub fn with_new_inputs(
+        &self,
+        from: &ModelConfig,
+        net: &Network,
+        device: &Device,
+    ) -> Result<Network, String> {
+        if let Some(why) = self.input_growth_obstacle(from) {
+            return Err(format!("cannot add input features: {why}"));
+        }
+        let Some(first) = net.hidden.first() else {
+            return Err("cannot add input features: the network has no hidden layer".into());
+        };
+        let [cout, old_cin, k, _] = first.weight.shape().dims::<4>();
+        if old_cin != from.in_channels {
+            return Err(format!(
+                "cannot add input features: the first convolution reads {old_cin} channels, its \
+                 config says {}",
+                from.in_channels
+            ));
+        }
+        let (old_weight, bias) = conv_values(first)?;
+        let (cin, area) = (self.in_channels, k * k);
+        let mut weight = vec![0.0f32; cout * cin * area];
+        for o in 0..cout {
+            let (src, dst) = (o * old_cin * area, o * cin * area);
+            weight[dst..dst + old_cin * area]
+                .copy_from_slice(&old_weight[src..src + old_cin * area]);
+        }
+        let mut hidden = net.hidden.clone();
+        hidden[0] = conv_from_values(weight, bias, cout, cin, k, device);
+        Ok(Network {
+            hidden,
+            output: net.output.clone(),
+            weighting: net.weighting,
+            unet: net.unet.clone(),
         }
         .with_stable_ids())
     }
@@ -885,6 +994,87 @@ mod tests {
         assert!(ModelConfig::preset(Preset::Medium)
             .growth_obstacle(&small)
             .is_none());
+    }
+
+    /// A U-Net reading extra feature planes: its config counts them, round-trips through JSON,
+    /// and trained weights without them start it computing the same raw output (zero weights
+    /// from the new planes, whatever their values); configs that do not just add planes are
+    /// refused.
+    #[test]
+    fn extra_features_start_from_the_same_function() {
+        use crate::features::{pack_with, ExtraFeature};
+        use crate::synthetic::{synthetic_bundle, with_distinct_biases};
+        let device = Device::flex();
+        let plain = ModelConfig::preset(Preset::UNet);
+        let extra = vec![ExtraFeature::Disagreement, ExtraFeature::Passes];
+        let wide = plain.clone().with_extra_features(extra.clone());
+        assert_eq!(wide.in_channels, INPUT_CHANNELS + 5);
+        wide.validate().unwrap();
+        let json = serde_json::to_string(&wide).unwrap();
+        assert!(
+            json.contains(r#""extra_features":["disagreement","passes"]"#),
+            "{json}"
+        );
+        assert_eq!(serde_json::from_str::<ModelConfig>(&json).unwrap(), wide);
+        assert!(!serde_json::to_string(&plain)
+            .unwrap()
+            .contains("extra_features"));
+        let dual = wide.clone().with_levels(vec![0, 2]);
+        assert_eq!(dual.in_channels, input_channels(2) + 2);
+
+        let net = with_distinct_biases(plain.init(5, &device));
+        let widened = wide.with_new_inputs(&plain, &net, &device).unwrap();
+        let (mut bundle, _) = synthetic_bundle(24, 16, 0.3, 8);
+        bundle.meta.passes = 64;
+        let forward = |network: &Network, config: &ModelConfig| -> Vec<f32> {
+            let packed = pack_with(&bundle, &config.packing()).unwrap();
+            let f = Tensor::<4>::from_data(
+                TensorData::new(packed.features, [1, config.in_channels, 16, 24]),
+                &device,
+            );
+            network.forward(f).into_data().try_to_vec::<f32>().unwrap()
+        };
+        let (before, after) = (forward(&net, &plain), forward(&widened, &wide));
+        let scale = before.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let worst = before
+            .iter()
+            .zip(&after)
+            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(worst <= 1e-5 * scale, "{worst} against a scale of {scale}");
+        // A network reading the extra planes with its own weights computes something else.
+        let fresh = forward(&with_distinct_biases(wide.init(5, &device)), &wide);
+        assert!(fresh
+            .iter()
+            .zip(&before)
+            .any(|(a, b)| (a - b).abs() > 1e-3 * scale));
+
+        let reordered = plain
+            .clone()
+            .with_extra_features(vec![ExtraFeature::Passes, ExtraFeature::Disagreement]);
+        let from = plain
+            .clone()
+            .with_extra_features(vec![ExtraFeature::Disagreement]);
+        let why = reordered.input_growth_obstacle(&from).unwrap();
+        assert!(why.contains("extra_features"), "{why}");
+        assert!(wide.input_growth_obstacle(&from).is_none());
+        assert!(wide.input_growth_obstacle(&wide).is_some());
+        let other = ModelConfig {
+            window: 9,
+            ..wide.clone()
+        };
+        let err = other.with_new_inputs(&plain, &net, &device).unwrap_err();
+        assert!(err.contains("only extra_features may differ"), "{err}");
+        let twice = ModelConfig {
+            extra_features: vec![ExtraFeature::Passes, ExtraFeature::Passes],
+            in_channels: INPUT_CHANNELS + 2,
+            ..plain.clone()
+        };
+        assert!(twice.validate().unwrap_err().contains("twice"));
+        let miscounted = ModelConfig {
+            in_channels: INPUT_CHANNELS,
+            ..wide.clone()
+        };
+        assert!(miscounted.validate().unwrap_err().contains("in_channels"));
     }
 
     #[test]

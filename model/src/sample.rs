@@ -4,8 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::features::{pack_with, planar_reference, PackedImage};
-use crate::screen_filter::ScreenFilters;
+use crate::features::{pack_with, planar_reference, PackedImage, Packing};
 
 /// A sample that was screened out, with the file and the reason.
 #[derive(Clone, Debug, PartialEq)]
@@ -25,11 +24,11 @@ pub struct Sample {
     pub reference: Vec<f32>,
 }
 
-/// Loads and checks one bundle and its reference, packed for a network with `screen` filters.
+/// Loads and checks one bundle and its reference, packed as a network's `packing` says.
 pub fn load_sample(
     bundle_path: &Path,
     reference_path: &Path,
-    screen: &ScreenFilters,
+    packing: &Packing,
 ) -> Result<Sample, BadSample> {
     let bad = |file: &Path, reason: String| BadSample {
         file: file.to_owned(),
@@ -39,7 +38,7 @@ pub fn load_sample(
         return Err(bad(reference_path, "missing reference".into()));
     }
     let bundle = bundle::read_bundle(bundle_path).map_err(|e| bad(bundle_path, e.to_string()))?;
-    let packed = pack_with(&bundle, screen).map_err(|e| bad(bundle_path, e.to_string()))?;
+    let packed = pack_with(&bundle, packing).map_err(|e| bad(bundle_path, e.to_string()))?;
     let reference = bundle::read_rgb_exr_image(reference_path)
         .map_err(|e| bad(reference_path, e.to_string()))?;
     let reference = planar_reference(&reference, packed.width, packed.height)

@@ -1056,7 +1056,11 @@ mod tests {
             levels: Vec::new(),
             direct: Some(DEFAULT_DIRECT_FILTER),
         };
-        let filtered = crate::features::pack_with(&b, &screen).unwrap();
+        let packing = crate::features::Packing {
+            screen,
+            extra: Vec::new(),
+        };
+        let filtered = crate::features::pack_with(&b, &packing).unwrap();
         let (plain_levels, plain_added) = plain.combination_inputs();
         let (levels, added) = filtered.combination_inputs();
         assert_eq!(plain_levels, levels);

@@ -79,6 +79,13 @@ pub struct TrainConfig {
     /// the filtered output and `model.json` keeps it for inference. Absent: not filtered.
     #[serde(default)]
     pub direct_filter: Option<model::screen_filter::DirectFilter>,
+    /// Input planes after the paper's 27 (docs/method.md §9, "Other weight predictors"):
+    /// `["disagreement", "passes"]` — per correlated level how far ỹ and z̃ʲ differ against
+    /// their noise, and the pass count. With `init` naming a model without them (and otherwise
+    /// the same architecture), the first convolution reads them with zero weights at the start.
+    /// Absent: the paper's inputs.
+    #[serde(default)]
+    pub extra_features: Vec<model::features::ExtraFeature>,
     /// Patch side in pixels.
     pub patch: usize,
     /// Patch stride in pixels.
@@ -103,7 +110,8 @@ pub struct TrainConfig {
     /// optimizer: fine-tuning. The architecture must match this config's, or be a smaller one
     /// (fewer hidden layers or filters, a narrower window with ReLU weighting; same kernel,
     /// levels, weighting) that is grown into it computing the same function (nearly, for a
-    /// wider window), e.g. `small` weights into the `medium` preset.
+    /// wider window), e.g. `small` weights into the `medium` preset, or the same one without
+    /// some of `extra_features` (read with zero weights at the start).
     /// Ignored by `--resume`.
     #[serde(default)]
     pub init: Option<PathBuf>,
@@ -177,6 +185,7 @@ impl TrainConfig {
         }
         c.screen_levels = self.screen_levels.clone();
         c.direct_filter = self.direct_filter.clone();
+        let c = c.with_extra_features(self.extra_features.clone());
         match &self.levels {
             Some(levels) => c.with_levels(levels.clone()),
             None => c,
@@ -197,7 +206,8 @@ impl TrainConfig {
 
     /// What a checkpoint of network `model` trained with `settings` cannot continue as this
     /// config says, one `<key> <checkpoint's> (checkpoint) vs <config's> (config)` per differing
-    /// TOML key: the network (`preset`, `weighting`, `window`, `guard`, `guard_target_noise`, `levels`) and the optimisation
+    /// TOML key: the network (`preset`, `weighting`, `window`, `guard`, `guard_target_noise`,
+    /// `levels`, `screen_levels`, `direct_filter`, `extra_features`) and the optimisation
     /// (`batch`, `lr`, `lr_end`, `seed`, `loss`; `epochs` too under a decaying rate, whose
     /// schedule spans them). Empty: the checkpoint resumes with this config.
     pub fn checkpoint_differences(
@@ -242,6 +252,11 @@ impl TrainConfig {
             "direct_filter",
             format!("{:?}", model.direct_filter),
             format!("{:?}", net.direct_filter),
+        );
+        differ(
+            "extra_features",
+            format!("{:?}", model.extra_features),
+            format!("{:?}", net.extra_features),
         );
         out.extend(crate::training::settings_differences(settings, &ours));
         // Same keys, different network: a preset whose sizes changed since the checkpoint.
@@ -349,6 +364,22 @@ mod tests {
                 "window 5 (checkpoint) vs 7 (config)",
                 "levels [0, 1, 2, 3, 4] (checkpoint) vs [0, 2] (config)",
             ]
+        );
+        assert_eq!(
+            diff("extra_features = [\"disagreement\", \"passes\"]\n"),
+            ["extra_features [] (checkpoint) vs [Disagreement, Passes] (config)"]
+        );
+        let with_extra: TrainConfig =
+            toml::from_str(&format!("{BASE}extra_features = [\"passes\"]\n")).unwrap();
+        assert_eq!(
+            with_extra.model_config().in_channels,
+            model::network::INPUT_CHANNELS + 1
+        );
+        assert!(
+            toml::from_str::<TrainConfig>(&format!("{BASE}extra_features = [\"pass\"]\n"))
+                .unwrap_err()
+                .to_string()
+                .contains("disagreement")
         );
         // Under a decaying rate the schedule spans `epochs`: they are fixed.
         let decaying: TrainConfig = toml::from_str(&format!("{BASE}lr_end = 1e-6\n")).unwrap();

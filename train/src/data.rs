@@ -19,11 +19,10 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
 use model::features::{
-    colour_channels, feature_channels, split_direct, COLOUR_CHANNELS, DIRECT_CHANNELS,
+    colour_channels, feature_channels, split_direct, Packing, COLOUR_CHANNELS, DIRECT_CHANNELS,
 };
 use model::network::all_levels;
 use model::sample::{load_sample, BadSample, Sample};
-use model::screen_filter::ScreenFilters;
 
 /// Where a sample's pixels come from: files, or memory (tests, synthetic data).
 #[derive(Clone, Debug)]
@@ -181,9 +180,10 @@ pub struct PatchDataset {
     /// Levels batches feed to the network and the combination (indices into ỹ, z̃1..z̃4; all
     /// five unless set with [`PatchDataset::with_levels`]).
     pub levels: Vec<usize>,
-    /// Screen-space levels the network reads in the place of some bundle levels (a model's
-    /// [`model::ModelConfig::screen_filters`]); applied as images load from files.
-    screen: ScreenFilters,
+    /// How images are packed as they load from files (a model's
+    /// [`model::ModelConfig::packing`]: screen-space levels in the place of some bundle levels,
+    /// extra feature planes).
+    packing: Packing,
     cache_images: usize,
     cache: Vec<(usize, Arc<Sample>)>,
 }
@@ -299,7 +299,7 @@ impl PatchDataset {
                 };
             // Screening reads the bundle as rendered (the screen levels only replace planes of
             // a bundle that passed these checks).
-            match load_sample(&bundle, &reference, &ScreenFilters::none()) {
+            match load_sample(&bundle, &reference, &Packing::none()) {
                 Ok(sample) => {
                     let (width, height) = (sample.packed.width, sample.packed.height);
                     if width < patch || height < patch {
@@ -354,18 +354,19 @@ impl PatchDataset {
             patch,
             stride,
             levels: all_levels(),
-            screen: ScreenFilters::none(),
+            packing: Packing::none(),
             cache_images: cache_images.max(1),
             cache: Vec::new(),
         }
     }
 
-    /// Loads images from now on with `screen` filters applied (a model's
-    /// [`model::ModelConfig::screen_filters`]); cached images of other settings are dropped.
-    /// In-memory samples are already packed and stay as they are.
-    pub fn set_screen_filters(&mut self, screen: &ScreenFilters) {
-        if self.screen != *screen {
-            self.screen = screen.clone();
+    /// Loads images from now on packed as `packing` says (a model's
+    /// [`model::ModelConfig::packing`]); cached images of other settings are dropped.
+    /// In-memory samples are already packed and stay as they are (their extra planes must be
+    /// the packing's).
+    pub fn set_packing(&mut self, packing: &Packing) {
+        if self.packing != *packing {
+            self.packing = packing.clone();
             self.cache.clear();
         }
     }
@@ -437,7 +438,7 @@ impl PatchDataset {
         let sample = match &self.images[index].source {
             SampleSource::Memory(s) => s.clone(),
             SampleSource::Files { bundle, reference } => {
-                Arc::new(load_sample(bundle, reference, &self.screen)?)
+                Arc::new(load_sample(bundle, reference, &self.packing)?)
             }
         };
         if self.cache.len() >= self.cache_images {
@@ -450,7 +451,7 @@ impl PatchDataset {
     /// Cuts the patches of `refs` into a host batch.
     pub fn batch(&mut self, refs: &[PatchRef]) -> Result<HostBatch, BadSample> {
         let p = self.patch;
-        let features = feature_channels(&self.levels);
+        let features = feature_channels(&self.levels, &self.packing.extra);
         let combined = colour_channels(&self.levels);
         let all_colours: Vec<usize> = (0..COLOUR_CHANNELS).collect();
         let n = refs.len() * p * p;
@@ -470,6 +471,11 @@ impl PatchDataset {
         for r in refs {
             let sample = self.sample(r.image)?;
             let packed = &sample.packed;
+            // Images from files are packed with `self.packing`; in-memory ones come packed.
+            assert_eq!(
+                packed.extra, self.packing.extra,
+                "an in-memory sample packed without the model's extra feature planes"
+            );
             let (w, h) = (packed.width, packed.height);
             crop(&packed.features, &features, w, h, r, p, &mut batch.features);
             crop(&packed.levels, &all_colours, w, h, r, p, &mut batch.levels);
@@ -549,6 +555,7 @@ mod tests {
                 width: w,
                 height: h,
                 features: (0..INPUT_CHANNELS).flat_map(plane).collect(),
+                extra: Vec::new(),
                 levels: (0..COLOUR_CHANNELS).flat_map(plane).collect(),
                 direct: None,
                 direct_added: None,

@@ -257,7 +257,7 @@ pub fn validate(
     // Per image: squared-error sums of the output and the levels, and the values summed.
     let mut sums = vec![(0.0f64, [0.0f64; LEVELS], 0usize); dataset.images.len()];
     dataset.levels = config.levels.clone();
-    dataset.set_screen_filters(&config.screen_filters());
+    dataset.set_packing(&config.packing());
     let refs: Vec<_> = (0..dataset.images.len())
         .flat_map(|i| dataset.image_patches(i, dataset.patch))
         .collect();
@@ -339,7 +339,8 @@ impl Trainer {
     /// A fresh run (new optimizer, epoch 0) that starts from the weights of the trained model
     /// directory `dir` instead of random ones: fine-tuning. The directory's architecture must
     /// equal `config`, or be a narrower/shallower one of the same kind, which is then grown
-    /// into `config` without changing what it computes ([`ModelConfig::grow`]).
+    /// into `config` without changing what it computes ([`ModelConfig::grow`]), or the same
+    /// one reading fewer extra feature planes ([`ModelConfig::with_new_inputs`]).
     pub fn from_weights(
         config: ModelConfig,
         settings: TrainSettings,
@@ -352,6 +353,13 @@ impl Trainer {
         trained.config = trained.config.with_settings_around_the_network_of(&config);
         if trained.config == config {
             return Ok(Self::fresh(trained.network, config, settings, device));
+        }
+        // The same network reading more input planes starts with zero weights from them.
+        if config.input_growth_obstacle(&trained.config).is_none() {
+            let widened = config
+                .with_new_inputs(&trained.config, &trained.network, &device)
+                .map_err(|e| format!("{}: {e}", dir.display()))?;
+            return Ok(Self::fresh(widened, config, settings, device));
         }
         // A smaller network of the same kind is grown into this architecture, computing the
         // same function (ModelConfig::grow); anything else is a mistake in the config.
@@ -397,7 +405,7 @@ impl Trainer {
         let start = Instant::now();
         let epoch = self.epochs_done;
         train.levels = self.config.levels.clone();
-        train.set_screen_filters(&self.config.screen_filters());
+        train.set_packing(&self.config.packing());
         let plan = train.epoch_plan(self.settings.seed, epoch);
         let total = plan.len();
         let batch_size = self.settings.batch.max(1);

@@ -414,6 +414,78 @@ fn grown_network_computes_the_same_function_and_trains() {
     assert!(err.contains("do not fit"), "{err}");
 }
 
+/// Fine-tuning with extra feature planes from weights trained without them: the run starts
+/// from the trained network's function (its raw output on the same bundle is unchanged), an
+/// epoch on samples packed with the planes moves the first convolution's weights from them,
+/// and in-memory samples packed without them are not fed to it.
+#[test]
+fn extra_features_fine_tune_from_weights_without_them() {
+    use model::features::{pack_with, ExtraFeature};
+    use model::sample::Sample;
+    use model::synthetic::synthetic_bundle;
+    let device = Device::flex();
+    let plain = ModelConfig::preset(Preset::Tiny);
+    let settings = tiny_settings(1, 3e-3, 1);
+    let (mut train, _) = tiny_sets();
+    let mut trainer = Trainer::new(plain.clone(), settings.clone(), &device);
+    trainer.run_epoch(&mut train, None, &mut |_| {}).unwrap();
+    let net = trainer.model.valid();
+    let dir = temp_dir("extra");
+    save_burnpack(&net, &dir.join("model.bpk")).unwrap();
+    std::fs::write(
+        dir.join("model.json"),
+        serde_json::to_string(&plain).unwrap(),
+    )
+    .unwrap();
+
+    let wide = plain
+        .clone()
+        .with_extra_features(vec![ExtraFeature::Disagreement, ExtraFeature::Passes]);
+    let mut tuned = Trainer::from_weights(wide.clone(), settings.clone(), &dir, &device).unwrap();
+    let packed_sample = |config: &ModelConfig, seed: u64| {
+        let (mut bundle, reference) = synthetic_bundle(32, 32, 0.3, seed);
+        bundle.meta.passes = 32;
+        Sample {
+            packed: pack_with(&bundle, &config.packing()).unwrap(),
+            reference: model::features::planar_reference(&reference, 32, 32).unwrap(),
+        }
+    };
+    let raw = |network: &model::Network, config: &ModelConfig| -> Vec<f32> {
+        let s = packed_sample(config, 4);
+        let f = burn::tensor::Tensor::<4>::from_data(
+            burn::tensor::TensorData::new(s.packed.features, [1, config.in_channels, 32, 32]),
+            &device,
+        );
+        network.forward(f).into_data().try_to_vec::<f32>().unwrap()
+    };
+    let d = max_relative_difference(&raw(&net, &plain), &raw(&tuned.model.valid(), &wide));
+    assert!(d <= 1e-5, "the widened network starts {d} away");
+
+    let samples = (0..3).map(|i| packed_sample(&wide, 100 + i)).collect();
+    let mut train_wide = PatchDataset::from_samples(samples, 16, 8);
+    tuned.run_epoch(&mut train_wide, None, &mut |_| {}).unwrap();
+    let first = tuned.model.hidden[0]
+        .weight
+        .val()
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    let (cin, area) = (wide.in_channels, wide.kernel * wide.kernel);
+    let moved = (0..wide.filters)
+        .flat_map(|o| (plain.in_channels..cin).map(move |i| (o * cin + i) * area))
+        .flat_map(|start| start..start + area)
+        .filter(|&i| first[i] != 0.0)
+        .count();
+    assert!(moved > 0, "the new planes' weights never moved");
+
+    // Samples packed without the planes cannot feed the wider network.
+    let refused = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let (mut old, _) = tiny_sets();
+        let _ = tuned.run_epoch(&mut old, None, &mut |_| {});
+    }));
+    assert!(refused.is_err());
+}
+
 /// Widening the combination window keeps every old window entry's raw output and starts the
 /// new outer entries at the small positive `NEW_WINDOW_ENTRY`, so the reconstruction barely
 /// moves.

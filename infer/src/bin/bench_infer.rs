@@ -260,7 +260,7 @@ fn run(cli: &Cli) -> Result<()> {
                 let start = Instant::now();
                 let own;
                 let input = if entry.pack_in_time {
-                    own = pack_with(&bundle, &model.config.screen_filters())?;
+                    own = pack_with(&bundle, &model.config.packing())?;
                     if k > 0 {
                         t.packing.push(start.elapsed().as_secs_f64());
                     }
