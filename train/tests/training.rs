@@ -306,21 +306,44 @@ fn training_on_relmse_beats_the_best_input_level() {
     training_beats_the_best_input_level_with(Loss::Relmse);
 }
 
+/// A tiny network trained one epoch on [`tiny_sets`] (so its biases are not zero, as in a
+/// trained model) and saved as the model directory `name`: its config, the network, the
+/// directory and the training set.
+fn trained_tiny_model(
+    name: &str,
+    settings: &TrainSettings,
+) -> (
+    ModelConfig,
+    model::Network,
+    std::path::PathBuf,
+    PatchDataset,
+) {
+    let device = Device::flex();
+    let config = ModelConfig::preset(Preset::Tiny);
+    let (mut train, _) = tiny_sets();
+    let mut trainer = Trainer::new(config.clone(), settings.clone(), &device);
+    trainer.run_epoch(&mut train, None, &mut |_| {}).unwrap();
+    let net = trainer.model.valid();
+    assert!(bias(&net.hidden[0]).iter().any(|&v| v != 0.0));
+    let dir = temp_dir(name);
+    save_burnpack(&net, &dir.join("model.bpk")).unwrap();
+    std::fs::write(
+        dir.join("model.json"),
+        serde_json::to_string(&config).unwrap(),
+    )
+    .unwrap();
+    (config, net, dir, train)
+}
+
 /// A trained network grown into a wider and deeper architecture computes the same output (so
 /// fine-tuning starts where the small network stands), and training then moves the weights
 /// that were zero — the new filters are used. Incompatible architectures are refused by name.
 #[test]
 fn grown_network_computes_the_same_function_and_trains() {
     let device = Device::flex();
-    let small = ModelConfig::preset(Preset::Tiny);
     let settings = tiny_settings(1, 3e-3, 1);
-    let (mut train, _) = tiny_sets();
+    let (small, net, dir, mut train) = trained_tiny_model("grow", &settings);
     let mut none = |_| {};
-    // One epoch first, so that the biases are not zero, as in a trained model.
-    let mut trainer = Trainer::new(small.clone(), settings.clone(), &device);
-    trainer.run_epoch(&mut train, None, &mut none).unwrap();
-    let net = trainer.model.valid();
-    assert!(bias(&net.hidden[0]).iter().any(|&v| v != 0.0));
 
     let big = ModelConfig {
         hidden_layers: small.hidden_layers + 2,
@@ -343,13 +366,6 @@ fn grown_network_computes_the_same_function_and_trains() {
     );
 
     // Through `init` of a training config: a model directory with the small network.
-    let dir = temp_dir("grow");
-    save_burnpack(&net, &dir.join("model.bpk")).unwrap();
-    std::fs::write(
-        dir.join("model.json"),
-        serde_json::to_string(&small).unwrap(),
-    )
-    .unwrap();
     let mut tuned = Trainer::from_weights(big.clone(), settings.clone(), &dir, &device).unwrap();
     assert_eq!(
         raw_output(&tuned.model.valid(), &device),
@@ -424,19 +440,8 @@ fn extra_features_fine_tune_from_weights_without_them() {
     use model::sample::Sample;
     use model::synthetic::synthetic_bundle;
     let device = Device::flex();
-    let plain = ModelConfig::preset(Preset::Tiny);
     let settings = tiny_settings(1, 3e-3, 1);
-    let (mut train, _) = tiny_sets();
-    let mut trainer = Trainer::new(plain.clone(), settings.clone(), &device);
-    trainer.run_epoch(&mut train, None, &mut |_| {}).unwrap();
-    let net = trainer.model.valid();
-    let dir = temp_dir("extra");
-    save_burnpack(&net, &dir.join("model.bpk")).unwrap();
-    std::fs::write(
-        dir.join("model.json"),
-        serde_json::to_string(&plain).unwrap(),
-    )
-    .unwrap();
+    let (plain, net, dir, _) = trained_tiny_model("extra", &settings);
 
     let wide = plain
         .clone()
