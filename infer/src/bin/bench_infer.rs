@@ -340,8 +340,9 @@ fn run(cli: &Cli) -> Result<()> {
         let m = &e.model;
         let screen = if e.pack_in_time {
             format!(
-                ", {} screen level(s) packed in the time ({} passes)",
+                ", {} screen level(s) and {} extra plane(s) packed in the time ({} passes)",
                 m.config.screen_levels.len(),
+                m.config.in_channels - model::network::input_channels(m.config.levels.len()),
                 cli.passes
             )
         } else {
@@ -373,7 +374,7 @@ fn run(cli: &Cli) -> Result<()> {
         );
         if !t.packing.is_empty() {
             println!(
-                "    of which packing the bundle with its screen filters: {:.3} s (median of {} runs)",
+                "    of which packing the bundle (screen filters, extra planes): {:.3} s (median of {} runs)",
                 median(&t.packing),
                 t.packing.len()
             );
