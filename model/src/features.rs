@@ -42,7 +42,7 @@ pub struct PackedImage {
     /// Height in pixels.
     pub height: usize,
     /// [`INPUT_CHANNELS`] transformed feature planes, then those of each of `extra`
-    /// ([`ExtraFeature::packed_planes`]).
+    /// ([`ExtraFeature::planes`] of [`LEVELS`]).
     pub features: Vec<f32>,
     /// The extra feature planes packed after the 27, in this order.
     pub extra: Vec<ExtraFeature>,
@@ -230,7 +230,7 @@ pub fn feature_channels(levels: &[usize], extra: &[ExtraFeature]) -> Vec<usize> 
             }
             ExtraFeature::Passes => planes.push(start),
         }
-        start += feature.packed_planes();
+        start += feature.planes(LEVELS);
     }
     planes
 }
@@ -259,17 +259,9 @@ pub enum ExtraFeature {
 pub const DISAGREEMENT_FLOOR: f32 = 1e-4;
 
 impl ExtraFeature {
-    /// Planes this feature adds to the full packing (all five levels).
-    pub fn packed_planes(self) -> usize {
-        match self {
-            ExtraFeature::Disagreement => LEVELS - 1,
-            ExtraFeature::Passes => 1,
-        }
-    }
-
     /// Planes this feature gives a network combining `levels` estimates (ỹ and levels − 1
-    /// correlated ones).
-    pub fn network_planes(self, levels: usize) -> usize {
+    /// correlated ones); with [`LEVELS`], what it adds to the full packing.
+    pub fn planes(self, levels: usize) -> usize {
         match self {
             ExtraFeature::Disagreement => levels.saturating_sub(1),
             ExtraFeature::Passes => 1,
@@ -740,7 +732,7 @@ fn pack_checked(
     let direct = filled.next();
     debug_assert_eq!(
         features.len(),
-        (INPUT_CHANNELS + extra.iter().map(|f| f.packed_planes()).sum::<usize>()) * pixels
+        (INPUT_CHANNELS + extra.iter().map(|f| f.planes(LEVELS)).sum::<usize>()) * pixels
     );
     debug_assert_eq!(levels.len(), COLOUR_CHANNELS * pixels);
     debug_assert!(direct

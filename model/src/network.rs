@@ -197,7 +197,7 @@ impl ModelConfig {
             + self
                 .extra_features
                 .iter()
-                .map(|f| f.network_planes(m))
+                .map(|f| f.planes(m))
                 .sum::<usize>()
     }
 
