@@ -471,4 +471,32 @@ mod tests {
             assert_eq!(dual.output, Path::new("runs").join(file));
         }
     }
+
+    /// A control run differs from its twin in the one thing it tests: the extra feature planes
+    /// learnt from scratch (`unet-extra-scratch`) against the same run without them.
+    #[test]
+    fn scratch_control_differs_from_its_twin_in_the_extra_planes_only() {
+        let dir = PathBuf::from(
+            std::env::var_os("CARGO_MANIFEST_DIR")
+                .unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
+        )
+        .join("../configs/train");
+        let table = |file: &str| -> toml::Table {
+            let text = std::fs::read_to_string(dir.join(file)).unwrap();
+            text.parse().unwrap()
+        };
+        let mut twin = table("unet-extra-scratch.toml");
+        let mut control = table("unet-es2-scratch.toml");
+        assert!(twin.remove("extra_features").is_some());
+        assert_eq!(control.remove("extra_features"), None);
+        assert_eq!(
+            twin.remove("output").unwrap().as_str(),
+            Some("runs/unet-extra-scratch")
+        );
+        assert_eq!(
+            control.remove("output").unwrap().as_str(),
+            Some("runs/unet-es2-scratch")
+        );
+        assert_eq!(twin, control);
+    }
 }
