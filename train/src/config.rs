@@ -285,6 +285,15 @@ impl TrainConfig {
 mod tests {
     use super::*;
 
+    /// The repository root, where `configs/` lives (the crate's manifest directory's parent).
+    fn repo_root() -> PathBuf {
+        PathBuf::from(
+            std::env::var_os("CARGO_MANIFEST_DIR")
+                .unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
+        )
+        .join("..")
+    }
+
     const BASE: &str = "dataset = \"d\"\npreset = \"tiny\"\npatch = 8\nstride = 8\nbatch = 2\n\
                         epochs = 1\nseed = 1\noutput = \"o\"\n";
 
@@ -420,11 +429,7 @@ mod tests {
 
     #[test]
     fn every_shipped_config_loads() {
-        let dir = PathBuf::from(
-            std::env::var_os("CARGO_MANIFEST_DIR")
-                .unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
-        )
-        .join("../configs/train");
+        let dir = repo_root().join("configs/train");
         let mut count = 0;
         for entry in std::fs::read_dir(&dir).unwrap() {
             let path = entry.unwrap().path();
@@ -442,11 +447,7 @@ mod tests {
 
     #[test]
     fn shipped_dual_configs_match_small_except_levels_and_output() {
-        let root = PathBuf::from(
-            std::env::var_os("CARGO_MANIFEST_DIR")
-                .unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
-        )
-        .join("..");
+        let root = repo_root();
         let small = TrainConfig::read(&root.join("configs/train/small.toml")).unwrap();
         assert_eq!(small.levels, None);
         for (file, j) in [
@@ -476,11 +477,7 @@ mod tests {
     /// learnt from scratch (`unet-extra-scratch`) against the same run without them.
     #[test]
     fn scratch_control_differs_from_its_twin_in_the_extra_planes_only() {
-        let dir = PathBuf::from(
-            std::env::var_os("CARGO_MANIFEST_DIR")
-                .unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into()),
-        )
-        .join("../configs/train");
+        let dir = repo_root().join("configs/train");
         let table = |file: &str| -> toml::Table {
             let text = std::fs::read_to_string(dir.join(file)).unwrap();
             text.parse().unwrap()
