@@ -21,7 +21,7 @@ use clap::Parser;
 use infer::oidn::{Denoiser, Guides};
 use infer::{reconstruct_tiled, Engine};
 use model::backend::Backend;
-use model::features::{pack, pack_with, planar_reference};
+use model::features::{pack, pack_with, planar_reference, ExtraFeature};
 use model::model_dir::TrainedModel;
 use model::synthetic::synthetic_bundle;
 use model::{ModelConfig, Preset};
@@ -41,6 +41,12 @@ struct Cli {
     /// counted. Repeat the flag for several.
     #[arg(long)]
     model: Vec<PathBuf>,
+    /// Extra feature planes, comma-separated (`disagreement`, `passes`): each preset and model
+    /// is also timed reading these planes after its own, in the same rounds — a preset
+    /// randomly initialised, a model with zero weights for the new planes (as `train` starts
+    /// it with `init`; speed does not depend on the values). Their packing is counted.
+    #[arg(long, value_delimiter = ',')]
+    extra_features: Vec<String>,
     /// The synthetic bundle's pass count: the screen filter's bandwidth shrinks with it
     /// (σ₀ at 64 passes), so it sets what `--model` timings pay for the filter.
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
@@ -163,6 +169,35 @@ struct Timed {
     rss: Option<f64>,
 }
 
+/// `entry` also reading the `extra` planes after its own: a preset initialised afresh, trained
+/// weights with zero weights for the new planes.
+fn widened(entry: &Entry, extra: &[ExtraFeature], device: &burn::tensor::Device) -> Result<Entry> {
+    let from = &entry.model.config;
+    let all: Vec<ExtraFeature> = from.extra_features.iter().chain(extra).copied().collect();
+    let config = from.clone().with_extra_features(all);
+    let network = if entry.pack_in_time {
+        config
+            .with_new_inputs(from, &entry.model.network, device)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("{}: adding {extra:?}", entry.name))?
+    } else {
+        config
+            .validate()
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("{}: adding {extra:?}", entry.name))?;
+        config.init(0, device)
+    };
+    Ok(Entry {
+        name: format!("{} + {extra:?}", entry.name),
+        model: TrainedModel {
+            dir: entry.model.dir.clone(),
+            network,
+            config,
+        },
+        pack_in_time: true,
+    })
+}
+
 fn run(cli: &Cli) -> Result<()> {
     let preset_list = match (&cli.preset, cli.model.is_empty()) {
         (Some(list), _) => list.as_str(),
@@ -208,6 +243,23 @@ fn run(cli: &Cli) -> Result<()> {
     }
     if entries.is_empty() {
         bail!("nothing to time: give --preset or --model");
+    }
+    if !cli.extra_features.is_empty() {
+        let extra = cli
+            .extra_features
+            .iter()
+            .map(|name| {
+                serde_json::from_value::<ExtraFeature>(Value::String(name.trim().to_string()))
+                    .with_context(|| {
+                        format!("unknown extra feature `{name}` (disagreement, passes)")
+                    })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let widened = entries
+            .iter()
+            .map(|e| widened(e, &extra, &device))
+            .collect::<Result<Vec<_>>>()?;
+        entries.extend(widened);
     }
     let (n, h) = (cli.size as usize, cli.height.unwrap_or(cli.size) as usize);
     let (mut bundle, _) = synthetic_bundle(n, h, 0.3, 1);

@@ -1,0 +1,77 @@
+//! `bench_infer`'s command line through the real binary: `--extra-features` times every
+//! network a second time reading the extra planes (a trained model widened with zero weights for
+//! them, as `train` starts it with `init`), and an unknown feature is refused by name.
+
+use std::process::Output;
+
+fn bench(args: &[&str]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_bench_infer"))
+        .args(args)
+        .output()
+        .expect("running bench_infer")
+}
+
+const SHIPPED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/default");
+
+#[test]
+fn extra_features_time_each_network_also_with_the_planes() {
+    let out = bench(&[
+        "--model",
+        SHIPPED,
+        "--preset",
+        "tiny",
+        "--extra-features",
+        "disagreement,passes",
+        "--size",
+        "24",
+        "--height",
+        "16",
+        "--repeats",
+        "1",
+        "--engine",
+        "native",
+        "--peer",
+        "none",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The shipped model reads no extra plane; widened it reads four disagreement planes (one per
+    // correlated level) and the pass count.
+    assert!(
+        stdout.contains("0 extra plane(s) packed in the time"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("+ [Disagreement, Passes] (UNet preset)")
+            && stdout.contains("5 extra plane(s) packed in the time"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("Tiny + [Disagreement, Passes] (Tiny preset)"),
+        "{stdout}"
+    );
+    // Four networks timed: two as given, two widened.
+    assert_eq!(stdout.matches("Native engine (infer, tiled)").count(), 4);
+}
+
+#[test]
+fn an_unknown_extra_feature_is_named() {
+    let out = bench(&[
+        "--preset",
+        "tiny",
+        "--extra-features",
+        "disagreement,pass",
+        "--size",
+        "8",
+        "--peer",
+        "none",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("unknown extra feature `pass`"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
