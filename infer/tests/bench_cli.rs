@@ -1,6 +1,6 @@
 //! `bench_infer`'s command line through the real binary: `--extra-features` times every
 //! network a second time reading the extra planes (a trained model widened with zero weights for
-//! them, as `train` starts it with `init`), and an unknown feature is refused by name.
+//! them, as `train` starts it with `init`), and an unknown or repeated feature is refused by name.
 
 use std::process::Output;
 
@@ -73,5 +73,26 @@ fn an_unknown_extra_feature_is_named() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(stderr.contains("unknown extra feature `pass`"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
+fn a_feature_listed_twice_is_refused() {
+    let out = bench(&[
+        "--model",
+        SHIPPED,
+        "--extra-features",
+        "passes,passes",
+        "--size",
+        "8",
+        "--peer",
+        "none",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("extra_features lists Passes twice"),
+        "{stderr}"
+    );
     assert!(!stderr.contains("panicked"), "{stderr}");
 }

@@ -175,16 +175,17 @@ fn widened(entry: &Entry, extra: &[ExtraFeature], device: &burn::tensor::Device)
     let from = &entry.model.config;
     let all: Vec<ExtraFeature> = from.extra_features.iter().chain(extra).copied().collect();
     let config = from.clone().with_extra_features(all);
+    let context = || format!("{}: adding {extra:?}", entry.name);
+    config
+        .validate()
+        .map_err(anyhow::Error::msg)
+        .with_context(context)?;
     let network = if entry.pack_in_time {
         config
             .with_new_inputs(from, &entry.model.network, device)
             .map_err(anyhow::Error::msg)
-            .with_context(|| format!("{}: adding {extra:?}", entry.name))?
+            .with_context(context)?
     } else {
-        config
-            .validate()
-            .map_err(anyhow::Error::msg)
-            .with_context(|| format!("{}: adding {extra:?}", entry.name))?;
         config.init(0, device)
     };
     Ok(Entry {
