@@ -175,6 +175,12 @@ pub fn render_dataset(
     render_dataset_to(config, root, options, renderer, target)
 }
 
+/// Seconds as `HH:MM:SS`, as the progress bars show time.
+pub fn clock(seconds: f64) -> String {
+    let s = seconds.max(0.0).round() as u64;
+    format!("{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
+}
+
 /// A position given to a bar that is not work of this session (skipped jobs, the passes a
 /// resumed run had done before): recorded, then forgotten by the rate and ETA estimate.
 fn jump(bar: &ProgressBar, pos: u64) {
@@ -299,6 +305,11 @@ pub fn render_dataset_to(
     }
     let mut files_done = 0;
     let mut work_done = 0u64;
+    // Where no bar can be drawn (stderr is a file: a batch job's log) and the user did not ask
+    // for quiet, each finished job is a line, so the log says how far the run is and when it may
+    // end. The ETA is this session's: the work rendered now over the seconds it took.
+    let log_jobs = options.progress && multi.is_hidden();
+    let (mut session_work, mut session_seconds) = (0u64, 0.0f64);
     // Files as in the summary line: references and bundles.
     overall.set_message(format!("{files_done}/{total_files} files"));
     // The user's scene files, hashed up front: a missing one (the XML or any file it reads)
@@ -318,6 +329,7 @@ pub fn render_dataset_to(
         };
         let skip =
             existing.is_some_and(|r| r.scene_sha256 == scene_hash && outputs_intact(root, &r));
+        let mut seconds = None;
         if skip {
             report.skipped += 1;
         } else {
@@ -390,7 +402,8 @@ pub fn render_dataset_to(
             // Only now, with the record written, are the finished runs of no further use.
             remove_run_files(root, &plan, &job, |_| true)?;
             // Wall-clock timing is useful but not reproducible: it lives outside the records.
-            let timing = serde_json::json!({ "seconds": start.elapsed().as_secs_f64() });
+            seconds = Some(start.elapsed().as_secs_f64());
+            let timing = serde_json::json!({ "seconds": seconds });
             let _ = write_atomic(&root.join(plan.timing_path(&job)), &to_json(&timing));
             report.rendered += 1;
         }
@@ -402,6 +415,19 @@ pub fn render_dataset_to(
             jump(overall, work_done);
         } else {
             overall.set_position(work_done);
+        }
+        if let (true, Some(seconds)) = (log_jobs, seconds) {
+            session_work += work;
+            session_seconds += seconds;
+            let left = total_work.saturating_sub(work_done) as f64;
+            let eta = left * session_seconds / session_work.max(1) as f64;
+            say(format!(
+                "{label}: done in {} ({files_done}/{total_files} files, {:.0} % of the work, \
+                 ETA {})",
+                clock(seconds),
+                100.0 * work_done as f64 / total_work.max(1) as f64,
+                clock(eta)
+            ));
         }
     }
     // Cleared, not left standing: the caller's summary line follows on a line of its own.

@@ -740,3 +740,72 @@ fn an_input_job_killed_between_its_bundles_resumes_from_its_state() {
     assert_same(&reference, &snapshot(&dir));
     std::fs::remove_dir_all(&work).unwrap();
 }
+
+/// A batch job's log (stderr not a terminal, so no bar is drawn) gets one line per finished job
+/// with the run's progress and ETA; jobs an earlier run finished get none, and `--quiet` none.
+#[test]
+fn a_log_without_a_terminal_gets_a_line_per_finished_job() {
+    let work = fresh_dir("log-lines");
+    let config = write_config(&work);
+    let dir = work.join("data");
+    let args = |quiet: bool| {
+        let mut a = vec![
+            "render".to_string(),
+            "--config".into(),
+            config.display().to_string(),
+            "--out".into(),
+            dir.display().to_string(),
+            "--threads".into(),
+            "2".into(),
+        ];
+        if quiet {
+            a.push("--quiet".into());
+        }
+        a
+    };
+    let run = |quiet: bool| {
+        let a = args(quiet);
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        let out = ok(datagen(&a).output().unwrap());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let job_lines = |stderr: &str| -> Vec<String> {
+        stderr
+            .lines()
+            .filter(|l| l.contains(": done in "))
+            .map(str::to_owned)
+            .collect()
+    };
+    let stderr = run(false);
+    let lines = job_lines(&stderr);
+    // Five scenes: a reference and two seeds' inputs each.
+    assert_eq!(lines.len(), 15, "{stderr}");
+    assert_eq!(
+        lines
+            .iter()
+            .filter(|l| l.contains(" reference: done in "))
+            .count(),
+        5,
+        "{stderr}"
+    );
+    assert_eq!(
+        lines
+            .iter()
+            .filter(|l| l.contains(" seed 1: done in "))
+            .count(),
+        5,
+        "{stderr}"
+    );
+    // Files and work counted up to the whole run, which then has nothing left.
+    assert!(lines[0].contains("(1/25 files, "), "{stderr}");
+    let last = lines.last().unwrap();
+    assert!(
+        last.contains("25/25 files, 100 % of the work, ETA 00:00:00)"),
+        "{stderr}"
+    );
+    // Everything done already: no job line.
+    assert!(job_lines(&run(false)).is_empty());
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(job_lines(&run(true)).is_empty());
+    std::fs::remove_dir_all(&work).unwrap();
+}

@@ -252,8 +252,7 @@ fn positive_interval(seconds: f64) -> Result<f64> {
 
 /// A duration as `HH:MM:SS`, as the progress bars show elapsed time.
 fn hms(d: std::time::Duration) -> String {
-    let s = d.as_secs();
-    format!("{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
+    datagen::jobs::clock(d.as_secs() as f64)
 }
 
 /// A progress bar on stderr (hidden with `--quiet`) of `len` steps (`None`: set later) in the
