@@ -44,7 +44,8 @@ struct Cli {
     /// Extra feature planes, comma-separated (`disagreement`, `passes`): each preset and model
     /// is also timed reading these planes after its own, in the same rounds — a preset
     /// randomly initialised, a model with zero weights for the new planes (as `train` starts
-    /// it with `init`; speed does not depend on the values). Their packing is counted.
+    /// it with `init`; speed does not depend on the values). A widened network's time counts
+    /// packing the bundle, as `--model` timings do (a plain preset's does not).
     #[arg(long, value_delimiter = ',')]
     extra_features: Vec<String>,
     /// The synthetic bundle's pass count: the screen filter's bandwidth shrinks with it
