@@ -898,9 +898,14 @@ mod tests {
 
         let unet = ModelConfig::preset(Preset::UNet);
         unet.validate().unwrap();
+        // The shipped weights: the `unet` preset reading the two extra planes (since
+        // 2026-12-06); their predecessor `models/unet-es2` reads the paper's 27.
         let default = include_str!("../../models/default/model.json");
         let config: ModelConfig = serde_json::from_str(default).unwrap();
         config.validate().unwrap();
+        use crate::features::ExtraFeature;
+        let planes = vec![ExtraFeature::Disagreement, ExtraFeature::Passes];
+        assert_eq!(config.in_channels, 32);
         assert_eq!(
             ModelConfig {
                 screen_levels: Vec::new(),
@@ -908,7 +913,17 @@ mod tests {
                 guard_target_noise: unet.guard_target_noise,
                 ..config.clone()
             },
-            unet
+            unet.clone().with_extra_features(planes)
+        );
+        let before = include_str!("../../models/unet-es2/model.json");
+        let before: ModelConfig = serde_json::from_str(before).unwrap();
+        assert_eq!(
+            before,
+            ModelConfig {
+                in_channels: unet.in_channels,
+                extra_features: Vec::new(),
+                ..config.clone()
+            }
         );
         assert_eq!(config.screen_levels.len(), 1);
         // The shipped weights trust the screen-filtered smoothest level less than the presets
