@@ -11,13 +11,16 @@ fn bench(args: &[&str]) -> Output {
         .expect("running bench_infer")
 }
 
-const SHIPPED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/default");
+/// Shipped weights that read the paper's 27 planes only (the U-Net before `models/default`).
+const WITHOUT_PLANES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/unet-es2");
+/// The shipped default, which already reads both extra planes.
+const DEFAULT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/default");
 
 #[test]
 fn extra_features_time_each_network_also_with_the_planes() {
     let out = bench(&[
         "--model",
-        SHIPPED,
+        WITHOUT_PLANES,
         "--preset",
         "tiny",
         "--extra-features",
@@ -39,7 +42,7 @@ fn extra_features_time_each_network_also_with_the_planes() {
         "{stdout}\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    // The shipped model reads no extra plane; widened it reads four disagreement planes (one per
+    // That model reads no extra plane; widened it reads four disagreement planes (one per
     // correlated level) and the pass count.
     assert!(
         stdout.contains("0 extra plane(s) packed in the time"),
@@ -82,8 +85,14 @@ fn an_unknown_extra_feature_is_named() {
 #[test]
 fn a_feature_listed_twice_is_refused() {
     refused(
-        ["--model", SHIPPED],
+        ["--model", WITHOUT_PLANES],
         "passes,passes",
         "extra_features lists Passes twice",
+    );
+    // A model that already reads a plane cannot be widened by it again.
+    refused(
+        ["--model", DEFAULT],
+        "passes",
+        "models/default already reads the Passes planes",
     );
 }

@@ -361,6 +361,27 @@ impl Trainer {
                 .map_err(|e| format!("{}: {e}", dir.display()))?;
             return Ok(Self::fresh(widened, config, settings, device));
         }
+        // The model reads planes the config does not list: a network cannot drop inputs, and
+        // the config most likely forgot them (say which, in the config's spelling).
+        let without_planes = |c: &ModelConfig| ModelConfig {
+            extra_features: Vec::new(),
+            in_channels: 0,
+            ..c.clone()
+        };
+        if without_planes(&trained.config) == without_planes(&config)
+            && !trained.config.extra_features.is_empty()
+        {
+            let spelt = |c: &ModelConfig| serde_json::to_string(&c.extra_features).unwrap();
+            return Err(format!(
+                "{}: the model reads extra_features = {}, the config lists {}: a fine-tune keeps \
+                 the planes its model reads (and may add more after them); give the config \
+                 extra_features = {}",
+                dir.display(),
+                spelt(&trained.config),
+                spelt(&config),
+                spelt(&trained.config)
+            ));
+        }
         // A smaller network of the same kind is grown into this architecture, computing the
         // same function (ModelConfig::grow); anything else is a mistake in the config.
         let grown = config

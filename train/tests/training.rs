@@ -489,6 +489,31 @@ fn extra_features_fine_tune_from_weights_without_them() {
         let _ = tuned.run_epoch(&mut old, None, &mut |_| {});
     }));
     assert!(refused.is_err());
+
+    // Weights that read the planes cannot start a config that forgot them: the error says
+    // which to list.
+    let wide_dir = temp_dir("extra-wide");
+    save_burnpack(&tuned.model.valid(), &wide_dir.join("model.bpk")).unwrap();
+    std::fs::write(
+        wide_dir.join("model.json"),
+        serde_json::to_string(&wide).unwrap(),
+    )
+    .unwrap();
+    let err = Trainer::from_weights(plain.clone(), settings.clone(), &wide_dir, &device)
+        .err()
+        .expect("a config without the model's planes must be refused");
+    assert!(
+        err.contains(r#"give the config extra_features = ["disagreement","passes"]"#),
+        "{err}"
+    );
+    let shorter = plain.with_extra_features(vec![ExtraFeature::Disagreement]);
+    let err = Trainer::from_weights(shorter, settings, &wide_dir, &device)
+        .err()
+        .expect("a config with fewer planes than the model must be refused");
+    assert!(
+        err.contains(r#"the config lists ["disagreement"]"#),
+        "{err}"
+    );
 }
 
 /// Widening the combination window keeps every old window entry's raw output and starts the

@@ -174,6 +174,12 @@ struct Timed {
 /// weights with zero weights for the new planes.
 fn widened(entry: &Entry, extra: &[ExtraFeature], device: &burn::tensor::Device) -> Result<Entry> {
     let from = &entry.model.config;
+    if let Some(f) = extra.iter().find(|f| from.extra_features.contains(f)) {
+        bail!(
+            "{} already reads the {f:?} planes: --extra-features adds planes a network does not read",
+            entry.name
+        );
+    }
     let all: Vec<ExtraFeature> = from.extra_features.iter().chain(extra).copied().collect();
     let config = from.clone().with_extra_features(all);
     let context = || format!("{}: adding {extra:?}", entry.name);
