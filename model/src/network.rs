@@ -571,16 +571,21 @@ impl ModelConfig {
                 self.extra_features, from.extra_features
             ));
         }
-        let same_otherwise = ModelConfig {
-            extra_features: from.extra_features.clone(),
-            in_channels: from.in_channels,
-            ..self.clone()
-        } == *from;
-        (!same_otherwise).then(|| {
+        (!self.differs_only_in_extra_features(from)).then(|| {
             "only extra_features may differ from the trained network's architecture when \
              features are added"
                 .to_owned()
         })
+    }
+
+    /// Whether `other` is this architecture reading other extra feature planes (or the same
+    /// ones): everything but `extra_features` and the input channels they add is equal.
+    pub fn differs_only_in_extra_features(&self, other: &ModelConfig) -> bool {
+        ModelConfig {
+            extra_features: other.extra_features.clone(),
+            in_channels: other.in_channels,
+            ..self.clone()
+        } == *other
     }
 
     /// The trained network `net` (architecture `from`) reading this config's further extra

@@ -363,12 +363,7 @@ impl Trainer {
         }
         // The model reads planes the config does not list: a network cannot drop inputs, and
         // the config most likely forgot them (say which, in the config's spelling).
-        let without_planes = |c: &ModelConfig| ModelConfig {
-            extra_features: Vec::new(),
-            in_channels: 0,
-            ..c.clone()
-        };
-        if without_planes(&trained.config) == without_planes(&config)
+        if config.differs_only_in_extra_features(&trained.config)
             && !trained.config.extra_features.is_empty()
         {
             let spelt = |c: &ModelConfig| serde_json::to_string(&c.extra_features).unwrap();
