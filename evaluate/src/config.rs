@@ -48,6 +48,10 @@ pub struct EvalConfig {
     /// the stratified direct-light estimate ours uses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub standard_emitter_samples: Option<u32>,
+    /// Share of the infinite lights' photons aimed at what the camera sees, in both SPPM runs
+    /// (renderer's `photon_focus`); absent: the renderer's default (none aimed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photon_focus: Option<f32>,
     /// Radius schedule of both runs: `sppm` (default) or `cppm`, which makes the study
     /// single-level CPPM against multi-level CPPM + reconstruction (the paper's "Ours + CPPM").
     /// Not written when `sppm`, so results saved before the option existed still match.
@@ -232,6 +236,11 @@ impl EvalConfig {
         }
         if self.emitter_samples == Some(0) || self.standard_emitter_samples == Some(0) {
             bail!("emitter_samples and standard_emitter_samples must be positive");
+        }
+        if let Some(f) = self.photon_focus {
+            if !(0.0..1.0).contains(&f) {
+                bail!("photon_focus must lie in [0, 1), got {f}");
+            }
         }
         for (i, peer) in self.peers.iter().enumerate() {
             if self.peers[..i].contains(peer) {
@@ -465,6 +474,16 @@ mod tests {
             let z: EvalConfig = toml::from_str(&top(zero)).unwrap();
             let e = z.validate().unwrap_err().to_string();
             assert!(e.contains("emitter_samples"), "{e}");
+        }
+        // The photon focus: absent is the renderer's default; a share outside [0, 1) is refused.
+        assert_eq!(c.photon_focus, None);
+        let aimed: EvalConfig = toml::from_str(&top("photon_focus = 0.5\n")).unwrap();
+        aimed.validate().unwrap();
+        assert_eq!(aimed.photon_focus, Some(0.5));
+        for bad in ["photon_focus = 1.0\n", "photon_focus = -0.1\n"] {
+            let b: EvalConfig = toml::from_str(&top(bad)).unwrap();
+            let e = b.validate().unwrap_err().to_string();
+            assert!(e.contains("photon_focus"), "{e}");
         }
         assert_eq!(c.engine, None);
         let native: EvalConfig = toml::from_str(&format!("engine = \"native\"\n{base}")).unwrap();

@@ -27,7 +27,7 @@ use self::config::{EvalConfig, EvalScene};
 use self::images::{error_panel, error_scale, relative_error_map, row_png, srgb_panel};
 use self::scene::{evaluate_scene, SceneEval};
 use model::model_dir::TrainedModel;
-use renderer::integrators::sppm::{SppmSettings, DEFAULT_MAX_DEPTH};
+use renderer::integrators::sppm::{SppmSettings, DEFAULT_MAX_DEPTH, DEFAULT_PHOTON_FOCUS};
 
 /// How the comparison is made, stored in results.json and shown on the page.
 pub const METHOD_NOTE: &str = "Equal time: ours is charged render seconds (multi-level SPPM up \
@@ -325,6 +325,7 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
             threads: config.threads,
             max_depth: config.max_depth.unwrap_or(DEFAULT_MAX_DEPTH),
             emitter_samples: config.emitter_samples,
+            photon_focus: config.photon_focus.unwrap_or(DEFAULT_PHOTON_FOCUS),
             schedule: config.schedule,
             scene_name: s.name.clone(),
             ..SppmSettings::default()

@@ -71,6 +71,10 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
     if let Some(n) = config.standard_emitter_samples.filter(|&n| n != 1) {
         settings["standard_emitter_samples"] = serde_json::json!(n);
     }
+    // The photon focus is named unless zero, the only share there was before the option.
+    if let Some(f) = config.photon_focus.filter(|&f| f != 0.0) {
+        settings["photon_focus"] = serde_json::json!(f);
+    }
     // Only CPPM is named: the fingerprints of SPPM evaluations stay what they were before
     // the option existed.
     if config.schedule != renderer::integrators::sppm::RadiusSchedule::Sppm {

@@ -12,7 +12,7 @@ use crate::lights::bounds::EmitterBounds;
 use crate::lights::selection::LightSelection;
 use crate::lights::{
     channel_mean, AreaLight, ConstantLight, DirectionalLight, EmissionSample, EnvmapLight, Light,
-    LightSample, PointLight, ProjectorLight, SceneSphere, SpotLight,
+    LightSample, PhotonFocus, PointLight, ProjectorLight, SceneSphere, SpotLight,
 };
 use crate::math::{offset_point, spawn_ray, spawn_ray_to, Ray};
 use crate::parity::media::{Medium, MediumInterface};
@@ -769,7 +769,15 @@ impl Scene {
 
     /// Samples a photon: a light by power, then a ray leaving it. `flux` includes the selection
     /// probability, so the average of `flux` over photons estimates the total emitted power.
-    pub fn sample_emission(&self, u_sel: f32, u_pos: Vec2, u_dir: Vec2) -> Option<EmissionSample> {
+    /// With a `focus`, an infinite light's photon starts from [`PhotonFocus`]'s mixture (same
+    /// expectation) instead of uniformly on the scene's bounding disk.
+    pub fn sample_emission(
+        &self,
+        u_sel: f32,
+        u_pos: Vec2,
+        u_dir: Vec2,
+        focus: Option<&PhotonFocus>,
+    ) -> Option<EmissionSample> {
         if self.lights.is_empty() {
             return None;
         }
@@ -790,6 +798,13 @@ impl Scene {
         };
         e.light = i as u32;
         e.flux /= pmf;
+        if let Some(focus) = focus.filter(|_| self.lights[i].is_infinite()) {
+            // The light drew the direction (and the flux it carries) from `u_dir`; the start
+            // on the disk facing it is re-drawn from the mixture with the same `u_pos`.
+            let (origin, factor) = focus.origin(&self.sphere, e.ray.d, u_pos);
+            e.ray = Ray::new(origin, e.ray.d);
+            e.flux *= factor;
+        }
         (e.flux.max_element() > 0.0).then_some(e)
     }
 }
@@ -1216,7 +1231,7 @@ mod tests {
         let mut acc = glam::DVec3::ZERO;
         for _ in 0..n {
             // A photon may carry nothing (e.g. exactly on a spot's cutoff): it counts as zero.
-            let Some(e) = scene.sample_emission(rng.next_f32(), rng.next_2d(), rng.next_2d())
+            let Some(e) = scene.sample_emission(rng.next_f32(), rng.next_2d(), rng.next_2d(), None)
             else {
                 continue;
             };
@@ -1460,7 +1475,7 @@ mod tests {
         let mut flux = glam::DVec3::ZERO;
         for _ in 0..n {
             let e = scene
-                .sample_emission(rng.next_f32(), rng.next_2d(), rng.next_2d())
+                .sample_emission(rng.next_f32(), rng.next_2d(), rng.next_2d(), None)
                 .unwrap();
             flux += e.flux.as_dvec3();
         }

@@ -7,12 +7,14 @@
 //! [`Lobe::Diffuse`]); deposits on glossy surfaces could never be gathered.
 
 use crate::bsdf::{Lobe, TransportMode};
+use crate::lights::PhotonFocus;
 use crate::sampling::{rng_for, UniformSource};
 use crate::scene::Scene;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::photon_map::Photon;
+use super::SppmSettings;
 
 /// Photons traced per parallel work item (small enough that 2+ threads stay balanced); the
 /// deposits of a chunk stay in photon order and chunks are read in order, so the photon list
@@ -25,20 +27,22 @@ const RR_START: u32 = 3;
 /// Domain-separation constant mixed into the seed of photon streams (pixels use the plain seed).
 const PHOTON_STREAM: u64 = 0x7068_6f74_6f6e_7321;
 
-/// Traces photon `index` of pass `pass`, appending its deposits to `out`.
+/// Traces photon `index` of pass `pass`, appending its deposits to `out`; infinite lights'
+/// photons start from `focus`'s mixture when given.
 pub fn trace_photon(
     scene: &Scene,
     seed: u64,
     pass: u64,
     index: u64,
     max_depth: u32,
+    focus: Option<&PhotonFocus>,
     out: &mut Vec<Photon>,
 ) {
     let mut rng = rng_for(seed ^ PHOTON_STREAM, pass, index);
     let u_sel = rng.next_f32();
     let u_pos = rng.next_2d();
     let u_dir = rng.next_2d();
-    let Some(emission) = scene.sample_emission(u_sel, u_pos, u_dir) else {
+    let Some(emission) = scene.sample_emission(u_sel, u_pos, u_dir, focus) else {
         return;
     };
     // A collimated light's (`directionalarea`) direct light is no NEE's: its photons are
@@ -102,20 +106,21 @@ pub fn chunk_list_bytes(count: u64) -> u64 {
         .saturating_mul(std::mem::size_of::<Vec<Photon>>() as u64)
 }
 
-/// Traces `count` photons of pass `pass` in parallel (current rayon pool) into `chunks`:
+/// Traces `settings.photons_per_pass` photons of pass `pass` in parallel (current rayon pool)
+/// into `chunks`, infinite lights' photons from `focus`'s mixture when given:
 /// chunk `c` receives the deposits of photons `c·CHUNK..(c+1)·CHUNK` in photon order, so the
 /// concatenation of the chunks is the deposit list in photon-index order whatever the thread
 /// count. The chunks' allocations are reused from the previous pass. More than `max_stored`
 /// deposits (what memory allows) stop the pass with an error instead of exhausting memory.
 pub fn trace_photons(
     scene: &Scene,
-    seed: u64,
+    settings: &SppmSettings,
     pass: u64,
-    count: u64,
-    max_depth: u32,
+    focus: Option<&PhotonFocus>,
     max_stored: u64,
     chunks: &mut Vec<Vec<Photon>>,
 ) -> anyhow::Result<()> {
+    let (seed, count, max_depth) = (settings.seed, settings.photons_per_pass, settings.max_depth);
     let n = count.div_ceil(CHUNK) as usize;
     chunks.truncate(n);
     chunks.resize_with(n, Vec::new);
@@ -127,7 +132,7 @@ pub fn trace_photons(
         }
         let c = c as u64;
         for index in c * CHUNK..((c + 1) * CHUNK).min(count) {
-            trace_photon(scene, seed, pass, index, max_depth, out);
+            trace_photon(scene, seed, pass, index, max_depth, focus, out);
         }
         stored.fetch_add(out.len() as u64, Ordering::Relaxed);
     });

@@ -63,6 +63,10 @@ struct RunIdentity {
     /// CPPM's parameters, for CPPM runs: a build with other ones refuses to resume.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     cppm: Option<CppmParameters>,
+    /// Share of the infinite lights' photons aimed at what the camera sees; files from before
+    /// the option (which aimed none) read as zero.
+    #[serde(default)]
+    photon_focus: f32,
 }
 
 /// One (serde's default of [`RunIdentity::emitter_samples`]).
@@ -286,6 +290,7 @@ impl<'a> StateStore<'a> {
                 emitter_samples: settings.emitter_samples(),
                 schedule: settings.schedule,
                 cppm: (settings.schedule == RadiusSchedule::Cppm).then(CppmParameters::current),
+                photon_focus: settings.photon_focus,
             },
             levels: match settings.mode {
                 SppmMode::MultiLevel => LEVELS,
