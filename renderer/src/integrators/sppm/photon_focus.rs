@@ -2,10 +2,10 @@
 //! photons is aimed ([`crate::lights::PhotonFocus`] holds the mixture and why it is unbiased).
 //!
 //! One eye subpath per pixel, from its own random streams (not the passes'), finds the visible
-//! points; the box holding most of them, grown by the radius cap (photons that far from a
-//! visible point are still gathered), bounded by a sphere, is the focus. The points are
-//! collected in pixel order and sorted per axis, so the focus does not depend on the thread
-//! count, and a resumed run recomputes the same one.
+//! points; the box holding the middle half of them on each axis, grown by the radius cap
+//! (photons that far from a visible point are still gathered), bounded by a sphere, is the
+//! focus. The points are collected in pixel order and sorted per axis, so the focus does not
+//! depend on the thread count, and a resumed run recomputes the same one.
 
 use glam::{UVec2, Vec3};
 use rayon::prelude::*;

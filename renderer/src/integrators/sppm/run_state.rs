@@ -63,15 +63,20 @@ struct RunIdentity {
     /// CPPM's parameters, for CPPM runs: a build with other ones refuses to resume.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     cppm: Option<CppmParameters>,
-    /// Share of the infinite lights' photons aimed at what the camera sees; files from before
-    /// the option (which aimed none) read as zero.
-    #[serde(default)]
+    /// Share of the infinite lights' photons aimed at what the camera sees; not written when
+    /// zero, so files from before the option (which aimed none) read as such.
+    #[serde(default, skip_serializing_if = "is_zero")]
     photon_focus: f32,
 }
 
 /// One (serde's default of [`RunIdentity::emitter_samples`]).
 fn one() -> u32 {
     1
+}
+
+/// Whether `x` is zero (then it is left out of the header).
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }
 
 /// Whether `n` is one (then it is left out of the header).
