@@ -17,8 +17,6 @@
 //! scene's bound and the focus is skipped.
 
 use super::SceneSphere;
-use crate::math::coordinate_system;
-use crate::sampling::square_to_uniform_disk_concentric;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -36,42 +34,28 @@ impl PhotonFocus {
     /// factor its flux (computed for a uniform start on `scene`'s disk) is to be multiplied by:
     /// the uniform disk's density over the mixture's at that point.
     pub fn origin(&self, scene: &SceneSphere, d: Vec3, u: Vec2) -> (Vec3, f32) {
-        let (s, t) = coordinate_system(d);
         let p = self.share;
-        let (centre, radius, own_density, other, other_density) = if u.x < p {
-            (
-                self.sphere.center,
-                self.sphere.radius,
-                p / disk_area(self.sphere.radius),
-                *scene,
-                (1.0 - p) / disk_area(scene.radius),
-            )
+        // The drawn component, its share, the other one and its share; u.x is reused within
+        // the drawn component, so the draw stays stratified.
+        let (drawn, drawn_share, other, other_share, ux) = if u.x < p {
+            (&self.sphere, p, scene, 1.0 - p, u.x / p)
         } else {
             (
-                scene.center,
-                scene.radius,
-                (1.0 - p) / disk_area(scene.radius),
-                self.sphere,
-                p / disk_area(self.sphere.radius),
+                scene,
+                1.0 - p,
+                &self.sphere,
+                p,
+                ((u.x - p) / (1.0 - p)).min(1.0),
             )
         };
-        // Reuse u.x within the chosen component, so the draw stays stratified.
-        let ux = if u.x < p {
-            u.x / p
-        } else {
-            ((u.x - p) / (1.0 - p)).min(1.0)
-        };
-        let q2 = square_to_uniform_disk_concentric(Vec2::new(ux, u.y)) * radius;
-        let q = centre + s * q2.x + t * q2.y;
+        let q = drawn.photon_origin(d, Vec2::new(ux, u.y));
         // The drawn component always counts (its own disk holds q, rounding aside); the other
         // one where q lies within its disk, measured across d.
-        let lateral = |c: Vec3| {
-            let v = q - c;
-            (v - d * v.dot(d)).length_squared()
-        };
-        let density = own_density
-            + if lateral(other.center) <= other.radius * other.radius {
-                other_density
+        let v = q - other.center;
+        let inside_other = (v - d * v.dot(d)).length_squared() <= other.radius * other.radius;
+        let density = drawn_share / disk_area(drawn.radius)
+            + if inside_other {
+                other_share / disk_area(other.radius)
             } else {
                 0.0
             };
@@ -88,6 +72,7 @@ fn disk_area(r: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::coordinate_system;
     use crate::sampling::{rng_for, UniformSource};
 
     fn scene() -> SceneSphere {
