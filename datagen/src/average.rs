@@ -154,13 +154,14 @@ pub fn summary_lines(report: &NoiseReport, split: Split, noise_path: &Path) -> V
     lines
 }
 
-/// The run settings of an extra run of `scene`'s reference (photons per pass, depth, the SPPM
-/// radius schedule, the scene's size and `-D` overrides) with its own `seed` and `passes`,
+/// The run settings of an extra run of `scene`'s reference (depth, the SPPM radius schedule,
+/// the scene's size and `-D` overrides) with its own `seed`, `photons` per pass and `passes`,
 /// keeping its state in `state`.
 pub fn extra_reference_run(
     manifest: &Manifest,
     scene: &SceneEntry,
     seed: u64,
+    photons: u64,
     passes: u32,
     state: StateSpec,
     threads: usize,
@@ -178,7 +179,7 @@ pub fn extra_reference_run(
         sppm: run_settings(
             &scene.id,
             seed,
-            scene.reference_photons,
+            photons,
             manifest.config.render.max_depth,
             // References are SPPM's whatever the inputs' schedule.
             RadiusSchedule::Sppm,
@@ -375,6 +376,7 @@ pub fn average_references(
                     manifest,
                     scene,
                     seed,
+                    scene.reference_photons,
                     scene.reference_passes,
                     state,
                     options.threads,

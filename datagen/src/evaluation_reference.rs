@@ -11,6 +11,13 @@
 //! (their difference is noise only); the bias is not measured, it is the estimator's (SPEC §4)
 //! at far more passes than any input.
 //!
+//! Photons per pass: at least `min_photons` (the scene's reference photons when more). The runs'
+//! bias is SPPM's kernel bias, which falls with the photons per pass; a dataset's sparse regimes
+//! have references of a few thousand photons per pass, and a reference that keeps them is as
+//! blurred as the evaluation's 100 000-photon inputs on caustics (measured on seven frozen
+//! held-out scenes, docs/journal/2026-12-06-photon-focus.md §4), which the noise measurement
+//! cannot see (both runs share the bias).
+//!
 //! Every step resumes: each run keeps its SPPM state (`evaluation-references/runs/`), so a
 //! killed call, or a later call with a stricter target or a higher limit, continues the runs
 //! from where they stopped instead of starting again. A finished scene writes its mean
@@ -35,6 +42,10 @@ pub const DIR: &str = "evaluation-references";
 
 /// The default noise limit: a tenth of the error the reference measures.
 pub const DEFAULT_TARGET: f64 = 0.1;
+
+/// The default floor on the runs' photons per pass: four times the 100 000 photons per pass the
+/// project's evaluations render, so the reference's kernel bias stays below theirs.
+pub const DEFAULT_MIN_PHOTONS: u64 = 400_000;
 
 /// Runs averaged: two give the noise estimate (their spread) at the least cost per pass.
 const RUNS: usize = 2;
@@ -98,6 +109,9 @@ pub struct EvaluationOptions {
     pub target: f64,
     /// Most passes per run, as a multiple of the scene's reference passes.
     pub max_factor: u32,
+    /// Photons per pass of the runs at least this many (the scene's reference photons when
+    /// more; an earlier call's runs with more are continued with theirs).
+    pub min_photons: u64,
     /// Most seconds of rendering per scene (both runs); `None`: no limit.
     pub max_seconds: Option<f64>,
     /// Worker threads per render (0 = all cores; results do not depend on it).
@@ -206,10 +220,17 @@ pub fn predicted_passes(passes: u32, noise: f64, input: f64, target: f64) -> u64
 }
 
 /// The state file of run `seed` of scene `id`.
-fn state_path(root: &Path, id: &str, seed: u64) -> PathBuf {
-    root.join(DIR)
-        .join("runs")
-        .join(format!("{id}.s{seed}.state"))
+/// The state of run `seed` of scene `id` at `photons` per pass: runs at the scene's reference
+/// photons keep the name they have always had, others carry the count, so runs of two photon
+/// counts never continue each other.
+fn state_path(root: &Path, scene: &SceneEntry, seed: u64, photons: u64) -> PathBuf {
+    let id = &scene.id;
+    let name = if photons == scene.reference_photons {
+        format!("{id}.s{seed}.state")
+    } else {
+        format!("{id}.s{seed}.n{photons}.state")
+    };
+    root.join(DIR).join("runs").join(name)
 }
 
 /// The round a scene's runs are in (`evaluation-references/runs/<id>.json`), written before
@@ -222,6 +243,10 @@ struct Progress {
     passes: u64,
     /// Seconds of rendering spent on the scene before this round.
     seconds: f64,
+    /// Photons per pass of the round's runs; absent in files written before the floor existed,
+    /// whose runs had the scene's reference photons.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    photons: Option<u64>,
 }
 
 /// Where scene `id`'s [`Progress`] lives.
@@ -281,6 +306,11 @@ pub fn evaluation_references(
         // An earlier call's record; kept only with its image intact, but its runs' states are at
         // its passes either way, so a redo never asks them for fewer.
         let recorded = read_record(root, &scene.id, fingerprint);
+        // The runs' photons per pass: the floor, or an earlier call's runs where they have at
+        // least as many (they are continued); runs below the floor are started again.
+        let floor = scene.reference_photons.max(options.min_photons);
+        let recorded = recorded.filter(|r| r.photons >= floor);
+        let photons = recorded.as_ref().map_or(floor, |r| r.photons);
         let earlier = recorded
             .clone()
             .filter(|r| sha256_file(&root.join(&r.path)).is_ok_and(|sha| sha == r.sha256));
@@ -318,7 +348,8 @@ pub fn evaluation_references(
         let progress_file = progress_path(root, &scene.id);
         let progress: Option<Progress> = std::fs::read(&progress_file)
             .ok()
-            .and_then(|b| serde_json::from_slice(&b).ok());
+            .and_then(|b| serde_json::from_slice::<Progress>(&b).ok())
+            .filter(|p| p.photons.unwrap_or(scene.reference_photons) == photons);
         let (mut passes, mut seconds): (u64, f64) = match (&progress, &recorded) {
             // The runs' states may be anywhere up to the round's target: never ask for less.
             (Some(p), _) => (p.passes, p.seconds),
@@ -351,7 +382,12 @@ pub fn evaluation_references(
         let result = loop {
             create_parent(&progress_file)
                 .with_context(|| format!("creating the folder of {}", progress_file.display()))?;
-            write_atomic(&progress_file, &to_json(&Progress { passes, seconds }))
+            let round_progress = Progress {
+                passes,
+                seconds,
+                photons: Some(photons),
+            };
+            write_atomic(&progress_file, &to_json(&round_progress))
                 .with_context(|| format!("writing {}", progress_file.display()))?;
             let round = Instant::now();
             let mut images = Vec::with_capacity(RUNS);
@@ -362,13 +398,14 @@ pub fn evaluation_references(
             for (run, &seed) in seeds.iter().enumerate() {
                 // The state is kept after the run: a later round or call continues from it.
                 let state = StateSpec {
-                    path: state_path(root, &scene.id, seed),
+                    path: state_path(root, scene, seed, photons),
                     interval: options.state_interval,
                 };
                 let spec = extra_reference_run(
                     manifest,
                     scene,
                     seed,
+                    photons,
                     passes as u32,
                     state,
                     options.threads,
@@ -423,7 +460,7 @@ pub fn evaluation_references(
             path: rel,
             sha256: sha256_file(&path)?,
             passes: passes as u32,
-            photons: scene.reference_photons,
+            photons,
             seeds: seeds.clone(),
             noise,
             input_relmse: input,

@@ -3,8 +3,8 @@
 //! SPPM run's does) and whose inputs miss the truth by a fixed amount: the runs grow until the
 //! noise of their mean is at most the target fraction of the input's error, the manifest lists
 //! the result and `check` verifies it, a repeated call renders nothing, a stricter target
-//! continues the runs from where they stopped, a pass limit flags the scene, and a killed round
-//! resumes at its own target.
+//! continues the runs from where they stopped, a pass limit flags the scene, a killed round
+//! resumes at its own target, and a photon floor starts runs below it again with more photons.
 
 mod common;
 
@@ -67,11 +67,12 @@ fn input_image(channels: usize, salt: usize) -> Image {
     img
 }
 
-/// The stand-in renderer: records every reference run asked for (seed, passes, state path);
-/// `fail_at` makes a run to that many passes fail (a kill).
+/// The stand-in renderer: records every reference run asked for (seed, passes, state path)
+/// and its photons per pass; `fail_at` makes a run to that many passes fail (a kill).
 #[derive(Default)]
 struct StandIn {
     runs: Mutex<Vec<(u64, u32, Option<PathBuf>)>>,
+    photons: Mutex<Vec<u64>>,
     fail_at: Option<u32>,
 }
 
@@ -88,6 +89,10 @@ impl SampleRenderer for StandIn {
             passes,
             spec.state.as_ref().map(|s| s.path.clone()),
         ));
+        self.photons
+            .lock()
+            .unwrap()
+            .push(spec.sppm.photons_per_pass);
         // Like the renderer: a run resumes from its state and refuses to go backwards.
         if let Some(state) = &spec.state {
             if let Ok(text) = std::fs::read_to_string(&state.path) {
@@ -151,6 +156,8 @@ fn options(manifest: &Manifest, target: f64, max_factor: u32) -> EvaluationOptio
         scenes: vec![manifest.scenes[0].id.clone()],
         target,
         max_factor,
+        // The stand-in's runs do not depend on it; the floor's own test sets it.
+        min_photons: 0,
         max_seconds: None,
         threads: 1,
         state_interval: 60.0,
@@ -344,4 +351,78 @@ fn a_pass_limit_flags_the_scene_and_a_killed_round_resumes_at_its_target() {
     assert!(run(&dir, &manifest, &bad, &StandIn::default()).is_err());
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&dir2);
+}
+
+#[test]
+fn a_photon_floor_starts_the_runs_again_with_more_photons_and_keeps_runs_above_it() {
+    let (dir, manifest) = dataset("evalref-photons");
+    let scene = manifest.scenes[0].clone();
+    let mut opts = options(&manifest, 0.1, 4096);
+    // Below the scene's reference photons the floor changes nothing: the runs keep the
+    // reference's photons and the state names they always had.
+    opts.min_photons = scene.reference_photons / 2;
+    let plain = StandIn::default();
+    let first = run(&dir, &manifest, &opts, &plain).unwrap();
+    assert_eq!(first[0].reference.photons, scene.reference_photons);
+    assert!(plain
+        .photons
+        .lock()
+        .unwrap()
+        .iter()
+        .all(|&p| p == scene.reference_photons));
+    let old_states: Vec<PathBuf> = plain
+        .runs
+        .lock()
+        .unwrap()
+        .iter()
+        .map(|(_, _, s)| s.clone().unwrap())
+        .collect();
+    for state in &old_states {
+        let name = state.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(name.ends_with(".state") && !name.contains(".n"), "{name}");
+        assert!(state.is_file(), "{}", state.display());
+    }
+    // A floor above them: the record does not meet it, so the runs start again (from the
+    // predicted first round, not from the old runs' passes) with the floor's photons, in states
+    // of their own.
+    let floor = 4 * scene.reference_photons;
+    opts.min_photons = floor;
+    let raised = StandIn::default();
+    let second = run(&dir, &manifest, &opts, &raised).unwrap();
+    assert!(second[0].rendered);
+    let r = &second[0].reference;
+    assert_eq!(r.photons, floor);
+    assert!(r.converged, "{r:?}");
+    assert!(raised.photons.lock().unwrap().iter().all(|&p| p == floor));
+    let runs = raised.runs.lock().unwrap().clone();
+    assert!(runs[0].1 <= 4 * REFERENCE_PASSES, "{runs:?}");
+    for (_, _, state) in &runs {
+        let state = state.as_ref().unwrap();
+        assert!(!old_states.contains(state), "{}", state.display());
+        assert!(state
+            .to_string_lossy()
+            .ends_with(&format!(".n{floor}.state")));
+    }
+    // The manifest lists the new reference with its photons.
+    let plan = Plan::new(&manifest.config);
+    let assembled = assemble_manifest(&dir, &manifest.config, &plan, false)
+        .unwrap()
+        .unwrap();
+    let listed = assembled.scenes.iter().find(|s| s.id == scene.id).unwrap();
+    assert_eq!(listed.evaluation_reference.as_ref(), Some(r));
+    // A lower floor later keeps the reference with more photons; a stricter target continues
+    // its runs with their photons.
+    opts.min_photons = 0;
+    let again = StandIn::default();
+    let kept = run(&dir, &manifest, &opts, &again).unwrap();
+    assert!(!kept[0].rendered);
+    assert!(again.runs.lock().unwrap().is_empty());
+    assert_eq!(&kept[0].reference, r);
+    opts.target = 0.01;
+    let stricter = StandIn::default();
+    let more = run(&dir, &manifest, &opts, &stricter).unwrap();
+    assert_eq!(more[0].reference.photons, floor);
+    assert!(stricter.photons.lock().unwrap().iter().all(|&p| p == floor));
+    assert_eq!(stricter.runs.lock().unwrap()[0].1, r.passes);
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -155,6 +155,12 @@ enum Command {
         /// Most passes per run, as a multiple of the scene's reference passes.
         #[arg(long, default_value_t = 64)]
         max_factor: u32,
+        /// Photons per pass of the runs at least this many (the scene's reference photons when
+        /// more). SPPM's kernel bias falls with the photons per pass and the runs' spread cannot
+        /// show it: the default is four times the 100 000 photons per pass the project's
+        /// evaluations render. Runs of an earlier call with fewer are started again.
+        #[arg(long, default_value_t = datagen::evaluation_reference::DEFAULT_MIN_PHOTONS)]
+        min_photons: u64,
         /// Most seconds of rendering per scene (both runs); a scene that would need more is
         /// flagged (`converged: false`) and can be continued by a later call with a higher limit.
         #[arg(long, value_name = "SECONDS")]
@@ -458,6 +464,7 @@ fn run(cli: Cli) -> Result<i32> {
             scenes,
             target,
             max_factor,
+            min_photons,
             max_seconds,
             threads,
             state_interval,
@@ -469,6 +476,7 @@ fn run(cli: Cli) -> Result<i32> {
                 scenes,
                 target,
                 max_factor,
+                min_photons,
                 max_seconds,
                 threads,
                 state_interval: positive_interval(state_interval)?,
