@@ -45,6 +45,14 @@ pub const SCHEDULES: [&str; 2] = ["sppm", "cppm"];
 /// The schedule of a bundle whose metadata names none (every bundle written before CPPM).
 pub const DEFAULT_SCHEDULE: &str = "sppm";
 
+/// What [`BundleMeta::sharp_level`] may say: the sharp level's photons gathered at eye subpath
+/// A's visible point, or the mean of A's and B's (docs/sppm.md).
+pub const SHARP_LEVELS: [&str; 2] = ["a", "both"];
+
+/// The sharp level of a bundle whose metadata names none (every bundle written before the
+/// option).
+pub const SHARP_LEVEL_A: &str = "a";
+
 /// Channel names of an RGB layer.
 const RGB: [&str; 3] = ["R", "G", "B"];
 /// Channel names of the normal layer.
@@ -252,6 +260,11 @@ pub struct BundleMeta {
     /// without it took one.
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub emitter_samples: u32,
+    /// Where multi-level SPPM gathered the sharp level's photons: `a` (eye subpath A's visible
+    /// point, the paper's) or `both` (the mean of A's and B's; docs/sppm.md). Not written for
+    /// `a`, so bundles rendered before the option keep their metadata.
+    #[serde(default = "sharp_level_a", skip_serializing_if = "is_sharp_level_a")]
+    pub sharp_level: String,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
@@ -261,6 +274,16 @@ pub struct BundleMeta {
 /// [`DEFAULT_SCHEDULE`] as a `String` (serde's default of [`BundleMeta::schedule`]).
 fn default_schedule() -> String {
     DEFAULT_SCHEDULE.into()
+}
+
+/// [`SHARP_LEVEL_A`] as a `String` (serde's default of [`BundleMeta::sharp_level`]).
+fn sharp_level_a() -> String {
+    SHARP_LEVEL_A.into()
+}
+
+/// Whether `name` is [`SHARP_LEVEL_A`] (then [`BundleMeta::sharp_level`] is not written).
+fn is_sharp_level_a(name: &str) -> bool {
+    name == SHARP_LEVEL_A
 }
 
 /// One (serde's default of [`BundleMeta::emitter_samples`]).
@@ -546,6 +569,15 @@ fn check_meta(path: &Path, decoded: &Decoded, meta: &BundleMeta) -> Result<(), B
             ),
         ));
     }
+    if !SHARP_LEVELS.contains(&meta.sharp_level.as_str()) {
+        return Err(bad(
+            META_ATTRIBUTE,
+            format!(
+                "sharp_level \"{}\" (expected one of {SHARP_LEVELS:?})",
+                meta.sharp_level
+            ),
+        ));
+    }
     if !SCHEDULES.contains(&meta.schedule.as_str()) {
         return Err(bad(
             META_ATTRIBUTE,
@@ -734,6 +766,7 @@ mod tests {
                 integrator: "sppm-ml".into(),
                 schedule: DEFAULT_SCHEDULE.into(),
                 emitter_samples: 1,
+                sharp_level: "a".into(),
                 width: width as u32,
                 height: height as u32,
             },
@@ -777,35 +810,72 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    /// The radius schedule: an SPPM bundle's metadata JSON has no `schedule` key (what SPPM
-    /// bundles always held, so old bundles read as SPPM), a CPPM bundle's says so and reads
-    /// back, and an unknown schedule is refused naming it.
-    #[test]
-    fn schedule_is_written_for_cppm_only_and_checked() {
-        let dir = temp_dir("schedule");
-        let sppm = sample_bundle(4, 3, false);
-        let path = dir.join("sppm.exr");
-        write_bundle(&path, &sppm).unwrap();
+    /// A metadata string with a default: a bundle at the default has no `key` in its metadata
+    /// JSON (what bundles from before the option held, so they read as the default), one set to
+    /// `other` says so and reads back, and an unknown value is refused naming it.
+    fn assert_written_unless_default(
+        key: &str,
+        default: &str,
+        other: &str,
+        unknown: &str,
+        set: impl Fn(&mut BundleMeta, &str),
+        get: impl Fn(&BundleMeta) -> &str,
+    ) {
+        let dir = temp_dir(key);
+        let plain = sample_bundle(4, 3, false);
+        let path = dir.join("plain.exr");
+        write_bundle(&path, &plain).unwrap();
         let json = Decoded::read(&path)
             .unwrap()
             .text_attribute(&path, META_ATTRIBUTE)
             .unwrap();
-        assert!(!json.contains("schedule"), "{json}");
-        assert_eq!(read_bundle(&path).unwrap().meta.schedule, "sppm");
-        let mut cppm = sppm.clone();
-        cppm.meta.schedule = "cppm".into();
-        let path = dir.join("cppm.exr");
-        write_bundle(&path, &cppm).unwrap();
-        assert_eq!(read_bundle(&path).unwrap(), cppm);
+        assert!(!json.contains(key), "{json}");
+        assert_eq!(get(&read_bundle(&path).unwrap().meta), default);
+        let mut changed = plain.clone();
+        set(&mut changed.meta, other);
+        let path = dir.join("changed.exr");
+        write_bundle(&path, &changed).unwrap();
+        assert_eq!(read_bundle(&path).unwrap(), changed);
         let mut bytes = std::fs::read(&path).unwrap();
-        patch(&mut bytes, b"\"cppm\"", b"\"xppm\"");
+        patch(
+            &mut bytes,
+            format!("\"{other}\"").as_bytes(),
+            format!("\"{unknown}\"").as_bytes(),
+        );
         std::fs::write(&path, &bytes).unwrap();
         let err = read_bundle(&path).unwrap_err().to_string();
         assert!(
-            err.contains("cppm.exr") && err.contains("schedule \"xppm\""),
+            err.contains("changed.exr") && err.contains(&format!("{key} \"{unknown}\"")),
             "{err}"
         );
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The radius schedule is written for CPPM only (old bundles read as SPPM) and checked.
+    #[test]
+    fn schedule_is_written_for_cppm_only_and_checked() {
+        assert_written_unless_default(
+            "schedule",
+            "sppm",
+            "cppm",
+            "xppm",
+            |m, v| m.schedule = v.into(),
+            |m| &m.schedule,
+        );
+    }
+
+    /// Where the sharp level was gathered is written for both subpaths only (old bundles read
+    /// as gathered at A) and checked.
+    #[test]
+    fn sharp_level_is_written_for_both_only_and_checked() {
+        assert_written_unless_default(
+            "sharp_level",
+            "a",
+            "both",
+            "bath",
+            |m, v| m.sharp_level = v.into(),
+            |m| &m.sharp_level,
+        );
     }
 
     /// The written EXR has exactly the documented `layer.channel` names, each holding the

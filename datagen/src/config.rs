@@ -58,6 +58,12 @@ pub struct RenderConfig {
     /// absent, so older configs keep their fingerprints.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub emitter_samples: Option<u32>,
+    /// Where the input runs gather the sharp level's photons (`"a"` or `"both"`; absent: `a`,
+    /// as every dataset rendered before the option; `infer --scene` and `evaluate` render with
+    /// `both`, the multi-level default). References gather at A whatever this says. Not
+    /// serialised when absent, so older configs keep their fingerprints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sharp_level: Option<renderer::integrators::sppm::SharpLevel>,
     /// Input regimes (`[[render.regimes]]`): each scene is rendered in one of them — its own
     /// photon density, pass counts, seeds and image side — instead of `photons_per_pass`,
     /// `passes`, `seeds` and the config's size. Absent: every scene as above. Every optional

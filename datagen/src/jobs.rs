@@ -17,7 +17,7 @@ use anyhow::{bail, Context, Result};
 use bundle::{read_bundle, read_rgb_exr_image, write_bundle, write_rgb_exr_image, Bundle, Image};
 use fileio::atomic::remove_stale_temps;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
-use renderer::integrators::sppm::{RadiusSchedule, SppmMode, SppmSettings};
+use renderer::integrators::sppm::{RadiusSchedule, SharpLevel, SppmMode, SppmSettings};
 use renderer::state_file::scene_fingerprint;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -40,8 +40,9 @@ pub struct RunSpec {
 }
 
 /// The multi-level SPPM settings of a dataset run with radius schedule `schedule`: one light
-/// sample per visible point (references always; input runs unless the config's
-/// `render.emitter_samples` says otherwise).
+/// sample per visible point and the sharp level gathered at subpath A (references always;
+/// input runs unless the config's `render.emitter_samples` / `render.sharp_level` say
+/// otherwise).
 pub fn run_settings(
     scene_id: &str,
     seed: u64,
@@ -58,8 +59,9 @@ pub fn run_settings(
         max_depth,
         threads,
         scene_name: scene_id.to_owned(),
-        // Every dataset rendered before the option existed took one.
+        // Every dataset rendered before the options existed took one, at A.
         emitter_samples: Some(1),
+        sharp_level: Some(SharpLevel::SubpathA),
         ..SppmSettings::default()
     }
 }
@@ -715,6 +717,7 @@ fn run_job(
             let spec = RunSpec {
                 sppm: SppmSettings {
                     emitter_samples: Some(config.render.emitter_samples.unwrap_or(1)),
+                    sharp_level: Some(config.render.sharp_level.unwrap_or(SharpLevel::SubpathA)),
                     ..run_settings(
                         &sp.id,
                         seed,

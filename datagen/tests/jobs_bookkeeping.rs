@@ -582,3 +582,83 @@ fn per_family_ranges_parse_and_bad_ones_are_refused() {
         assert!(SceneSelection::parse_range(bad).is_err(), "{bad}");
     }
 }
+
+/// `render.sharp_level` reaches the input runs only: references gather ỹ at subpath A whatever
+/// it says (so a dataset's references do not depend on it), inputs as configured (absent: A,
+/// as every dataset rendered before the option).
+#[test]
+fn the_sharp_level_reaches_the_input_runs_and_not_the_references() {
+    use renderer::integrators::sppm::SharpLevel;
+    use std::sync::Mutex;
+    /// [`StandIn`] that notes each run's kind and sharp level.
+    #[derive(Default)]
+    struct Recorder {
+        inner: StandIn,
+        seen: Mutex<Vec<(&'static str, Option<SharpLevel>)>>,
+    }
+    impl SampleRenderer for Recorder {
+        fn reference(
+            &self,
+            xml: &Path,
+            spec: &RunSpec,
+            on_pass: &mut (dyn FnMut(u32) + Send),
+        ) -> Result<Image> {
+            let kind = ("reference", spec.sppm.sharp_level);
+            self.seen.lock().unwrap().push(kind);
+            self.inner.reference(xml, spec, on_pass)
+        }
+        fn inputs(
+            &self,
+            xml: &Path,
+            spec: &RunSpec,
+            on_bundle: &mut (dyn FnMut(Bundle) -> Result<()> + Send),
+            on_pass: &mut (dyn FnMut(u32) + Send),
+        ) -> Result<()> {
+            let kind = ("inputs", spec.sppm.sharp_level);
+            self.seen.lock().unwrap().push(kind);
+            self.inner.inputs(xml, spec, on_bundle, on_pass)
+        }
+    }
+    for (configured, inputs) in [
+        (None, SharpLevel::SubpathA),
+        (Some(SharpLevel::BothSubpaths), SharpLevel::BothSubpaths),
+    ] {
+        let mut config = test_config(8, &[2], 1, 4);
+        config.render.sharp_level = configured;
+        let dir = fresh_dir(&format!("fake-sharp-{}", inputs.name()));
+        let recorder = Recorder::default();
+        render_dataset(&config, &dir, options(Shard::ALL), &recorder).unwrap();
+        let seen = recorder.seen.lock().unwrap().clone();
+        assert!(seen.iter().any(|(k, _)| *k == "reference"), "{seen:?}");
+        assert!(seen.iter().any(|(k, _)| *k == "inputs"), "{seen:?}");
+        for (kind, sharp) in &seen {
+            let expected = if *kind == "inputs" {
+                inputs
+            } else {
+                SharpLevel::SubpathA
+            };
+            assert_eq!(*sharp, Some(expected), "{kind}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    // The key: absent leaves the fingerprint as it was; an unknown value is refused.
+    let plain = test_config(8, &[2], 1, 4);
+    let json = serde_json::to_string(&plain).unwrap();
+    assert!(!json.contains("sharp_level"), "{json}");
+    let mut both = plain.clone();
+    both.render.sharp_level = Some(SharpLevel::BothSubpaths);
+    assert_ne!(
+        datagen::manifest::config_fingerprint(&both),
+        datagen::manifest::config_fingerprint(&plain)
+    );
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/datagen/tiny.toml"),
+    )
+    .unwrap();
+    let edited = text.replacen("max_depth = 8", "max_depth = 8\nsharp_level = \"b\"", 1);
+    assert_ne!(edited, text, "tiny.toml no longer has `max_depth = 8`");
+    let e = datagen::config::Config::parse(&edited, "s.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("s.toml") && e.contains("sharp_level"), "{e}");
+}

@@ -52,6 +52,11 @@ pub struct EvalConfig {
     /// (renderer's `photon_focus`); absent: the renderer's default (none aimed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub photon_focus: Option<f32>,
+    /// Where our multi-level runs gather the sharp level's photons (renderer's `sharp_level`:
+    /// `"both"` or `"a"`); absent: the renderer's default (both). The standard run has one
+    /// subpath.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sharp_level: Option<renderer::integrators::sppm::SharpLevel>,
     /// Radius schedule of both runs: `sppm` (default) or `cppm`, which makes the study
     /// single-level CPPM against multi-level CPPM + reconstruction (the paper's "Ours + CPPM").
     /// Not written when `sppm`, so results saved before the option existed still match.
@@ -476,6 +481,16 @@ mod tests {
             assert!(e.contains("emitter_samples"), "{e}");
         }
         // The photon focus: absent is the renderer's default; a share outside [0, 1) is refused.
+        assert_eq!(c.sharp_level, None);
+        let a: EvalConfig = toml::from_str(&top("sharp_level = \"a\"\n")).unwrap();
+        assert_eq!(
+            a.sharp_level,
+            Some(renderer::integrators::sppm::SharpLevel::SubpathA)
+        );
+        let e = toml::from_str::<EvalConfig>(&top("sharp_level = \"b\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sharp_level") || e.contains("variant"), "{e}");
         assert_eq!(c.photon_focus, None);
         let aimed: EvalConfig = toml::from_str(&top("photon_focus = 0.5\n")).unwrap();
         aimed.validate().unwrap();

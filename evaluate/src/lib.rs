@@ -326,6 +326,7 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
             max_depth: config.max_depth.unwrap_or(DEFAULT_MAX_DEPTH),
             emitter_samples: config.emitter_samples,
             photon_focus: config.photon_focus.unwrap_or(DEFAULT_PHOTON_FOCUS),
+            sharp_level: config.sharp_level,
             schedule: config.schedule,
             scene_name: s.name.clone(),
             ..SppmSettings::default()

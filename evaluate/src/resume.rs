@@ -71,6 +71,12 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
     if let Some(n) = config.standard_emitter_samples.filter(|&n| n != 1) {
         settings["standard_emitter_samples"] = serde_json::json!(n);
     }
+    // Where ours gathers ỹ's photons is named unless at subpath A, the only place there was
+    // before the option: results saved with A-only bundles are not resumed as both.
+    let sharp_level = config.sharp_level.unwrap_or_default();
+    if sharp_level != renderer::integrators::sppm::SharpLevel::SubpathA {
+        settings["sharp_level"] = serde_json::json!(sharp_level);
+    }
     // The photon focus is named unless zero, the only share there was before the option.
     if let Some(f) = config.photon_focus.filter(|&f| f != 0.0) {
         settings["photon_focus"] = serde_json::json!(f);
@@ -178,4 +184,32 @@ pub fn load(
         )));
     }
     Ok(Ok(r))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use renderer::integrators::sppm::SharpLevel;
+
+    /// Where ours gathers ỹ's photons is part of what a saved scene depends on: results of
+    /// A-only bundles are never resumed as both's, and the default is both.
+    #[test]
+    fn the_sharp_level_is_in_the_fingerprint() {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
+        let config = |sharp: Option<SharpLevel>| -> EvalConfig {
+            let mut c: EvalConfig = toml::from_str(&format!(
+                "model = {:?}\noutput = \"o\"\nphotons_per_pass = 10\npasses = [2]\nseed = 1\n\
+                 [[scenes]]\nname = \"s\"\nxml = \"s.xml\"\nreference = \"r.exr\"\n",
+                model.display().to_string()
+            ))
+            .unwrap();
+            c.sharp_level = sharp;
+            c
+        };
+        let absent = run_fingerprint(&config(None)).unwrap();
+        let both = run_fingerprint(&config(Some(SharpLevel::BothSubpaths))).unwrap();
+        let a = run_fingerprint(&config(Some(SharpLevel::SubpathA))).unwrap();
+        assert_eq!(absent, both);
+        assert_ne!(a, both);
+    }
 }

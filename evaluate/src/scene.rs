@@ -243,6 +243,8 @@ pub fn evaluate_scene(
     let mut shown_final = false;
     let standard = SppmSettings {
         emitter_samples: Some(peers.standard_emitter_samples),
+        // One eye subpath: its only level is gathered there.
+        sharp_level: None,
         ..settings.clone()
     };
     let kept = run_timed(

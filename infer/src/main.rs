@@ -118,6 +118,10 @@ struct Cli {
     /// `render --emitter-samples` for `sppm-ml`) [default: 2].
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..), help_heading = "Rendering (--scene)")]
     emitter_samples: Option<u32>,
+    /// `--scene`: where the sharp level's photons are gathered (as `render --sharp-level`):
+    /// `both` eye subpaths' visible points, or `a` alone [default: both].
+    #[arg(long, value_enum, help_heading = "Rendering (--scene)")]
+    sharp_level: Option<renderer::integrators::sppm::SharpLevel>,
     /// `--scene`: turn unsupported plugins/attributes of the scene into warnings instead of
     /// errors (as `render --lenient`).
     #[arg(long, help_heading = "Rendering (--scene)")]
@@ -155,7 +159,7 @@ fn backend_parser() -> impl TypedValueParser<Value = Backend> {
 const DEFAULT_MODEL: &str = "models/default";
 
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
-const RENDERING_ONLY: [&str; 11] = [
+const RENDERING_ONLY: [&str; 12] = [
     "passes",
     "time",
     "photons",
@@ -163,6 +167,7 @@ const RENDERING_ONLY: [&str; 11] = [
     "seed",
     "max_depth",
     "emitter_samples",
+    "sharp_level",
     "lenient",
     "define",
     "state",
@@ -547,6 +552,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
             .max_depth
             .unwrap_or(renderer::integrators::sppm::DEFAULT_MAX_DEPTH),
         emitter_samples: cli.emitter_samples,
+        sharp_level: cli.sharp_level,
         ..SppmSettings::default()
     };
     let stop = StopCondition {

@@ -106,6 +106,7 @@ pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, I
             integrator: "synthetic".into(),
             schedule: bundle::DEFAULT_SCHEDULE.into(),
             emitter_samples: 1,
+            sharp_level: "a".into(),
             width: w as u32,
             height: h as u32,
         },

@@ -81,6 +81,7 @@ pub fn stand_in_bundle(
             integrator: "sppm-ml".into(),
             schedule: bundle::DEFAULT_SCHEDULE.into(),
             emitter_samples: 1,
+            sharp_level: "a".into(),
             width: width as u32,
             height: height as u32,
         },

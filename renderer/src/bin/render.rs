@@ -12,7 +12,7 @@ use renderer::description::{AovSpec, IntegratorDesc};
 use renderer::film::Film;
 use renderer::image_io::{write_channels_exr, write_png_srgb, write_rgb_exr};
 use renderer::integrators::path::PathTracer;
-use renderer::integrators::sppm::RadiusSchedule;
+use renderer::integrators::sppm::{RadiusSchedule, SharpLevel};
 use renderer::integrators::RayIntegrator;
 use renderer::parity::aov::{environment_seen, render_aovs, DepthIntegrator};
 use renderer::parity::direct::DirectIntegrator;
@@ -144,6 +144,12 @@ struct Cli {
     /// either way; off by default (docs/sppm.md, "Photons from infinite lights").
     #[arg(long, default_value_t = renderer::integrators::sppm::DEFAULT_PHOTON_FOCUS, help_heading = "SPPM")]
     photon_focus: f32,
+    /// SPPM: where `sppm-ml` gathers the sharp level ỹ's photons: `both` averages the gathers
+    /// around eye subpaths A's and B's visible points (the default: less noise for no time),
+    /// `a` gathers at A's alone, as the paper and every bundle before 2026-12-06 (docs/sppm.md,
+    /// "The sharp level at both subpaths"). Recorded in the bundles; `sppm` takes only `a`.
+    #[arg(long, value_enum, help_heading = "SPPM")]
+    sharp_level: Option<SharpLevel>,
 }
 
 fn main() -> ExitCode {
@@ -158,7 +164,7 @@ fn main() -> ExitCode {
 }
 
 /// Options that only the SPPM integrators read, by their clap ids.
-const SPPM_ONLY: [&str; 7] = [
+const SPPM_ONLY: [&str; 8] = [
     "photons",
     "passes",
     "time",
@@ -166,6 +172,7 @@ const SPPM_ONLY: [&str; 7] = [
     "max_radius",
     "schedule",
     "photon_focus",
+    "sharp_level",
 ];
 /// Options that only the direct integrator reads.
 const DIRECT_ONLY: [&str; 1] = ["bsdf_samples"];
@@ -735,6 +742,7 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
             .map_or(DEFAULT_MAX_DEPTH, |d| d as u32),
         emitter_samples: cli.emitter_samples,
         photon_focus: cli.photon_focus,
+        sharp_level: cli.sharp_level,
         threads: cli.threads,
         scene_name: cli.scene.display().to_string(),
         ..SppmSettings::default()

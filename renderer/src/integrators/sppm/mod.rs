@@ -84,6 +84,45 @@ pub const DEFAULT_EMITTER_SAMPLES_MULTI_LEVEL: u32 = 2;
 /// lights").
 pub const DEFAULT_PHOTON_FOCUS: f32 = 0.0;
 
+/// Where multi-level SPPM gathers the photon part of the sharp level ỹ.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+pub enum SharpLevel {
+    /// At eye subpath A's visible point alone (the paper's method; every bundle before
+    /// 2026-12-06).
+    #[serde(rename = "a")]
+    #[value(name = "a")]
+    SubpathA,
+    /// The mean of the gathers at r₁ around A's and B's visible points (B's query at r₅ already
+    /// finds those photons, so it costs nothing): ỹ's photon noise falls to 0.67–0.96 of A's
+    /// alone on caustic scenes, its expectation unchanged (docs/sppm.md, "The sharp level at
+    /// both subpaths"). ỹ then shares half of B's photon gather with the z̃ levels; its direct
+    /// part stays A's, so the emission split is unchanged.
+    #[default]
+    #[serde(rename = "both")]
+    #[value(name = "both")]
+    BothSubpaths,
+}
+
+impl SharpLevel {
+    /// The name in bundle metadata, run states and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            SharpLevel::SubpathA => "a",
+            SharpLevel::BothSubpaths => "both",
+        }
+    }
+}
+
 /// The warning for a bundle rendered with a reconstruction filter other than the box: its
 /// pixels are smoother than those of the box-filtered bundles the networks are trained on
 /// (the toolkit's scenes and datagen families name `box`). `None` for the box.
@@ -137,6 +176,14 @@ impl SppmSettings {
         })
     }
 
+    /// Where ỹ's photons are gathered: the setting, or the mode's default.
+    pub fn sharp_level(&self) -> SharpLevel {
+        self.sharp_level.unwrap_or(match self.mode {
+            SppmMode::MultiLevel => SharpLevel::default(),
+            SppmMode::Single => SharpLevel::SubpathA,
+        })
+    }
+
     /// CPPM states per pixel: one per level with a radius of its own under the CPPM
     /// schedule, none under SPPM's (whose radii live in [`PixelState::r2`]).
     fn cppm_levels(&self) -> usize {
@@ -177,6 +224,10 @@ pub struct SppmSettings {
     /// small against the scene ([`photon_focus`]). The estimate's expectation does not depend
     /// on it ([`crate::lights::PhotonFocus`]).
     pub photon_focus: f32,
+    /// Where multi-level SPPM gathers ỹ's photon part (single-level SPPM has no subpath B and
+    /// refuses anything but [`SharpLevel::SubpathA`]). `None`: the mode's default, both
+    /// subpaths for multi-level; see [`SppmSettings::sharp_level`].
+    pub sharp_level: Option<SharpLevel>,
     /// Worker threads (0: all cores). The output does not depend on it.
     pub threads: usize,
     /// Scene identifier written into bundle metadata.
@@ -196,6 +247,7 @@ impl Default for SppmSettings {
             max_depth: DEFAULT_MAX_DEPTH,
             emitter_samples: None,
             photon_focus: DEFAULT_PHOTON_FOCUS,
+            sharp_level: None,
             threads: 0,
             scene_name: String::new(),
         }
@@ -374,6 +426,7 @@ fn render_pixel(
         level.test_and_update();
     }
     let radii = state.radii(ctx.settings.mode);
+    let cppm_r1 = cppm.first().map(|level| level.r2.sqrt());
     let n = ctx.settings.photons_per_pass;
     // Gathers the levels `range` at `vp` into `out`: nested SPPM radii, or CPPM's own.
     let mut gather_levels =
@@ -388,20 +441,43 @@ fn render_pixel(
     let mut found = 0;
     match ctx.settings.mode {
         SppmMode::MultiLevel => {
-            estimates[0] = a.direct;
+            // ỹ's photon part at A's visible point, and (sharp level at both subpaths) at B's.
+            let mut photons_a = [Rgb::ZERO];
             if let Some(vp) = &a.vp {
-                gather_levels(vp, 0..1, &mut estimates[..1]);
+                gather_levels(vp, 0..1, &mut photons_a);
                 found += 1;
             }
             let b = b.unwrap_or_default();
             for e in &mut estimates[1..] {
                 *e = b.direct;
             }
+            let both = ctx.settings.sharp_level() == SharpLevel::BothSubpaths;
+            let mut photons_b = Rgb::ZERO;
             if let Some(vp) = &b.vp {
-                gather_levels(vp, 1..LEVELS, &mut estimates[1..]);
+                if !both {
+                    gather_levels(vp, 1..LEVELS, &mut estimates[1..]);
+                } else if let Some(r1) = cppm_r1 {
+                    // CPPM's level 1 counts A's photons for its test alone; B's are only added.
+                    gather_levels(vp, 1..LEVELS, &mut estimates[1..]);
+                    let mut photons = [Rgb::ZERO];
+                    gather::gather(scene, ctx.grid, vp, &[r1], n, &mut photons);
+                    photons_b = photons[0];
+                } else {
+                    // The radii are nested: one query at r₅ serves all five levels.
+                    let mut photons = [Rgb::ZERO; LEVELS];
+                    gather::gather(scene, ctx.grid, vp, &radii, n, &mut photons);
+                    for (e, p) in estimates[1..].iter_mut().zip(&photons[1..]) {
+                        *e += *p;
+                    }
+                    photons_b = photons[0];
+                }
                 found += 1;
             }
-            estimates[0] *= weight_a;
+            estimates[0] = if both {
+                a.direct * weight_a + (photons_a[0] * weight_a + photons_b * weight_b) * 0.5
+            } else {
+                (a.direct + photons_a[0]) * weight_a
+            };
             for e in &mut estimates[1..] {
                 *e *= weight_b;
             }
@@ -537,6 +613,7 @@ fn make_bundle(
             integrator: settings.mode.name().into(),
             schedule: settings.schedule.name().into(),
             emitter_samples: settings.emitter_samples(),
+            sharp_level: settings.sharp_level().name().into(),
             width: res.x,
             height: res.y,
         },
@@ -643,6 +720,12 @@ pub fn render_sppm_resumable(
             "photon focus (the share of infinite lights' photons aimed at what the camera sees) \
              must lie in [0, 1), got {}",
             settings.photon_focus
+        );
+    }
+    if settings.mode == SppmMode::Single && settings.sharp_level() != SharpLevel::SubpathA {
+        bail!(
+            "the sharp level at both subpaths needs multi-level SPPM (sppm-ml): standard SPPM \
+             traces one eye subpath"
         );
     }
     if !(settings.alpha > 0.0 && settings.alpha < 1.0) {

@@ -67,6 +67,20 @@ struct RunIdentity {
     /// zero, so files from before the option (which aimed none) read as such.
     #[serde(default, skip_serializing_if = "is_zero")]
     photon_focus: f32,
+    /// Where ỹ's photons are gathered ([`super::SharpLevel::name`]); not written for subpath A,
+    /// so files from before the option (which gathered there) read as such.
+    #[serde(default = "subpath_a", skip_serializing_if = "is_subpath_a")]
+    sharp_level: String,
+}
+
+/// [`super::SharpLevel::SubpathA`]'s name (serde's default of [`RunIdentity::sharp_level`]).
+fn subpath_a() -> String {
+    super::SharpLevel::SubpathA.name().into()
+}
+
+/// Whether `name` is [`super::SharpLevel::SubpathA`]'s (then it is left out of the header).
+fn is_subpath_a(name: &str) -> bool {
+    name == super::SharpLevel::SubpathA.name()
 }
 
 /// One (serde's default of [`RunIdentity::emitter_samples`]).
@@ -296,6 +310,7 @@ impl<'a> StateStore<'a> {
                 schedule: settings.schedule,
                 cppm: (settings.schedule == RadiusSchedule::Cppm).then(CppmParameters::current),
                 photon_focus: settings.photon_focus,
+                sharp_level: settings.sharp_level().name().into(),
             },
             levels: match settings.mode {
                 SppmMode::MultiLevel => LEVELS,

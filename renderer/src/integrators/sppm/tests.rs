@@ -1451,3 +1451,116 @@ fn photon_focus_keeps_the_estimate_and_densifies_the_view() {
         assert!(e.contains("photon focus"), "{e}");
     }
 }
+
+/// Mean over pixels of the stored variance of ỹ's pixel mean.
+fn sharp_variance(b: &Bundle) -> f64 {
+    let v = &b.variance;
+    let pixels = v.width * v.height;
+    (0..pixels)
+        .map(|p| v.data[p * v.channels] as f64)
+        .sum::<f64>()
+        / pixels as f64
+}
+
+/// Gathering ỹ's photons at both eye subpaths' visible points (the multi-level default) keeps
+/// ỹ's expectation — its photon part agrees with subpath A's alone over eight seeds — and cuts
+/// its variance; everything else of the bundle (the z̃ levels, the photon-free parts, the
+/// G-buffer, the radii) is bit-identical to an A-only run of the same seed under both radius
+/// schedules, and the bundle records the setting. Standard SPPM, with one subpath, refuses it.
+#[test]
+fn the_sharp_level_at_both_subpaths_keeps_its_expectation_and_cuts_its_noise() {
+    let scene = lit_box(8);
+    let run = |sharp: SharpLevel, schedule: RadiusSchedule, seed: u64| {
+        let s = SppmSettings {
+            sharp_level: Some(sharp),
+            schedule,
+            ..settings(SppmMode::MultiLevel, 2_000, seed)
+        };
+        render(&scene, &s, 32)
+    };
+    let (mut a_means, mut both_means) = (Vec::new(), Vec::new());
+    let (mut a_var, mut both_var) = (0.0, 0.0);
+    for seed in 1..=8 {
+        let a = run(SharpLevel::SubpathA, RadiusSchedule::Sppm, seed);
+        let both = run(SharpLevel::BothSubpaths, RadiusSchedule::Sppm, seed);
+        assert_eq!(
+            (a.meta.sharp_level.as_str(), both.meta.sharp_level.as_str()),
+            ("a", "both")
+        );
+        assert!(
+            bundle_bits_without_sharp(&a) == bundle_bits_without_sharp(&both),
+            "seed {seed}: only ỹ and its variance may differ"
+        );
+        assert_ne!(a.levels[0].data, both.levels[0].data);
+        a_means.push(photon_part_mean(&a));
+        both_means.push(photon_part_mean(&both));
+        a_var += sharp_variance(&a);
+        both_var += sharp_variance(&both);
+    }
+    let n = a_means.len() as f64;
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / n;
+    let spread = |v: &[f64]| {
+        let m = mean(v);
+        v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0) / n
+    };
+    let (ma, mb) = (mean(&a_means), mean(&both_means));
+    assert!(ma > 0.01, "the photons light the box: {ma}");
+    let sigma = (spread(&a_means) + spread(&both_means)).sqrt();
+    assert!(
+        (ma - mb).abs() < 4.0 * sigma,
+        "same expectation: {ma} vs {mb} (σ of the difference {sigma})"
+    );
+    assert!(
+        both_var < 0.8 * a_var,
+        "the second gather cuts ỹ's variance: {both_var} vs {a_var}"
+    );
+    // CPPM: level 1's radius follows A's photons alone, so the rest is unchanged as well.
+    let a = run(SharpLevel::SubpathA, RadiusSchedule::Cppm, 3);
+    let both = run(SharpLevel::BothSubpaths, RadiusSchedule::Cppm, 3);
+    assert!(bundle_bits_without_sharp(&a) == bundle_bits_without_sharp(&both));
+    assert_ne!(a.levels[0].data, both.levels[0].data);
+    // An A-only run is bit-identical for one and two threads too (the default's are checked
+    // in `bundles_are_bit_identical_for_one_and_two_threads`).
+    let s = SppmSettings {
+        sharp_level: Some(SharpLevel::SubpathA),
+        ..settings(SppmMode::MultiLevel, 2_000, 5)
+    };
+    let mut one = render(&scene, &s, 3);
+    let mut two = render(&scene, &SppmSettings { threads: 2, ..s }, 3);
+    one.meta.seconds = 0.0;
+    two.meta.seconds = 0.0;
+    assert!(bundle_bits(&one) == bundle_bits(&two));
+    // Standard SPPM has no subpath B.
+    let single = SppmSettings {
+        sharp_level: Some(SharpLevel::BothSubpaths),
+        ..settings(SppmMode::Single, 2_000, 1)
+    };
+    let stop = StopCondition {
+        checkpoints: vec![2],
+        seconds: None,
+    };
+    let err = render_sppm(&scene, &single, &stop, |_| Ok(()), |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("multi-level"), "{err}");
+}
+
+/// [`bundle_bits`] and the photon-free layers of everything but ỹ and its variance.
+fn bundle_bits_without_sharp(b: &Bundle) -> Vec<u32> {
+    let mut c = b.clone();
+    c.levels[0].data.fill(0.0);
+    let channels = c.variance.channels;
+    assert_eq!(channels, LEVELS);
+    for p in 0..c.variance.width * c.variance.height {
+        c.variance.data[p * channels] = 0.0;
+    }
+    let mut bits = bundle_bits(&c);
+    let d = c
+        .direct
+        .as_ref()
+        .expect("multi-level bundles carry the photon-free parts");
+    for img in [&d.y, &d.z, &d.variance] {
+        bits.extend(img.data.iter().map(|x| x.to_bits()));
+    }
+    bits
+}
