@@ -150,6 +150,20 @@ fn assign_manifest(dir: &Path, manifest: &Manifest) {
         .unwrap();
 }
 
+/// The evaluation reference the re-assembled manifest lists for scene `id`.
+fn listed_reference(
+    dir: &Path,
+    manifest: &Manifest,
+    id: &str,
+) -> Option<bundle::manifest::EvaluationReference> {
+    let plan = Plan::new(&manifest.config);
+    let assembled = assemble_manifest(dir, &manifest.config, &plan, false)
+        .unwrap()
+        .unwrap();
+    let listed = assembled.scenes.iter().find(|s| s.id == id).unwrap();
+    listed.evaluation_reference.clone()
+}
+
 fn options(manifest: &Manifest, target: f64, max_factor: u32) -> EvaluationOptions {
     EvaluationOptions {
         splits: vec![manifest.scenes[0].split],
@@ -245,12 +259,10 @@ fn runs_grow_until_the_noise_meets_the_target_and_the_manifest_lists_them() {
         r.input_relmse
     );
     // The manifest, re-assembled, lists it; check verifies its file.
-    let plan = Plan::new(&manifest.config);
-    let assembled = assemble_manifest(&dir, &manifest.config, &plan, false)
-        .unwrap()
-        .unwrap();
-    let listed = assembled.scenes.iter().find(|s| s.id == scene.id).unwrap();
-    assert_eq!(listed.evaluation_reference.as_ref(), Some(r));
+    assert_eq!(
+        listed_reference(&dir, &manifest, &scene.id).as_ref(),
+        Some(r)
+    );
     assert_eq!(r.path, image_path(&scene.id));
     assert!(dir.join(record_path(&scene.id)).is_file());
     let report = datagen::check::check_dataset(&dir, |_, _| {});
@@ -404,12 +416,10 @@ fn a_photon_floor_starts_the_runs_again_with_more_photons_and_keeps_runs_above_i
             .ends_with(&format!(".n{floor}.state")));
     }
     // The manifest lists the new reference with its photons.
-    let plan = Plan::new(&manifest.config);
-    let assembled = assemble_manifest(&dir, &manifest.config, &plan, false)
-        .unwrap()
-        .unwrap();
-    let listed = assembled.scenes.iter().find(|s| s.id == scene.id).unwrap();
-    assert_eq!(listed.evaluation_reference.as_ref(), Some(r));
+    assert_eq!(
+        listed_reference(&dir, &manifest, &scene.id).as_ref(),
+        Some(r)
+    );
     // A lower floor later keeps the reference with more photons; a stricter target continues
     // its runs with their photons.
     opts.min_photons = 0;
