@@ -53,6 +53,13 @@ pub const SHARP_LEVELS: [&str; 2] = ["a", "both"];
 /// option).
 pub const SHARP_LEVEL_A: &str = "a";
 
+/// What [`BundleMeta::sampler`] may say: how the eye subpaths' random numbers relate across
+/// passes (docs/sppm.md, "Eye samples across passes").
+pub const SAMPLERS: [&str; 2] = ["independent", "ldsampler"];
+
+/// The sampler of a bundle whose metadata names none (every bundle written before the option).
+pub const SAMPLER_INDEPENDENT: &str = "independent";
+
 /// Channel names of an RGB layer.
 const RGB: [&str; 3] = ["R", "G", "B"];
 /// Channel names of the normal layer.
@@ -265,6 +272,14 @@ pub struct BundleMeta {
     /// `a`, so bundles rendered before the option keep their metadata.
     #[serde(default = "sharp_level_a", skip_serializing_if = "is_sharp_level_a")]
     pub sharp_level: String,
+    /// Where the eye subpaths' random numbers came from across passes: `independent` draws or
+    /// the `ldsampler` sequence (docs/sppm.md). Not written for `independent`, so bundles
+    /// rendered before the option keep their metadata.
+    #[serde(
+        default = "sampler_independent",
+        skip_serializing_if = "is_sampler_independent"
+    )]
+    pub sampler: String,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
@@ -284,6 +299,16 @@ fn sharp_level_a() -> String {
 /// Whether `name` is [`SHARP_LEVEL_A`] (then [`BundleMeta::sharp_level`] is not written).
 fn is_sharp_level_a(name: &str) -> bool {
     name == SHARP_LEVEL_A
+}
+
+/// [`SAMPLER_INDEPENDENT`] as a `String` (serde's default of [`BundleMeta::sampler`]).
+fn sampler_independent() -> String {
+    SAMPLER_INDEPENDENT.into()
+}
+
+/// Whether `name` is [`SAMPLER_INDEPENDENT`] (then [`BundleMeta::sampler`] is not written).
+fn is_sampler_independent(name: &str) -> bool {
+    name == SAMPLER_INDEPENDENT
 }
 
 /// One (serde's default of [`BundleMeta::emitter_samples`]).
@@ -578,6 +603,15 @@ fn check_meta(path: &Path, decoded: &Decoded, meta: &BundleMeta) -> Result<(), B
             ),
         ));
     }
+    if !SAMPLERS.contains(&meta.sampler.as_str()) {
+        return Err(bad(
+            META_ATTRIBUTE,
+            format!(
+                "sampler \"{}\" (expected one of {SAMPLERS:?})",
+                meta.sampler
+            ),
+        ));
+    }
     if !SCHEDULES.contains(&meta.schedule.as_str()) {
         return Err(bad(
             META_ATTRIBUTE,
@@ -767,6 +801,7 @@ mod tests {
                 schedule: DEFAULT_SCHEDULE.into(),
                 emitter_samples: 1,
                 sharp_level: "a".into(),
+                sampler: SAMPLER_INDEPENDENT.into(),
                 width: width as u32,
                 height: height as u32,
             },
@@ -875,6 +910,20 @@ mod tests {
             "bath",
             |m, v| m.sharp_level = v.into(),
             |m| &m.sharp_level,
+        );
+    }
+
+    /// The eye sampler is written for the low-discrepancy sequence only (old bundles read as
+    /// independent) and checked.
+    #[test]
+    fn sampler_is_written_for_ldsampler_only_and_checked() {
+        assert_written_unless_default(
+            "sampler",
+            "independent",
+            "ldsampler",
+            "xdsampler",
+            |m, v| m.sampler = v.into(),
+            |m| &m.sampler,
         );
     }
 

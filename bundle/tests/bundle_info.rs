@@ -47,6 +47,7 @@ fn write_sample(path: &std::path::Path, passes: u32) {
             schedule: bundle::DEFAULT_SCHEDULE.into(),
             emitter_samples: 1,
             sharp_level: "a".into(),
+            sampler: "independent".into(),
             width: w as u32,
             height: h as u32,
         },

@@ -64,6 +64,12 @@ pub struct RenderConfig {
     /// serialised when absent, so older configs keep their fingerprints.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sharp_level: Option<renderer::integrators::sppm::SharpLevel>,
+    /// Where the input runs' eye subpaths take their random numbers across passes
+    /// (`"independent"` or `"ldsampler"`; absent: independent, as every dataset rendered before
+    /// the option). References draw independently whatever this says. Not serialised when
+    /// absent, so older configs keep their fingerprints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampler: Option<renderer::integrators::sppm::EyeSampler>,
     /// Input regimes (`[[render.regimes]]`): each scene is rendered in one of them — its own
     /// photon density, pass counts, seeds and image side — instead of `photons_per_pass`,
     /// `passes`, `seeds` and the config's size. Absent: every scene as above. Every optional

@@ -718,6 +718,7 @@ fn run_job(
                 sppm: SppmSettings {
                     emitter_samples: Some(config.render.emitter_samples.unwrap_or(1)),
                     sharp_level: Some(config.render.sharp_level.unwrap_or(SharpLevel::SubpathA)),
+                    sampler: config.render.sampler.unwrap_or_default(),
                     ..run_settings(
                         &sp.id,
                         seed,

@@ -57,6 +57,10 @@ pub struct EvalConfig {
     /// subpath.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sharp_level: Option<renderer::integrators::sppm::SharpLevel>,
+    /// Where the eye subpaths' random numbers come from across passes, in both SPPM runs alike
+    /// (renderer's `sampler`: `"independent"` or `"ldsampler"`); absent: independent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampler: Option<renderer::integrators::sppm::EyeSampler>,
     /// Radius schedule of both runs: `sppm` (default) or `cppm`, which makes the study
     /// single-level CPPM against multi-level CPPM + reconstruction (the paper's "Ours + CPPM").
     /// Not written when `sppm`, so results saved before the option existed still match.
@@ -481,6 +485,16 @@ mod tests {
             assert!(e.contains("emitter_samples"), "{e}");
         }
         // The photon focus: absent is the renderer's default; a share outside [0, 1) is refused.
+        assert_eq!(c.sampler, None);
+        let ld: EvalConfig = toml::from_str(&top("sampler = \"ldsampler\"\n")).unwrap();
+        assert_eq!(
+            ld.sampler,
+            Some(renderer::integrators::sppm::EyeSampler::LowDiscrepancy)
+        );
+        let e = toml::from_str::<EvalConfig>(&top("sampler = \"sobol\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sampler") || e.contains("variant"), "{e}");
         assert_eq!(c.sharp_level, None);
         let a: EvalConfig = toml::from_str(&top("sharp_level = \"a\"\n")).unwrap();
         assert_eq!(

@@ -39,7 +39,8 @@ checkpoints around it. Render times exclude the evaluator's own callback work (b
 and error computation at checkpoints), so the dense checkpoints do not slow the baseline. \
 Overhead = multi-level render seconds / single-level render seconds at the same pass count − 1. \
 Light samples per visible point: ours' runs take emitter_samples (absent: two, stratified), the \
-standard run standard_emitter_samples (absent: one, the paper's standard SPPM).";
+standard run standard_emitter_samples (absent: one, the paper's standard SPPM). Both SPPM runs \
+take the same eye sampler (sampler; absent: independent).";
 
 /// The outcome of one scene.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -327,6 +328,7 @@ pub fn run(config: &EvalConfig, resume: bool) -> Result<EvalResults> {
             emitter_samples: config.emitter_samples,
             photon_focus: config.photon_focus.unwrap_or(DEFAULT_PHOTON_FOCUS),
             sharp_level: config.sharp_level,
+            sampler: config.sampler.unwrap_or_default(),
             schedule: config.schedule,
             scene_name: s.name.clone(),
             ..SppmSettings::default()

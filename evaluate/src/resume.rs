@@ -77,6 +77,13 @@ pub fn run_fingerprint(config: &EvalConfig) -> Result<String> {
     if sharp_level != renderer::integrators::sppm::SharpLevel::SubpathA {
         settings["sharp_level"] = serde_json::json!(sharp_level);
     }
+    // The eye sampler is named unless independent, the only one there was before the option.
+    if let Some(s) = config
+        .sampler
+        .filter(|&s| s != renderer::integrators::sppm::EyeSampler::Independent)
+    {
+        settings["sampler"] = serde_json::json!(s);
+    }
     // The photon focus is named unless zero, the only share there was before the option.
     if let Some(f) = config.photon_focus.filter(|&f| f != 0.0) {
         settings["photon_focus"] = serde_json::json!(f);
@@ -189,12 +196,12 @@ pub fn load(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use renderer::integrators::sppm::SharpLevel;
+    use renderer::integrators::sppm::{EyeSampler, SharpLevel};
 
     /// Where ours gathers ỹ's photons is part of what a saved scene depends on: results of
     /// A-only bundles are never resumed as both's, and the default is both.
     #[test]
-    fn the_sharp_level_is_in_the_fingerprint() {
+    fn the_sharp_level_and_the_sampler_are_in_the_fingerprint() {
         let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
         let config = |sharp: Option<SharpLevel>| -> EvalConfig {
             let mut c: EvalConfig = toml::from_str(&format!(
@@ -211,5 +218,14 @@ mod tests {
         let a = run_fingerprint(&config(Some(SharpLevel::SubpathA))).unwrap();
         assert_eq!(absent, both);
         assert_ne!(a, both);
+        // The eye sampler likewise: independent is what there was before the option.
+        let sampled = |s: Option<EyeSampler>| {
+            let mut c = config(None);
+            c.sampler = s;
+            run_fingerprint(&c).unwrap()
+        };
+        assert_eq!(sampled(None), absent);
+        assert_eq!(sampled(Some(EyeSampler::Independent)), absent);
+        assert_ne!(sampled(Some(EyeSampler::LowDiscrepancy)), absent);
     }
 }

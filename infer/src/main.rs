@@ -122,6 +122,10 @@ struct Cli {
     /// `both` eye subpaths' visible points, or `a` alone [default: both].
     #[arg(long, value_enum, help_heading = "Rendering (--scene)")]
     sharp_level: Option<renderer::integrators::sppm::SharpLevel>,
+    /// `--scene`: where the eye subpaths' random numbers come from across passes (as `render
+    /// --sampler`): `independent` or `ldsampler` [default: independent].
+    #[arg(long, value_enum, help_heading = "Rendering (--scene)")]
+    sampler: Option<renderer::integrators::sppm::EyeSampler>,
     /// `--scene`: turn unsupported plugins/attributes of the scene into warnings instead of
     /// errors (as `render --lenient`).
     #[arg(long, help_heading = "Rendering (--scene)")]
@@ -159,7 +163,7 @@ fn backend_parser() -> impl TypedValueParser<Value = Backend> {
 const DEFAULT_MODEL: &str = "models/default";
 
 /// The options that only `--scene` reads (it renders; `--input` does not), by their clap ids.
-const RENDERING_ONLY: [&str; 12] = [
+const RENDERING_ONLY: [&str; 13] = [
     "passes",
     "time",
     "photons",
@@ -168,6 +172,7 @@ const RENDERING_ONLY: [&str; 12] = [
     "max_depth",
     "emitter_samples",
     "sharp_level",
+    "sampler",
     "lenient",
     "define",
     "state",
@@ -553,6 +558,7 @@ fn render_bundle(cli: &Cli, scene_path: &Path, output: &Path) -> Result<Bundle> 
             .unwrap_or(renderer::integrators::sppm::DEFAULT_MAX_DEPTH),
         emitter_samples: cli.emitter_samples,
         sharp_level: cli.sharp_level,
+        sampler: cli.sampler.unwrap_or_default(),
         ..SppmSettings::default()
     };
     let stop = StopCondition {

@@ -107,6 +107,7 @@ pub fn synthetic_bundle(w: usize, h: usize, noise: f32, seed: u64) -> (Bundle, I
             schedule: bundle::DEFAULT_SCHEDULE.into(),
             emitter_samples: 1,
             sharp_level: "a".into(),
+            sampler: "independent".into(),
             width: w as u32,
             height: h as u32,
         },

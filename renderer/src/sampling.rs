@@ -9,7 +9,7 @@ use std::f32::consts::{FRAC_PI_4, PI};
 
 /// SplitMix64 finaliser: a bijective 64-bit mix with good avalanche.
 #[inline]
-fn mix64(mut z: u64) -> u64 {
+pub(crate) fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)

@@ -179,17 +179,25 @@ pub fn check_identity<I: Serialize>(path: &Path, saved: &I, here: &I) -> Result<
     let (Some(a), Some(b)) = (saved.as_object(), here.as_object()) else {
         bail!("run identities must be JSON objects");
     };
-    let mut fields: Vec<_> = b.iter().collect();
-    fields.sort_by_key(|(key, _)| key.as_str() != "integrator");
-    for (key, value) in fields {
-        let old = a.get(key).unwrap_or(&serde_json::Value::Null);
+    // Every key of either side: a setting at its default is left out of an identity, so a key
+    // only one side has is a setting that differs from the default on that side.
+    let mut keys: Vec<&String> = b
+        .keys()
+        .chain(a.keys().filter(|k| !b.contains_key(*k)))
+        .collect();
+    keys.sort_by_key(|key| key.as_str() != "integrator");
+    let null = serde_json::Value::Null;
+    let shown = |v: &serde_json::Value| {
+        if v.is_null() {
+            "absent (the default)".to_string()
+        } else {
+            v.to_string()
+        }
+    };
+    for key in keys {
+        let (old, value) = (a.get(key).unwrap_or(&null), b.get(key).unwrap_or(&null));
         if old != value {
-            // A key the file lacks was written by an older build and holds its default.
-            let old = if old.is_null() {
-                "absent (the default)".to_string()
-            } else {
-                old.to_string()
-            };
+            let (old, value) = (shown(old), shown(value));
             let hint = if key == "scene_fingerprint" {
                 " (the scene file, a file it reads — include, mesh, texture — or its -D overrides \
                  changed)"
@@ -282,6 +290,40 @@ impl<'a> Cursor<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Identities are compared on every key of either side: a setting left out at its default
+    /// on one side and set on the other is a difference, named with both values.
+    #[test]
+    fn identities_differ_on_a_key_only_one_side_has() {
+        #[derive(serde::Serialize)]
+        struct Id {
+            integrator: &'static str,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            sampler: Option<&'static str>,
+        }
+        let path = Path::new("run.state");
+        let plain = Id {
+            integrator: "sppm-ml",
+            sampler: None,
+        };
+        let set = Id {
+            integrator: "sppm-ml",
+            sampler: Some("ldsampler"),
+        };
+        check_identity(path, &plain, &plain).unwrap();
+        check_identity(path, &set, &set).unwrap();
+        for (saved, here, old, new) in [
+            (&set, &plain, "\"ldsampler\"", "absent (the default)"),
+            (&plain, &set, "absent (the default)", "\"ldsampler\""),
+        ] {
+            let e = check_identity(path, saved, here).unwrap_err().to_string();
+            assert!(
+                e.contains("run.state")
+                    && e.contains(&format!("sampler: {old} in the file, {new} in this run")),
+                "{e}"
+            );
+        }
+    }
 
     #[test]
     fn the_scene_fingerprint_changes_with_any_file_the_scene_reads() {

@@ -82,6 +82,7 @@ pub fn stand_in_bundle(
             schedule: bundle::DEFAULT_SCHEDULE.into(),
             emitter_samples: 1,
             sharp_level: "a".into(),
+            sampler: "independent".into(),
             width: width as u32,
             height: height as u32,
         },

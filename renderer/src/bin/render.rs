@@ -12,7 +12,7 @@ use renderer::description::{AovSpec, IntegratorDesc};
 use renderer::film::Film;
 use renderer::image_io::{write_channels_exr, write_png_srgb, write_rgb_exr};
 use renderer::integrators::path::PathTracer;
-use renderer::integrators::sppm::{RadiusSchedule, SharpLevel};
+use renderer::integrators::sppm::{EyeSampler, RadiusSchedule, SharpLevel};
 use renderer::integrators::RayIntegrator;
 use renderer::parity::aov::{environment_seen, render_aovs, DepthIntegrator};
 use renderer::parity::direct::DirectIntegrator;
@@ -150,6 +150,12 @@ struct Cli {
     /// "The sharp level at both subpaths"). Recorded in the bundles; `sppm` takes only `a`.
     #[arg(long, value_enum, help_heading = "SPPM")]
     sharp_level: Option<SharpLevel>,
+    /// SPPM: where the eye subpaths' random numbers come from across passes: `independent`
+    /// draws (the default; every bundle before 2026-12-06), or `ldsampler`, a scrambled
+    /// (0, 2)-sequence per pixel that stratifies the film position, lens and light samples over
+    /// the passes (docs/sppm.md, "Eye samples across passes"). Recorded in the bundles.
+    #[arg(long, value_enum, default_value_t = EyeSampler::Independent, help_heading = "SPPM")]
+    sampler: EyeSampler,
 }
 
 fn main() -> ExitCode {
@@ -164,7 +170,7 @@ fn main() -> ExitCode {
 }
 
 /// Options that only the SPPM integrators read, by their clap ids.
-const SPPM_ONLY: [&str; 8] = [
+const SPPM_ONLY: [&str; 9] = [
     "photons",
     "passes",
     "time",
@@ -173,6 +179,7 @@ const SPPM_ONLY: [&str; 8] = [
     "schedule",
     "photon_focus",
     "sharp_level",
+    "sampler",
 ];
 /// Options that only the direct integrator reads.
 const DIRECT_ONLY: [&str; 1] = ["bsdf_samples"];
@@ -743,6 +750,7 @@ fn run_sppm(cli: &Cli, scene: &Scene, multi_level: bool) -> Result<()> {
         emitter_samples: cli.emitter_samples,
         photon_focus: cli.photon_focus,
         sharp_level: cli.sharp_level,
+        sampler: cli.sampler,
         threads: cli.threads,
         scene_name: cli.scene.display().to_string(),
         ..SppmSettings::default()

@@ -25,6 +25,7 @@
 pub mod accumulate;
 pub mod cppm;
 pub mod gather;
+pub mod pass_sampler;
 pub mod photon_focus;
 pub mod photon_map;
 pub mod photon_trace;
@@ -50,6 +51,8 @@ use crate::threads::with_threads;
 use crate::state_file::StateFile;
 use accumulate::{GBufferSum, Welford};
 use cppm::CppmLevel;
+pub use pass_sampler::EyeSampler;
+use pass_sampler::PassSampler;
 use photon_map::PhotonGrid;
 pub use radius::RadiusSchedule;
 use radius::{nested_radii, shrink_factor, LEVELS};
@@ -228,6 +231,10 @@ pub struct SppmSettings {
     /// refuses anything but [`SharpLevel::SubpathA`]). `None`: the mode's default, both
     /// subpaths for multi-level; see [`SppmSettings::sharp_level`].
     pub sharp_level: Option<SharpLevel>,
+    /// Where the eye subpaths' random numbers come from across passes: independent draws, or
+    /// a low-discrepancy sequence that stratifies each pixel's first draws over the passes
+    /// (docs/sppm.md, "Eye samples across passes").
+    pub sampler: EyeSampler,
     /// Worker threads (0: all cores). The output does not depend on it.
     pub threads: usize,
     /// Scene identifier written into bundle metadata.
@@ -248,6 +255,7 @@ impl Default for SppmSettings {
             emitter_samples: None,
             photon_focus: DEFAULT_PHOTON_FOCUS,
             sharp_level: None,
+            sampler: EyeSampler::Independent,
             threads: 0,
             scene_name: String::new(),
         }
@@ -388,7 +396,14 @@ fn render_pixel(
     let pixel = UVec2::new((index % width) as u32, (index / width) as u32);
     // Each subpath with the reconstruction filter's weight of its film position.
     let trace = |sub: u64| -> (EyePath, f32) {
-        let mut rng = rng_for(ctx.settings.seed, ctx.pass as u64, 2 * index as u64 + sub);
+        let stream = 2 * index as u64 + sub;
+        let mut rng = PassSampler::new(
+            rng_for(ctx.settings.seed, ctx.pass as u64, stream),
+            ctx.settings.sampler,
+            ctx.settings.seed,
+            stream,
+            ctx.pass,
+        );
         let u_film = rng.next_2d();
         let u_lens = rng.next_2d();
         let sample = scene.camera.sample_ray(pixel, u_film, u_lens);
@@ -614,6 +629,7 @@ fn make_bundle(
             schedule: settings.schedule.name().into(),
             emitter_samples: settings.emitter_samples(),
             sharp_level: settings.sharp_level().name().into(),
+            sampler: settings.sampler.name().into(),
             width: res.x,
             height: res.y,
         },

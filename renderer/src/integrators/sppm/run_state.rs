@@ -71,6 +71,15 @@ struct RunIdentity {
     /// so files from before the option (which gathered there) read as such.
     #[serde(default = "subpath_a", skip_serializing_if = "is_subpath_a")]
     sharp_level: String,
+    /// Where the eye subpaths' random numbers come from across passes; not written for
+    /// independent draws, so files from before the option (which drew so) read as such.
+    #[serde(default, skip_serializing_if = "is_independent")]
+    sampler: super::EyeSampler,
+}
+
+/// Whether the eye sampler is the independent one (then it is left out of the header).
+fn is_independent(sampler: &super::EyeSampler) -> bool {
+    *sampler == super::EyeSampler::Independent
 }
 
 /// [`super::SharpLevel::SubpathA`]'s name (serde's default of [`RunIdentity::sharp_level`]).
@@ -311,6 +320,7 @@ impl<'a> StateStore<'a> {
                 cppm: (settings.schedule == RadiusSchedule::Cppm).then(CppmParameters::current),
                 photon_focus: settings.photon_focus,
                 sharp_level: settings.sharp_level().name().into(),
+                sampler: settings.sampler,
             },
             levels: match settings.mode {
                 SppmMode::MultiLevel => LEVELS,

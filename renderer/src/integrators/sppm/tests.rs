@@ -1272,11 +1272,8 @@ fn hidden_emitters_stay_hidden_through_a_mask() {
     assert_eq!(through_the_panel(&scene), Rgb::ZERO);
 }
 
-/// Light samples at the visible point (`emitter_samples`, their light choices stratified): the
-/// photon-free part keeps its expectation and loses variance. Two ceiling lights of unequal
-/// power, so that one sample picks either and two stratified ones tend to take both.
-#[test]
-fn stratified_light_samples_keep_the_direct_light_and_cut_its_variance() {
+/// A box lit by two ceiling lights of unequal power, seen from inside at 8×8 pixels.
+fn two_light_box() -> Scene {
     let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
     let mut shapes = box_walls(0, 0);
     shapes.extend([
@@ -1297,7 +1294,7 @@ fn stratified_light_samples_keep_the_direct_light_and_cut_its_variance() {
             Some(Rgb::splat(3.0)),
         ),
     ]);
-    let scene = scene(
+    scene(
         camera(
             Vec3::new(0.0, 0.0, -0.95),
             Vec3::new(0.0, -0.3, 1.0),
@@ -1307,7 +1304,15 @@ fn stratified_light_samples_keep_the_direct_light_and_cut_its_variance() {
         vec![diffuse(0.6)],
         shapes,
         vec![],
-    );
+    )
+}
+
+/// Light samples at the visible point (`emitter_samples`, their light choices stratified): the
+/// photon-free part keeps its expectation and loses variance. Two ceiling lights of unequal
+/// power, so that one sample picks either and two stratified ones tend to take both.
+#[test]
+fn stratified_light_samples_keep_the_direct_light_and_cut_its_variance() {
+    let scene = two_light_box();
     // Image mean of path A's photon-free part, the variance of that mean, and the mean
     // per-pixel variance of the pixel means.
     let direct = |n: u32| {
@@ -1563,4 +1568,114 @@ fn bundle_bits_without_sharp(b: &Bundle) -> Vec<u32> {
         bits.extend(img.data.iter().map(|x| x.to_bits()));
     }
     bits
+}
+
+/// The low-discrepancy eye sampler (`EyeSampler::LowDiscrepancy`): every layer keeps its
+/// expectation (image means over eight seeds within 4σ of the independent draws'), the
+/// photon-free part's error across seeds falls well below the independent draws' (its passes
+/// stratify the film position and the light samples), the bundle says which sampler made it,
+/// and the render is bit-identical on one and two threads and when resumed.
+#[test]
+fn the_low_discrepancy_sampler_keeps_the_estimate_and_cuts_the_error() {
+    let scene = two_light_box();
+    let seeds = 8u64;
+    // Per layer (A's photon-free part, ỹ, z̃4): the image mean of each seed, and the mean over
+    // pixels of the per-pixel variance across seeds (the error of one seed's pixel).
+    let run = |sampler: EyeSampler| -> Vec<(Vec<f64>, f64)> {
+        let bundles: Vec<Bundle> = (0..seeds)
+            .map(|seed| {
+                let s = SppmSettings {
+                    sampler,
+                    ..settings(SppmMode::MultiLevel, 1_000, 100 + seed)
+                };
+                let b = render(&scene, &s, 64);
+                assert_eq!(b.meta.sampler, sampler.name());
+                b
+            })
+            .collect();
+        let layers = |b: &Bundle| -> [Image; 3] {
+            [
+                b.direct.clone().expect("multi-level bundles carry it").y,
+                b.levels[0].clone(),
+                b.levels[4].clone(),
+            ]
+        };
+        let all: Vec<[Image; 3]> = bundles.iter().map(layers).collect();
+        (0..3)
+            .map(|l| {
+                let means: Vec<f64> = all.iter().map(|ls| mean_rgb(&ls[l])).collect();
+                let values = all[0][l].data.len();
+                let mut spread = 0.0;
+                for v in 0..values {
+                    let xs: Vec<f64> = all.iter().map(|ls| ls[l].data[v] as f64).collect();
+                    let m = xs.iter().sum::<f64>() / xs.len() as f64;
+                    spread +=
+                        xs.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (xs.len() - 1) as f64;
+                }
+                (means, spread / values as f64)
+            })
+            .collect()
+    };
+    let independent = run(EyeSampler::Independent);
+    let low = run(EyeSampler::LowDiscrepancy);
+    for (l, name) in ["ydirect", "y", "z4"].iter().enumerate() {
+        let stats = |means: &[f64]| {
+            let m = means.iter().sum::<f64>() / means.len() as f64;
+            let v = means.iter().map(|x| (x - m) * (x - m)).sum::<f64>()
+                / ((means.len() - 1) * means.len()) as f64;
+            (m, v)
+        };
+        let (mi, vi) = stats(&independent[l].0);
+        let (ml, vl) = stats(&low[l].0);
+        let sigma = (vi + vl).sqrt();
+        assert!(mi > 0.05, "{name}: the lights reach the walls ({mi})");
+        assert!(
+            (mi - ml).abs() < 4.0 * sigma,
+            "{name}: same expectation: {mi} vs {ml} (σ of the difference {sigma})"
+        );
+    }
+    let (ei, el) = (independent[0].1, low[0].1);
+    assert!(
+        el < 0.5 * ei,
+        "the photon-free part's error across seeds falls: {el} vs {ei}"
+    );
+    // Bit-identical on two threads and when resumed after a stop.
+    let s = SppmSettings {
+        sampler: EyeSampler::LowDiscrepancy,
+        ..settings(SppmMode::MultiLevel, 1_000, 3)
+    };
+    let mut one = render(&scene, &s, 5);
+    let mut two = render(
+        &scene,
+        &SppmSettings {
+            threads: 2,
+            ..s.clone()
+        },
+        5,
+    );
+    one.meta.seconds = 0.0;
+    two.meta.seconds = 0.0;
+    assert_eq!(one.meta, two.meta);
+    assert!(
+        bundle_bits(&one) == bundle_bits(&two),
+        "thread count changed the bundle"
+    );
+    let file = StateFile {
+        path: state_path("resume-ldsampler"),
+        interval: 1e-12,
+        scene_fingerprint: "two-light box".into(),
+    };
+    assert!(run_with_state(&scene, &s, &[5], &file, Some(3)).is_err());
+    let resumed = run_with_state(&scene, &s, &[5], &file, None).unwrap();
+    assert!(bundle_bits(&resumed[0]) == bundle_bits(&one));
+    // A state of the other sampler is refused.
+    let other = SppmSettings {
+        sampler: EyeSampler::Independent,
+        ..s.clone()
+    };
+    let err = run_with_state(&scene, &other, &[7], &file, None)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("sampler"), "{err}");
+    let _ = std::fs::remove_dir_all(file.path.parent().unwrap());
 }

@@ -12,7 +12,7 @@
 use crate::bsdf::{Bsdf, BsdfSample, Lobe, ShadingPoint, TransportMode};
 use crate::frame::Frame;
 use crate::math::Ray;
-use crate::sampling::{power_heuristic, Pcg32, UniformSource, ONE_MINUS_EPSILON};
+use crate::sampling::{power_heuristic, UniformSource, ONE_MINUS_EPSILON};
 use crate::scene::{EmitterHit, Scene, SurfaceInteraction};
 use crate::spectrum::Rgb;
 use glam::Vec3;
@@ -89,7 +89,7 @@ fn sharp_probability(share: f32) -> f32 {
 /// The part an eye path takes at a diffuse vertex and the probability of that choice: the
 /// whole model (probability 1) without a sharp part, else the sharp part with probability `q`
 /// and the broad one otherwise (one random number, drawn only then).
-fn choose_part(sharp: Option<f32>, rng: &mut Pcg32) -> (Part, f32) {
+fn choose_part(sharp: Option<f32>, rng: &mut impl UniformSource) -> (Part, f32) {
     match sharp {
         None => (Part::All, 1.0),
         Some(q) if rng.next_f32() < q => (Part::Sharp, q),
@@ -176,7 +176,7 @@ fn direct_light(
     sp: &ShadingPoint,
     bsdf: &Bsdf,
     wo: Vec3,
-    rng: &mut Pcg32,
+    rng: &mut impl UniformSource,
     n: u32,
 ) -> Rgb {
     let mut sample = |k: u32| {
@@ -245,10 +245,10 @@ fn visible_point(
 /// Traces one eye subpath starting with `ray`; `max_depth` bounds the number of delta/glossy
 /// bounces before the path gives up without a visible point; `emitter_samples` light samples
 /// estimate direct light at the visible point.
-pub fn trace_eye_path(
+pub fn trace_eye_path<R: UniformSource>(
     scene: &Scene,
     mut ray: Ray,
-    rng: &mut Pcg32,
+    rng: &mut R,
     max_depth: u32,
     emitter_samples: u32,
 ) -> EyePath {
@@ -314,7 +314,7 @@ pub fn trace_eye_path(
             let sharp = bsdf.sharp_share(wo, &sp).map(sharp_probability);
             // Next-event estimation at this visible point, scaled by the caller.
             let direct_here =
-                |rng: &mut Pcg32| direct_light(scene, &si, &sp, bsdf, wo, rng, emitter_samples);
+                |rng: &mut R| direct_light(scene, &si, &sp, bsdf, wo, rng, emitter_samples);
             // Direct light for the whole model, the MIS probe's sample `bs`, and the
             // throughput the visible point's photons get.
             let (bs, vp_beta) = if p_delta > 0.0 {
