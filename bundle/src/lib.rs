@@ -585,41 +585,20 @@ fn check_meta(path: &Path, decoded: &Decoded, meta: &BundleMeta) -> Result<(), B
             format!("\"{format}\", but this build reads \"{FORMAT_VERSION}\""),
         ));
     }
-    if !INTEGRATORS.contains(&meta.integrator.as_str()) {
-        return Err(bad(
-            META_ATTRIBUTE,
-            format!(
-                "integrator \"{}\" (expected one of {INTEGRATORS:?})",
-                meta.integrator
-            ),
-        ));
-    }
-    if !SHARP_LEVELS.contains(&meta.sharp_level.as_str()) {
-        return Err(bad(
-            META_ATTRIBUTE,
-            format!(
-                "sharp_level \"{}\" (expected one of {SHARP_LEVELS:?})",
-                meta.sharp_level
-            ),
-        ));
-    }
-    if !SAMPLERS.contains(&meta.sampler.as_str()) {
-        return Err(bad(
-            META_ATTRIBUTE,
-            format!(
-                "sampler \"{}\" (expected one of {SAMPLERS:?})",
-                meta.sampler
-            ),
-        ));
-    }
-    if !SCHEDULES.contains(&meta.schedule.as_str()) {
-        return Err(bad(
-            META_ATTRIBUTE,
-            format!(
-                "schedule \"{}\" (expected one of {SCHEDULES:?})",
-                meta.schedule
-            ),
-        ));
+    // The metadata strings that name one of a fixed set, in the order they are reported.
+    let named: [(&str, &str, &[&str]); 4] = [
+        ("integrator", &meta.integrator, &INTEGRATORS),
+        ("sharp_level", &meta.sharp_level, &SHARP_LEVELS),
+        ("sampler", &meta.sampler, &SAMPLERS),
+        ("schedule", &meta.schedule, &SCHEDULES),
+    ];
+    for (key, value, allowed) in named {
+        if !allowed.contains(&value) {
+            return Err(bad(
+                META_ATTRIBUTE,
+                format!("{key} \"{value}\" (expected one of {allowed:?})"),
+            ));
+        }
     }
     if meta.passes == 0 {
         return Err(bad(META_ATTRIBUTE, "passes is 0".into()));

@@ -43,7 +43,7 @@ use bundle::{Bundle, BundleMeta, DirectLight, Image};
 use glam::UVec2;
 use rayon::prelude::*;
 
-use crate::sampling::{rng_for, UniformSource};
+use crate::sampling::UniformSource;
 use crate::scene::Scene;
 use crate::spectrum::Rgb;
 use crate::threads::with_threads;
@@ -397,13 +397,7 @@ fn render_pixel(
     // Each subpath with the reconstruction filter's weight of its film position.
     let trace = |sub: u64| -> (EyePath, f32) {
         let stream = 2 * index as u64 + sub;
-        let mut rng = PassSampler::new(
-            rng_for(ctx.settings.seed, ctx.pass as u64, stream),
-            ctx.settings.sampler,
-            ctx.settings.seed,
-            stream,
-            ctx.pass,
-        );
+        let mut rng = PassSampler::new(ctx.settings.sampler, ctx.settings.seed, stream, ctx.pass);
         let u_film = rng.next_2d();
         let u_lens = rng.next_2d();
         let sample = scene.camera.sample_ray(pixel, u_film, u_lens);

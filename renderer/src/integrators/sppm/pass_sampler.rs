@@ -13,7 +13,7 @@
 //! count in advance. Each pass's point is uniformly distributed whatever the scrambles, so each
 //! pass's estimate keeps its expectation and the mean over passes converges as before.
 
-use crate::sampling::{hash3, mix64, Pcg32, UniformSource};
+use crate::sampling::{hash3, mix64, rng_for, Pcg32, UniformSource};
 use glam::Vec2;
 use serde::{Deserialize, Serialize};
 
@@ -135,42 +135,41 @@ fn scrambled_point(reversed_index: u32, shuffle: u32, scramble: u64) -> (u32, u3
 
 /// The random numbers of one eye subpath in one pass.
 pub struct PassSampler {
+    /// The stream's PCG32 generator of this pass.
     rng: Pcg32,
     /// The pass's point index (pass − 1), bit-reversed.
     reversed_index: u32,
-    seed: u64,
+    /// The pixel's scrambles (the same in every pass), under [`EyeSampler::LowDiscrepancy`].
+    scrambles: Option<u64>,
+    /// Draws taken so far.
     dimension: u32,
-    low_discrepancy: bool,
 }
 
 impl PassSampler {
     /// Pass `pass` (1-based) of the subpath stream `stream` (pixel and subpath) of a run
-    /// seeded `seed`; `rng` is the stream's PCG32 generator of that pass, which supplies every
-    /// draw under [`EyeSampler::Independent`] and the draws past the sequence's dimensions.
-    pub fn new(rng: Pcg32, sampler: EyeSampler, seed: u64, stream: u64, pass: u32) -> Self {
-        let low_discrepancy = sampler == EyeSampler::LowDiscrepancy;
+    /// seeded `seed`. The stream's PCG32 generator of that pass, `rng_for(seed, pass, stream)`,
+    /// supplies every draw under [`EyeSampler::Independent`] and the draws past the sequence's
+    /// dimensions.
+    pub fn new(sampler: EyeSampler, seed: u64, stream: u64, pass: u32) -> Self {
         PassSampler {
-            rng,
+            rng: rng_for(seed, pass as u64, stream),
             reversed_index: pass.wrapping_sub(1).reverse_bits(),
-            // The pixel's scrambles: apart from every PCG32 stream, the same in every pass.
-            seed: if low_discrepancy {
-                hash3(seed ^ 0x1d5a_3c0f_7b2e_9a41, 0, stream)
-            } else {
-                0
-            },
+            // Apart from every PCG32 stream.
+            scrambles: (sampler == EyeSampler::LowDiscrepancy)
+                .then(|| hash3(seed ^ 0x1d5a_3c0f_7b2e_9a41, 0, stream)),
             dimension: 0,
-            low_discrepancy,
         }
     }
 
     /// This draw's point of the sequence, or `None` when PCG32 supplies it.
     #[inline]
     fn point(&mut self) -> Option<(u32, u32)> {
-        if !self.low_discrepancy || self.dimension >= LOW_DISCREPANCY_DIMENSIONS {
+        let scrambles = self.scrambles?;
+        if self.dimension >= LOW_DISCREPANCY_DIMENSIONS {
             return None;
         }
-        // Two 64-bit hashes of (pixel seed, draw) give the draw's three 32-bit seeds.
-        let a = mix64(self.seed ^ (self.dimension as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        // Two 64-bit hashes of (pixel's scrambles, draw) give the draw's three 32-bit seeds.
+        let a = mix64(scrambles ^ (self.dimension as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15));
         let b = mix64(a ^ 0xd1b5_4a32_d192_ed03);
         self.dimension += 1;
         Some(scrambled_point(self.reversed_index, (a >> 32) as u32, b))
@@ -204,8 +203,7 @@ mod tests {
     fn points(sampler: EyeSampler, stream: u64, dimension: u32, k: u32) -> Vec<Vec2> {
         (1..=1u32 << k)
             .map(|pass| {
-                let mut s =
-                    PassSampler::new(rng_for(9, pass as u64, stream), sampler, 9, stream, pass);
+                let mut s = PassSampler::new(sampler, 9, stream, pass);
                 for _ in 0..dimension {
                     s.next_2d();
                 }
@@ -274,24 +272,12 @@ mod tests {
         assert_ne!(a, points(EyeSampler::LowDiscrepancy, 3, 1, 4));
         for pass in [1u32, 2, 77] {
             let mut rng = rng_for(9, pass as u64, 3);
-            let mut s = PassSampler::new(
-                rng_for(9, pass as u64, 3),
-                EyeSampler::Independent,
-                9,
-                3,
-                pass,
-            );
+            let mut s = PassSampler::new(EyeSampler::Independent, 9, 3, pass);
             for _ in 0..20 {
                 assert_eq!(s.next_2d(), rng.next_2d());
             }
             let mut rng = rng_for(9, pass as u64, 3);
-            let mut s = PassSampler::new(
-                rng_for(9, pass as u64, 3),
-                EyeSampler::LowDiscrepancy,
-                9,
-                3,
-                pass,
-            );
+            let mut s = PassSampler::new(EyeSampler::LowDiscrepancy, 9, 3, pass);
             for _ in 0..LOW_DISCREPANCY_DIMENSIONS {
                 s.next_f32();
             }
@@ -308,13 +294,7 @@ mod tests {
         for pass in [1u32, 6, 1000] {
             let (mut sx, mut sxx, mut sy, mut syy) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
             for stream in 0..n {
-                let mut s = PassSampler::new(
-                    rng_for(1, pass as u64, stream),
-                    EyeSampler::LowDiscrepancy,
-                    1,
-                    stream,
-                    pass,
-                );
+                let mut s = PassSampler::new(EyeSampler::LowDiscrepancy, 1, stream, pass);
                 let p = s.next_2d();
                 sx += p.x as f64;
                 sxx += (p.x * p.x) as f64;

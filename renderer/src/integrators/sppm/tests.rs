@@ -7,6 +7,7 @@ use crate::description::test_camera as camera;
 use crate::description::{
     CameraDesc, EmitterDesc, Geometry, SceneDescription, ShapeDesc, TriangleMesh,
 };
+use crate::sampling::rng_for;
 use crate::texture::Texture;
 use glam::Vec3;
 
