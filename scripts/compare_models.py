@@ -2,13 +2,14 @@
 """Compare models on the same bundles: candidate ÷ baseline relMSE at equal passes.
 
 A quick screen before the 35-minute equal-time evaluation: renders each scene of an evaluation
-config once (`infer --scene` with the first model, the config's seed, photons per pass and max
-depth; bundles kept under `--out`, so a second call only reconstructs), reconstructs every
-bundle with each `--models` entry (`infer --input`) and prints, per scene and overall
-(geometric mean, median, range, scenes better), each later model's relMSE ÷ the first's. Equal
-passes, not equal time: a candidate that wins here still has to win in `evaluate`. Writes
-`scores.json` under `--out/p<passes>`. Run from the repository root, like `evaluate` (the
-config's scene paths are relative to it). A development tool (numpy, OpenEXR).
+config once (`infer --scene` with the first model and the config's seed, photons per pass, max
+depth, schedule, emitter samples, sharp level and sampler; bundles kept under `--out`, so a
+second call only reconstructs), reconstructs every bundle with each `--models` entry (`infer
+--input`) and prints, per scene and overall (geometric mean, median, range, scenes better),
+each later model's relMSE ÷ the first's. Equal passes, not equal time: a candidate that wins
+here still has to win in `evaluate`. Writes `scores.json` under `--out/p<passes>`. Run from the
+repository root, like `evaluate` (the config's scene paths are relative to it). A development
+tool (numpy, OpenEXR).
 
     python3 scripts/compare_models.py --infer target/release/infer \
         --config configs/eval/heldout.toml --passes 64 \
@@ -48,6 +49,13 @@ def main():
         sys.exit(f"compare_models: {a.config}: {e}")
     if not cfg.get("scenes"):
         sys.exit(f"compare_models: {a.config}: no [[scenes]]")
+    # The config's renderer settings, as `evaluate` renders ours (absent: the renderer's default).
+    render_flags = []
+    for key in ("schedule", "emitter_samples", "sharp_level", "sampler"):
+        if key in cfg:
+            render_flags += ["--" + key.replace("_", "-"), str(cfg[key])]
+    if "photon_focus" in cfg:
+        sys.exit(f"compare_models: {a.config}: photon_focus is not passed to infer --scene")
     out = f"{a.out}/p{a.passes}"
     os.makedirs(out, exist_ok=True)
     rows = []
@@ -59,7 +67,7 @@ def main():
                 [a.infer, "--model", a.models[0], "--scene", scene["xml"],
                  "--passes", str(a.passes), "--photons", str(cfg.get("photons_per_pass", 100000)),
                  "--seed", str(cfg.get("seed", 1)), "--max-depth", str(cfg.get("max_depth", 10)),
-                 "--output", f"{out}/{name}.exr"],
+                 *render_flags, "--output", f"{out}/{name}.exr"],
                 check=True, stdout=subprocess.DEVNULL,
             )
         ref = rgb(scene["reference"])
