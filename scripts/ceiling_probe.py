@@ -26,49 +26,50 @@ repository root.
 
 import argparse
 import json
-import math
 import os
 import statistics
 import sys
-import tomllib
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from compare_models import geometric_mean, load_eval_config  # noqa: E402
 from postfilter_probe import oidn, oracle, read, relmse, rgb  # noqa: E402
 
 LEVELS = ("y", "z1", "z2", "z3", "z4")
 
 
 def summary(values):
-    gm = math.exp(sum(math.log(max(v, 1e-30)) for v in values) / len(values))
-    return f"median {statistics.median(values):.3f}, geometric mean {gm:.3f}"
+    return f"median {statistics.median(values):.3f}, geometric mean {geometric_mean(values):.3f}"
 
 
-def needed_factor(results, passes, target):
-    """The factor m on (ours − reference noise) at which the median of ours ÷ standard SPPM at
-    equal time over the scenes of `results` reaches `target` (bisection; None if even m = 0
-    does not)."""
+def equal_time_pairs(results, passes):
+    """(ours, standard SPPM at equal time, reference noise) relMSE per scene at `passes`."""
     noise = {s["name"]: s.get("reference_noise") or 0.0 for s in results["config"]["scenes"]}
-    pairs = []
-    for scene in results["scenes"]:
-        for c in scene["eval"]["checkpoints"]:
-            if c["passes"] == passes and c.get("standard_equal_time"):
-                pairs.append((c["ours_relmse"], c["standard_equal_time"]["relmse"],
-                              noise.get(scene["name"], 0.0)))
+    pairs = [
+        (c["ours_relmse"], c["standard_equal_time"]["relmse"], noise.get(scene["name"], 0.0))
+        for scene in results["scenes"]
+        for c in scene["eval"]["checkpoints"]
+        if c["passes"] == passes and c.get("standard_equal_time")
+    ]
     if not pairs:
         sys.exit(f"ceiling_probe: no checkpoint at {passes} passes in --results")
+    return pairs
 
-    def median(m):
-        return statistics.median((m * (a - n) + n) / b for a, b, n in pairs)
 
-    if median(0.0) > target:
-        return None, median(1.0)
+def median_ratio(pairs, m):
+    """The median of ours ÷ standard SPPM with our error above the reference's noise × m."""
+    return statistics.median((m * (a - n) + n) / b for a, b, n in pairs)
+
+
+def needed_factor(pairs, target):
+    """The factor m in [0, 1] at which `median_ratio` falls to `target` (bisection; it rises
+    with m), or None if even m = 0 stays above it. Call it where m = 1 is above `target`."""
+    if median_ratio(pairs, 0.0) > target:
+        return None
     lo, hi = 0.0, 1.0
-    if median(hi) <= target:
-        return 1.0, median(1.0)
     for _ in range(50):
         mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if median(mid) <= target else (lo, mid)
-    return lo, median(1.0)
+        lo, hi = (mid, hi) if median_ratio(pairs, mid) <= target else (lo, mid)
+    return lo
 
 
 def main():
@@ -81,14 +82,10 @@ def main():
     ap.add_argument("--results", help="evaluate's results.json of the same config")
     ap.add_argument("--target", type=float, default=0.35)
     a = ap.parse_args()
-    try:
-        with open(a.config, "rb") as f:
-            cfg = tomllib.load(f)
-    except (OSError, tomllib.TOMLDecodeError) as e:
-        sys.exit(f"ceiling_probe: {a.config}: {e}")
+    cfg = load_eval_config(a.config, "ceiling_probe")
     folder = f"{a.compare}/p{a.passes}"
     rows = []
-    for scene in cfg.get("scenes", []):
+    for scene in cfg["scenes"]:
         name = scene["name"]
         bundle, recon = f"{folder}/{name}_bundle.exr", f"{folder}/{name}_m{a.model_index}.exr"
         for path in (bundle, recon):
@@ -110,26 +107,25 @@ def main():
         rows.append(row)
         print(f"{name}: oidn {row['oidn']:.3f}, oracle8 {row['oracle8']:.3f}, "
               f"oracle4 {row['oracle4']:.3f}", flush=True)
-    if not rows:
-        sys.exit(f"ceiling_probe: {a.config}: no [[scenes]]")
     for key in ("oidn", "oracle8", "oracle4"):
         print(f"{key} ÷ ours ({len(rows)} scenes): {summary([r[key] for r in rows])}")
     if a.results:
         try:
-            results = json.load(open(a.results))
+            with open(a.results) as f:
+                results = json.load(f)
         except (OSError, json.JSONDecodeError) as e:
             sys.exit(f"ceiling_probe: {a.results}: {e}")
-        m, now = needed_factor(results, a.passes, a.target)
+        pairs = equal_time_pairs(results, a.passes)
+        now = median_ratio(pairs, 1.0)
+        head = f"median ours ÷ standard SPPM at {a.passes} passes: {now:.3f}"
         if now <= a.target:
-            print(f"median ours ÷ standard SPPM at {a.passes} passes: {now:.3f}, at or below "
-                  f"{a.target} already")
-        elif m is None:
-            print(f"median ours ÷ standard SPPM at {a.passes} passes: {now:.3f}; even an error of "
-                  f"zero above the references' noise does not bring it to {a.target}")
+            print(f"{head}, at or below {a.target} already")
+        elif (m := needed_factor(pairs, a.target)) is None:
+            print(f"{head}; even an error of zero above the references' noise does not bring "
+                  f"it to {a.target}")
         else:
-            print(f"median ours ÷ standard SPPM at {a.passes} passes: {now:.3f}; it reaches "
-                  f"{a.target} when our error (above the references' noise) is × {m:.3f} on "
-                  f"every scene")
+            print(f"{head}; it reaches {a.target} when our error (above the references' noise) "
+                  f"is × {m:.3f} on every scene")
 
 
 if __name__ == "__main__":

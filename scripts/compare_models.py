@@ -29,6 +29,22 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from postfilter_probe import relmse, rgb  # noqa: E402
 
 
+def load_eval_config(path, tool):
+    """An evaluation config (TOML) with at least one [[scenes]]; exits naming `path` otherwise."""
+    try:
+        with open(path, "rb") as f:
+            cfg = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        sys.exit(f"{tool}: {path}: {e}")
+    if not cfg.get("scenes"):
+        sys.exit(f"{tool}: {path}: no [[scenes]]")
+    return cfg
+
+
+def geometric_mean(values):
+    return math.exp(sum(math.log(max(v, 1e-30)) for v in values) / len(values))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--infer", default="target/release/infer")
@@ -39,16 +55,13 @@ def main():
     a = ap.parse_args()
     if len(a.models) < 2:
         ap.error("--models needs a baseline and at least one candidate")
+    if not os.path.isfile(a.infer):
+        sys.exit(f"compare_models: {a.infer}: no such binary (build it with `cargo build --release "
+                 f"-p infer`, or pass --infer $CARGO_TARGET_DIR/release/infer)")
     for model in a.models:
         if not os.path.isfile(os.path.join(model, "model.json")):
             sys.exit(f"compare_models: {model}: no model.json (not a model directory)")
-    try:
-        with open(a.config, "rb") as f:
-            cfg = tomllib.load(f)
-    except (OSError, tomllib.TOMLDecodeError) as e:
-        sys.exit(f"compare_models: {a.config}: {e}")
-    if not cfg.get("scenes"):
-        sys.exit(f"compare_models: {a.config}: no [[scenes]]")
+    cfg = load_eval_config(a.config, "compare_models")
     # The config's renderer settings, as `evaluate` renders ours (absent: the renderer's default).
     render_flags = []
     for key in ("schedule", "emitter_samples", "sharp_level", "sampler"):
@@ -84,7 +97,7 @@ def main():
         json.dump(rows, f, indent=1)
     for model in a.models[1:]:
         x = [r[model] / r[a.models[0]] for r in rows]
-        gm = math.exp(sum(math.log(max(v, 1e-30)) for v in x) / len(x))
+        gm = geometric_mean(x)
         print(f"{model} ÷ {a.models[0]}: geometric mean {gm:.4f}, median "
               f"{statistics.median(x):.4f}, range {min(x):.3f}–{max(x):.3f}, better on "
               f"{sum(v < 1 for v in x)} of {len(x)}")
